@@ -1,0 +1,1 @@
+//! The actor process of alfd: wires the core to the transport.

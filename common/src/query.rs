@@ -1,0 +1,189 @@
+//! When to ask the expert (paper section 3.3, Algorithm 1 lines 3-8): the divergence of the current
+//! state is compared with the `p_r` percentile of the last `L_q` divergences, while budget remains.
+
+use std::collections::VecDeque;
+
+/// Percentile of `values` with linear interpolation between closest ranks, NumPy's default
+/// (`np.percentile(values, p)`, method `"linear"`). `p` is in `[0, 100]`. `None` when empty.
+pub fn percentile(values: &[f64], p: f64) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    let mut sorted = values.to_vec();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let rank = (p / 100.0) * (sorted.len() - 1) as f64;
+    let lo = rank.floor() as usize;
+    let hi = rank.ceil() as usize;
+    let frac = rank - lo as f64;
+    Some(sorted[lo] + (sorted[hi] - sorted[lo]) * frac)
+}
+
+/// The divergence queue `U_queue` and the percentile threshold of Algorithm 1.
+#[derive(Debug, Clone)]
+pub struct QueryRule {
+    /// `L_q`: how many past divergences are remembered.
+    queue_len: usize,
+    /// `p_r`: the percentile, in `[0, 100]`, the current divergence must exceed.
+    percentile: f64,
+    queue: VecDeque<f64>,
+    scratch: Vec<f64>,
+}
+
+impl QueryRule {
+    /// `queue_len` must be at least 1 and `percentile` in `[0, 100]` (the config checks this).
+    pub fn new(queue_len: usize, percentile: f64) -> Self {
+        assert!(queue_len >= 1, "L_q must be at least 1");
+        assert!(
+            (0.0..=100.0).contains(&percentile),
+            "p_r must be in [0, 100]"
+        );
+        Self {
+            queue_len,
+            percentile,
+            queue: VecDeque::with_capacity(queue_len),
+            scratch: Vec::with_capacity(queue_len),
+        }
+    }
+
+    /// Algorithm 1 lines 4-7: the threshold is the percentile of the queue *before* `u` is pushed;
+    /// `u` is then pushed (dropping the oldest value beyond `L_q`); the rule fires when
+    /// `u > threshold`. An empty queue has no threshold, and the rule does not fire.
+    pub fn observe(&mut self, u: f64) -> bool {
+        let threshold = self.threshold();
+        if self.queue.len() == self.queue_len {
+            self.queue.pop_front();
+        }
+        self.queue.push_back(u);
+        matches!(threshold, Some(t) if u > t)
+    }
+
+    /// The current threshold `U_threshold`, `None` while the queue is empty.
+    pub fn threshold(&mut self) -> Option<f64> {
+        if self.queue.is_empty() {
+            return None;
+        }
+        self.scratch.clear();
+        self.scratch.extend(self.queue.iter().copied());
+        percentile(&self.scratch, self.percentile)
+    }
+
+    pub fn len(&self) -> usize {
+        self.queue.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.queue.is_empty()
+    }
+}
+
+/// The demonstration budget `B`: how many expert queries may still be answered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Budget {
+    total: u32,
+    used: u32,
+}
+
+impl Budget {
+    pub fn new(total: u32) -> Self {
+        Self { total, used: 0 }
+    }
+
+    /// A budget of which `used` queries are already spent (an expert restarted on a run).
+    pub fn with_used(total: u32, used: u32) -> Self {
+        Self {
+            total,
+            used: used.min(total),
+        }
+    }
+
+    /// Spends one query if any remains (Algorithm 1 line 8); `false` when the budget is exhausted.
+    pub fn try_spend(&mut self) -> bool {
+        if self.used < self.total {
+            self.used += 1;
+            true
+        } else {
+            false
+        }
+    }
+
+    pub fn remaining(&self) -> u32 {
+        self.total - self.used
+    }
+
+    pub fn used(&self) -> u32 {
+        self.used
+    }
+
+    pub fn total(&self) -> u32 {
+        self.total
+    }
+
+    pub fn is_exhausted(&self) -> bool {
+        self.used >= self.total
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentile_matches_numpy_linear() {
+        // np.percentile([1, 2, 3, 4], 50) == 2.5; 90 -> 3.7; 0 -> 1; 100 -> 4
+        let v = [4.0, 1.0, 3.0, 2.0];
+        assert_eq!(percentile(&v, 50.0), Some(2.5));
+        assert!((percentile(&v, 90.0).unwrap() - 3.7).abs() < 1e-12);
+        assert_eq!(percentile(&v, 0.0), Some(1.0));
+        assert_eq!(percentile(&v, 100.0), Some(4.0));
+        assert_eq!(percentile(&[], 50.0), None);
+        // np.percentile([0.5], 70) == 0.5
+        assert_eq!(percentile(&[0.5], 70.0), Some(0.5));
+    }
+
+    #[test]
+    fn rule_compares_with_queue_before_push() {
+        let mut rule = QueryRule::new(3, 50.0);
+        assert!(!rule.observe(1.0), "empty queue never fires");
+        assert!(rule.observe(2.0), "2 > median([1])");
+        assert!(
+            !rule.observe(1.5),
+            "1.5 < median([1, 2]) = 1.5 is not strictly greater"
+        );
+        // queue is [1, 2, 1.5]; median 1.5; 1.6 fires, and 1 drops out
+        assert!(rule.observe(1.6));
+        assert_eq!(rule.len(), 3);
+        // queue is [2, 1.5, 1.6]; median 1.6
+        assert!(!rule.observe(1.55));
+        // queue is now [1.5, 1.6, 1.55]
+        assert!((rule.threshold().unwrap() - 1.55).abs() < 1e-12);
+    }
+
+    #[test]
+    fn percentile_100_never_fires_and_0_fires_above_minimum() {
+        let mut never = QueryRule::new(10, 100.0);
+        let mut often = QueryRule::new(10, 0.0);
+        let mut fired_never = 0;
+        let mut fired_often = 0;
+        for i in 0..100 {
+            let u = (i as f64 * 0.37).sin().abs();
+            fired_never += never.observe(u) as u32;
+            fired_often += often.observe(u) as u32;
+        }
+        // p = 100 fires only on a new maximum of the last 10; p = 0 on anything above their minimum.
+        assert!(fired_never < 30, "{fired_never}");
+        assert!(fired_often > 70, "{fired_often}");
+    }
+
+    #[test]
+    fn budget_never_goes_below_zero() {
+        let mut b = Budget::new(2);
+        assert!(b.try_spend());
+        assert!(b.try_spend());
+        assert!(!b.try_spend());
+        assert_eq!(b.remaining(), 0);
+        assert_eq!(b.used(), 2);
+        assert!(b.is_exhausted());
+        assert_eq!(Budget::with_used(5, 9).remaining(), 0);
+        assert_eq!(Budget::with_used(5, 3).remaining(), 2);
+    }
+}

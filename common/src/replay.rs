@@ -1,0 +1,193 @@
+//! The replay buffer `D_buff`: a ring of transitions, each with its bootstrap mask and a flag
+//! saying whether it is a demonstration, sampled uniformly.
+
+use rand::Rng as _;
+
+use crate::rng::Rng;
+
+/// One transition as stored, with its Bernoulli bootstrap mask (which heads it trains).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Transition {
+    pub state: Vec<f32>,
+    pub action: u32,
+    /// The reward learned from (shaped when shaping is on).
+    pub reward: f32,
+    pub next_state: Vec<f32>,
+    /// Terminal: no bootstrapping from `next_state`. A truncated step is not terminal.
+    pub terminated: bool,
+    /// `mask[k]` is 1.0 if head k trains on this transition, else 0.0.
+    pub mask: Vec<f32>,
+    /// The action came from the expert.
+    pub demo: bool,
+}
+
+/// A sampled mini-batch in flat, row-major arrays, ready for the network.
+#[derive(Debug, Clone, Default)]
+pub struct Batch {
+    pub size: usize,
+    pub obs_dim: usize,
+    pub heads: usize,
+    pub states: Vec<f32>,
+    pub actions: Vec<u32>,
+    pub rewards: Vec<f32>,
+    pub next_states: Vec<f32>,
+    /// 1.0 where the transition is terminal.
+    pub terminated: Vec<f32>,
+    /// `size * heads` values.
+    pub masks: Vec<f32>,
+}
+
+/// Fixed-capacity ring buffer in structure-of-arrays layout.
+#[derive(Debug, Clone)]
+pub struct ReplayBuffer {
+    capacity: usize,
+    obs_dim: usize,
+    heads: usize,
+    len: usize,
+    next: usize,
+    states: Vec<f32>,
+    actions: Vec<u32>,
+    rewards: Vec<f32>,
+    next_states: Vec<f32>,
+    terminated: Vec<f32>,
+    masks: Vec<f32>,
+    demo: Vec<bool>,
+}
+
+impl ReplayBuffer {
+    pub fn new(capacity: usize, obs_dim: usize, heads: usize) -> Self {
+        assert!(capacity > 0 && obs_dim > 0 && heads > 0);
+        Self {
+            capacity,
+            obs_dim,
+            heads,
+            len: 0,
+            next: 0,
+            states: vec![0.0; capacity * obs_dim],
+            actions: vec![0; capacity],
+            rewards: vec![0.0; capacity],
+            next_states: vec![0.0; capacity * obs_dim],
+            terminated: vec![0.0; capacity],
+            masks: vec![0.0; capacity * heads],
+            demo: vec![false; capacity],
+        }
+    }
+
+    /// Adds a transition, overwriting the oldest one when full.
+    pub fn push(&mut self, t: &Transition) {
+        assert_eq!(t.state.len(), self.obs_dim, "state has the wrong dimension");
+        assert_eq!(
+            t.next_state.len(),
+            self.obs_dim,
+            "next state has the wrong dimension"
+        );
+        assert_eq!(
+            t.mask.len(),
+            self.heads,
+            "mask has the wrong number of heads"
+        );
+        let i = self.next;
+        let d = self.obs_dim;
+        self.states[i * d..(i + 1) * d].copy_from_slice(&t.state);
+        self.next_states[i * d..(i + 1) * d].copy_from_slice(&t.next_state);
+        self.actions[i] = t.action;
+        self.rewards[i] = t.reward;
+        self.terminated[i] = if t.terminated { 1.0 } else { 0.0 };
+        self.masks[i * self.heads..(i + 1) * self.heads].copy_from_slice(&t.mask);
+        self.demo[i] = t.demo;
+        self.next = (self.next + 1) % self.capacity;
+        self.len = (self.len + 1).min(self.capacity);
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// How many stored transitions are demonstrations.
+    pub fn demos(&self) -> usize {
+        self.demo[..self.len].iter().filter(|&&d| d).count()
+    }
+
+    /// Samples `size` transitions uniformly with replacement into `batch` (reusing its storage).
+    pub fn sample_into(&self, size: usize, rng: &mut Rng, batch: &mut Batch) {
+        assert!(self.len > 0, "cannot sample from an empty replay buffer");
+        let d = self.obs_dim;
+        let h = self.heads;
+        batch.size = size;
+        batch.obs_dim = d;
+        batch.heads = h;
+        batch.states.clear();
+        batch.actions.clear();
+        batch.rewards.clear();
+        batch.next_states.clear();
+        batch.terminated.clear();
+        batch.masks.clear();
+        for _ in 0..size {
+            let i = rng.random_range(0..self.len);
+            batch
+                .states
+                .extend_from_slice(&self.states[i * d..(i + 1) * d]);
+            batch
+                .next_states
+                .extend_from_slice(&self.next_states[i * d..(i + 1) * d]);
+            batch.actions.push(self.actions[i]);
+            batch.rewards.push(self.rewards[i]);
+            batch.terminated.push(self.terminated[i]);
+            batch
+                .masks
+                .extend_from_slice(&self.masks[i * h..(i + 1) * h]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn t(x: f32, demo: bool) -> Transition {
+        Transition {
+            state: vec![x, x],
+            action: 1,
+            reward: x,
+            next_state: vec![x + 1.0, x + 1.0],
+            terminated: x > 5.0,
+            mask: vec![1.0, 0.0],
+            demo,
+        }
+    }
+
+    #[test]
+    fn ring_overwrites_oldest_and_samples_stored_rows() {
+        let mut rb = ReplayBuffer::new(4, 2, 2);
+        for i in 0..6 {
+            rb.push(&t(i as f32, i == 5));
+        }
+        assert_eq!(rb.len(), 4);
+        assert_eq!(rb.demos(), 1);
+        let mut rng = crate::rng::seeded(3);
+        let mut batch = Batch::default();
+        rb.sample_into(64, &mut rng, &mut batch);
+        assert_eq!(batch.states.len(), 128);
+        assert_eq!(batch.masks.len(), 128);
+        for j in 0..64 {
+            let x = batch.states[2 * j];
+            assert!((2.0..=5.0).contains(&x), "sampled an overwritten row {x}");
+            assert_eq!(batch.rewards[j], x);
+            assert_eq!(batch.next_states[2 * j], x + 1.0);
+            assert_eq!(batch.terminated[j], if x > 5.0 { 1.0 } else { 0.0 });
+        }
+        // All four rows get sampled.
+        let mut seen: Vec<i32> = batch.rewards.iter().map(|&r| r as i32).collect();
+        seen.sort();
+        seen.dedup();
+        assert_eq!(seen, vec![2, 3, 4, 5]);
+    }
+}

@@ -1,0 +1,1 @@
+//! Integration tests of the core against the reference fixtures (one test binary).

@@ -1,0 +1,1 @@
+//! The expert process of alfd: wires the core to the transport.

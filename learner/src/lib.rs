@@ -1,0 +1,1 @@
+//! The learner process of alfd: wires the core to the transport.
