@@ -1,0 +1,674 @@
+//! The experiment config: raw TOML (plus `--set key=value` overrides) becomes a validated
+//! [`ExperimentConfig`]; an unknown key or a value out of range is refused with a message naming
+//! the field.
+//!
+//! The same config runs in one process (`alfd local`) or in many (`alfd run`).
+
+use serde::{Deserialize, Serialize};
+
+/// A config that cannot be used, with the field (or TOML line) at fault.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ConfigError {
+    #[error("invalid config: {0}")]
+    Parse(String),
+    #[error("invalid config: `{field}` {message}")]
+    Invalid {
+        field: &'static str,
+        message: String,
+    },
+    #[error("invalid --set `{0}`: expected key=value, e.g. agent.heads=3")]
+    BadOverride(String),
+}
+
+pub type Result<T, E = ConfigError> = std::result::Result<T, E>;
+
+fn invalid(field: &'static str, message: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid {
+        field,
+        message: message.into(),
+    }
+}
+
+/// One experiment: an environment, an agent, its query rule, budget, expert and shaping.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentConfig {
+    /// Seed of everything random in the run (environment, initialisation, exploration, masks).
+    pub seed: u64,
+    /// Number of training episodes.
+    pub episodes: u32,
+    pub env: EnvConfig,
+    pub agent: AgentConfig,
+    #[serde(default)]
+    pub query: QueryConfig,
+    #[serde(default)]
+    pub budget: BudgetConfig,
+    #[serde(default)]
+    pub expert: ExpertConfig,
+    #[serde(default)]
+    pub shaping: ShapingConfig,
+}
+
+/// Which environment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EnvName {
+    Cartpole,
+    Cliffwalk,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EnvConfig {
+    /// `cartpole` or `cliffwalk`.
+    pub name: EnvName,
+    /// Step limit after which an episode is truncated (CartPole 1000, CliffWalk 500 by default).
+    #[serde(default)]
+    pub max_episode_steps: Option<usize>,
+    /// CliffWalk: probability that the chosen move happens, in (0, 1].
+    #[serde(default = "default_p_success")]
+    pub p_success: f64,
+    /// CliffWalk: a map file of `S`, `G`, `X`, `.`; the built-in map when absent.
+    #[serde(default)]
+    pub map: Option<String>,
+}
+
+fn default_p_success() -> f64 {
+    0.9
+}
+
+impl EnvConfig {
+    pub fn max_episode_steps(&self) -> usize {
+        self.max_episode_steps.unwrap_or(match self.name {
+            EnvName::Cartpole => 1000,
+            EnvName::Cliffwalk => 500,
+        })
+    }
+}
+
+/// The learning algorithm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AgentKind {
+    /// Tabular Q-learning.
+    Qlearning,
+    /// Tabular SARSA.
+    Sarsa,
+    /// Tabular bootstrapped Q-learning: K Q-tables with randomized (masked) updates.
+    BootstrappedQ,
+    /// DQN (section 5.3), one head.
+    Dqn,
+    /// Bootstrapped DQN (section 3.2), K heads in one network.
+    Bdqn,
+}
+
+impl AgentKind {
+    pub fn is_tabular(self) -> bool {
+        matches!(self, Self::Qlearning | Self::Sarsa | Self::BootstrappedQ)
+    }
+}
+
+/// How the agent picks its own actions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Exploration {
+    /// Sample from the softmax policy (eq. 2) of the acting head.
+    Softmax,
+    /// ε-greedy on the acting head, ε decaying exponentially.
+    EpsilonGreedy,
+    /// Greedy on the head sampled for the episode (Algorithm 1, lines 1 and 12).
+    GreedyHead,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AgentConfig {
+    /// `qlearning`, `sarsa`, `bootstrapped-q`, `dqn` or `bdqn`.
+    pub kind: AgentKind,
+    /// K, the number of heads (default 1 for qlearning/sarsa/dqn, 2 for bootstrapped-q/bdqn).
+    #[serde(default)]
+    pub heads: Option<usize>,
+    /// Discount factor γ.
+    #[serde(default = "default_gamma")]
+    pub gamma: f64,
+    /// Temperature of the softmax policies of eq. 2 (JS divergence, shaping, softmax exploration).
+    #[serde(default = "default_temperature")]
+    pub temperature: f64,
+    /// Step size: α of the tabular update (default 0.1), or Adam's learning rate (default 1e-3).
+    #[serde(default)]
+    pub learning_rate: Option<f64>,
+    /// Exploration (default: softmax for tabular Q-learning/SARSA, epsilon-greedy for dqn,
+    /// greedy-head for the bootstrapped agents).
+    #[serde(default)]
+    pub exploration: Option<Exploration>,
+    /// ε at the first step.
+    #[serde(default = "default_epsilon_start")]
+    pub epsilon_start: f64,
+    /// ε reached asymptotically.
+    #[serde(default = "default_epsilon_end")]
+    pub epsilon_end: f64,
+    /// Time constant of the exponential decay of ε, in environment steps.
+    #[serde(default = "default_epsilon_decay_steps")]
+    pub epsilon_decay_steps: f64,
+    /// Probability that a transition trains a given head (the Bernoulli bootstrap mask).
+    #[serde(default = "default_bootstrap_probability")]
+    pub bootstrap_probability: f64,
+    /// Neural: replay buffer capacity.
+    #[serde(default = "default_replay_capacity")]
+    pub replay_capacity: usize,
+    /// Neural: mini-batch size.
+    #[serde(default = "default_batch_size")]
+    pub batch_size: usize,
+    /// Neural: the target networks are copied from the online one every this many updates.
+    #[serde(default = "default_target_update_every")]
+    pub target_update_every: u64,
+    /// Neural: updates per environment step (the replay ratio U).
+    #[serde(default = "default_updates_per_step")]
+    pub updates_per_step: u32,
+    /// Neural: width of the two hidden layers.
+    #[serde(default = "default_hidden")]
+    pub hidden: usize,
+}
+
+fn default_gamma() -> f64 {
+    0.99
+}
+fn default_temperature() -> f64 {
+    1.0
+}
+fn default_epsilon_start() -> f64 {
+    1.0
+}
+fn default_epsilon_end() -> f64 {
+    0.05
+}
+fn default_epsilon_decay_steps() -> f64 {
+    1000.0
+}
+fn default_bootstrap_probability() -> f64 {
+    0.5
+}
+fn default_replay_capacity() -> usize {
+    10_000
+}
+fn default_batch_size() -> usize {
+    64
+}
+fn default_target_update_every() -> u64 {
+    50
+}
+fn default_updates_per_step() -> u32 {
+    1
+}
+fn default_hidden() -> usize {
+    64
+}
+
+impl AgentConfig {
+    pub fn heads(&self) -> usize {
+        self.heads.unwrap_or(match self.kind {
+            AgentKind::BootstrappedQ | AgentKind::Bdqn => 2,
+            _ => 1,
+        })
+    }
+
+    pub fn learning_rate(&self) -> f64 {
+        self.learning_rate
+            .unwrap_or(if self.kind.is_tabular() { 0.1 } else { 1e-3 })
+    }
+
+    pub fn exploration(&self) -> Exploration {
+        self.exploration.unwrap_or(match self.kind {
+            AgentKind::Qlearning | AgentKind::Sarsa => Exploration::Softmax,
+            AgentKind::Dqn => Exploration::EpsilonGreedy,
+            AgentKind::BootstrappedQ | AgentKind::Bdqn => Exploration::GreedyHead,
+        })
+    }
+
+    /// ε after `step` environment steps: `end + (start − end) · exp(−step / decay)`.
+    pub fn epsilon(&self, step: u64) -> f64 {
+        self.epsilon_end
+            + (self.epsilon_start - self.epsilon_end)
+                * (-(step as f64) / self.epsilon_decay_steps).exp()
+    }
+}
+
+/// When the agent asks the expert.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum QueryMode {
+    /// Never: pure RL.
+    Never,
+    /// On every step until the budget is spent ("all the budget at the beginning").
+    First,
+    /// When the JS divergence is above the `p_r` percentile of the last `L_q` values (section 3.3).
+    Active,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct QueryConfig {
+    /// `never`, `first` or `active`.
+    #[serde(default = "default_query_mode")]
+    pub mode: QueryMode,
+    /// L_q: length of the divergence queue.
+    #[serde(default = "default_queue_len")]
+    pub queue_len: usize,
+    /// p_r: percentile of the queue the divergence must exceed, in [0, 100].
+    #[serde(default = "default_percentile")]
+    pub percentile: f64,
+}
+
+fn default_query_mode() -> QueryMode {
+    QueryMode::Never
+}
+fn default_queue_len() -> usize {
+    1000
+}
+fn default_percentile() -> f64 {
+    99.0
+}
+
+impl Default for QueryConfig {
+    fn default() -> Self {
+        Self {
+            mode: default_query_mode(),
+            queue_len: default_queue_len(),
+            percentile: default_percentile(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BudgetConfig {
+    /// B: how many demonstrations may be asked for in the whole run.
+    #[serde(default = "default_budget")]
+    pub total: i64,
+}
+
+fn default_budget() -> i64 {
+    100
+}
+
+impl Default for BudgetConfig {
+    fn default() -> Self {
+        Self {
+            total: default_budget(),
+        }
+    }
+}
+
+/// Which model of the demonstrations shapes the reward.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DemoModelChoice {
+    /// No model: no shaping.
+    None,
+    /// Kernel Ridge Regression (α = 0.1, RBF γ = 0.1).
+    Krr,
+    /// Kernel SVM (C = 10, RBF γ = 0.1) with Platt scaling.
+    Svm,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExpertConfig {
+    /// The demonstrator, by name (`alfd expert list`).
+    #[serde(default = "default_expert")]
+    pub name: String,
+    /// The demonstration model fitted on the demonstrations: `none`, `krr` or `svm`.
+    #[serde(default = "default_model")]
+    pub model: DemoModelChoice,
+}
+
+fn default_expert() -> String {
+    "cartpole-1000".to_owned()
+}
+fn default_model() -> DemoModelChoice {
+    DemoModelChoice::None
+}
+
+impl Default for ExpertConfig {
+    fn default() -> Self {
+        Self {
+            name: default_expert(),
+            model: default_model(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShapingConfig {
+    /// λ of eq. 4.
+    #[serde(default = "default_lambda")]
+    pub lambda: f64,
+    /// Shaping starts once this many demonstrations exist.
+    #[serde(default = "default_min_demos")]
+    pub min_demos: usize,
+    /// Shaping stops at this multiple of the global step of the last demonstration.
+    #[serde(default = "default_stop_multiple")]
+    pub stop_multiple: f64,
+}
+
+fn default_lambda() -> f64 {
+    0.75
+}
+fn default_min_demos() -> usize {
+    10
+}
+fn default_stop_multiple() -> f64 {
+    2.0
+}
+
+impl Default for ShapingConfig {
+    fn default() -> Self {
+        Self {
+            lambda: default_lambda(),
+            min_demos: default_min_demos(),
+            stop_multiple: default_stop_multiple(),
+        }
+    }
+}
+
+impl ShapingConfig {
+    pub fn schedule(&self) -> crate::shaping::ShapingSchedule {
+        crate::shaping::ShapingSchedule {
+            lambda: self.lambda,
+            min_demos: self.min_demos,
+            stop_multiple: self.stop_multiple,
+        }
+    }
+}
+
+impl ExperimentConfig {
+    /// Parses TOML, applies `key=value` overrides (dotted keys, TOML values; bare words are
+    /// strings), and validates.
+    pub fn from_toml_with_overrides(text: &str, overrides: &[String]) -> Result<Self> {
+        let mut value: toml::Table = text
+            .parse()
+            .map_err(|e: toml::de::Error| ConfigError::Parse(e.to_string()))?;
+        for o in overrides {
+            apply_override(&mut value, o)?;
+        }
+        let config: Self = toml::Value::Table(value)
+            .try_into()
+            .map_err(|e: toml::de::Error| ConfigError::Parse(e.to_string().trim().to_owned()))?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    pub fn from_toml(text: &str) -> Result<Self> {
+        Self::from_toml_with_overrides(text, &[])
+    }
+
+    /// The config as TOML (what a run directory records as `config.toml`).
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).expect("an ExperimentConfig always serialises")
+    }
+
+    /// The budget B, validated non-negative.
+    pub fn budget(&self) -> u32 {
+        self.budget.total as u32
+    }
+
+    /// Whether the reward is shaped (a demonstration model is chosen).
+    pub fn shaping_enabled(&self) -> bool {
+        self.expert.model != DemoModelChoice::None
+    }
+
+    /// Checks every value; the error names the field.
+    pub fn validate(&self) -> Result<()> {
+        if self.episodes == 0 {
+            return Err(invalid("episodes", "must be at least 1"));
+        }
+        let e = &self.env;
+        if !(e.p_success > 0.0 && e.p_success <= 1.0) {
+            return Err(invalid(
+                "env.p_success",
+                format!("must be in (0, 1], got {}", e.p_success),
+            ));
+        }
+        if e.max_episode_steps() == 0 {
+            return Err(invalid("env.max_episode_steps", "must be at least 1"));
+        }
+        if e.name == EnvName::Cartpole && e.map.is_some() {
+            return Err(invalid("env.map", "applies to cliffwalk only"));
+        }
+        let a = &self.agent;
+        if a.heads() == 0 {
+            return Err(invalid("agent.heads", "K must be at least 1"));
+        }
+        if a.heads() > 8 {
+            return Err(invalid(
+                "agent.heads",
+                format!("at most 8 heads are supported, got {}", a.heads()),
+            ));
+        }
+        if matches!(
+            a.kind,
+            AgentKind::Qlearning | AgentKind::Sarsa | AgentKind::Dqn
+        ) && a.heads() != 1
+        {
+            return Err(invalid(
+                "agent.heads",
+                format!(
+                    "{:?} has one head; use bdqn or bootstrapped-q for K > 1",
+                    a.kind
+                ),
+            ));
+        }
+        if a.kind.is_tabular() != (e.name == EnvName::Cliffwalk) {
+            return Err(invalid(
+                "agent.kind",
+                format!("{:?} does not run on {:?}: tabular agents run on cliffwalk, neural ones on cartpole", a.kind, e.name),
+            ));
+        }
+        if !(a.gamma >= 0.0 && a.gamma <= 1.0) {
+            return Err(invalid(
+                "agent.gamma",
+                format!("must be in [0, 1], got {}", a.gamma),
+            ));
+        }
+        if !(a.temperature > 0.0 && a.temperature.is_finite()) {
+            return Err(invalid(
+                "agent.temperature",
+                format!("must be > 0, got {}", a.temperature),
+            ));
+        }
+        if !(a.learning_rate() > 0.0 && a.learning_rate().is_finite()) {
+            return Err(invalid(
+                "agent.learning_rate",
+                format!("must be > 0, got {}", a.learning_rate()),
+            ));
+        }
+        for (field, v) in [
+            ("agent.epsilon_start", a.epsilon_start),
+            ("agent.epsilon_end", a.epsilon_end),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(invalid(field, format!("must be in [0, 1], got {v}")));
+            }
+        }
+        if !(a.epsilon_decay_steps > 0.0) {
+            return Err(invalid("agent.epsilon_decay_steps", "must be > 0"));
+        }
+        if !(a.bootstrap_probability > 0.0 && a.bootstrap_probability <= 1.0) {
+            return Err(invalid(
+                "agent.bootstrap_probability",
+                format!("must be in (0, 1], got {}", a.bootstrap_probability),
+            ));
+        }
+        if a.replay_capacity == 0 {
+            return Err(invalid("agent.replay_capacity", "must be at least 1"));
+        }
+        if a.batch_size == 0 {
+            return Err(invalid("agent.batch_size", "must be at least 1"));
+        }
+        if a.target_update_every == 0 {
+            return Err(invalid("agent.target_update_every", "must be at least 1"));
+        }
+        if a.hidden == 0 {
+            return Err(invalid("agent.hidden", "must be at least 1"));
+        }
+        let q = &self.query;
+        if q.queue_len == 0 {
+            return Err(invalid("query.queue_len", "L_q must be at least 1"));
+        }
+        if !(0.0..=100.0).contains(&q.percentile) {
+            return Err(invalid(
+                "query.percentile",
+                format!("p_r must be in [0, 100], got {}", q.percentile),
+            ));
+        }
+        if self.budget.total < 0 {
+            return Err(invalid(
+                "budget.total",
+                format!("B must not be negative, got {}", self.budget.total),
+            ));
+        }
+        if self.budget.total > u32::MAX as i64 {
+            return Err(invalid("budget.total", "is too large"));
+        }
+        let s = &self.shaping;
+        if !(s.lambda >= 0.0 && s.lambda.is_finite()) {
+            return Err(invalid(
+                "shaping.lambda",
+                format!("must be >= 0, got {}", s.lambda),
+            ));
+        }
+        if !(s.stop_multiple >= 0.0 && s.stop_multiple.is_finite()) {
+            return Err(invalid(
+                "shaping.stop_multiple",
+                format!("must be >= 0, got {}", s.stop_multiple),
+            ));
+        }
+        if self.shaping_enabled() && a.kind.is_tabular() {
+            return Err(invalid(
+                "expert.model",
+                "reward shaping with a kernel model applies to the neural agents (cartpole)",
+            ));
+        }
+        if self.expert.name.trim().is_empty() {
+            return Err(invalid("expert.name", "must not be empty"));
+        }
+        Ok(())
+    }
+}
+
+/// Applies one `a.b.c=value` override to a TOML table.
+fn apply_override(table: &mut toml::Table, item: &str) -> Result<()> {
+    let (key, raw) = item
+        .split_once('=')
+        .ok_or_else(|| ConfigError::BadOverride(item.to_owned()))?;
+    let key = key.trim();
+    if key.is_empty() || key.split('.').any(str::is_empty) {
+        return Err(ConfigError::BadOverride(item.to_owned()));
+    }
+    let raw = raw.trim();
+    // A TOML value when it parses as one, else a bare string (so `--set expert.name=cartpole-200` works).
+    let value = format!("v = {raw}")
+        .parse::<toml::Table>()
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| toml::Value::String(raw.to_owned()));
+    let parts: Vec<&str> = key.split('.').collect();
+    let mut cur = table;
+    for p in &parts[..parts.len() - 1] {
+        let entry = cur
+            .entry(p.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        cur = match entry {
+            toml::Value::Table(t) => t,
+            _ => {
+                return Err(ConfigError::BadOverride(format!(
+                    "{item} (`{p}` is not a section)"
+                )))
+            }
+        };
+    }
+    cur.insert(parts[parts.len() - 1].to_owned(), value);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const BASE: &str = r#"
+seed = 1
+episodes = 10
+[env]
+name = "cartpole"
+[agent]
+kind = "bdqn"
+[expert]
+model = "krr"
+"#;
+
+    #[test]
+    fn defaults_follow_the_paper() {
+        let c = ExperimentConfig::from_toml(BASE).unwrap();
+        assert_eq!(c.agent.heads(), 2);
+        assert_eq!(c.agent.learning_rate(), 1e-3);
+        assert_eq!(c.agent.batch_size, 64);
+        assert_eq!(c.agent.replay_capacity, 10_000);
+        assert_eq!(c.agent.target_update_every, 50);
+        assert_eq!(c.env.max_episode_steps(), 1000);
+        assert_eq!(c.shaping.lambda, 0.75);
+        assert_eq!(c.budget(), 100);
+        assert_eq!(c.agent.exploration(), Exploration::GreedyHead);
+        assert!((c.agent.epsilon(0) - 1.0).abs() < 1e-12);
+        assert!((c.agent.epsilon(1_000_000) - 0.05).abs() < 1e-9);
+    }
+
+    #[test]
+    fn overrides_apply_and_round_trip() {
+        let c = ExperimentConfig::from_toml_with_overrides(
+            BASE,
+            &[
+                "agent.heads=3".into(),
+                "expert.name=cartpole-200".into(),
+                "query.percentile=95.5".into(),
+            ],
+        )
+        .unwrap();
+        assert_eq!(c.agent.heads(), 3);
+        assert_eq!(c.expert.name, "cartpole-200");
+        assert_eq!(c.query.percentile, 95.5);
+        assert_eq!(ExperimentConfig::from_toml(&c.to_toml()).unwrap(), c);
+    }
+
+    fn err(overrides: &[&str]) -> String {
+        let o: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+        ExperimentConfig::from_toml_with_overrides(BASE, &o)
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn bad_values_name_the_field() {
+        assert!(err(&["agent.heads=0"]).contains("agent.heads"));
+        assert!(err(&["query.percentile=101"]).contains("query.percentile"));
+        assert!(err(&["query.percentile=-1"]).contains("query.percentile"));
+        assert!(err(&["budget.total=-5"]).contains("budget.total"));
+        assert!(err(&["env.p_success=0"]).contains("env.p_success"));
+        assert!(err(&["env.p_success=1.5"]).contains("env.p_success"));
+        assert!(err(&["agent.kind=qlearning"]).contains("agent.kind"));
+        assert!(err(&["episodes=0"]).contains("episodes"));
+        let unknown = err(&["agent.hedas=2"]);
+        assert!(unknown.contains("hedas"), "{unknown}");
+        let unknown_env = err(&["env.name=mountaincar"]);
+        assert!(unknown_env.contains("mountaincar"), "{unknown_env}");
+        assert!(err(&["nonsense"]).contains("expected key=value"));
+    }
+
+    #[test]
+    fn p_success_of_one_is_allowed() {
+        let text = "seed = 0\nepisodes = 1\n[env]\nname = \"cliffwalk\"\np_success = 1.0\n[agent]\nkind = \"qlearning\"\n";
+        let c = ExperimentConfig::from_toml(text).unwrap();
+        assert_eq!(c.env.max_episode_steps(), 500);
+        assert_eq!(c.agent.learning_rate(), 0.1);
+    }
+}

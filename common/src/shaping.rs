@@ -1,0 +1,57 @@
+//! Reward shaping with the demonstration model (paper section 3.5, eq. 4), and when it is on.
+
+/// Eq. 4: `r̂ = r + λ [1 − (p(a|s, demo model) − π(a|s))²]`.
+pub fn shaped_reward(reward: f64, lambda: f64, p_demo: f64, pi: f64) -> f64 {
+    let d = p_demo - pi;
+    reward + lambda * (1.0 - d * d)
+}
+
+/// When shaping applies: from the moment `min_demos` demonstrations exist until `stop_multiple`
+/// times the (global) step of the last demonstration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShapingSchedule {
+    /// λ of eq. 4.
+    pub lambda: f64,
+    /// Shaping starts once this many demonstrations exist (and a model is fitted on them).
+    pub min_demos: usize,
+    /// Shaping stops at `stop_multiple × (step of the last demonstration)`.
+    pub stop_multiple: f64,
+}
+
+impl ShapingSchedule {
+    /// Whether the reward of global step `step` is shaped, given `demos` demonstrations so far,
+    /// the last of them at global step `last_demo_step`.
+    pub fn active(&self, step: u64, demos: usize, last_demo_step: u64) -> bool {
+        demos > 0
+            && demos >= self.min_demos
+            && (step as f64) < self.stop_multiple * (last_demo_step as f64)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn eq4_bonus_is_largest_when_policy_agrees_with_demo_model() {
+        assert_eq!(shaped_reward(1.0, 0.75, 0.8, 0.8), 1.75);
+        assert!((shaped_reward(1.0, 0.75, 1.0, 0.0) - 1.0).abs() < 1e-15);
+        assert!((shaped_reward(0.0, 0.75, 0.9, 0.5) - 0.75 * (1.0 - 0.16)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn schedule_starts_at_min_demos_and_stops_at_twice_last_demo() {
+        let s = ShapingSchedule {
+            lambda: 0.75,
+            min_demos: 10,
+            stop_multiple: 2.0,
+        };
+        assert!(!s.active(50, 9, 40), "not enough demos yet");
+        assert!(s.active(50, 10, 40));
+        assert!(s.active(79, 10, 40));
+        assert!(!s.active(80, 10, 40), "stops at twice the last demo's step");
+        // A new demonstration moves the end.
+        assert!(s.active(150, 11, 100));
+        assert!(!s.active(0, 0, 0));
+    }
+}
