@@ -12,3 +12,4 @@ pub mod query;
 pub mod replay;
 pub mod rng;
 pub mod shaping;
+pub mod wire;
