@@ -12,3 +12,5 @@ pub mod query;
 pub mod replay;
 pub mod rng;
 pub mod shaping;
+pub mod agent;
+pub mod runner;
