@@ -17,7 +17,9 @@ fn run_episode<E: Env>(
     let first = env.reset(seed);
     let mut steps = Vec::new();
     for i in 0..max_steps {
-        let step = env.step(action_at(i)).expect("valid action in a running episode");
+        let step = env
+            .step(action_at(i))
+            .expect("valid action in a running episode");
         let done = step.done();
         steps.push(step);
         if done {
@@ -45,14 +47,20 @@ fn conformance<E: Env>(
     let a = run_episode(&mut make(long), Some(7), &action_at, long);
     let b = run_episode(&mut make(long), Some(7), &action_at, long);
     let c = run_episode(&mut make(long), Some(8), &action_at, long);
-    assert!(a.1.len() >= 5, "{name}: the seeded episode is long enough to compare");
+    assert!(
+        a.1.len() >= 5,
+        "{name}: the seeded episode is long enough to compare"
+    );
     assert_eq!(a, b, "{name}: same seed, same actions, same trajectory");
     assert_ne!(a, c, "{name}: another seed gives another trajectory");
 
     // A fresh environment behaves as if seeded with 0.
     let unseeded = run_episode(&mut make(long), None, &action_at, long);
     let zero = run_episode(&mut make(long), Some(0), &action_at, long);
-    assert_eq!(unseeded, zero, "{name}: a never-seeded environment uses seed 0");
+    assert_eq!(
+        unseeded, zero,
+        "{name}: a never-seeded environment uses seed 0"
+    );
 
     // reset(None) continues the generator: the second episode is reproducible from the first
     // seed, and is not a replay of the first episode.
@@ -62,8 +70,19 @@ fn conformance<E: Env>(
     let mut again = make(long);
     run_episode(&mut again, Some(7), &action_at, long);
     assert_eq!(first, a, "{name}");
-    assert_eq!(second, run_episode(&mut again, None, &action_at, long), "{name}");
+    assert_eq!(
+        second,
+        run_episode(&mut again, None, &action_at, long),
+        "{name}"
+    );
     assert_ne!(second, first, "{name}: reset(None) does not reseed");
+    let mut other = make(long);
+    run_episode(&mut other, Some(8), &action_at, long);
+    let other_second = run_episode(&mut other, None, &action_at, long);
+    assert_ne!(
+        second, other_second,
+        "{name}: after reset(None) the episode still depends on the earlier seed"
+    );
 
     // Action space: out-of-range actions are errors and change nothing.
     let mut env = make(long);
@@ -73,12 +92,19 @@ fn conformance<E: Env>(
     for bad in [num_actions, num_actions + 1, usize::MAX] {
         assert_eq!(
             env.step(bad),
-            Err(EnvError::InvalidAction { action: bad, num_actions }),
+            Err(EnvError::InvalidAction {
+                action: bad,
+                num_actions
+            }),
             "{name}: action {bad}"
         );
     }
     for (i, expected) in a.1.iter().enumerate() {
-        assert_eq!(&env.step(action_at(i)).expect("running"), expected, "{name}: step {i}");
+        assert_eq!(
+            &env.step(action_at(i)).expect("running"),
+            expected,
+            "{name}: step {i}"
+        );
         if i == 0 {
             assert!(env.step(num_actions).is_err(), "{name}");
         }
@@ -91,7 +117,10 @@ fn conformance<E: Env>(
         env.reset(Some(seed));
         for i in 0..5 {
             let step = env.step(action_at(i)).expect("running");
-            assert!(!step.terminated, "{name}: seed {seed} step {i} must not terminate");
+            assert!(
+                !step.terminated,
+                "{name}: seed {seed} step {i} must not terminate"
+            );
             assert_eq!(step.truncated, i == 4, "{name}: seed {seed} step {i}");
         }
         for action in 0..num_actions {

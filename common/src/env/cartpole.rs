@@ -117,11 +117,9 @@ impl CartPole {
     /// Whether `state` is outside the thresholds (Gymnasium's `terminated`).
     pub fn is_terminal(state: &[f64; 4]) -> bool {
         let [x, _, theta, _] = *state;
-        // Strict comparisons, as Gymnasium's (so a NaN state is not terminal there either).
-        x < -X_THRESHOLD
-            || x > X_THRESHOLD
-            || theta < -THETA_THRESHOLD_RADIANS
-            || theta > THETA_THRESHOLD_RADIANS
+        // Gymnasium's `x < -x_threshold or x > x_threshold or ...`: the same comparisons, so a
+        // state exactly on a threshold (or NaN) is not terminal.
+        x.abs() > X_THRESHOLD || theta.abs() > THETA_THRESHOLD_RADIANS
     }
 }
 
@@ -218,8 +216,18 @@ mod tests {
         // Gymnasium uses strict comparisons: x > 2.4 terminates, x == 2.4 does not.
         assert!(!CartPole::is_terminal(&[X_THRESHOLD, 0.0, 0.0, 0.0]));
         assert!(CartPole::is_terminal(&[X_THRESHOLD + 1e-12, 0.0, 0.0, 0.0]));
-        assert!(!CartPole::is_terminal(&[0.0, 0.0, -THETA_THRESHOLD_RADIANS, 0.0]));
-        assert!(CartPole::is_terminal(&[0.0, 0.0, -THETA_THRESHOLD_RADIANS - 1e-12, 0.0]));
+        assert!(!CartPole::is_terminal(&[
+            0.0,
+            0.0,
+            -THETA_THRESHOLD_RADIANS,
+            0.0
+        ]));
+        assert!(CartPole::is_terminal(&[
+            0.0,
+            0.0,
+            -THETA_THRESHOLD_RADIANS - 1e-12,
+            0.0
+        ]));
     }
 
     #[test]
@@ -236,6 +244,6 @@ mod tests {
         assert!((s[1] - 0.02 * xacc).abs() < 1e-15);
         assert_eq!(s[2], 0.0);
         assert!((s[3] - 0.02 * thetaacc).abs() < 1e-15);
-        assert!((s[1] - 0.19512195121951220).abs() < 1e-12);
+        assert!((s[1] - 0.1951219512195122).abs() < 1e-12);
     }
 }

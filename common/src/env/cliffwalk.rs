@@ -131,7 +131,9 @@ pub enum CliffWalkError {
     PolicyAction { state: usize, action: usize },
     #[error("policy probabilities of state {state} are not a distribution (negative, not finite, or summing to {sum})")]
     PolicyRow { state: usize, sum: f64 },
-    #[error("value iteration did not reach tol {tol} in {iterations} sweeps (last change {residual})")]
+    #[error(
+        "value iteration did not reach tol {tol} in {iterations} sweeps (last change {residual})"
+    )]
     NotConverged {
         tol: f64,
         iterations: usize,
@@ -452,10 +454,9 @@ impl CliffWalk {
         let slip = (1.0 - self.p_success) / NUM_ACTIONS as f64;
         let mut out = [(state, slip); NUM_ACTIONS];
         out[0] = (self.map.neighbour(state, action), self.p_success + slip);
-        let mut i = 1;
-        for direction in (0..NUM_ACTIONS).filter(|&d| d != action) {
-            out[i] = (self.map.neighbour(state, direction), slip);
-            i += 1;
+        let others = (0..NUM_ACTIONS).filter(|&d| d != action);
+        for (slot, direction) in out[1..].iter_mut().zip(others) {
+            *slot = (self.map.neighbour(state, direction), slip);
         }
         out
     }
@@ -513,7 +514,13 @@ impl Env for CliffWalk {
         if terminated || truncated {
             self.phase = Phase::Over;
         }
-        tracing::trace!(from, action, direction, to = self.position, "cliffwalk step");
+        tracing::trace!(
+            from,
+            action,
+            direction,
+            to = self.position,
+            "cliffwalk step"
+        );
         Ok(Step {
             observation: self.position,
             reward: self.reward(self.position),
@@ -728,28 +735,40 @@ mod tests {
             ("\n  \n", MapError::Empty),
             ("...\n..G\n.X.\n...", MapError::NoStart),
             ("S..\n...", MapError::NoGoal),
-            ("S.G\n.S.", MapError::DuplicateStart {
-                line: 2,
-                column: 2,
-                first_line: 1,
-                first_column: 1,
-            }),
-            ("SGG", MapError::DuplicateGoal {
-                line: 1,
-                column: 3,
-                first_line: 1,
-                first_column: 2,
-            }),
-            ("S..\n..\nG..", MapError::RaggedRow {
-                line: 2,
-                expected: 3,
-                found: 2,
-            }),
-            ("S.G\n.o.", MapError::UnknownCharacter {
-                line: 2,
-                column: 2,
-                found: 'o',
-            }),
+            (
+                "S.G\n.S.",
+                MapError::DuplicateStart {
+                    line: 2,
+                    column: 2,
+                    first_line: 1,
+                    first_column: 1,
+                },
+            ),
+            (
+                "SGG",
+                MapError::DuplicateGoal {
+                    line: 1,
+                    column: 3,
+                    first_line: 1,
+                    first_column: 2,
+                },
+            ),
+            (
+                "S..\n..\nG..",
+                MapError::RaggedRow {
+                    line: 2,
+                    expected: 3,
+                    found: 2,
+                },
+            ),
+            (
+                "S.G\n.o.",
+                MapError::UnknownCharacter {
+                    line: 2,
+                    column: 2,
+                    found: 'o',
+                },
+            ),
             ("S.G\n\n...", MapError::BlankLine { line: 2 }),
         ];
         for (text, expected) in cases {
@@ -793,16 +812,35 @@ mod tests {
         let mut e = env("SXG", 1.0);
         assert_eq!(e.reset(Some(1)), 0);
         let step = e.step(RIGHT).expect("running");
-        assert_eq!(step, Step { observation: 1, reward: -5.0, terminated: false, truncated: false });
+        assert_eq!(
+            step,
+            Step {
+                observation: 1,
+                reward: -5.0,
+                terminated: false,
+                truncated: false
+            }
+        );
         // Bumping into the wall while on the pit lands on the pit again.
         let step = e.step(UP).expect("running");
-        assert_eq!((step.observation, step.reward, step.done()), (1, -5.0, false));
+        assert_eq!(
+            (step.observation, step.reward, step.done()),
+            (1, -5.0, false)
+        );
         // Back to the start tile: a plate.
         let step = e.step(LEFT).expect("running");
         assert_eq!((step.observation, step.reward), (0, -0.1));
         e.step(RIGHT).expect("running");
         let step = e.step(RIGHT).expect("running");
-        assert_eq!(step, Step { observation: 2, reward: 5.0, terminated: true, truncated: false });
+        assert_eq!(
+            step,
+            Step {
+                observation: 2,
+                reward: 5.0,
+                terminated: true,
+                truncated: false
+            }
+        );
         assert_eq!(e.step(LEFT), Err(EnvError::EpisodeOver));
     }
 
@@ -815,7 +853,10 @@ mod tests {
         e.reset(Some(11));
         for _ in 0..trials {
             let s = e.step(RIGHT).expect("running").observation;
-            let direction = [1, 5, 7, 3].iter().position(|&t| t == s).expect("a neighbour");
+            let direction = [1, 5, 7, 3]
+                .iter()
+                .position(|&t| t == s)
+                .expect("a neighbour");
             counts[direction] += 1;
             e.reset(None);
         }
@@ -852,7 +893,11 @@ mod tests {
         // "SG", p = 0.9: V = 0.925 * 5 + 0.075 * (-0.1 + γ V)  =>  V = 4.6175 / (1 - 0.075 γ).
         let vi = value_iteration(&env("SG", 0.9), 0.9, 1e-12).expect("converges");
         let expected = 4.6175 / (1.0 - 0.075 * 0.9);
-        assert!((vi.values[0] - expected).abs() < 1e-10, "{} vs {expected}", vi.values[0]);
+        assert!(
+            (vi.values[0] - expected).abs() < 1e-10,
+            "{} vs {expected}",
+            vi.values[0]
+        );
 
         // "SXG", deterministic: crossing the pit (-5 + 0.9 * 5 = -0.5) beats staying on the start
         // forever (-0.1 / (1 - 0.9) = -1).
@@ -869,8 +914,14 @@ mod tests {
     #[test]
     fn value_iteration_refuses_bad_gamma_and_tol() {
         let e = CliffWalk::default();
-        assert_eq!(value_iteration(&e, 1.0, 1e-9), Err(CliffWalkError::Gamma(1.0)));
-        assert_eq!(value_iteration(&e, 0.99, 0.0), Err(CliffWalkError::Tolerance(0.0)));
+        assert_eq!(
+            value_iteration(&e, 1.0, 1e-9),
+            Err(CliffWalkError::Gamma(1.0))
+        );
+        assert_eq!(
+            value_iteration(&e, 0.99, 0.0),
+            Err(CliffWalkError::Tolerance(0.0))
+        );
         assert!(policy_evaluation(&e, &[0; 3], 0.99).is_err());
         assert!(policy_evaluation(&e, &[4; 225], 0.99).is_err());
     }
@@ -884,7 +935,10 @@ mod tests {
         let vi = value_iteration(&e, DEFAULT_GAMMA, 1e-12).expect("converges");
         let v_start = vi.values[e.map().start()];
         eprintln!("V*(S) = {v_start} after {} sweeps", vi.iterations);
-        assert!((v_start - DEFAULT_VALUE_AT_START).abs() < 1e-8, "V(S) = {v_start}");
+        assert!(
+            (v_start - DEFAULT_VALUE_AT_START).abs() < 1e-8,
+            "V(S) = {v_start}"
+        );
         // The greedy path from S climbs to row 11 before going right (it does not hug the cliff).
         let mut s = e.map().start();
         let mut rows = Vec::new();
@@ -935,6 +989,9 @@ mod tests {
         }
         let mean = total / episodes as f64;
         eprintln!("mean discounted return over {episodes} episodes: {mean} (V*(S) = {DEFAULT_VALUE_AT_START})");
-        assert!((mean - DEFAULT_VALUE_AT_START).abs() < 0.05, "mean return {mean}");
+        assert!(
+            (mean - DEFAULT_VALUE_AT_START).abs() < 0.05,
+            "mean return {mean}"
+        );
     }
 }
