@@ -4,6 +4,7 @@
 //! [`wire`] module, which is the one place that knows about iceoryx2. Everything else is exactly
 //! reproducible from a seed, so the same experiment runs in one process or in many.
 
+pub mod demo_model;
 pub mod env;
 pub mod policy;
 pub mod query;

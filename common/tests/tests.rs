@@ -1,1 +1,3 @@
 //! Integration tests of the core against the reference fixtures (one test binary).
+
+mod kernel_reference;
