@@ -4,7 +4,11 @@
 //! [`wire`] module, which is the one place that knows about iceoryx2. Everything else is exactly
 //! reproducible from a seed, so the same experiment runs in one process or in many.
 
+<<<<<<< HEAD
 pub mod config;
+=======
+pub mod demo_model;
+>>>>>>> kernel
 pub mod env;
 pub mod policy;
 pub mod qfunction;

@@ -3,7 +3,7 @@
 //!
 //! Bad input (a malformed state or action list, an unknown env name, an unreadable or malformed
 //! map, an out-of-range parameter) is returned as a [`UsageError`], which `main` maps to exit
-//! code 2 (see [`is_usage_error`]).
+//! code 2 (see [`crate::usage::exit_code`]).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -14,26 +14,10 @@ use alfd_common::env::cliffwalk::{
 use alfd_common::env::{cartpole, CartPole, Env};
 use anyhow::Context;
 
-/// Bad input from the user: `main` exits with code 2 when an error's chain contains one.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct UsageError(pub String);
-
-impl std::fmt::Display for UsageError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for UsageError {}
-
-/// Whether `err` is (or was caused by) bad user input, i.e. should exit with code 2.
-pub fn is_usage_error(err: &anyhow::Error) -> bool {
-    err.chain().any(|e| e.is::<UsageError>())
-}
-
-fn usage(message: impl Into<String>) -> anyhow::Error {
-    anyhow::Error::new(UsageError(message.into()))
-}
+pub use crate::usage::UsageError;
+#[cfg(test)]
+use crate::usage::is_usage_error;
+use crate::usage::usage;
 
 /// Arguments of `alfd env`.
 #[derive(Debug, clap::Args)]

@@ -67,9 +67,9 @@ pub fn run_config(cfg: &ExperimentConfig, out: &Path, progress: bool) -> anyhow:
             let env = setup::cliffwalk(cfg)?;
             let mut demonstrator = alfd_expert::registry::cliffwalk(&cfg.expert.name, &env)?;
             let run = run_tabular(cfg, env.clone(), demonstrator.as_mut(), |r, _| show(r));
-            let vi = value_iteration(&env, 0.99, 1e-10);
-            let greedy = policy_evaluation(&env, &run.greedy_policy, 0.99, 1e-10);
-            let s0 = env.start_state();
+            let vi = value_iteration(&env, cfg.agent.gamma, 1e-10)?;
+            let greedy = policy_evaluation(&env, &run.greedy_policy, cfg.agent.gamma)?;
+            let s0 = env.map().start();
             let table = serde_json::json!({ "actions": run.greedy_policy });
             write(out, "policy.json", table.to_string().as_bytes())?;
             (run.records, Vec::new(), Some(greedy[s0]), Some(vi.values[s0]))

@@ -2,7 +2,7 @@
 //! them, and 1 on anything else.
 
 /// A problem with what the user gave us, already phrased for them.
-#[derive(Debug)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct UsageError(pub String);
 
 impl std::fmt::Display for UsageError {
@@ -24,10 +24,16 @@ pub fn exit_code(err: &anyhow::Error) -> i32 {
         if cause.is::<UsageError>()
             || cause.is::<alfd_common::config::ConfigError>()
             || cause.is::<alfd_common::env::cliffwalk::MapError>()
+            || cause.is::<alfd_common::env::cliffwalk::CliffWalkError>()
             || cause.is::<alfd_expert::registry::RegistryError>()
         {
             return 2;
         }
     }
     1
+}
+
+/// Whether `err` is the user's to fix (exit code 2).
+pub fn is_usage_error(err: &anyhow::Error) -> bool {
+    exit_code(err) == 2
 }

@@ -87,7 +87,10 @@ pub fn cartpole(name: &str) -> Result<Box<dyn Demonstrator<[f32]> + Send>, Regis
 pub fn cliffwalk(name: &str, env: &CliffWalk) -> Result<Box<dyn Demonstrator<usize> + Send>, RegistryError> {
     let e = entry(name, "cliffwalk")?;
     match e.kind.as_str() {
-        "value-iteration" => Ok(Box::new(TablePolicy { actions: value_iteration(env, 0.99, 1e-10).policy })),
+        "value-iteration" => {
+            let vi = value_iteration(env, 0.99, 1e-10).map_err(|err| RegistryError::Corrupt { name: name.to_owned(), reason: err.to_string() })?;
+            Ok(Box::new(TablePolicy { actions: vi.policy }))
+        }
         "policy-table" => {
             let file = e.file.as_deref().unwrap_or_default();
             let bytes = shipped_file(file)
