@@ -7,7 +7,7 @@ use rand::Rng as _;
 use crate::agent::query_decision;
 use crate::config::{AgentConfig, Exploration, QueryConfig, QueryMode};
 use crate::demo_model::DemoModel;
-use crate::nn::{Adam, Mlp, NnError, TrainScratch};
+use crate::nn::{Adam, AdamConfig, Mlp, NnError, TrainScratch};
 use crate::policy::{argmax, js_divergence, softmax_into};
 use crate::query::QueryRule;
 use crate::replay::{Batch, ReplayBuffer, Transition};
@@ -82,7 +82,7 @@ impl NeuralActor {
 
     /// Copies the weights of `net` (same architecture) without going through a flat buffer.
     pub fn copy_weights_from(&mut self, net: &Mlp, version: u64) {
-        self.net.clone_from(net);
+        self.net.copy_params_from(net).expect("actor and learner networks share one architecture");
         self.weights_version = version;
     }
 
@@ -212,8 +212,8 @@ impl NeuralLearner {
         let heads = agent.heads();
         let online = Mlp::new(obs_dim, agent.hidden, heads, actions, &mut rng);
         let target = online.clone();
-        let adam = Adam::new(&online, agent.learning_rate() as f32);
-        let scratch = TrainScratch::new(&online, agent.batch_size);
+        let adam = Adam::with_config(&online, AdamConfig { lr: agent.learning_rate(), ..AdamConfig::default() });
+        let scratch = TrainScratch::default();
         Self {
             online,
             target,
@@ -244,7 +244,7 @@ impl NeuralLearner {
         let loss = crate::nn::train_step(&mut self.online, &self.target, &mut self.adam, &self.batch, self.gamma, &mut self.scratch);
         self.updates += 1;
         if self.updates % self.target_update_every == 0 {
-            self.target.clone_from(&self.online);
+            self.target.copy_params_from(&self.online).expect("online and target networks share one architecture");
         }
         Some(loss)
     }
