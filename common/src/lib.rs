@@ -5,6 +5,7 @@
 //! reproducible from a seed, so the same experiment runs in one process or in many.
 
 pub mod env;
+pub mod nn;
 pub mod policy;
 pub mod query;
 pub mod replay;

@@ -1,1 +1,2 @@
 //! Integration tests of the core against the reference fixtures (one test binary).
+mod mlp_reference;
