@@ -8,6 +8,7 @@ pub mod agent;
 pub mod config;
 pub mod demo_model;
 pub mod env;
+pub mod nn;
 pub mod policy;
 pub mod qfunction;
 pub mod query;
