@@ -209,3 +209,15 @@ fn bad_demonstrations_are_refused() {
     assert!(matches!(err, DemoModelError::Unsupported(_)), "{err}");
     assert!(err.to_string().contains("2 actions"), "{err}");
 }
+
+#[test]
+fn contradictory_demonstrations_give_even_odds() {
+    // The same state demonstrated with both actions, three times each.
+    let states = vec![vec![0.3, -0.2]; 6];
+    let actions = [0, 1, 0, 1, 0, 1];
+    for kind in [DemoModelKind::Krr, DemoModelKind::Svm] {
+        let model = DemoModel::fit(kind, &states, &actions, 2).unwrap();
+        let p = model.probs(&[0.3, -0.2]);
+        assert!((p[0] - 0.5).abs() < 1e-6, "{kind}: {p:?}");
+    }
+}
