@@ -1,15 +1,19 @@
 //! The pure, seeded core of alfd (active learning from demonstrations).
 //!
 //! Nothing in this crate opens a file, takes a lock or talks to another process, except the
-//! [`wire`] module, which is the one place that knows about iceoryx2. Everything else is exactly
+//! `wire` module, which is the one place that knows about iceoryx2. Everything else is exactly
 //! reproducible from a seed, so the same experiment runs in one process or in many.
 
+pub mod agent;
 pub mod config;
+pub mod demo_model;
 pub mod env;
+pub mod nn;
 pub mod policy;
 pub mod qfunction;
 pub mod query;
 pub mod replay;
 pub mod rng;
 pub mod shaping;
+pub mod runner;
 pub mod wire;

@@ -1,1 +1,8 @@
 //! Integration tests of the core against the reference fixtures (one test binary).
+
+mod cartpole_reference;
+mod dqn_loss;
+mod env_conformance;
+mod kernel_reference;
+mod mlp_reference;
+mod nn_checkpoint;

@@ -1,6 +1,52 @@
-//! `alfd`: the command line of the project.
+//! `alfd`: the command line of the project. Each subcommand is a small module; this file parses
+//! arguments, installs logging, and maps errors to exit codes (2 for bad input, 1 otherwise).
+
+mod cmd_demo_model;
+mod cmd_env;
+mod cmd_expert;
+mod cmd_local;
+mod setup;
+mod usage;
+
+use clap::{Parser, Subcommand};
+
+/// Active learning from demonstrations: actor, learner and expert processes, experiments.
+#[derive(Debug, Parser)]
+#[command(name = "alfd", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run an experiment config in one process.
+    Local(cmd_local::LocalArgs),
+    /// Environments: roll out CartPole from a state, show a CliffWalk map.
+    Env(cmd_env::EnvArgs),
+    /// Demonstrators: list them, evaluate one.
+    Expert(cmd_expert::ExpertArgs),
+    /// Train the demonstrators of known quality and save them.
+    TrainExperts(cmd_expert::TrainExpertsArgs),
+    /// Fit a demonstration model (KRR or SVM) on demonstrations and query it.
+    DemoModel(cmd_demo_model::DemoModelArgs),
+}
 
 fn main() {
-    eprintln!("alfd: not yet implemented");
-    std::process::exit(2);
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => e.exit(),
+    };
+    setup::init_logging();
+    let result = match cli.command {
+        Command::Local(a) => cmd_local::run(a),
+        Command::Env(a) => cmd_env::run(a),
+        Command::Expert(a) => cmd_expert::run(a),
+        Command::TrainExperts(a) => cmd_expert::train(a),
+        Command::DemoModel(a) => cmd_demo_model::run(a),
+    };
+    if let Err(err) = result {
+        eprintln!("error: {err:#}");
+        std::process::exit(usage::exit_code(&err));
+    }
 }

@@ -1,1 +1,4 @@
-//! The expert process of alfd: wires the core to the transport.
+//! The expert process of alfd, and the registry of demonstrators it (and the single-process
+//! runner) loads by name.
+
+pub mod registry;

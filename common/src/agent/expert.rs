@@ -1,0 +1,201 @@
+//! The expert's side: demonstrators (who answers a query), and [`ExpertCore`], which enforces the
+//! budget B, keeps the demonstration set `D_dem`, and refits the demonstration model on it
+//! (Algorithm 1 lines 8-10 and 21).
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::DemoModelChoice;
+use crate::demo_model::{DemoModel, DemoModelError, DemoModelKind};
+use crate::nn::Mlp;
+use crate::policy::argmax;
+use crate::query::Budget;
+use crate::shaping::ShapingSchedule;
+
+/// Anything that answers "which action would you take in state `s`?".
+pub trait Demonstrator<S: ?Sized> {
+    fn act(&mut self, s: &S) -> usize;
+}
+
+/// A deterministic policy table (CliffWalk experts).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TablePolicy {
+    pub actions: Vec<usize>,
+}
+
+impl Demonstrator<usize> for TablePolicy {
+    fn act(&mut self, s: &usize) -> usize {
+        self.actions[*s]
+    }
+}
+
+/// The analytic CartPole controller: push towards the side the pole falls to, with damping and a
+/// weak pull of the cart back to the centre. Balances for the whole 1000-step episode from
+/// Gymnasium's initial states (tested), so it serves as a perfect expert.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct BalancingController;
+
+impl Demonstrator<[f32]> for BalancingController {
+    fn act(&mut self, s: &[f32]) -> usize {
+        let (x, x_dot, theta, theta_dot) = (s[0], s[1], s[2], s[3]);
+        let u = theta + 0.5 * theta_dot + 0.03 * x + 0.1 * x_dot;
+        usize::from(u > 0.0)
+    }
+}
+
+/// A trained Q-network acting greedily on the mean of its heads (CartPole experts of known quality).
+#[derive(Debug, Clone)]
+pub struct NetworkDemonstrator {
+    net: Mlp,
+    q: Vec<f32>,
+    mean: Vec<f32>,
+}
+
+impl NetworkDemonstrator {
+    pub fn new(net: Mlp) -> Self {
+        let q = vec![0.0; net.heads() * net.actions()];
+        let mean = vec![0.0; net.actions()];
+        Self { net, q, mean }
+    }
+
+    pub fn network(&self) -> &Mlp {
+        &self.net
+    }
+}
+
+impl Demonstrator<[f32]> for NetworkDemonstrator {
+    fn act(&mut self, s: &[f32]) -> usize {
+        self.net.forward_one(s, &mut self.q);
+        let a = self.mean.len();
+        let k = self.q.len() / a;
+        self.mean.iter_mut().for_each(|m| *m = 0.0);
+        for h in 0..k {
+            for i in 0..a {
+                self.mean[i] += self.q[h * a + i];
+            }
+        }
+        argmax(&self.mean)
+    }
+}
+
+/// One answered query, as `demos.jsonl` records it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DemoRecord {
+    /// 0-based index of the demonstration in the run (the budget spent before it).
+    pub index: u32,
+    pub state: Vec<f64>,
+    pub action: usize,
+    /// The global environment step at which it was asked for.
+    pub step: u64,
+    /// The demonstrator that answered.
+    pub expert: String,
+}
+
+/// The budget, the demonstration set and the demonstration model.
+#[derive(Debug, Clone)]
+pub struct ExpertCore {
+    budget: Budget,
+    demos: Vec<DemoRecord>,
+    choice: DemoModelChoice,
+    num_actions: usize,
+    model: Option<DemoModel>,
+    model_version: u64,
+    schedule: ShapingSchedule,
+}
+
+impl ExpertCore {
+    pub fn new(budget: u32, choice: DemoModelChoice, num_actions: usize, schedule: ShapingSchedule) -> Self {
+        Self {
+            budget: Budget::new(budget),
+            demos: Vec::new(),
+            choice,
+            num_actions,
+            model: None,
+            model_version: 0,
+            schedule,
+        }
+    }
+
+    /// Restores the demonstrations of an earlier expert process (its `demos.jsonl`): the budget
+    /// left and the model are those they imply.
+    pub fn restore(&mut self, records: Vec<DemoRecord>) -> Result<(), DemoModelError> {
+        self.budget = Budget::with_used(self.budget.total(), records.len() as u32);
+        self.demos = records;
+        self.refit()
+    }
+
+    /// Spends one unit of budget on `action`, the demonstrator's answer at `state` (global step
+    /// `step`), records it and refits the model. `None` when the budget is exhausted.
+    pub fn record(&mut self, state: &[f64], action: usize, step: u64, expert: &str) -> Option<&DemoRecord> {
+        if !self.budget.try_spend() {
+            return None;
+        }
+        self.demos.push(DemoRecord {
+            index: self.demos.len() as u32,
+            state: state.to_vec(),
+            action,
+            step,
+            expert: expert.to_owned(),
+        });
+        if let Err(e) = self.refit() {
+            tracing::warn!(error = %e, "demonstration model not refitted");
+        }
+        self.demos.last()
+    }
+
+    /// Asks `demonstrator` at `obs` if budget remains (Algorithm 1 lines 8-10).
+    pub fn answer(&mut self, demonstrator: &mut dyn Demonstrator<[f32]>, obs: &[f32], step: u64, expert: &str) -> Option<usize> {
+        if self.budget.is_exhausted() {
+            return None;
+        }
+        let action = demonstrator.act(obs);
+        let state: Vec<f64> = obs.iter().map(|&x| f64::from(x)).collect();
+        self.record(&state, action, step, expert).map(|d| d.action)
+    }
+
+    fn refit(&mut self) -> Result<(), DemoModelError> {
+        let kind = match self.choice {
+            DemoModelChoice::None => return Ok(()),
+            DemoModelChoice::Krr => DemoModelKind::Krr,
+            DemoModelChoice::Svm => DemoModelKind::Svm,
+        };
+        if self.demos.is_empty() {
+            self.model = None;
+            return Ok(());
+        }
+        let states: Vec<Vec<f64>> = self.demos.iter().map(|d| d.state.clone()).collect();
+        let actions: Vec<usize> = self.demos.iter().map(|d| d.action).collect();
+        self.model = Some(DemoModel::fit(kind, &states, &actions, self.num_actions)?);
+        self.model_version += 1;
+        Ok(())
+    }
+
+    pub fn budget(&self) -> Budget {
+        self.budget
+    }
+
+    pub fn demos(&self) -> &[DemoRecord] {
+        &self.demos
+    }
+
+    pub fn model(&self) -> Option<&DemoModel> {
+        self.model.as_ref()
+    }
+
+    /// Incremented on every refit.
+    pub fn model_version(&self) -> u64 {
+        self.model_version
+    }
+
+    /// The global step of the last demonstration (0 before any).
+    pub fn last_demo_step(&self) -> u64 {
+        self.demos.last().map_or(0, |d| d.step)
+    }
+
+    /// The model to shape the reward of global step `step` with, if shaping is on then.
+    pub fn shaping_model(&self, step: u64) -> Option<(&DemoModel, f64)> {
+        let model = self.model.as_ref()?;
+        self.schedule
+            .active(step, self.demos.len(), self.last_demo_step())
+            .then_some((model, self.schedule.lambda))
+    }
+}

@@ -1,0 +1,264 @@
+//! The neural agents of sections 3.2-3.5 and 5.3, split into the part that acts and the part that
+//! learns: DQN (one head, ε-greedy), Bootstrapped DQN (K heads, one followed greedily per episode),
+//! the single-head greedy ablation, all with active queries and eq. 4 shaping.
+
+use rand::Rng as _;
+
+use crate::agent::query_decision;
+use crate::config::{AgentConfig, Exploration, QueryConfig, QueryMode};
+use crate::demo_model::DemoModel;
+use crate::nn::{Adam, AdamConfig, Mlp, NnError, TrainScratch};
+use crate::policy::{argmax, js_divergence, softmax_into};
+use crate::query::QueryRule;
+use crate::replay::{Batch, ReplayBuffer, Transition};
+use crate::rng::Rng;
+use crate::shaping::shaped_reward;
+
+/// What the actor decided at one state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decision {
+    /// The agent's own action (used when no query is made, or when the query goes unanswered).
+    pub action: usize,
+    /// The Jensen-Shannon divergence of the K heads at the state (0 with one head).
+    pub js: f64,
+    /// The query rule fired: ask the expert.
+    pub query: bool,
+}
+
+/// The acting side: the latest weights, exploration, the divergence queue and shaping.
+#[derive(Debug, Clone)]
+pub struct NeuralActor {
+    net: Mlp,
+    heads: usize,
+    actions: usize,
+    exploration: Exploration,
+    temperature: f64,
+    epsilon: (f64, f64, f64),
+    bootstrap_probability: f64,
+    mode: QueryMode,
+    rule: QueryRule,
+    rng: Rng,
+    arm: usize,
+    steps: u64,
+    q32: Vec<f32>,
+    /// Q-values of the last state passed to [`NeuralActor::decide`].
+    q: Vec<f64>,
+    probs: Vec<f64>,
+    weights_version: u64,
+}
+
+impl NeuralActor {
+    /// An actor whose network has the architecture of `cfg`; it acts on whatever weights it is
+    /// given with [`NeuralActor::set_weights`] (a fresh initialisation until then).
+    pub fn new(agent: &AgentConfig, query: &QueryConfig, obs_dim: usize, actions: usize, mut rng: Rng) -> Self {
+        let heads = agent.heads();
+        let net = Mlp::new(obs_dim, agent.hidden, heads, actions, &mut rng);
+        Self {
+            net,
+            heads,
+            actions,
+            exploration: agent.exploration(),
+            temperature: agent.temperature,
+            epsilon: (agent.epsilon_start, agent.epsilon_end, agent.epsilon_decay_steps),
+            bootstrap_probability: agent.bootstrap_probability,
+            mode: query.mode,
+            rule: QueryRule::new(query.queue_len, query.percentile),
+            rng,
+            arm: 0,
+            steps: 0,
+            q32: vec![0.0; heads * actions],
+            q: vec![0.0; heads * actions],
+            probs: vec![0.0; actions],
+            weights_version: 0,
+        }
+    }
+
+    /// Replaces the acting weights (the flat parameter order of [`Mlp::params_flat`]).
+    pub fn set_weights(&mut self, params: &[f32], version: u64) -> Result<(), NnError> {
+        self.net.load_params_flat(params)?;
+        self.weights_version = version;
+        Ok(())
+    }
+
+    /// Copies the weights of `net` (same architecture) without going through a flat buffer.
+    pub fn copy_weights_from(&mut self, net: &Mlp, version: u64) {
+        self.net.copy_params_from(net).expect("actor and learner networks share one architecture");
+        self.weights_version = version;
+    }
+
+    pub fn weights_version(&self) -> u64 {
+        self.weights_version
+    }
+
+    pub fn network(&self) -> &Mlp {
+        &self.net
+    }
+
+    /// The head followed this episode.
+    pub fn arm(&self) -> usize {
+        self.arm
+    }
+
+    /// Environment steps taken by this actor (drives ε).
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Algorithm 1 line 1: sample the head to follow this episode.
+    pub fn begin_episode(&mut self) {
+        self.arm = self.rng.random_range(0..self.heads);
+    }
+
+    /// Algorithm 1 lines 3-16 at state `obs`: the divergence, the query decision, and the agent's
+    /// own action (greedy on the episode's head, or ε-greedy / softmax as configured).
+    pub fn decide(&mut self, obs: &[f32], budget_left: bool) -> Decision {
+        self.net.forward_one(obs, &mut self.q32);
+        for (q, &v) in self.q.iter_mut().zip(&self.q32) {
+            *q = f64::from(v);
+        }
+        let js = if self.heads > 1 { js_divergence(&self.q, self.heads, self.temperature) } else { 0.0 };
+        let query = query_decision(self.mode, &mut self.rule, js, budget_left);
+        let a = self.actions;
+        let head = &self.q[self.arm * a..(self.arm + 1) * a];
+        let action = match self.exploration {
+            Exploration::GreedyHead => argmax(head),
+            Exploration::EpsilonGreedy => {
+                let (start, end, decay) = self.epsilon;
+                let eps = end + (start - end) * (-(self.steps as f64) / decay).exp();
+                if self.rng.random::<f64>() < eps {
+                    self.rng.random_range(0..a)
+                } else {
+                    argmax(head)
+                }
+            }
+            Exploration::Softmax => {
+                softmax_into(head, self.temperature, &mut self.probs);
+                crate::agent::tabular::sample(&self.probs, &mut self.rng)
+            }
+        };
+        self.steps += 1;
+        Decision { action, js, query }
+    }
+
+    /// `π(a|s)` of the episode's head at the state last passed to [`NeuralActor::decide`] (eq. 2).
+    pub fn policy_prob(&mut self, action: usize) -> f64 {
+        let a = self.actions;
+        softmax_into(&self.q[self.arm * a..(self.arm + 1) * a], self.temperature, &mut self.probs);
+        self.probs[action]
+    }
+
+    /// Algorithm 1 lines 17-19: the transition to store, with the reward shaped by eq. 4 when a
+    /// demonstration model is given (`shaping = Some((model, λ))`), and its bootstrap mask.
+    /// Demonstrations train every head; other transitions train head k with probability p.
+    #[allow(clippy::too_many_arguments)]
+    pub fn transition(
+        &mut self,
+        obs: &[f32],
+        action: usize,
+        reward: f64,
+        next_obs: &[f32],
+        terminated: bool,
+        demo: bool,
+        shaping: Option<(&DemoModel, f64)>,
+    ) -> Transition {
+        let reward = match shaping {
+            Some((model, lambda)) => {
+                let s: Vec<f64> = obs.iter().map(|&x| f64::from(x)).collect();
+                let p_demo = model.prob(&s, action);
+                let pi = self.policy_prob(action);
+                shaped_reward(reward, lambda, p_demo, pi)
+            }
+            None => reward,
+        };
+        let mask = (0..self.heads)
+            .map(|_| {
+                if demo || self.heads == 1 || self.rng.random::<f64>() < self.bootstrap_probability {
+                    1.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        Transition {
+            state: obs.to_vec(),
+            action: action as u32,
+            reward: reward as f32,
+            next_state: next_obs.to_vec(),
+            terminated,
+            mask,
+            demo,
+        }
+    }
+}
+
+/// The learning side: replay, the K heads, their targets and Adam (Algorithm 1 line 20).
+#[derive(Debug, Clone)]
+pub struct NeuralLearner {
+    online: Mlp,
+    target: Mlp,
+    adam: Adam,
+    replay: ReplayBuffer,
+    rng: Rng,
+    batch: Batch,
+    scratch: TrainScratch,
+    gamma: f32,
+    batch_size: usize,
+    target_update_every: u64,
+    updates: u64,
+}
+
+impl NeuralLearner {
+    pub fn new(agent: &AgentConfig, obs_dim: usize, actions: usize, mut rng: Rng) -> Self {
+        let heads = agent.heads();
+        let online = Mlp::new(obs_dim, agent.hidden, heads, actions, &mut rng);
+        let target = online.clone();
+        let adam = Adam::with_config(&online, AdamConfig { lr: agent.learning_rate(), ..AdamConfig::default() });
+        let scratch = TrainScratch::default();
+        Self {
+            online,
+            target,
+            adam,
+            replay: ReplayBuffer::new(agent.replay_capacity, obs_dim, heads),
+            rng,
+            batch: Batch::default(),
+            scratch,
+            gamma: agent.gamma as f32,
+            batch_size: agent.batch_size,
+            target_update_every: agent.target_update_every,
+            updates: 0,
+        }
+    }
+
+    /// Algorithm 1 line 19.
+    pub fn insert(&mut self, t: &Transition) {
+        self.replay.push(t);
+    }
+
+    /// One update of the K heads on a batch from the replay buffer, and the target copy every
+    /// `target_update_every` updates. `None` (no update) until the buffer holds a full batch.
+    pub fn update(&mut self) -> Option<f32> {
+        if self.replay.len() < self.batch_size {
+            return None;
+        }
+        self.replay.sample_into(self.batch_size, &mut self.rng, &mut self.batch);
+        let loss = crate::nn::train_step(&mut self.online, &self.target, &mut self.adam, &self.batch, self.gamma, &mut self.scratch);
+        self.updates += 1;
+        if self.updates % self.target_update_every == 0 {
+            self.target.copy_params_from(&self.online).expect("online and target networks share one architecture");
+        }
+        Some(loss)
+    }
+
+    /// Updates made so far (also the version of the weights).
+    pub fn updates(&self) -> u64 {
+        self.updates
+    }
+
+    pub fn network(&self) -> &Mlp {
+        &self.online
+    }
+
+    pub fn replay(&self) -> &ReplayBuffer {
+        &self.replay
+    }
+}

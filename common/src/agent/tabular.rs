@@ -1,0 +1,192 @@
+//! The tabular agents of section 5.1.1: Q-learning and SARSA with softmax exploration, and
+//! bootstrapped Q-learning (K Q-tables, randomized masked updates, one greedy head per episode).
+
+use rand::Rng as _;
+
+use crate::config::{AgentConfig, AgentKind, Exploration};
+use crate::policy::{argmax, softmax_into};
+use crate::qfunction::{QFunction, TabularQ};
+use crate::rng::Rng;
+
+/// A tabular agent over `states` states and `actions` actions.
+#[derive(Debug, Clone)]
+pub struct TabularAgent {
+    kind: AgentKind,
+    exploration: Exploration,
+    q: TabularQ,
+    temperature: f64,
+    lr: f64,
+    gamma: f64,
+    bootstrap_probability: f64,
+    epsilon: (f64, f64, f64),
+    rng: Rng,
+    /// The head followed this episode (Algorithm 1 line 1).
+    arm: usize,
+    steps: u64,
+    scratch: Vec<f64>,
+}
+
+impl TabularAgent {
+    pub fn new(cfg: &AgentConfig, states: usize, actions: usize, rng: Rng) -> Self {
+        let heads = cfg.heads();
+        Self {
+            kind: cfg.kind,
+            exploration: cfg.exploration(),
+            q: TabularQ::new(states, heads, actions, 0.0),
+            temperature: cfg.temperature,
+            lr: cfg.learning_rate(),
+            gamma: cfg.gamma,
+            bootstrap_probability: cfg.bootstrap_probability,
+            epsilon: (cfg.epsilon_start, cfg.epsilon_end, cfg.epsilon_decay_steps),
+            rng,
+            arm: 0,
+            steps: 0,
+            scratch: vec![0.0; heads * actions],
+        }
+    }
+
+    pub fn q(&self) -> &TabularQ {
+        &self.q
+    }
+
+    pub fn arm(&self) -> usize {
+        self.arm
+    }
+
+    /// Algorithm 1 line 1: sample the head to follow this episode.
+    pub fn begin_episode(&mut self) {
+        self.arm = self.rng.random_range(0..self.q.heads());
+    }
+
+    /// The Jensen-Shannon divergence of the K heads' softmax policies at `s` (0 for one head).
+    pub fn js_divergence(&mut self, s: usize) -> f64 {
+        if self.q.heads() == 1 {
+            return 0.0;
+        }
+        self.q.js_divergence(&s, self.temperature)
+    }
+
+    /// The agent's own action at `s` on the episode's head.
+    pub fn act(&mut self, s: usize) -> usize {
+        let a = self.q.actions();
+        let values = self.q.head_values(s, self.arm);
+        let action = match self.exploration {
+            Exploration::GreedyHead => argmax(values),
+            Exploration::EpsilonGreedy => {
+                let (start, end, decay) = self.epsilon;
+                let eps = end + (start - end) * (-(self.steps as f64) / decay).exp();
+                if self.rng.random::<f64>() < eps {
+                    self.rng.random_range(0..a)
+                } else {
+                    argmax(values)
+                }
+            }
+            Exploration::Softmax => {
+                let probs = &mut self.scratch[..a];
+                softmax_into(values, self.temperature, probs);
+                sample(probs, &mut self.rng)
+            }
+        };
+        self.steps += 1;
+        action
+    }
+
+    /// Learns from one transition. `next_action` is the action taken at `s_next` (SARSA's target;
+    /// ignored by Q-learning). A terminal transition does not bootstrap; a truncated one does.
+    pub fn learn(&mut self, s: usize, a: usize, r: f64, s_next: usize, terminated: bool, next_action: Option<usize>) {
+        for k in 0..self.q.heads() {
+            // Randomized update keeping the heads diverse: head k learns with probability p.
+            if self.q.heads() > 1 && self.rng.random::<f64>() >= self.bootstrap_probability {
+                continue;
+            }
+            let next = if terminated {
+                0.0
+            } else {
+                match (self.kind, next_action) {
+                    (AgentKind::Sarsa, Some(a_next)) => self.q.get(s_next, k, a_next),
+                    _ => self.q.max_value(s_next, k),
+                }
+            };
+            self.q.update_towards(s, k, a, r + self.gamma * next, self.lr);
+        }
+    }
+
+    /// The greedy policy of the agent (of head 0, or of the mean over heads when K > 1).
+    pub fn greedy_policy(&self) -> Vec<usize> {
+        let heads = self.q.heads();
+        let actions = self.q.actions();
+        (0..self.q.states())
+            .map(|s| {
+                let mut mean = vec![0.0; actions];
+                for k in 0..heads {
+                    for (m, v) in mean.iter_mut().zip(self.q.head_values(s, k)) {
+                        *m += v / heads as f64;
+                    }
+                }
+                argmax(&mean)
+            })
+            .collect()
+    }
+}
+
+/// Samples an index from a probability vector.
+pub(crate) fn sample(probs: &[f64], rng: &mut Rng) -> usize {
+    let u: f64 = rng.random();
+    let mut acc = 0.0;
+    for (i, p) in probs.iter().enumerate() {
+        acc += p;
+        if u < acc {
+            return i;
+        }
+    }
+    probs.len() - 1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::ExperimentConfig;
+
+    fn cfg(kind: &str, extra: &str) -> AgentConfig {
+        let text = format!("seed = 0\nepisodes = 1\n[env]\nname = \"cliffwalk\"\n[agent]\nkind = \"{kind}\"\n{extra}");
+        ExperimentConfig::from_toml(&text).unwrap().agent
+    }
+
+    #[test]
+    fn qlearning_and_sarsa_targets_differ_as_they_should() {
+        let mut ql = TabularAgent::new(&cfg("qlearning", "learning_rate = 1.0\ngamma = 0.5"), 2, 2, crate::rng::seeded(0));
+        let mut sa = TabularAgent::new(&cfg("sarsa", "learning_rate = 1.0\ngamma = 0.5"), 2, 2, crate::rng::seeded(0));
+        for agent in [&mut ql, &mut sa] {
+            agent.q.set(1, 0, 0, 4.0);
+            agent.q.set(1, 0, 1, -2.0);
+            agent.learn(0, 1, 1.0, 1, false, Some(1));
+        }
+        assert_eq!(ql.q.get(0, 0, 1), 1.0 + 0.5 * 4.0, "Q-learning bootstraps from the max");
+        assert_eq!(sa.q.get(0, 0, 1), 1.0 + 0.5 * -2.0, "SARSA bootstraps from the action taken");
+        ql.learn(0, 0, 3.0, 1, true, None);
+        assert_eq!(ql.q.get(0, 0, 0), 3.0, "a terminal transition does not bootstrap");
+    }
+
+    #[test]
+    fn masked_updates_train_each_head_about_half_the_time() {
+        let mut agent = TabularAgent::new(&cfg("bootstrapped-q", "heads = 4\nlearning_rate = 1.0"), 1000, 2, crate::rng::seeded(1));
+        for s in 0..1000 {
+            agent.learn(s, 0, 1.0, s, true, None);
+        }
+        for k in 0..4 {
+            let trained = (0..1000).filter(|&s| agent.q.get(s, k, 0) == 1.0).count();
+            assert!((400..600).contains(&trained), "head {k} trained on {trained} of 1000");
+        }
+        // The heads now disagree, so the divergence is positive somewhere.
+        let max_js = (0..1000).map(|s| agent.js_divergence(s)).fold(0.0, f64::max);
+        assert!(max_js > 0.01, "{max_js}");
+    }
+
+    #[test]
+    fn softmax_exploration_follows_the_policy() {
+        let mut agent = TabularAgent::new(&cfg("qlearning", "temperature = 1.0"), 1, 2, crate::rng::seeded(2));
+        agent.q.set(0, 0, 1, 2f64.ln()); // pi = (1/3, 2/3)
+        let ones = (0..30_000).filter(|_| agent.act(0) == 1).count();
+        assert!((ones as f64 / 30_000.0 - 2.0 / 3.0).abs() < 0.01, "{ones}");
+    }
+}

@@ -1,0 +1,140 @@
+//! Adam (Kingma & Ba), computed as PyTorch's `torch.optim.Adam` does without weight decay or
+//! AMSGrad, so that our weights follow a PyTorch run step for step.
+
+use super::{Mlp, Params};
+
+/// Adam's hyper-parameters; the defaults are the paper's (and PyTorch's, but for `lr`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdamConfig {
+    pub lr: f64,
+    pub beta1: f64,
+    pub beta2: f64,
+    pub eps: f64,
+}
+
+impl Default for AdamConfig {
+    fn default() -> Self {
+        Self {
+            lr: 1e-3,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+        }
+    }
+}
+
+/// The optimiser state: the step count and the first and second moments of every parameter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Adam {
+    config: AdamConfig,
+    step: u64,
+    m: Params,
+    v: Params,
+}
+
+impl Adam {
+    /// Adam with the default hyper-parameters for the parameters of `net`.
+    pub fn new(net: &Mlp) -> Self {
+        Self::with_config(net, AdamConfig::default())
+    }
+
+    pub fn with_config(net: &Mlp, config: AdamConfig) -> Self {
+        Self {
+            config,
+            step: 0,
+            m: net.params().zeros_like(),
+            v: net.params().zeros_like(),
+        }
+    }
+
+    pub fn config(&self) -> &AdamConfig {
+        &self.config
+    }
+
+    /// How many steps were taken.
+    pub fn steps(&self) -> u64 {
+        self.step
+    }
+
+    /// One update of `net` with the gradients `grads` (same shapes). As PyTorch's single-tensor
+    /// Adam: `m <- lerp(m, g, 1 - beta1)`, `v <- beta2 v + (1 - beta2) g^2`, then
+    /// `p <- p - lr / (1 - beta1^t) * m / (sqrt(v) / sqrt(1 - beta2^t) + eps)`, with the bias
+    /// corrections in f64 (Python floats) and the element-wise work in f32.
+    ///
+    /// Panics if `grads` does not have the shapes of `net`'s parameters.
+    pub fn step(&mut self, net: &mut Mlp, grads: &Params) {
+        assert_eq!(
+            grads.shapes(),
+            self.m.shapes(),
+            "gradients do not have the optimiser's shapes"
+        );
+        assert_eq!(
+            net.params.shapes(),
+            self.m.shapes(),
+            "network does not have the optimiser's shapes"
+        );
+        self.step += 1;
+        let c = &self.config;
+        let t = self.step as f64;
+        let bias_correction1 = 1.0 - c.beta1.powf(t);
+        let bias_correction2 = 1.0 - c.beta2.powf(t);
+        let step_size = (c.lr / bias_correction1) as f32;
+        let bias_correction2_sqrt = bias_correction2.sqrt() as f32;
+        let w1 = (1.0 - c.beta1) as f32;
+        let beta2 = c.beta2 as f32;
+        let w2 = (1.0 - c.beta2) as f32;
+        let eps = c.eps as f32;
+        let tensors = net
+            .params
+            .tensors_mut()
+            .into_iter()
+            .zip(grads.tensors())
+            .zip(self.m.tensors_mut())
+            .zip(self.v.tensors_mut());
+        for (((p, g), m), v) in tensors {
+            for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
+                *m += w1 * (g - *m);
+                *v = *v * beta2 + w2 * (g * g);
+                let denom = v.sqrt() / bias_correction2_sqrt + eps;
+                *p -= step_size * (*m / denom);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn first_step_moves_every_parameter_by_lr_against_its_gradient() {
+        let mut net = Mlp::new(3, 5, 1, 2, &mut crate::rng::seeded(1));
+        let before = net.params_flat();
+        let mut grads = net.params().zeros_like();
+        let mut i = 0;
+        for t in grads.tensors_mut() {
+            for g in t {
+                *g = if i % 2 == 0 { 0.3 } else { -2.0 };
+                i += 1;
+            }
+        }
+        let mut adam = Adam::new(&net);
+        adam.step(&mut net, &grads);
+        assert_eq!(adam.steps(), 1);
+        // At t = 1, m / sqrt(v) (bias-corrected) is sign(g), so each step is lr.
+        for (j, (a, b)) in net.params_flat().iter().zip(&before).enumerate() {
+            let expected = if j % 2 == 0 { -1e-3 } else { 1e-3 };
+            assert!((a - b - expected).abs() < 1e-6, "param {j}: {}", a - b);
+        }
+    }
+
+    #[test]
+    fn zero_gradient_leaves_parameters_alone() {
+        let mut net = Mlp::new(3, 5, 2, 2, &mut crate::rng::seeded(1));
+        let before = net.clone();
+        let grads = net.params().zeros_like();
+        let mut adam = Adam::new(&net);
+        adam.step(&mut net, &grads);
+        assert_eq!(net, before);
+    }
+}

@@ -1,0 +1,500 @@
+//! The K-head MLP: PyTorch's default initialisation, the single-state forward of the act step,
+//! the batched forward and backward passes of the learner, and the flat parameter vector that
+//! carries weights between processes.
+//!
+//! Batched activations are nalgebra matrices of shape `(batch, features)`, one sample per row;
+//! with the weights stored as `(in, out)` (see the module docs of [`crate::nn`]) a layer is
+//! `Z = A W^T + b = A * w + b`. The 64x64 products go to nalgebra's `gemm` (matrixmultiply); the
+//! thin ones (4 inputs, K*A outputs) become dot products or axpys over contiguous columns.
+
+use nalgebra::{DMatrix, DMatrixView, DVector, Dyn};
+use rand::Rng as _;
+
+use super::{torch_shapes, NnError, Params, Result};
+use crate::rng::Rng;
+
+/// Hidden widths up to this keep the act step's activations on the stack.
+const STACK_HIDDEN: usize = 256;
+
+/// The network `obs_dim -> hidden -> hidden -> K*A` with ReLU; output `k * A + a` is `Q_k(s, a)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mlp {
+    heads: usize,
+    actions: usize,
+    pub(crate) params: Params,
+}
+
+/// Activations of one batched forward pass, kept for the backward pass, plus the backward pass's
+/// temporaries. Reused across calls: it reallocates only when the batch size or the network's
+/// dimensions change.
+#[derive(Debug, Clone)]
+pub struct ForwardCache {
+    /// The input, `(batch, obs_dim)`.
+    x: DMatrix<f32>,
+    /// ReLU outputs of `torso.0` and `torso.1`, `(batch, hidden)`.
+    h0: DMatrix<f32>,
+    h1: DMatrix<f32>,
+    /// The Q-values, `(batch, K*A)`.
+    q: DMatrix<f32>,
+    /// dL/d(pre-activation) of `torso.1` and `torso.0`, `(batch, hidden)`.
+    dz1: DMatrix<f32>,
+    dz0: DMatrix<f32>,
+}
+
+impl Default for ForwardCache {
+    fn default() -> Self {
+        Self {
+            x: DMatrix::zeros(0, 0),
+            h0: DMatrix::zeros(0, 0),
+            h1: DMatrix::zeros(0, 0),
+            q: DMatrix::zeros(0, 0),
+            dz1: DMatrix::zeros(0, 0),
+            dz0: DMatrix::zeros(0, 0),
+        }
+    }
+}
+
+impl ForwardCache {
+    /// The Q-values of the last forward pass, `(batch, K*A)`: `q[(i, k * A + a)]` is
+    /// `Q_k(s_i, a)`.
+    pub fn q(&self) -> &DMatrix<f32> {
+        &self.q
+    }
+
+    /// The batch size of the last forward pass.
+    pub fn batch_size(&self) -> usize {
+        self.q.nrows()
+    }
+
+    fn ensure(&mut self, batch: usize, obs_dim: usize, hidden: usize, outputs: usize) {
+        ensure_shape(&mut self.x, batch, obs_dim);
+        ensure_shape(&mut self.h0, batch, hidden);
+        ensure_shape(&mut self.h1, batch, hidden);
+        ensure_shape(&mut self.q, batch, outputs);
+        ensure_shape(&mut self.dz1, batch, hidden);
+        ensure_shape(&mut self.dz0, batch, hidden);
+    }
+}
+
+impl Mlp {
+    /// A freshly initialised network, as PyTorch's `nn.Linear` does by default: every weight and
+    /// bias of a layer with `fan_in` inputs uniform in `[-1/sqrt(fan_in), 1/sqrt(fan_in))`
+    /// (`kaiming_uniform_(a = sqrt(5))` for weights). Values are drawn layer by layer, weight
+    /// (row-major `[out, in]`) then bias.
+    ///
+    /// Panics if a dimension is zero (configurations are validated before they get here).
+    pub fn new(obs_dim: usize, hidden: usize, heads: usize, actions: usize, rng: &mut Rng) -> Self {
+        assert!(
+            obs_dim > 0 && hidden > 0 && heads > 0 && actions > 0,
+            "network dimensions must be positive: obs_dim {obs_dim}, hidden {hidden}, heads {heads}, actions {actions}"
+        );
+        let mut params = Params::zeros(obs_dim, hidden, heads * actions);
+        init_linear(params.w0.as_mut_slice(), params.b0.as_mut_slice(), rng);
+        init_linear(params.w1.as_mut_slice(), params.b1.as_mut_slice(), rng);
+        init_linear(params.wh.as_mut_slice(), params.bh.as_mut_slice(), rng);
+        Self {
+            heads,
+            actions,
+            params,
+        }
+    }
+
+    /// A network from given tensors; checks that their shapes fit together and with
+    /// `heads * actions` outputs.
+    pub fn from_params(params: Params, heads: usize, actions: usize) -> Result<Self> {
+        let (d, h) = (params.w0.nrows(), params.w0.ncols());
+        if d == 0 || h == 0 || heads == 0 || actions == 0 {
+            return Err(NnError::Dims(format!(
+                "obs_dim {d}, hidden {h}, heads {heads}, actions {actions} must all be positive"
+            )));
+        }
+        let expected = torch_shapes(d, h, heads * actions);
+        let found = [
+            vec![params.w0.ncols(), params.w0.nrows()],
+            vec![params.b0.len()],
+            vec![params.w1.ncols(), params.w1.nrows()],
+            vec![params.b1.len()],
+            vec![params.wh.ncols(), params.wh.nrows()],
+            vec![params.bh.len()],
+        ];
+        for ((name, e), f) in super::PARAM_NAMES.iter().zip(&expected).zip(&found) {
+            if e != f {
+                return Err(NnError::Shape {
+                    name: (*name).to_string(),
+                    expected: e.clone(),
+                    found: f.clone(),
+                });
+            }
+        }
+        Ok(Self {
+            heads,
+            actions,
+            params,
+        })
+    }
+
+    pub fn obs_dim(&self) -> usize {
+        self.params.obs_dim()
+    }
+
+    pub fn hidden(&self) -> usize {
+        self.params.hidden()
+    }
+
+    /// `K`, the number of heads.
+    pub fn heads(&self) -> usize {
+        self.heads
+    }
+
+    /// `A`, the number of actions.
+    pub fn actions(&self) -> usize {
+        self.actions
+    }
+
+    /// `K * A`, the width of the output layer.
+    pub fn outputs(&self) -> usize {
+        self.heads * self.actions
+    }
+
+    /// The six tensors (PyTorch layout).
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    pub fn into_params(self) -> Params {
+        self.params
+    }
+
+    /// The number of scalar parameters, the length of [`Mlp::params_flat`].
+    pub fn num_params(&self) -> usize {
+        self.params.len()
+    }
+
+    /// All parameters in one vector: the tensors of [`super::PARAM_NAMES`] in that order, each
+    /// flattened row-major in PyTorch's layout (`[out, in]` for weights).
+    pub fn params_flat(&self) -> Vec<f32> {
+        let mut out = vec![0.0; self.num_params()];
+        // The length is right by construction.
+        let _ = self.copy_params_into(&mut out);
+        out
+    }
+
+    /// Writes [`Mlp::params_flat`] into `out` without allocating; `out` must have
+    /// [`Mlp::num_params`] values.
+    pub fn copy_params_into(&self, out: &mut [f32]) -> Result<()> {
+        self.check_flat_len(out.len())?;
+        let mut offset = 0;
+        for t in self.params.tensors() {
+            out[offset..offset + t.len()].copy_from_slice(t);
+            offset += t.len();
+        }
+        Ok(())
+    }
+
+    /// Loads parameters written by [`Mlp::params_flat`] of a network of the same dimensions.
+    pub fn load_params_flat(&mut self, flat: &[f32]) -> Result<()> {
+        self.check_flat_len(flat.len())?;
+        let mut offset = 0;
+        for t in self.params.tensors_mut() {
+            let n = t.len();
+            t.copy_from_slice(&flat[offset..offset + n]);
+            offset += n;
+        }
+        Ok(())
+    }
+
+    /// Copies the parameters of `other` (same dimensions) without allocating: the target
+    /// network's update.
+    pub fn copy_params_from(&mut self, other: &Mlp) -> Result<()> {
+        if self.params.shapes() != other.params.shapes() || self.heads != other.heads {
+            return Err(NnError::Dims(format!(
+                "cannot copy a network of shapes {:?} ({} heads) into one of shapes {:?} ({} heads)",
+                other.params.shapes(),
+                other.heads,
+                self.params.shapes(),
+                self.heads
+            )));
+        }
+        for (dst, src) in self.params.tensors_mut().into_iter().zip(other.params.tensors()) {
+            dst.copy_from_slice(src);
+        }
+        Ok(())
+    }
+
+    fn check_flat_len(&self, found: usize) -> Result<()> {
+        let expected = self.num_params();
+        if found != expected {
+            return Err(NnError::ParamCount { expected, found });
+        }
+        Ok(())
+    }
+
+    /// The Q-values of one state, `out[k * A + a] = Q_k(x, a)`: the act step's path. It does not
+    /// allocate for hidden widths up to 256.
+    ///
+    /// Panics if `x` does not have `obs_dim` values or `out` does not have `K * A`.
+    pub fn forward_one(&self, x: &[f32], out: &mut [f32]) {
+        assert_eq!(x.len(), self.obs_dim(), "state has the wrong dimension");
+        assert_eq!(out.len(), self.outputs(), "output has the wrong length");
+        let h = self.hidden();
+        if h <= STACK_HIDDEN {
+            let mut h0 = [0.0f32; STACK_HIDDEN];
+            let mut h1 = [0.0f32; STACK_HIDDEN];
+            self.forward_one_with(x, out, &mut h0[..h], &mut h1[..h]);
+        } else {
+            let mut h0 = vec![0.0f32; h];
+            let mut h1 = vec![0.0f32; h];
+            self.forward_one_with(x, out, &mut h0, &mut h1);
+        }
+    }
+
+    fn forward_one_with(&self, x: &[f32], out: &mut [f32], h0: &mut [f32], h1: &mut [f32]) {
+        let p = &self.params;
+        dense_one(&p.w0, &p.b0, x, h0, true);
+        dense_one(&p.w1, &p.b1, h0, h1, true);
+        dense_one(&p.wh, &p.bh, h1, out, false);
+    }
+
+    /// The batched forward pass: `states` holds `batch * obs_dim` values, one state per row
+    /// (the layout of [`crate::replay::Batch`]). The Q-values are in [`ForwardCache::q`], and the
+    /// cache is ready for [`Mlp::backward`].
+    ///
+    /// Panics if `states.len()` is not a multiple of `obs_dim`.
+    pub fn forward_batch(&self, states: &[f32], cache: &mut ForwardCache) {
+        let d = self.obs_dim();
+        assert_eq!(
+            states.len() % d,
+            0,
+            "states must hold batch * obs_dim values"
+        );
+        let batch = states.len() / d;
+        cache.ensure(batch, d, self.hidden(), self.outputs());
+        for (j, row) in states.chunks_exact(d).enumerate() {
+            for (i, &v) in row.iter().enumerate() {
+                cache.x[(j, i)] = v;
+            }
+        }
+        let p = &self.params;
+        linear(&mut cache.h0, &cache.x, &p.w0, &p.b0);
+        relu(&mut cache.h0);
+        linear(&mut cache.h1, &cache.h0, &p.w1, &p.b1);
+        relu(&mut cache.h1);
+        linear(&mut cache.q, &cache.h1, &p.wh, &p.bh);
+    }
+
+    /// The backward pass of the batch last given to [`Mlp::forward_batch`] with `cache`: from
+    /// `dq` = dL/dQ, `(batch, K*A)` laid out as [`ForwardCache::q`], it writes dL/dθ for all six
+    /// tensors into `grads` (overwritten, PyTorch layout). No allocation once `grads` has the
+    /// network's shapes.
+    ///
+    /// Panics if `dq` does not have the shape of the cached Q-values.
+    pub fn backward(&self, cache: &mut ForwardCache, dq: &DMatrix<f32>, grads: &mut Params) {
+        assert_eq!(
+            dq.shape(),
+            cache.q.shape(),
+            "dL/dQ must have the shape of the Q-values"
+        );
+        if grads.shapes() != self.params.shapes() {
+            *grads = self.params.zeros_like();
+        }
+        let p = &self.params;
+        let c = cache;
+        // Output layer: Q = h1 * wh + bh.
+        grads.wh.gemm_tr(1.0, &c.h1, dq, 0.0);
+        column_sums(dq, &mut grads.bh);
+        c.dz1.gemm(1.0, dq, &transposed(&p.wh), 0.0);
+        relu_backward(&mut c.dz1, &c.h1);
+        // torso.1: h1 = relu(h0 * w1 + b1).
+        grads.w1.gemm(1.0, &transposed(&c.h0), &c.dz1, 0.0);
+        column_sums(&c.dz1, &mut grads.b1);
+        c.dz0.gemm(1.0, &c.dz1, &transposed(&p.w1), 0.0);
+        relu_backward(&mut c.dz0, &c.h0);
+        // torso.0: h0 = relu(x * w0 + b0).
+        grads.w0.gemm_tr(1.0, &c.x, &c.dz0, 0.0);
+        column_sums(&c.dz0, &mut grads.b0);
+    }
+}
+
+/// PyTorch's `nn.Linear` default initialisation of one layer; `w` is row-major `[out, in]`, so
+/// `fan_in = w.len() / b.len()`.
+fn init_linear(w: &mut [f32], b: &mut [f32], rng: &mut Rng) {
+    let fan_in = w.len() / b.len();
+    let bound = 1.0 / (fan_in as f32).sqrt();
+    for v in w.iter_mut().chain(b.iter_mut()) {
+        *v = rng.random_range(-bound..bound);
+    }
+}
+
+fn ensure_shape(m: &mut DMatrix<f32>, rows: usize, cols: usize) {
+    if m.shape() != (rows, cols) {
+        *m = DMatrix::zeros(rows, cols);
+    }
+}
+
+/// The transpose of `m` as a strided view, without copying.
+fn transposed(m: &DMatrix<f32>) -> DMatrixView<'_, f32, Dyn, Dyn> {
+    DMatrixView::from_slice_with_strides(m.as_slice(), m.ncols(), m.nrows(), m.nrows(), 1)
+}
+
+/// `out = input * w + b` (b broadcast over rows).
+fn linear(out: &mut DMatrix<f32>, input: &DMatrix<f32>, w: &DMatrix<f32>, b: &DVector<f32>) {
+    for (mut col, &bias) in out.column_iter_mut().zip(b.iter()) {
+        col.fill(bias);
+    }
+    out.gemm(1.0, input, w, 1.0);
+}
+
+fn relu(m: &mut DMatrix<f32>) {
+    for v in m.as_mut_slice() {
+        *v = v.max(0.0);
+    }
+}
+
+/// Zeroes the gradient where the ReLU output is not positive (as PyTorch's `threshold_backward`).
+fn relu_backward(grad: &mut DMatrix<f32>, out: &DMatrix<f32>) {
+    for (g, &h) in grad.as_mut_slice().iter_mut().zip(out.as_slice()) {
+        if h <= 0.0 {
+            *g = 0.0;
+        }
+    }
+}
+
+/// `out[j] = sum_i m[(i, j)]`.
+fn column_sums(m: &DMatrix<f32>, out: &mut DVector<f32>) {
+    let rows = m.nrows();
+    for (o, col) in out.iter_mut().zip(m.as_slice().chunks_exact(rows.max(1))) {
+        *o = sum(col);
+    }
+}
+
+/// One dense layer for one input: `out[o] = b[o] + w[:, o] . x`, with ReLU if asked; `w` is
+/// `(in, out)` column-major, so each output's weights are contiguous.
+fn dense_one(w: &DMatrix<f32>, b: &DVector<f32>, x: &[f32], out: &mut [f32], relu: bool) {
+    let n_in = w.nrows();
+    for ((o, col), &bias) in out
+        .iter_mut()
+        .zip(w.as_slice().chunks_exact(n_in))
+        .zip(b.iter())
+    {
+        let v = dot(col, x) + bias;
+        *o = if relu { v.max(0.0) } else { v };
+    }
+}
+
+/// Dot product with eight independent accumulators, so that it vectorises.
+#[inline]
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 8];
+    let ca = a.chunks_exact(8);
+    let cb = b.chunks_exact(8);
+    let tail: f32 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for ((s, &x), &y) in acc.iter_mut().zip(x).zip(y) {
+            *s += x * y;
+        }
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+}
+
+/// Sum with eight independent accumulators, so that it vectorises.
+#[inline]
+fn sum(a: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 8];
+    let chunks = a.chunks_exact(8);
+    let tail: f32 = chunks.remainder().iter().sum();
+    for x in chunks {
+        for (s, &x) in acc.iter_mut().zip(x) {
+            *s += x;
+        }
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn net() -> Mlp {
+        Mlp::new(4, 16, 2, 3, &mut crate::rng::seeded(5))
+    }
+
+    #[test]
+    fn init_is_bounded_by_one_over_sqrt_fan_in_and_seeded() {
+        let a = net();
+        assert_eq!(a, net());
+        let b = Mlp::new(4, 16, 2, 3, &mut crate::rng::seeded(6));
+        assert_ne!(a, b);
+        let p = a.params();
+        assert!(p.w0.iter().chain(p.b0.iter()).all(|v| v.abs() <= 0.5));
+        assert!(p.w1.iter().chain(p.bh.iter()).all(|v| v.abs() <= 0.25));
+        // The bound is used, not something much smaller.
+        assert!(p.w0.iter().any(|v| v.abs() > 0.4));
+        assert!(p.w1.iter().any(|v| v.abs() > 0.2));
+        assert_eq!(a.num_params(), 16 * 4 + 16 + 16 * 16 + 16 + 6 * 16 + 6);
+    }
+
+    #[test]
+    fn forward_one_matches_forward_batch() {
+        let net = net();
+        let states: Vec<f32> = (0..20).map(|i| (i as f32 * 0.7).sin() * 2.0).collect();
+        let mut cache = ForwardCache::default();
+        net.forward_batch(&states, &mut cache);
+        assert_eq!(cache.batch_size(), 5);
+        let mut out = [0.0f32; 6];
+        for (j, s) in states.chunks_exact(4).enumerate() {
+            net.forward_one(s, &mut out);
+            for (c, &o) in out.iter().enumerate() {
+                assert!((cache.q()[(j, c)] - o).abs() < 1e-5, "row {j} col {c}");
+            }
+        }
+    }
+
+    #[test]
+    fn flat_params_round_trip_and_refuse_wrong_lengths() {
+        let a = net();
+        let flat = a.params_flat();
+        assert_eq!(flat.len(), a.num_params());
+        // The first values are torso.0.weight row-major: row 0 is output 0's weights.
+        assert_eq!(flat[..4], a.params().w0.column(0).as_slice()[..]);
+        let mut b = Mlp::new(4, 16, 2, 3, &mut crate::rng::seeded(9));
+        assert_ne!(a, b);
+        b.load_params_flat(&flat).unwrap();
+        assert_eq!(a, b);
+        assert!(matches!(
+            b.load_params_flat(&flat[1..]),
+            Err(NnError::ParamCount { expected, found }) if expected == flat.len() && found == flat.len() - 1
+        ));
+        let mut short = vec![0.0; 3];
+        assert!(a.copy_params_into(&mut short).is_err());
+        let mut c = Mlp::new(4, 8, 2, 3, &mut crate::rng::seeded(9));
+        assert!(c.copy_params_from(&a).is_err());
+        let mut d = Mlp::new(4, 16, 2, 3, &mut crate::rng::seeded(10));
+        d.copy_params_from(&a).unwrap();
+        assert_eq!(d, a);
+    }
+
+    #[test]
+    fn from_params_checks_shapes() {
+        let p = net().into_params();
+        assert!(Mlp::from_params(p.clone(), 2, 3).is_ok());
+        let err = Mlp::from_params(p.clone(), 3, 3).unwrap_err();
+        assert!(err.to_string().contains("heads.weight"), "{err}");
+        let mut bad = p;
+        bad.b1 = DVector::zeros(3);
+        let err = Mlp::from_params(bad, 2, 3).unwrap_err();
+        assert!(err.to_string().contains("torso.1.bias"), "{err}");
+    }
+
+    #[test]
+    fn dot_and_sum_handle_tails() {
+        let a: Vec<f32> = (0..13).map(|i| i as f32).collect();
+        assert_eq!(sum(&a), 78.0);
+        assert_eq!(dot(&a, &a), (0..13).map(|i| (i * i) as f32).sum::<f32>());
+        assert_eq!(sum(&[]), 0.0);
+    }
+}

@@ -1,0 +1,246 @@
+//! `alfd expert list|eval` and `alfd train-experts`: the demonstrators of known quality.
+
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+
+use alfd_common::agent::{NetworkDemonstrator, TablePolicy};
+use alfd_common::config::ExperimentConfig;
+use alfd_common::runner::{evaluate_cartpole, evaluate_cliffwalk, run_neural, run_tabular, ReturnStats};
+use alfd_expert::registry::{self, ExpertEntry};
+use anyhow::Context as _;
+
+use crate::cmd_local::write;
+use crate::usage::usage;
+
+#[derive(Debug, clap::Args)]
+pub struct ExpertArgs {
+    #[command(subcommand)]
+    pub command: ExpertCommand,
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub enum ExpertCommand {
+    /// List the demonstrators with their measured quality.
+    List,
+    /// Evaluate a demonstrator: prints {"mean":…,"median":…,"std":…} as one JSON line.
+    Eval {
+        /// Its name (see `alfd expert list`).
+        name: String,
+        /// Episodes to play.
+        #[arg(long, default_value_t = 100)]
+        episodes: usize,
+        /// Seed of the first reset.
+        #[arg(long, default_value_t = 12345)]
+        seed: u64,
+    },
+}
+
+pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
+    match args.command {
+        ExpertCommand::List => {
+            println!("{:<28} {:<10} {:<16} {:>9} {:>9}", "name", "env", "kind", "mean", "median");
+            for e in registry::list() {
+                let f = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.1}"));
+                println!("{:<28} {:<10} {:<16} {:>9} {:>9}", e.name, e.env, e.kind, f(e.mean), f(e.median));
+            }
+            Ok(())
+        }
+        ExpertCommand::Eval { name, episodes, seed } => {
+            if episodes == 0 {
+                return Err(usage("--episodes must be at least 1"));
+            }
+            let stats = evaluate_named(&name, episodes, seed)?;
+            println!("{}", serde_json::to_string(&stats)?);
+            Ok(())
+        }
+    }
+}
+
+/// Evaluates a demonstrator by name on its environment (CartPole-1000 or the default CliffWalk).
+pub fn evaluate_named(name: &str, episodes: usize, seed: u64) -> anyhow::Result<ReturnStats> {
+    let entry = registry::list().into_iter().find(|e| e.name == name);
+    let returns = match entry.as_ref().map(|e| e.env.as_str()) {
+        Some("cliffwalk") => {
+            let env = crate::setup::cliffwalk(&cliffwalk_config())?;
+            let mut d = registry::cliffwalk(name, &env)?;
+            evaluate_cliffwalk(d.as_mut(), &env, episodes, seed)
+        }
+        _ => {
+            let mut d = registry::cartpole(name)?;
+            evaluate_cartpole(d.as_mut(), episodes, seed, 1000)
+        }
+    };
+    Ok(ReturnStats::of(&returns))
+}
+
+fn cliffwalk_config() -> ExperimentConfig {
+    ExperimentConfig::from_toml("seed = 0\nepisodes = 1\n[env]\nname = \"cliffwalk\"\n[agent]\nkind = \"qlearning\"\n")
+        .expect("a valid built-in config")
+}
+
+#[derive(Debug, clap::Args)]
+pub struct TrainExpertsArgs {
+    /// `cartpole` or `cliffwalk`.
+    #[arg(long)]
+    pub env: String,
+    /// Where to write the demonstrators and their manifest entries.
+    #[arg(long, default_value = "expert/demonstrators")]
+    pub out: PathBuf,
+    /// First training seed; further seeds are tried until every level is found.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Give up after this many training runs.
+    #[arg(long, default_value_t = 8)]
+    pub max_runs: u64,
+}
+
+/// CartPole quality levels of the paper (section 5.2).
+pub const LEVELS: [f64; 5] = [50.0, 100.0, 200.0, 500.0, 1000.0];
+const EVAL_SEED: u64 = 1_000_003;
+const VERIFY_SEED: u64 = 2_000_003;
+
+pub fn train(args: TrainExpertsArgs) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    match args.env.as_str() {
+        "cartpole" => train_cartpole(&args),
+        "cliffwalk" => train_cliffwalk(&args),
+        other => Err(usage(format!("unknown env `{other}`: expected cartpole or cliffwalk"))),
+    }
+}
+
+const DQN_CONFIG: &str = r#"
+seed = 0
+episodes = 800
+[env]
+name = "cartpole"
+[agent]
+kind = "dqn"
+[query]
+mode = "never"
+"#;
+
+/// Trains DQN and saves a checkpoint whenever the greedy policy's mean over 100 evaluation
+/// episodes is within ±10% of a level not yet saved, and again within ±10% on 100 other episodes.
+fn train_cartpole(args: &TrainExpertsArgs) -> anyhow::Result<()> {
+    let mut found: Vec<ExpertEntry> = Vec::new();
+    for run in 0..args.max_runs {
+        let seed = args.seed + run;
+        let cfg = ExperimentConfig::from_toml_with_overrides(DQN_CONFIG, &[format!("seed={seed}")])?;
+        let mut no_expert = alfd_common::agent::BalancingController;
+        run_neural(&cfg, &mut no_expert, |r, net| {
+            let missing: Vec<f64> = LEVELS.iter().copied().filter(|l| !found.iter().any(|e| e.name == level_name(*l))).collect();
+            if missing.is_empty() {
+                return ControlFlow::Break(());
+            }
+            let mut d = NetworkDemonstrator::new(net.clone());
+            let stats = ReturnStats::of(&evaluate_cartpole(&mut d, 100, EVAL_SEED, 1000));
+            for level in missing {
+                if (stats.mean - level).abs() <= 0.1 * level {
+                    let verify = ReturnStats::of(&evaluate_cartpole(&mut d, 100, VERIFY_SEED, 1000));
+                    if (verify.mean - level).abs() > 0.1 * level {
+                        tracing::info!(level, eval = stats.mean, verify = verify.mean, "candidate not verified");
+                        continue;
+                    }
+                    let file = format!("{}.safetensors", level_name(level));
+                    if let Err(e) = write(&args.out, &file, &net.to_safetensors_bytes()) {
+                        tracing::error!(error = %e, "cannot save checkpoint");
+                        continue;
+                    }
+                    eprintln!("saved {file}: seed {seed}, episode {}, mean {:.1}, verified {:.1}", r.episode, stats.mean, verify.mean);
+                    found.push(ExpertEntry {
+                        name: level_name(level),
+                        env: "cartpole".into(),
+                        kind: "dqn-checkpoint".into(),
+                        file: Some(file),
+                        mean: Some(verify.mean),
+                        median: Some(verify.median),
+                        std: Some(verify.std),
+                        evaluation: Some(format!("greedy policy, 100 CartPole-1000 episodes from seed {VERIFY_SEED}")),
+                        provenance: Some(format!(
+                            "alfd train-experts --env cartpole: DQN seed {seed}, after episode {}; mean {:.1} on 100 episodes from seed {EVAL_SEED}",
+                            r.episode, stats.mean
+                        )),
+                    });
+                    break;
+                }
+            }
+            ControlFlow::Continue(())
+        });
+        if found.len() == LEVELS.len() {
+            break;
+        }
+    }
+    let missing: Vec<String> = LEVELS.iter().map(|l| level_name(*l)).filter(|n| !found.iter().any(|e| &e.name == n)).collect();
+    update_manifest(&args.out, found)?;
+    if !missing.is_empty() {
+        anyhow::bail!("no checkpoint reached {} within {} runs", missing.join(", "), args.max_runs);
+    }
+    Ok(())
+}
+
+fn level_name(level: f64) -> String {
+    format!("cartpole-{level}")
+}
+
+const TABULAR_CONFIG: &str = r#"
+seed = 0
+episodes = 300
+[env]
+name = "cliffwalk"
+[agent]
+kind = "qlearning"
+[query]
+mode = "never"
+"#;
+
+/// CliffWalk: greedy policies of Q-learning and SARSA at several stages of training.
+fn train_cliffwalk(args: &TrainExpertsArgs) -> anyhow::Result<()> {
+    const STAGES: [u32; 3] = [25, 100, 300];
+    let mut found = Vec::new();
+    for kind in ["qlearning", "sarsa"] {
+        let cfg = ExperimentConfig::from_toml_with_overrides(TABULAR_CONFIG, &[format!("agent.kind={kind}"), format!("seed={}", args.seed)])?;
+        let env = crate::setup::cliffwalk(&cfg)?;
+        let mut optimal = registry::cliffwalk("cliffwalk-optimal", &env)?;
+        let mut snapshots = Vec::new();
+        run_tabular(&cfg, env.clone(), optimal.as_mut(), |r, agent| {
+            if STAGES.contains(&(r.episode + 1)) {
+                snapshots.push((r.episode + 1, agent.greedy_policy()));
+            }
+            ControlFlow::Continue(())
+        });
+        for (episodes, policy) in snapshots {
+            let mut table = TablePolicy { actions: policy };
+            let stats = ReturnStats::of(&evaluate_cliffwalk(&mut table, &env, 1000, EVAL_SEED));
+            let name = format!("cliffwalk-{kind}-{episodes}");
+            let file = format!("{name}.json");
+            write(&args.out, &file, serde_json::to_string(&table)?.as_bytes())?;
+            eprintln!("saved {file}: mean {:.2}, median {:.2}", stats.mean, stats.median);
+            found.push(ExpertEntry {
+                name,
+                env: "cliffwalk".into(),
+                kind: "policy-table".into(),
+                file: Some(file),
+                mean: Some(stats.mean),
+                median: Some(stats.median),
+                std: Some(stats.std),
+                evaluation: Some(format!("1000 episodes on the default map from seed {EVAL_SEED}")),
+                provenance: Some(format!("alfd train-experts --env cliffwalk: greedy policy of {kind} (softmax exploration, seed {}) after {episodes} episodes", args.seed)),
+            });
+        }
+    }
+    update_manifest(&args.out, found)
+}
+
+/// Adds or replaces entries in `dir/manifest.json`, keeping the others.
+fn update_manifest(dir: &Path, entries: Vec<ExpertEntry>) -> anyhow::Result<()> {
+    let path = dir.join("manifest.json");
+    let mut all: Vec<ExpertEntry> = match std::fs::read_to_string(&path) {
+        Ok(text) => serde_json::from_str(&text).with_context(|| format!("{} is not a valid manifest", path.display()))?,
+        Err(_) => Vec::new(),
+    };
+    for e in entries {
+        all.retain(|x| x.name != e.name);
+        all.push(e);
+    }
+    write(dir, "manifest.json", (serde_json::to_string_pretty(&all)? + "\n").as_bytes())
+}

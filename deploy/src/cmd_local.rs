@@ -1,0 +1,128 @@
+//! `alfd local`: one experiment config in one process; writes `config.toml`, `episodes.csv`,
+//! `demos.jsonl`, and the learned policy (weights as safetensors, or a CliffWalk policy table
+//! with its value) to the output directory.
+
+use std::io::Write as _;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use alfd_common::config::{EnvName, ExperimentConfig};
+use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration};
+use alfd_common::runner::{episodes_csv, run_neural, run_tabular, EpisodeRecord};
+use anyhow::Context as _;
+
+use crate::setup;
+
+#[derive(Debug, clap::Args)]
+pub struct LocalArgs {
+    /// The experiment config (TOML).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Override a config value, e.g. `--set agent.heads=3` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Output directory (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print no progress.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+pub fn run(args: LocalArgs) -> anyhow::Result<()> {
+    let cfg = setup::load_config(&args.config, &args.set)?;
+    let summary = run_config(&cfg, &args.out, !args.quiet)?;
+    println!("{}", serde_json::to_string(&summary)?);
+    Ok(())
+}
+
+/// What a finished run reports (also written as `summary.json`).
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct RunSummary {
+    pub episodes: usize,
+    pub mean_return_last_50: f64,
+    pub demos_used: u32,
+    pub wall_clock_s: f64,
+    /// CliffWalk: value at S of the learned greedy policy, and of the optimal one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub greedy_value_at_start: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub optimal_value_at_start: Option<f64>,
+}
+
+/// Runs `cfg` in this process and writes its outputs to `out`.
+pub fn run_config(cfg: &ExperimentConfig, out: &Path, progress: bool) -> anyhow::Result<RunSummary> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create output directory {}", out.display()))?;
+    write(out, "config.toml", cfg.to_toml().as_bytes())?;
+    let bar = progress_bar(cfg.episodes as u64, progress);
+    let show = |r: &EpisodeRecord| {
+        bar.set_message(format!("return {:.1}  demos {}", r.ret, r.demos_used));
+        bar.inc(1);
+        ControlFlow::Continue(())
+    };
+    let start = Instant::now();
+    let (records, demos, greedy, optimal) = match cfg.env.name {
+        EnvName::Cliffwalk => {
+            let env = setup::cliffwalk(cfg)?;
+            let mut demonstrator = alfd_expert::registry::cliffwalk(&cfg.expert.name, &env)?;
+            let run = run_tabular(cfg, env.clone(), demonstrator.as_mut(), |r, _| show(r));
+            let vi = value_iteration(&env, cfg.agent.gamma, 1e-10)?;
+            let greedy = policy_evaluation(&env, &run.greedy_policy, cfg.agent.gamma)?;
+            let s0 = env.map().start();
+            let table = serde_json::json!({ "actions": run.greedy_policy });
+            write(out, "policy.json", table.to_string().as_bytes())?;
+            (run.records, Vec::new(), Some(greedy[s0]), Some(vi.values[s0]))
+        }
+        EnvName::Cartpole => {
+            let mut demonstrator = alfd_expert::registry::cartpole(&cfg.expert.name)?;
+            let run = run_neural(cfg, demonstrator.as_mut(), |r, _| show(r));
+            write(out, "weights.safetensors", &run.network.to_safetensors_bytes())?;
+            (run.records, run.expert.demos().to_vec(), None, None)
+        }
+    };
+    let wall = start.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+    write(out, "episodes.csv", episodes_csv(&records).as_bytes())?;
+    let mut jsonl = Vec::new();
+    for d in &demos {
+        serde_json::to_writer(&mut jsonl, d)?;
+        jsonl.push(b'\n');
+    }
+    write(out, "demos.jsonl", &jsonl)?;
+    let tail = &records[records.len().saturating_sub(50)..];
+    let summary = RunSummary {
+        episodes: records.len(),
+        mean_return_last_50: tail.iter().map(|r| r.ret).sum::<f64>() / tail.len().max(1) as f64,
+        demos_used: records.last().map_or(0, |r| r.demos_used),
+        wall_clock_s: wall,
+        greedy_value_at_start: greedy,
+        optimal_value_at_start: optimal,
+    };
+    write(out, "summary.json", serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    Ok(summary)
+}
+
+fn progress_bar(len: u64, show: bool) -> indicatif::ProgressBar {
+    if !show {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(len);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} episodes  {msg}  (eta {eta})")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    bar
+}
+
+/// Writes a file whole, via a temporary file and a rename, so a crash never leaves half a file.
+pub fn write(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
+    let path = dir.join(name);
+    let tmp = dir.join(format!(".{name}.tmp"));
+    let mut f = std::fs::File::create(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
+    f.write_all(bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
+    f.sync_all().ok();
+    std::fs::rename(&tmp, &path).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
+}

@@ -1,0 +1,135 @@
+//! Demonstrators by name. Trained ones ship in `expert/demonstrators/` and are compiled into the
+//! binaries (no file to find at run time); `manifest.json` there records how each was made and
+//! its measured quality.
+
+use alfd_common::agent::{BalancingController, Demonstrator, NetworkDemonstrator, TablePolicy};
+use alfd_common::env::cliffwalk::{value_iteration, CliffWalk};
+use alfd_common::nn::Mlp;
+use serde::{Deserialize, Serialize};
+
+/// A shipped demonstrator, as `manifest.json` lists it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ExpertEntry {
+    pub name: String,
+    /// `cartpole` or `cliffwalk`.
+    pub env: String,
+    /// `analytic`, `value-iteration`, `dqn-checkpoint` or `policy-table`.
+    pub kind: String,
+    /// File in `expert/demonstrators/`, if any.
+    #[serde(default)]
+    pub file: Option<String>,
+    /// Measured mean return of the demonstrator's greedy policy (see `evaluation`).
+    #[serde(default)]
+    pub mean: Option<f64>,
+    #[serde(default)]
+    pub median: Option<f64>,
+    #[serde(default)]
+    pub std: Option<f64>,
+    /// How the numbers were measured.
+    #[serde(default)]
+    pub evaluation: Option<String>,
+    /// How the demonstrator was made.
+    #[serde(default)]
+    pub provenance: Option<String>,
+}
+
+/// An expert that cannot be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum RegistryError {
+    #[error("unknown expert `{name}` for {env}; known: {known}")]
+    Unknown { name: String, env: String, known: String },
+    #[error("expert `{name}` is corrupt: {reason}")]
+    Corrupt { name: String, reason: String },
+}
+
+const MANIFEST: &str = include_str!("../demonstrators/manifest.json");
+
+/// The bytes of a shipped file, by its name in the manifest.
+fn shipped_file(file: &str) -> Option<&'static [u8]> {
+    SHIPPED.iter().find(|(n, _)| *n == file).map(|(_, b)| *b)
+}
+
+/// Files compiled in. Keep in step with `manifest.json` (a test checks it).
+const SHIPPED: &[(&str, &[u8])] = &[];
+
+/// Every demonstrator in the manifest.
+pub fn list() -> Vec<ExpertEntry> {
+    serde_json::from_str(MANIFEST).expect("expert/demonstrators/manifest.json is valid (tested)")
+}
+
+fn entry(name: &str, env: &str) -> Result<ExpertEntry, RegistryError> {
+    let all = list();
+    all.iter().find(|e| e.name == name && e.env == env).cloned().ok_or_else(|| RegistryError::Unknown {
+        name: name.to_owned(),
+        env: env.to_owned(),
+        known: all.iter().filter(|e| e.env == env).map(|e| e.name.as_str()).collect::<Vec<_>>().join(", "),
+    })
+}
+
+/// A CartPole demonstrator by name.
+pub fn cartpole(name: &str) -> Result<Box<dyn Demonstrator<[f32]> + Send>, RegistryError> {
+    let e = entry(name, "cartpole")?;
+    match e.kind.as_str() {
+        "analytic" => Ok(Box::new(BalancingController)),
+        "dqn-checkpoint" => {
+            let file = e.file.as_deref().unwrap_or_default();
+            let bytes = shipped_file(file)
+                .ok_or_else(|| RegistryError::Corrupt { name: name.to_owned(), reason: format!("file `{file}` is not compiled in") })?;
+            let net = Mlp::from_safetensors_bytes(bytes)
+                .map_err(|err| RegistryError::Corrupt { name: name.to_owned(), reason: err.to_string() })?;
+            Ok(Box::new(NetworkDemonstrator::new(net)))
+        }
+        other => Err(RegistryError::Corrupt { name: name.to_owned(), reason: format!("kind `{other}` is not a cartpole kind") }),
+    }
+}
+
+/// A CliffWalk demonstrator by name, for `env` (the optimal one is computed for its map).
+pub fn cliffwalk(name: &str, env: &CliffWalk) -> Result<Box<dyn Demonstrator<usize> + Send>, RegistryError> {
+    let e = entry(name, "cliffwalk")?;
+    match e.kind.as_str() {
+        "value-iteration" => {
+            let vi = value_iteration(env, 0.99, 1e-10).map_err(|err| RegistryError::Corrupt { name: name.to_owned(), reason: err.to_string() })?;
+            Ok(Box::new(TablePolicy { actions: vi.policy }))
+        }
+        "policy-table" => {
+            let file = e.file.as_deref().unwrap_or_default();
+            let bytes = shipped_file(file)
+                .ok_or_else(|| RegistryError::Corrupt { name: name.to_owned(), reason: format!("file `{file}` is not compiled in") })?;
+            let table: TablePolicy = serde_json::from_slice(bytes)
+                .map_err(|err| RegistryError::Corrupt { name: name.to_owned(), reason: err.to_string() })?;
+            if table.actions.len() != env.num_states() || table.actions.iter().any(|&a| a >= 4) {
+                return Err(RegistryError::Corrupt {
+                    name: name.to_owned(),
+                    reason: format!("its table has {} states; the map has {} (policy tables fit the default map only)", table.actions.len(), env.num_states()),
+                });
+            }
+            Ok(Box::new(table))
+        }
+        other => Err(RegistryError::Corrupt { name: name.to_owned(), reason: format!("kind `{other}` is not a cliffwalk kind") }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn manifest_parses_and_every_file_is_compiled_in() {
+        let all = list();
+        assert!(all.iter().any(|e| e.name == "cartpole-perfect"));
+        for e in &all {
+            if let Some(f) = &e.file {
+                assert!(shipped_file(f).is_some(), "{} names {f}, which SHIPPED lacks", e.name);
+            }
+        }
+        for (f, _) in SHIPPED {
+            assert!(all.iter().any(|e| e.file.as_deref() == Some(f)), "{f} is compiled in but not in the manifest");
+        }
+    }
+
+    #[test]
+    fn unknown_names_are_refused_with_the_known_ones() {
+        let err = cartpole("cartpole-9000").err().unwrap().to_string();
+        assert!(err.contains("cartpole-9000") && err.contains("cartpole-perfect"), "{err}");
+    }
+}
