@@ -187,6 +187,10 @@ pub enum WireError {
         value: u64,
         expected: &'static str,
     },
+    #[error("no word from the launcher of this run within {waited_ms} ms (is the run id right, is the run alive?)")]
+    NoLauncher { waited_ms: u64 },
+    #[error("interrupted by a termination signal")]
+    Interrupted,
     #[error("run `{run_id}` still has live processes: {nodes}")]
     RunAlive { run_id: String, nodes: String },
     #[error("iceoryx2 failed to {op} `{service}`: {detail}")]
@@ -433,6 +437,8 @@ pub struct Credits {
     pub env_steps: u64,
     /// Updates the learner has made.
     pub updates: u64,
+    /// Per actor id: steps of that incarnation received so far.
+    pub received: [u64; MAX_ACTORS],
     /// Per actor id: the incarnation the grant is for (0: none yet).
     pub incarnation: [u64; MAX_ACTORS],
     /// Per actor id: the actor may send steps with sequence numbers below this.
@@ -445,6 +451,18 @@ impl Credits {
     pub fn granted_for(&self, actor: u16, incarnation: u64) -> Option<u64> {
         let a = actor as usize;
         (a < MAX_ACTORS && self.incarnation[a] == incarnation).then(|| self.granted[a])
+    }
+
+    /// The global step as `actor` (incarnation `incarnation`) sees it after producing `produced`
+    /// steps: the learner's count plus the actor's own steps it has not received yet.
+    pub fn global_step_for(&self, actor: u16, incarnation: u64, produced: u64) -> u64 {
+        let a = actor as usize;
+        let received = if a < MAX_ACTORS && self.incarnation[a] == incarnation {
+            self.received[a]
+        } else {
+            0
+        };
+        self.env_steps + produced.saturating_sub(received)
     }
 }
 
@@ -581,7 +599,8 @@ pub mod process_state {
     pub const EXITING: u32 = 4;
 }
 
-/// Progress and metrics, from every process to the launcher.
+/// Progress and metrics, from every process to the launcher. An episode message carries the
+/// fields of the single-process runner's `EpisodeRecord`; the sender is `header.id`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("alfd.Progress")]
@@ -595,22 +614,26 @@ pub struct Progress {
     pub _pad: u32,
     pub incarnation: u64,
     // --- an episode (kind EPISODE) ---
-    /// The actor's episode number.
+    /// The actor's own episode number.
     pub episode: u64,
-    /// The environment's return (never shaped).
+    /// The environment's return (never the shaped one).
     pub episode_return: f64,
     pub length: u64,
-    /// Demonstrations used in this episode.
+    /// Demonstrations used so far in the run, as far as the actor knows.
     pub demos_used: u64,
     /// Mean JS divergence over the episode's steps.
     pub mean_js: f64,
-    /// Exploration ε at the end of the episode (NaN when not applicable).
-    pub epsilon: f64,
-    // --- counters (both kinds) ---
-    /// Environment steps: sent (actor), received (learner), global step (expert).
+    /// Queries answered during the episode.
+    pub queries: u64,
+    /// Steps whose reward was shaped during the episode.
+    pub shaped_steps: u64,
+    /// The global step at the end of the episode, as far as the actor knows.
+    pub total_steps: u64,
+    // --- counters (status) ---
+    /// Environment steps: sent (actor), received (learner).
     pub env_steps: u64,
     pub updates: u64,
-    /// Demonstrations answered in the whole run (expert), or by this actor.
+    /// Demonstrations answered in the whole run (expert).
     pub demos: u64,
     pub budget_left: u64,
     pub weights_version: u64,
@@ -1663,6 +1686,84 @@ impl Waiter {
         self.listener
             .try_wait(|_| {})
             .map_err(transport("drain", self.bell.topic()))
+    }
+}
+
+/// A process's view of the launcher's [`Control`]: the first message is the schema handshake,
+/// later ones carry the expert generations and shutdown, and their arrival is the launcher's
+/// heartbeat.
+pub struct ControlWatch<'w> {
+    rx: Receiver<'w, Control>,
+    current: Control,
+    seen: bool,
+    last_seen: std::time::Instant,
+}
+
+impl fmt::Debug for ControlWatch<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "ControlWatch({:?})", self.current)
+    }
+}
+
+/// How often the launcher republishes [`Control`] (its heartbeat).
+pub const CONTROL_PERIOD: Duration = Duration::from_millis(200);
+
+impl<'w> ControlWatch<'w> {
+    pub fn new(wire: &'w Wire) -> Result<Self> {
+        Ok(Self {
+            rx: wire.control_receiver()?,
+            current: Control::default(),
+            seen: false,
+            last_seen: std::time::Instant::now(),
+        })
+    }
+
+    /// Waits (blocking on `waiter`) for the launcher's first message, up to `timeout`. This is
+    /// where a process of another schema version learns it does not belong: it gets
+    /// [`WireError::SchemaMismatch`].
+    pub fn handshake(&mut self, waiter: &Waiter, timeout: Duration) -> Result<Control> {
+        let start = std::time::Instant::now();
+        loop {
+            if self.poll()? {
+                return Ok(self.current);
+            }
+            if start.elapsed() >= timeout {
+                return Err(WireError::NoLauncher {
+                    waited_ms: timeout.as_millis() as u64,
+                });
+            }
+            if waiter.wait(CONTROL_PERIOD / 4)? == Wake::Signal {
+                return Err(WireError::Interrupted);
+            }
+        }
+    }
+
+    /// Takes in what the launcher sent since the last call; `true` if anything came.
+    pub fn poll(&mut self) -> Result<bool> {
+        let mut any = false;
+        while let Some(c) = self.rx.receive()? {
+            self.current = c;
+            any = true;
+        }
+        if any {
+            self.seen = true;
+            self.last_seen = std::time::Instant::now();
+        }
+        Ok(any)
+    }
+
+    /// The newest control message (all zero before the handshake).
+    pub fn current(&self) -> Control {
+        self.current
+    }
+
+    pub fn shutdown_requested(&self) -> bool {
+        self.current.command == command::SHUTDOWN
+    }
+
+    /// Time since the launcher was last heard of.
+    pub fn silence(&self) -> Duration {
+        self.last_seen.elapsed()
     }
 }
 
