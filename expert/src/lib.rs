@@ -1,4 +1,9 @@
-//! The expert process of alfd, and the registry of demonstrators it (and the single-process
-//! runner) loads by name.
+//! The expert process of alfd (it answers the actors' queries within the global budget, keeps
+//! `demos.jsonl`, and publishes the demonstration model), and the registry of demonstrators it
+//! (and the single-process runner) loads by name.
 
+pub mod demo_log;
+mod process;
 pub mod registry;
+
+pub use process::{log_name, run, Args};

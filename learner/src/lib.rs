@@ -1,1 +1,470 @@
-//! The learner process of alfd: wires the core to the transport.
+//! The learner process of alfd: receives the actors' transitions, makes `U` updates of the K heads
+//! per environment step (the core's [`NeuralLearner`]), publishes versioned weights, and returns
+//! credits to the actors so that none runs more than a window of steps ahead.
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use alfd_common::agent::NeuralLearner;
+use alfd_common::config::{EnvName, ExperimentConfig};
+use alfd_common::replay::Transition;
+use alfd_common::rng::{derive_seed, seeded};
+use alfd_common::wire::{
+    self, process_state, progress_kind, ControlWatch, Credits, Doorbell, Process, Progress, Role,
+    TransitionBatch, Wake, Wire, WireError, MAX_ACTORS, MAX_CREDIT_WINDOW,
+};
+use anyhow::Context as _;
+use tracing::{debug, info, warn};
+
+/// CartPole's observation size and number of actions.
+const OBS_DIM: usize = 4;
+const ACTIONS: usize = 2;
+
+/// `alfd-learner`: the learner process of a run (started by `alfd run`).
+#[derive(Debug, Clone, clap::Parser)]
+#[command(name = "alfd-learner", version)]
+pub struct Args {
+    /// The run directory (config, logs, weights).
+    #[arg(long)]
+    pub run_dir: PathBuf,
+    /// The run id (names the run's iceoryx2 services).
+    #[arg(long)]
+    pub run_id: String,
+    /// The experiment config; default `RUN_DIR/config.toml`.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Credit window: how many steps an actor may run ahead of the learner's updates.
+    #[arg(long, default_value_t = 64)]
+    pub window: u64,
+    /// Publish the weights every this many updates.
+    #[arg(long, default_value_t = 1)]
+    pub weights_every: u64,
+    /// Seconds to wait for the launcher's first word.
+    #[arg(long, default_value_t = 20)]
+    pub handshake_timeout: u64,
+}
+
+/// The name of the process's log file (without `.log`).
+pub fn log_name(_args: &Args) -> String {
+    "learner".to_owned()
+}
+
+/// Reads the experiment config of a run and checks the runtime can run it.
+pub fn load_config(path: &Path) -> anyhow::Result<ExperimentConfig> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read config {}", path.display()))?;
+    let cfg = ExperimentConfig::from_toml(&text)
+        .with_context(|| format!("in config {}", path.display()))?;
+    anyhow::ensure!(
+        cfg.env.name == EnvName::Cartpole && !cfg.agent.kind.is_tabular(),
+        "the multi-process runtime runs neural agents (dqn, bdqn) on cartpole; \
+         run tabular configs with `alfd local`"
+    );
+    Ok(cfg)
+}
+
+/// Where the credits of each actor stand.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct ActorBook {
+    incarnation: u64,
+    /// One past the highest sequence number received (lost steps count as received).
+    received: u64,
+    /// Steps received and not yet learned from.
+    queued: u64,
+    lost: u64,
+}
+
+/// The learner's accounts: what each actor sent, what is learned from, and the grants.
+#[derive(Debug, Clone)]
+pub struct CreditBook {
+    window: u64,
+    actors: [ActorBook; MAX_ACTORS],
+    env_steps: u64,
+}
+
+/// One step waiting in the learner's queue.
+#[derive(Debug, Clone)]
+pub struct Queued {
+    pub actor: u16,
+    pub incarnation: u64,
+    /// The last step of its batch: its processing frees a batch worth of credit.
+    pub last_of_batch: bool,
+    pub transition: Transition,
+}
+
+impl CreditBook {
+    pub fn new(window: u64) -> Self {
+        Self {
+            window,
+            actors: [ActorBook::default(); MAX_ACTORS],
+            env_steps: 0,
+        }
+    }
+
+    /// Environment steps received from all actors: the run's global step.
+    pub fn env_steps(&self) -> u64 {
+        self.env_steps
+    }
+
+    /// Steps of `actor` lost on the way (never expected; logged).
+    pub fn lost(&self, actor: u16) -> u64 {
+        self.actors.get(actor as usize).map_or(0, |a| a.lost)
+    }
+
+    /// Takes in a batch, appending its steps to `queue`; returns how many it appended.
+    pub fn accept(&mut self, b: &TransitionBatch, queue: &mut VecDeque<Queued>) -> usize {
+        let a = b.actor as usize;
+        if a >= MAX_ACTORS {
+            warn!(actor = a, "transitions from an actor id beyond the credit table; dropped");
+            return 0;
+        }
+        let book = &mut self.actors[a];
+        let current = b.incarnation >= book.incarnation;
+        if b.incarnation > book.incarnation {
+            if book.incarnation != 0 {
+                info!(actor = a, old = book.incarnation, new = b.incarnation, "actor restarted");
+            }
+            *book = ActorBook {
+                incarnation: b.incarnation,
+                ..ActorBook::default()
+            };
+        }
+        if current {
+            if b.first_seq > book.received {
+                let gap = b.first_seq - book.received;
+                warn!(actor = a, gap, "transitions lost on the way; counted as received");
+                book.lost += gap;
+            }
+            book.received = book.received.max(b.end_seq());
+            book.queued += b.len() as u64;
+        }
+        let n = b.len().min(wire::TRANSITIONS_PER_BATCH);
+        for (i, transition) in b.transitions().enumerate() {
+            queue.push_back(Queued {
+                actor: b.actor as u16,
+                incarnation: b.incarnation,
+                last_of_batch: i + 1 == n,
+                transition,
+            });
+        }
+        self.env_steps += n as u64;
+        n
+    }
+
+    /// Records that a queued step of `actor` has been learned from.
+    pub fn learned(&mut self, actor: u16, incarnation: u64) {
+        if let Some(book) = self.actors.get_mut(actor as usize) {
+            if book.incarnation == incarnation {
+                book.queued = book.queued.saturating_sub(1);
+            }
+        }
+    }
+
+    /// The grants: each actor may send up to `window` steps beyond those learned from.
+    pub fn credits(&self, updates: u64) -> Credits {
+        let mut c = Credits {
+            env_steps: self.env_steps,
+            updates,
+            ..Credits::default()
+        };
+        for (i, b) in self.actors.iter().enumerate() {
+            c.incarnation[i] = b.incarnation;
+            c.received[i] = b.received;
+            c.granted[i] = b.received - b.queued + self.window;
+        }
+        c
+    }
+}
+
+/// Runs the learner until the launcher says stop or a termination signal arrives; saves the final
+/// weights to `RUN_DIR/weights.safetensors`.
+pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        (1..=MAX_CREDIT_WINDOW).contains(&args.window),
+        "--window must be in 1..={MAX_CREDIT_WINDOW}, got {}",
+        args.window
+    );
+    let config_path = args
+        .config
+        .clone()
+        .unwrap_or_else(|| args.run_dir.join("config.toml"));
+    let cfg = load_config(&config_path)?;
+    let wire = Wire::connect(&args.run_id, Process::new(Role::Learner, 0), schema)
+        .context("cannot join the run")?;
+    let waiter = wire.waiter(Doorbell::Learner)?;
+    let mut control = ControlWatch::new(&wire)?;
+    control
+        .handshake(&waiter, Duration::from_secs(args.handshake_timeout))
+        .context("no handshake with the launcher")?;
+    let rx = wire.transitions_receiver()?;
+    let mut credits_tx = wire.credits_sender()?;
+    let actors = wire.bell(Doorbell::Actors)?;
+    let mut progress = wire.progress_sender()?;
+
+    let mut learner = NeuralLearner::new(
+        &cfg.agent,
+        OBS_DIM,
+        ACTIONS,
+        seeded(derive_seed(cfg.seed, "learner")),
+    );
+    let mut params = vec![0.0f32; learner.network().num_params()];
+    let mut weights_tx = wire.weights_sender(params.len())?;
+    let mut book = CreditBook::new(args.window);
+    let updates_per_step = cfg.agent.updates_per_step;
+
+    let publish_weights = |learner: &NeuralLearner,
+                               params: &mut Vec<f32>,
+                               tx: &mut wire::WeightsSender<'_>,
+                               env_steps: u64|
+     -> anyhow::Result<()> {
+        learner.network().copy_params_into(params)?;
+        tx.publish(learner.updates(), learner.updates(), env_steps, params)?;
+        Ok(())
+    };
+    publish_weights(&learner, &mut params, &mut weights_tx, 0)?;
+    credits_tx.send(book.credits(0))?;
+    actors.ring()?;
+    info!(params = params.len(), window = args.window, "learner running");
+
+    let mut status = Status::new(std::process::id());
+    status.send(&mut progress, process_state::RUNNING, &book, &learner)?;
+    let mut queue: VecDeque<Queued> = VecDeque::new();
+    let mut published_version = 0u64;
+    let mut credits_dirty = false;
+    let mut since_check = 0u32;
+    let stop_reason;
+    loop {
+        // Take in whatever arrived.
+        loop {
+            match rx.receive() {
+                Ok(Some(batch)) => {
+                    book.accept(&batch, &mut queue);
+                }
+                Ok(None) => break,
+                Err(e @ WireError::SchemaMismatch { .. }) => {
+                    tracing::error!("{e}; batch dropped");
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+        if let Some(q) = queue.pop_front() {
+            // Algorithm 1 lines 19-20, U times per step.
+            learner.insert(&q.transition);
+            for _ in 0..updates_per_step {
+                if let Some(loss) = learner.update() {
+                    status.loss = f64::from(loss);
+                }
+            }
+            book.learned(q.actor, q.incarnation);
+            if learner.updates() >= published_version + args.weights_every {
+                publish_weights(&learner, &mut params, &mut weights_tx, book.env_steps())?;
+                published_version = learner.updates();
+            }
+            credits_dirty = true;
+            if q.last_of_batch {
+                credits_tx.send(book.credits(learner.updates()))?;
+                actors.ring()?;
+                credits_dirty = false;
+            }
+            since_check += 1;
+            if since_check < 32 {
+                continue;
+            }
+        }
+        since_check = 0;
+        if queue.is_empty() {
+            if learner.updates() > published_version {
+                publish_weights(&learner, &mut params, &mut weights_tx, book.env_steps())?;
+                published_version = learner.updates();
+            }
+            if credits_dirty {
+                credits_tx.send(book.credits(learner.updates()))?;
+                actors.ring()?;
+                credits_dirty = false;
+            }
+        }
+        if status.due() {
+            status.send(&mut progress, process_state::RUNNING, &book, &learner)?;
+        }
+        control.poll()?;
+        if control.shutdown_requested() {
+            stop_reason = "the launcher said stop";
+            break;
+        }
+        if wire.termination_requested() {
+            stop_reason = "termination signal";
+            break;
+        }
+        anyhow::ensure!(
+            control.silence() < LAUNCHER_SILENCE,
+            "no word from the launcher for {:?}: giving up",
+            control.silence()
+        );
+        if queue.is_empty() && waiter.wait(Duration::from_millis(100))? == Wake::Signal {
+            stop_reason = "termination signal";
+            break;
+        }
+    }
+    info!(
+        reason = stop_reason,
+        updates = learner.updates(),
+        env_steps = book.env_steps(),
+        "learner stopping"
+    );
+    let path = args.run_dir.join("weights.safetensors");
+    write_atomically(&path, &learner.network().to_safetensors_bytes())?;
+    info!(path = %path.display(), "final weights saved");
+    status.send(&mut progress, process_state::EXITING, &book, &learner)?;
+    debug!(lost = (0..MAX_ACTORS as u16).map(|a| book.lost(a)).sum::<u64>(), "lost steps");
+    Ok(())
+}
+
+/// How long the launcher may stay silent before a process gives up on the run.
+pub const LAUNCHER_SILENCE: Duration = Duration::from_secs(10);
+
+/// The learner's periodic status message.
+struct Status {
+    pid: u32,
+    loss: f64,
+    last: Instant,
+}
+
+impl Status {
+    fn new(pid: u32) -> Self {
+        Self {
+            pid,
+            loss: f64::NAN,
+            last: Instant::now(),
+        }
+    }
+
+    fn due(&self) -> bool {
+        self.last.elapsed() >= Duration::from_millis(500)
+    }
+
+    fn send(
+        &mut self,
+        tx: &mut wire::Sender<'_, Progress>,
+        state: u32,
+        book: &CreditBook,
+        learner: &NeuralLearner,
+    ) -> anyhow::Result<()> {
+        tx.send(Progress {
+            kind: progress_kind::STATUS,
+            state,
+            pid: self.pid,
+            env_steps: book.env_steps(),
+            updates: learner.updates(),
+            weights_version: learner.updates(),
+            loss: self.loss,
+            ..Progress::default()
+        })?;
+        self.last = Instant::now();
+        Ok(())
+    }
+}
+
+/// Writes a file whole: a temporary file, fsync, rename.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    use std::io::Write as _;
+    let tmp = path.with_extension("tmp");
+    let mut f = std::fs::File::create(&tmp)
+        .with_context(|| format!("cannot write {}", tmp.display()))?;
+    f.write_all(bytes)
+        .and_then(|()| f.sync_all())
+        .with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn batch(actor: u16, incarnation: u64, first_seq: u64, len: usize) -> TransitionBatch {
+        let mut b = TransitionBatch::new(actor, incarnation, 4, 2, first_seq).unwrap();
+        for i in 0..len {
+            let t = Transition {
+                state: vec![i as f32; 4],
+                action: 0,
+                reward: 1.0,
+                next_state: vec![i as f32 + 1.0; 4],
+                terminated: false,
+                mask: vec![1.0, 1.0],
+                demo: false,
+            };
+            b.push(&t, 0, false).unwrap();
+        }
+        b
+    }
+
+    #[test]
+    fn grants_follow_what_is_learned_from() {
+        let mut book = CreditBook::new(64);
+        let mut q = VecDeque::new();
+        // Before anything: nobody has a grant (actors start with an implicit one of `window`).
+        assert_eq!(book.credits(0).granted_for(0, 1), None);
+
+        assert_eq!(book.accept(&batch(0, 1, 0, 32), &mut q), 32);
+        assert_eq!(book.accept(&batch(1, 1, 0, 10), &mut q), 10);
+        assert_eq!(book.env_steps(), 42);
+        let c = book.credits(0);
+        assert_eq!(c.granted_for(0, 1), Some(64), "nothing learned yet: window only");
+        assert_eq!(c.received[0], 32);
+        assert_eq!(c.global_step_for(0, 1, 40), 42 + 8);
+
+        for _ in 0..20 {
+            let s = q.pop_front().unwrap();
+            book.learned(s.actor, s.incarnation);
+        }
+        assert_eq!(book.credits(0).granted_for(0, 1), Some(20 + 64));
+        // The 32nd step of actor 0 ends its batch.
+        let mut last = None;
+        for _ in 0..12 {
+            let s = q.pop_front().unwrap();
+            book.learned(s.actor, s.incarnation);
+            last = Some(s);
+        }
+        let last = last.unwrap();
+        assert!(last.last_of_batch && last.actor == 0);
+        assert_eq!(book.credits(0).granted_for(0, 1), Some(96));
+        assert_eq!(book.credits(0).granted_for(1, 1), Some(64));
+    }
+
+    #[test]
+    fn a_restarted_actor_starts_a_new_account_and_old_steps_still_count() {
+        let mut book = CreditBook::new(8);
+        let mut q = VecDeque::new();
+        book.accept(&batch(2, 1, 0, 5), &mut q);
+        book.accept(&batch(2, 2, 0, 3), &mut q);
+        let c = book.credits(0);
+        assert_eq!(c.granted_for(2, 1), None);
+        assert_eq!(c.granted_for(2, 2), Some(8));
+        // A late batch of the dead incarnation is learned from but does not touch the account.
+        book.accept(&batch(2, 1, 5, 4), &mut q);
+        assert_eq!(q.len(), 12);
+        assert_eq!(book.env_steps(), 12);
+        while let Some(s) = q.pop_front() {
+            book.learned(s.actor, s.incarnation);
+        }
+        assert_eq!(book.credits(0).granted_for(2, 2), Some(3 + 8));
+    }
+
+    #[test]
+    fn lost_steps_count_as_received_so_credits_keep_flowing() {
+        let mut book = CreditBook::new(4);
+        let mut q = VecDeque::new();
+        book.accept(&batch(0, 1, 0, 2), &mut q);
+        book.accept(&batch(0, 1, 5, 2), &mut q); // steps 2..5 lost
+        assert_eq!(book.lost(0), 3);
+        while let Some(s) = q.pop_front() {
+            book.learned(s.actor, s.incarnation);
+        }
+        assert_eq!(book.credits(0).granted_for(0, 1), Some(7 + 4));
+        let mut q2 = VecDeque::new();
+        let mut out_of_range = batch(0, 1, 0, 1);
+        out_of_range.actor = MAX_ACTORS as u32;
+        assert_eq!(book.accept(&out_of_range, &mut q2), 0);
+    }
+}

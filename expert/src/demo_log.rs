@@ -1,0 +1,175 @@
+//! `demos.jsonl`: the run's demonstrations, one JSON object per line (the core's
+//! [`DemoRecord`]: `index`, `state`, `action`, `step`, `expert`). The expert appends each answered
+//! demonstration, flushed and fsync'd before the answer goes out; a new expert reads the file back.
+
+use std::fs::{File, OpenOptions};
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use alfd_common::agent::DemoRecord;
+
+/// A `demos.jsonl` that cannot be used as it is. Nothing is ever removed from the file.
+#[derive(Debug, thiserror::Error)]
+pub enum DemoLogError {
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot append to {path}: {source}")]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path} line {line}: {reason}")]
+    Malformed {
+        path: PathBuf,
+        line: usize,
+        reason: String,
+    },
+}
+
+/// Reads every demonstration of `path` (none if the file does not exist). Each line must be a
+/// [`DemoRecord`] whose `index` is its 0-based line number, and the file must end with a newline.
+pub fn read(path: &Path) -> Result<Vec<DemoRecord>, DemoLogError> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(source) => {
+            return Err(DemoLogError::Read {
+                path: path.to_owned(),
+                source,
+            })
+        }
+    };
+    let malformed = |line: usize, reason: String| DemoLogError::Malformed {
+        path: path.to_owned(),
+        line,
+        reason,
+    };
+    let mut records = Vec::new();
+    let mut lines = text.split_inclusive('\n').enumerate().peekable();
+    while let Some((i, raw)) = lines.next() {
+        let line = i + 1;
+        if !raw.ends_with('\n') {
+            return Err(malformed(
+                line,
+                "incomplete last line (no newline at its end): the file was cut while being written"
+                    .to_owned(),
+            ));
+        }
+        let record: DemoRecord = serde_json::from_str(raw.trim_end())
+            .map_err(|e| malformed(line, format!("not a demonstration record: {e}")))?;
+        if record.index as usize != records.len() {
+            return Err(malformed(
+                line,
+                format!(
+                    "demonstration index {} where {} was expected (lines must be in order, none missing or repeated)",
+                    record.index,
+                    records.len()
+                ),
+            ));
+        }
+        records.push(record);
+    }
+    Ok(records)
+}
+
+/// `demos.jsonl`, open for appending.
+#[derive(Debug)]
+pub struct DemoLog {
+    file: File,
+    path: PathBuf,
+}
+
+impl DemoLog {
+    /// Opens (creating it if needed) `path` for appending.
+    pub fn open(path: &Path) -> Result<Self, DemoLogError> {
+        let file = OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(path)
+            .map_err(|source| DemoLogError::Write {
+                path: path.to_owned(),
+                source,
+            })?;
+        Ok(Self {
+            file,
+            path: path.to_owned(),
+        })
+    }
+
+    /// Appends `record` as one line and waits until it is on disk (fsync).
+    pub fn append(&mut self, record: &DemoRecord) -> Result<(), DemoLogError> {
+        let mut line = serde_json::to_vec(record).expect("a DemoRecord always serialises");
+        line.push(b'\n');
+        self.file
+            .write_all(&line)
+            .and_then(|()| self.file.sync_data())
+            .map_err(|source| DemoLogError::Write {
+                path: self.path.clone(),
+                source,
+            })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(index: u32) -> DemoRecord {
+        DemoRecord {
+            index,
+            state: vec![0.1, -0.2, 0.03, index as f64],
+            action: (index % 2) as usize,
+            step: 10 * u64::from(index),
+            expert: "cartpole-perfect".to_owned(),
+        }
+    }
+
+    fn dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("alfd-demo-log-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn appended_records_read_back_identical() {
+        let d = dir("roundtrip");
+        let path = d.join("demos.jsonl");
+        assert!(read(&path).unwrap().is_empty(), "a missing file holds no demos");
+        let mut log = DemoLog::open(&path).unwrap();
+        for i in 0..3 {
+            log.append(&record(i)).unwrap();
+        }
+        drop(log);
+        // A second writer appends after the first (the next expert of a swap).
+        DemoLog::open(&path).unwrap().append(&record(3)).unwrap();
+        let back = read(&path).unwrap();
+        assert_eq!(back, (0..4).map(record).collect::<Vec<_>>());
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(text.lines().count(), 4);
+        assert!(text.lines().next().unwrap().contains("\"expert\":\"cartpole-perfect\""));
+    }
+
+    #[test]
+    fn a_malformed_line_is_named_and_nothing_is_lost() {
+        let d = dir("malformed");
+        let path = d.join("demos.jsonl");
+        let good = |i| serde_json::to_string(&record(i)).unwrap();
+        let text = format!("{}\n{}\n{{\"index\": 2, \"state\": oops}}\n{}\n", good(0), good(1), good(3));
+        std::fs::write(&path, &text).unwrap();
+        let err = read(&path).unwrap_err().to_string();
+        assert!(err.contains("line 3") && err.contains("not a demonstration record"), "{err}");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), text, "the file is untouched");
+
+        std::fs::write(&path, format!("{}\n{}\n", good(0), good(2))).unwrap();
+        let err = read(&path).unwrap_err().to_string();
+        assert!(err.contains("line 2") && err.contains("index 2 where 1 was expected"), "{err}");
+
+        std::fs::write(&path, format!("{}\n{}", good(0), &good(1)[..10])).unwrap();
+        let err = read(&path).unwrap_err().to_string();
+        assert!(err.contains("line 2") && err.contains("incomplete last line"), "{err}");
+    }
+}

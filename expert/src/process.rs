@@ -1,0 +1,285 @@
+//! The expert process: loads a demonstrator by name, answers the actors' queries within the global
+//! budget B (the core's [`ExpertCore`]), appends every answer to `demos.jsonl` before sending it,
+//! and publishes the refitted demonstration model.
+//!
+//! An expert answers only while the launcher's [`Control`](alfd_common::wire::Control) names its
+//! generation as the active one; a newer generation makes it exit. Swaps are made before broken:
+//! the new expert is up (standby) before the old one goes, and becomes active only after the old
+//! one has exited, reading `demos.jsonl` back at that moment. So at most one expert ever spends
+//! budget, and none spends it twice.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use alfd_common::agent::ExpertCore;
+use alfd_common::config::{EnvName, ExperimentConfig};
+use alfd_common::wire::{
+    name_to_bytes, outcome, process_state, progress_kind, ControlWatch, DemoModelHeader, Doorbell,
+    Process, Progress, QueryResponse, Role, Wake, Wire, WireError,
+};
+use anyhow::Context as _;
+use tracing::{debug, info};
+
+use crate::demo_log::{self, DemoLog};
+use crate::registry;
+
+const ACTIONS: usize = 2;
+/// How long the launcher may stay silent before the expert gives up on the run.
+const LAUNCHER_SILENCE: Duration = Duration::from_secs(10);
+
+/// `alfd-expert`: the expert process of a run (started by `alfd run` and `alfd swap-expert`).
+#[derive(Debug, Clone, clap::Parser)]
+#[command(name = "alfd-expert", version)]
+pub struct Args {
+    /// The run directory (config, logs, `demos.jsonl`).
+    #[arg(long)]
+    pub run_dir: PathBuf,
+    /// The run id (names the run's iceoryx2 services).
+    #[arg(long)]
+    pub run_id: String,
+    /// The experiment config; default `RUN_DIR/config.toml`.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// The demonstrator, by name (`alfd expert list`); default the config's `expert.name`.
+    #[arg(long)]
+    pub expert: Option<String>,
+    /// This expert's generation in the run (1 for the first, +1 per swap).
+    #[arg(long, default_value_t = 1)]
+    pub generation: u16,
+    /// Seconds to wait for the launcher's first word.
+    #[arg(long, default_value_t = 20)]
+    pub handshake_timeout: u64,
+}
+
+/// The name of the process's log file (without `.log`).
+pub fn log_name(args: &Args) -> String {
+    format!("expert-{}", args.generation)
+}
+
+fn load_config(path: &Path) -> anyhow::Result<ExperimentConfig> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read config {}", path.display()))?;
+    let cfg = ExperimentConfig::from_toml(&text)
+        .with_context(|| format!("in config {}", path.display()))?;
+    anyhow::ensure!(
+        cfg.env.name == EnvName::Cartpole && !cfg.agent.kind.is_tabular(),
+        "the multi-process runtime runs neural agents (dqn, bdqn) on cartpole; \
+         run tabular configs with `alfd local`"
+    );
+    Ok(cfg)
+}
+
+/// Whether this expert may answer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    Standby,
+    Active,
+}
+
+/// Runs the expert until the launcher says stop, a newer expert replaces it, or a termination
+/// signal arrives.
+pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
+    let config_path = args
+        .config
+        .clone()
+        .unwrap_or_else(|| args.run_dir.join("config.toml"));
+    let cfg = load_config(&config_path)?;
+    let name = args.expert.clone().unwrap_or_else(|| cfg.expert.name.clone());
+    let mut demonstrator = registry::cartpole(&name)?;
+    let demos_path = args.run_dir.join("demos.jsonl");
+    // Read the demonstrations now, to refuse a bad file before the run depends on us; they are
+    // read again when this expert becomes active (its predecessor may have added some).
+    let earlier = demo_log::read(&demos_path)?;
+    info!(expert = %name, generation = args.generation, demos = earlier.len(), "expert starting");
+
+    let me = Process::new(Role::Expert, args.generation);
+    let wire = Wire::connect(&args.run_id, me, schema).context("cannot join the run")?;
+    let waiter = wire.waiter(Doorbell::Expert)?;
+    let mut control = ControlWatch::new(&wire)?;
+    control
+        .handshake(&waiter, Duration::from_secs(args.handshake_timeout))
+        .context("no handshake with the launcher")?;
+    let server = wire.query_server()?;
+    let mut model_tx = wire.demo_model_sender()?;
+    let actors = wire.bell(Doorbell::Actors)?;
+    let launcher = wire.bell(Doorbell::Launcher)?;
+    let mut progress = wire.progress_sender()?;
+
+    let mut core = ExpertCore::new(
+        cfg.budget(),
+        cfg.expert.model,
+        ACTIONS,
+        cfg.shaping.schedule(),
+    );
+    let mut log: Option<DemoLog> = None;
+    let mut mode = Mode::Standby;
+    let pid = std::process::id();
+    let status = |progress: &mut alfd_common::wire::Sender<'_, Progress>,
+                  state: u32,
+                  core: &ExpertCore|
+     -> anyhow::Result<()> {
+        progress.send(Progress {
+            kind: progress_kind::STATUS,
+            state,
+            pid,
+            demos: u64::from(core.budget().used()),
+            budget_left: u64::from(core.budget().remaining()),
+            ..Progress::default()
+        })?;
+        Ok(())
+    };
+    status(&mut progress, process_state::STANDBY, &core)?;
+    launcher.ring()?;
+    let mut last_status = Instant::now();
+    let (mut answered, mut refused, mut abandoned) = (0u64, 0u64, 0u64);
+
+    let stop_reason = loop {
+        control.poll()?;
+        let c = control.current();
+        if control.shutdown_requested() {
+            break "the launcher said stop";
+        }
+        if u32::from(args.generation) < c.newest_expert {
+            break "replaced by a newer expert";
+        }
+        if wire.termination_requested() {
+            break "termination signal";
+        }
+        anyhow::ensure!(
+            control.silence() < LAUNCHER_SILENCE,
+            "no word from the launcher for {:?}: giving up",
+            control.silence()
+        );
+        let should_be_active = c.active_expert == u32::from(args.generation);
+        if should_be_active && mode == Mode::Standby {
+            // Make-before-break: the previous expert has exited; its demonstrations are final.
+            let records = demo_log::read(&demos_path)?;
+            let n = records.len();
+            core.restore(records)
+                .context("cannot refit the demonstration model on demos.jsonl")?;
+            log = Some(DemoLog::open(&demos_path)?);
+            mode = Mode::Active;
+            publish_model(&mut model_tx, &core, args.generation, &name)?;
+            actors.ring()?;
+            status(&mut progress, process_state::RUNNING, &core)?;
+            launcher.ring()?;
+            info!(
+                demos = n,
+                budget_left = core.budget().remaining(),
+                "active: answering queries"
+            );
+        } else if !should_be_active && mode == Mode::Active {
+            info!("no longer the active expert: standing by");
+            mode = Mode::Standby;
+            log = None;
+            status(&mut progress, process_state::STANDBY, &core)?;
+            launcher.ring()?;
+        }
+
+        let mut rang = false;
+        loop {
+            let query = match server.receive() {
+                Ok(Some(q)) => q,
+                Ok(None) => break,
+                Err(e @ WireError::SchemaMismatch { .. }) => {
+                    tracing::error!("{e}; query dropped");
+                    continue;
+                }
+                Err(e) => return Err(e.into()),
+            };
+            let (Mode::Active, Some(log)) = (mode, log.as_mut()) else {
+                debug!("standing by: query left unanswered");
+                continue;
+            };
+            if !query.is_connected() {
+                // The actor gave up waiting and acted on its own: spend no budget on it.
+                abandoned += 1;
+                continue;
+            }
+            let request = *query.request();
+            let step = request.global_step.max(core.last_demo_step());
+            let mut response = QueryResponse {
+                expert: u32::from(args.generation),
+                budget_total: core.budget().total(),
+                expert_name: name_to_bytes(&name),
+                ..QueryResponse::default()
+            };
+            match core.answer(demonstrator.as_mut(), request.state(), step, &name) {
+                Some(action) => {
+                    let record = core.demos().last().expect("answer recorded a demonstration");
+                    // On disk before the answer goes out: no demonstration is ever lost.
+                    log.append(record)?;
+                    response.outcome = outcome::ANSWERED;
+                    response.action = action as u32;
+                    response.demo_index = record.index;
+                    response.budget_left = core.budget().remaining();
+                    query.answer(response)?;
+                    answered += 1;
+                    debug!(index = record.index, actor = request.actor, action, step, "demonstration");
+                    publish_model(&mut model_tx, &core, args.generation, &name)?;
+                }
+                None => {
+                    response.outcome = outcome::BUDGET_EXHAUSTED;
+                    response.budget_left = 0;
+                    query.answer(response)?;
+                    refused += 1;
+                }
+            }
+            rang = true;
+        }
+        if rang {
+            actors.ring()?;
+        }
+        if last_status.elapsed() >= Duration::from_millis(500) {
+            let state = if mode == Mode::Active {
+                process_state::RUNNING
+            } else {
+                process_state::STANDBY
+            };
+            status(&mut progress, state, &core)?;
+            last_status = Instant::now();
+        }
+        if waiter.wait(Duration::from_millis(100))? == Wake::Signal {
+            break "termination signal";
+        }
+    };
+    info!(
+        reason = stop_reason,
+        answered,
+        refused,
+        abandoned,
+        demos = core.budget().used(),
+        "expert stopping"
+    );
+    status(&mut progress, process_state::EXITING, &core)?;
+    launcher.ring()?;
+    Ok(())
+}
+
+/// Publishes the current demonstration model (empty bytes when there is none yet), with the
+/// budget and the step of the last demonstration.
+fn publish_model(
+    tx: &mut alfd_common::wire::DemoModelSender<'_>,
+    core: &ExpertCore,
+    generation: u16,
+    name: &str,
+) -> anyhow::Result<()> {
+    let bytes = match core.model() {
+        Some(m) => postcard::to_stdvec(m).context("cannot serialise the demonstration model")?,
+        None => Vec::new(),
+    };
+    tx.publish(
+        DemoModelHeader {
+            version: (u64::from(generation) << 32) | core.model_version(),
+            last_demo_step: core.last_demo_step(),
+            demos: core.budget().used(),
+            budget_total: core.budget().total(),
+            budget_left: core.budget().remaining(),
+            expert: u32::from(generation),
+            expert_name: name_to_bytes(name),
+            ..DemoModelHeader::default()
+        },
+        &bytes,
+    )?;
+    Ok(())
+}
