@@ -215,7 +215,12 @@ impl Mlp {
                 self.heads
             )));
         }
-        for (dst, src) in self.params.tensors_mut().into_iter().zip(other.params.tensors()) {
+        for (dst, src) in self
+            .params
+            .tensors_mut()
+            .into_iter()
+            .zip(other.params.tensors())
+        {
             dst.copy_from_slice(src);
         }
         Ok(())
