@@ -7,7 +7,8 @@
 //! `Z = A W^T + b = A * w + b`. The 64x64 products go to nalgebra's `gemm` (matrixmultiply); the
 //! thin ones (4 inputs, K*A outputs) become dot products or axpys over contiguous columns.
 
-use nalgebra::{DMatrix, DMatrixView, DVector, Dyn};
+use nalgebra::storage::Storage;
+use nalgebra::{DMatrix, DMatrixView, DVector, Dyn, Matrix};
 use rand::Rng as _;
 
 use super::{torch_shapes, NnError, Params, Result};
@@ -300,17 +301,17 @@ impl Mlp {
         let p = &self.params;
         let c = cache;
         // Output layer: Q = h1 * wh + bh.
-        grads.wh.gemm_tr(1.0, &c.h1, dq, 0.0);
+        tr_matmul(&mut grads.wh, &c.h1, dq);
         column_sums(dq, &mut grads.bh);
-        c.dz1.gemm(1.0, dq, &transposed(&p.wh), 0.0);
+        matmul(&mut c.dz1, dq, &transposed(&p.wh), 0.0);
         relu_backward(&mut c.dz1, &c.h1);
         // torso.1: h1 = relu(h0 * w1 + b1).
-        grads.w1.gemm(1.0, &transposed(&c.h0), &c.dz1, 0.0);
+        tr_matmul(&mut grads.w1, &c.h0, &c.dz1);
         column_sums(&c.dz1, &mut grads.b1);
-        c.dz0.gemm(1.0, &c.dz1, &transposed(&p.w1), 0.0);
+        matmul(&mut c.dz0, &c.dz1, &transposed(&p.w1), 0.0);
         relu_backward(&mut c.dz0, &c.h0);
         // torso.0: h0 = relu(x * w0 + b0).
-        grads.w0.gemm_tr(1.0, &c.x, &c.dz0, 0.0);
+        tr_matmul(&mut grads.w0, &c.x, &c.dz0);
         column_sums(&c.dz0, &mut grads.b0);
     }
 }
@@ -341,7 +342,73 @@ fn linear(out: &mut DMatrix<f32>, input: &DMatrix<f32>, w: &DMatrix<f32>, b: &DV
     for (mut col, &bias) in out.column_iter_mut().zip(b.iter()) {
         col.fill(bias);
     }
-    out.gemm(1.0, input, w, 1.0);
+    matmul(out, input, w, 1.0);
+}
+
+/// Below this, a dimension is "thin": nalgebra hands products to matrixmultiply only when every
+/// dimension exceeds 5, and does the rest with generic per-element code.
+const THIN: usize = 5;
+
+/// `out = beta * out + a * b`. Products whose dimensions all exceed [`THIN`] go to nalgebra's
+/// `gemm` (matrixmultiply); thin ones become axpys over the contiguous columns of `a`, which
+/// vectorise.
+fn matmul<S>(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &Matrix<f32, Dyn, Dyn, S>, beta: f32)
+where
+    S: Storage<f32, Dyn, Dyn>,
+{
+    let (m, k) = a.shape();
+    let n = b.ncols();
+    debug_assert_eq!(b.nrows(), k);
+    debug_assert_eq!(out.shape(), (m, n));
+    if m > THIN && k > THIN && n > THIN {
+        out.gemm(1.0, a, b, beta);
+        return;
+    }
+    if beta == 0.0 {
+        out.fill(0.0);
+    } else if beta != 1.0 {
+        *out *= beta;
+    }
+    if m == 0 {
+        return;
+    }
+    let a = a.as_slice();
+    for (j, out_col) in out.as_mut_slice().chunks_exact_mut(m).enumerate() {
+        for (p, a_col) in a.chunks_exact(m).enumerate() {
+            axpy(out_col, b[(p, j)], a_col);
+        }
+    }
+}
+
+/// `out = a^T * b` (overwritten), `a` and `b` with the same number of rows (the batch). Thin
+/// products become dot products of contiguous columns.
+fn tr_matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &DMatrix<f32>) {
+    let (m, k) = a.shape();
+    let n = b.ncols();
+    debug_assert_eq!(b.nrows(), m);
+    debug_assert_eq!(out.shape(), (k, n));
+    if m > THIN && k > THIN && n > THIN {
+        out.gemm(1.0, &transposed(a), b, 0.0);
+        return;
+    }
+    if m == 0 {
+        out.fill(0.0);
+        return;
+    }
+    let a = a.as_slice();
+    for (out_col, b_col) in out.as_mut_slice().chunks_exact_mut(k.max(1)).zip(b.as_slice().chunks_exact(m)) {
+        for (o, a_col) in out_col.iter_mut().zip(a.chunks_exact(m)) {
+            *o = dot(a_col, b_col);
+        }
+    }
+}
+
+/// `y += alpha * x`.
+#[inline]
+fn axpy(y: &mut [f32], alpha: f32, x: &[f32]) {
+    for (y, &x) in y.iter_mut().zip(x) {
+        *y += alpha * x;
+    }
 }
 
 fn relu(m: &mut DMatrix<f32>) {
@@ -381,12 +448,13 @@ fn dense_one(w: &DMatrix<f32>, b: &DVector<f32>, x: &[f32], out: &mut [f32], rel
     }
 }
 
-/// Dot product with eight independent accumulators, so that it vectorises.
+/// Dot product with sixteen independent accumulators, so that it vectorises and the additions
+/// do not wait on one another.
 #[inline]
 fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let ca = a.chunks_exact(8);
-    let cb = b.chunks_exact(8);
+    let mut acc = [0.0f32; 16];
+    let ca = a.chunks_exact(16);
+    let cb = b.chunks_exact(16);
     let tail: f32 = ca
         .remainder()
         .iter()
@@ -398,7 +466,11 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
             *s += x * y;
         }
     }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+    let mut half = [0.0f32; 8];
+    for (h, (&lo, &hi)) in half.iter_mut().zip(acc[..8].iter().zip(&acc[8..])) {
+        *h = lo + hi;
+    }
+    ((half[0] + half[4]) + (half[1] + half[5])) + ((half[2] + half[6]) + (half[3] + half[7])) + tail
 }
 
 /// Sum with eight independent accumulators, so that it vectorises.
@@ -488,6 +560,29 @@ mod tests {
         bad.b1 = DVector::zeros(3);
         let err = Mlp::from_params(bad, 2, 3).unwrap_err();
         assert!(err.to_string().contains("torso.1.bias"), "{err}");
+    }
+
+    #[test]
+    fn matmul_kernels_match_nalgebra_products() {
+        let mut rng = crate::rng::seeded(4);
+        let mut rand = |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random_range(-1.0f32..1.0));
+        // Thin (axpy and dot kernels) and wide (matrixmultiply) shapes.
+        for (m, k, n) in [(64, 4, 64), (64, 64, 4), (7, 3, 2), (64, 64, 64), (9, 8, 7)] {
+            let a = rand(m, k);
+            let b = rand(k, n);
+            let mut out = rand(m, n);
+            let expected = &a * &b + &out * 0.5;
+            matmul(&mut out, &a, &b, 0.5);
+            assert!((out - &expected).abs().max() < 1e-5, "matmul {m}x{k}x{n}");
+            let bt = b.transpose();
+            let mut out = rand(m, n);
+            matmul(&mut out, &a, &transposed(&bt), 0.0);
+            assert!((out - &a * &b).abs().max() < 1e-5, "matmul by a view {m}x{k}x{n}");
+            let c = rand(m, n);
+            let mut out = rand(k, n);
+            tr_matmul(&mut out, &a, &c);
+            assert!((out - a.transpose() * &c).abs().max() < 1e-5, "tr_matmul {m}x{k}x{n}");
+        }
     }
 
     #[test]
