@@ -339,7 +339,8 @@ fn transposed(m: &DMatrix<f32>) -> DMatrixView<'_, f32, Dyn, Dyn> {
 
 /// `out = input * w + b` (b broadcast over rows).
 fn linear(out: &mut DMatrix<f32>, input: &DMatrix<f32>, w: &DMatrix<f32>, b: &DVector<f32>) {
-    for (mut col, &bias) in out.column_iter_mut().zip(b.iter()) {
+    let rows = out.nrows().max(1);
+    for (col, &bias) in out.as_mut_slice().chunks_exact_mut(rows).zip(b.iter()) {
         col.fill(bias);
     }
     matmul(out, input, w, 1.0);
@@ -365,17 +366,31 @@ where
         return;
     }
     if beta == 0.0 {
-        out.fill(0.0);
+        out.as_mut_slice().fill(0.0);
     } else if beta != 1.0 {
-        *out *= beta;
+        for v in out.as_mut_slice() {
+            *v *= beta;
+        }
     }
     if m == 0 {
         return;
     }
     let a = a.as_slice();
     for (j, out_col) in out.as_mut_slice().chunks_exact_mut(m).enumerate() {
-        for (p, a_col) in a.chunks_exact(m).enumerate() {
+        // Four columns of `a` per pass over the output column.
+        let mut blocks = a.chunks_exact(4 * m);
+        let mut p = 0;
+        for block in &mut blocks {
+            let (a0, rest) = block.split_at(m);
+            let (a1, rest) = rest.split_at(m);
+            let (a2, a3) = rest.split_at(m);
+            let s = [b[(p, j)], b[(p + 1, j)], b[(p + 2, j)], b[(p + 3, j)]];
+            axpy4(out_col, s, [a0, a1, a2, a3]);
+            p += 4;
+        }
+        for a_col in blocks.remainder().chunks_exact(m) {
             axpy(out_col, b[(p, j)], a_col);
+            p += 1;
         }
     }
 }
@@ -392,14 +407,40 @@ fn tr_matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &DMatrix<f32>) {
         return;
     }
     if m == 0 {
-        out.fill(0.0);
+        out.as_mut_slice().fill(0.0);
         return;
     }
     let a = a.as_slice();
-    for (out_col, b_col) in out.as_mut_slice().chunks_exact_mut(k.max(1)).zip(b.as_slice().chunks_exact(m)) {
-        for (o, a_col) in out_col.iter_mut().zip(a.chunks_exact(m)) {
+    for (out_col, b_col) in out
+        .as_mut_slice()
+        .chunks_exact_mut(k.max(1))
+        .zip(b.as_slice().chunks_exact(m))
+    {
+        // Four columns of `a` against the same column of `b`.
+        let mut outs = out_col.chunks_exact_mut(4);
+        let mut blocks = a.chunks_exact(4 * m);
+        for (o, block) in (&mut outs).zip(&mut blocks) {
+            let (a0, rest) = block.split_at(m);
+            let (a1, rest) = rest.split_at(m);
+            let (a2, a3) = rest.split_at(m);
+            o.copy_from_slice(&dot4([a0, a1, a2, a3], b_col));
+        }
+        for (o, a_col) in outs
+            .into_remainder()
+            .iter_mut()
+            .zip(blocks.remainder().chunks_exact(m))
+        {
             *o = dot(a_col, b_col);
         }
+    }
+}
+
+/// `y += s[0] * x[0] + s[1] * x[1] + s[2] * x[2] + s[3] * x[3]`, added left to right as four
+/// [`axpy`]s would.
+#[inline]
+fn axpy4(y: &mut [f32], s: [f32; 4], x: [&[f32]; 4]) {
+    for ((((y, &a), &b), &c), &d) in y.iter_mut().zip(x[0]).zip(x[1]).zip(x[2]).zip(x[3]) {
+        *y = *y + s[0] * a + s[1] * b + s[2] * c + s[3] * d;
     }
 }
 
@@ -435,17 +476,67 @@ fn column_sums(m: &DMatrix<f32>, out: &mut DVector<f32>) {
 }
 
 /// One dense layer for one input: `out[o] = b[o] + w[:, o] . x`, with ReLU if asked; `w` is
-/// `(in, out)` column-major, so each output's weights are contiguous.
+/// `(in, out)` column-major, so each output's weights are contiguous. Four outputs at a time
+/// share the loads of `x` and keep independent accumulators.
 fn dense_one(w: &DMatrix<f32>, b: &DVector<f32>, x: &[f32], out: &mut [f32], relu: bool) {
     let n_in = w.nrows();
-    for ((o, col), &bias) in out
-        .iter_mut()
-        .zip(w.as_slice().chunks_exact(n_in))
-        .zip(b.iter())
-    {
-        let v = dot(col, x) + bias;
-        *o = if relu { v.max(0.0) } else { v };
+    let finish = |v: f32| if relu { v.max(0.0) } else { v };
+    let w = w.as_slice();
+    let b = b.as_slice();
+    let mut out_blocks = out.chunks_exact_mut(4);
+    let mut w_blocks = w.chunks_exact(4 * n_in);
+    let mut b_blocks = b.chunks_exact(4);
+    for ((o, wb), bb) in (&mut out_blocks).zip(&mut w_blocks).zip(&mut b_blocks) {
+        let (w0, rest) = wb.split_at(n_in);
+        let (w1, rest) = rest.split_at(n_in);
+        let (w2, w3) = rest.split_at(n_in);
+        let d = dot4([w0, w1, w2, w3], x);
+        for ((o, d), &bias) in o.iter_mut().zip(d).zip(bb) {
+            *o = finish(d + bias);
+        }
     }
+    let w_rest = w_blocks.remainder();
+    for ((o, col), &bias) in out_blocks
+        .into_remainder()
+        .iter_mut()
+        .zip(w_rest.chunks_exact(n_in))
+        .zip(b_blocks.remainder())
+    {
+        *o = finish(dot(col, x) + bias);
+    }
+}
+
+/// Four dot products with the same `x`.
+#[inline(always)]
+fn dot4(w: [&[f32]; 4], x: &[f32]) -> [f32; 4] {
+    let n = x.len();
+    let full = n - n % 8;
+    let mut acc = [[0.0f32; 8]; 4];
+    let mut i = 0;
+    while i < full {
+        let xs = lanes(&x[i..i + 8]);
+        for (acc, w) in acc.iter_mut().zip(&w) {
+            let ws = lanes(&w[i..i + 8]);
+            for ((s, w), x) in acc.iter_mut().zip(ws).zip(xs) {
+                *s += w * x;
+            }
+        }
+        i += 8;
+    }
+    let mut out = [0.0f32; 4];
+    for ((o, a), w) in out.iter_mut().zip(&acc).zip(&w) {
+        let t: f32 = w[full..n].iter().zip(&x[full..]).map(|(w, x)| w * x).sum();
+        *o = ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])) + t;
+    }
+    out
+}
+
+/// Eight values as an array, so that the compiler sees the length.
+#[inline(always)]
+fn lanes(v: &[f32]) -> [f32; 8] {
+    let mut out = [0.0f32; 8];
+    out.copy_from_slice(v);
+    out
 }
 
 /// Dot product with sixteen independent accumulators, so that it vectorises and the additions
