@@ -202,7 +202,8 @@ mod tests {
             let expected = percentile(window.make_contiguous(), 35.0);
             let got = rule.threshold();
             assert!(
-                got == expected || (got.is_some_and(f64::is_nan) && expected.is_some_and(f64::is_nan)),
+                got == expected
+                    || (got.is_some_and(f64::is_nan) && expected.is_some_and(f64::is_nan)),
                 "step {i}: {got:?} vs {expected:?}"
             );
             let fired = rule.observe(u);

@@ -216,7 +216,12 @@ impl Mlp {
                 self.heads
             )));
         }
-        for (dst, src) in self.params.tensors_mut().into_iter().zip(other.params.tensors()) {
+        for (dst, src) in self
+            .params
+            .tensors_mut()
+            .into_iter()
+            .zip(other.params.tensors())
+        {
             dst.copy_from_slice(src);
         }
         Ok(())
@@ -656,7 +661,8 @@ mod tests {
     #[test]
     fn matmul_kernels_match_nalgebra_products() {
         let mut rng = crate::rng::seeded(4);
-        let mut rand = |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random_range(-1.0f32..1.0));
+        let mut rand =
+            |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random_range(-1.0f32..1.0));
         // Thin (axpy and dot kernels) and wide (matrixmultiply) shapes.
         for (m, k, n) in [(64, 4, 64), (64, 64, 4), (7, 3, 2), (64, 64, 64), (9, 8, 7)] {
             let a = rand(m, k);
@@ -668,11 +674,17 @@ mod tests {
             let bt = b.transpose();
             let mut out = rand(m, n);
             matmul(&mut out, &a, &transposed(&bt), 0.0);
-            assert!((out - &a * &b).abs().max() < 1e-5, "matmul by a view {m}x{k}x{n}");
+            assert!(
+                (out - &a * &b).abs().max() < 1e-5,
+                "matmul by a view {m}x{k}x{n}"
+            );
             let c = rand(m, n);
             let mut out = rand(k, n);
             tr_matmul(&mut out, &a, &c);
-            assert!((out - a.transpose() * &c).abs().max() < 1e-5, "tr_matmul {m}x{k}x{n}");
+            assert!(
+                (out - a.transpose() * &c).abs().max() < 1e-5,
+                "tr_matmul {m}x{k}x{n}"
+            );
         }
     }
 
