@@ -178,7 +178,7 @@ fn td_loss(
         if scratch.dq.shape() != (n, heads * actions) {
             scratch.dq = DMatrix::zeros(n, heads * actions);
         } else {
-            scratch.dq.fill(0.0);
+            scratch.dq.as_mut_slice().fill(0.0);
         }
     }
     let q = scratch.online.q();
