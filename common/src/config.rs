@@ -137,6 +137,11 @@ pub struct AgentConfig {
     /// Step size: α of the tabular update (default 0.1), or Adam's learning rate (default 1e-3).
     #[serde(default)]
     pub learning_rate: Option<f64>,
+    /// Tabular: the step size of the n-th update of a state-action pair is
+    /// `learning_rate / n^learning_rate_decay` (0 keeps it constant; in (0.5, 1] it meets the
+    /// Robbins-Monro conditions under which Q-learning converges).
+    #[serde(default)]
+    pub learning_rate_decay: f64,
     /// Exploration (default: softmax for tabular Q-learning/SARSA, epsilon-greedy for dqn,
     /// greedy-head for the bootstrapped agents).
     #[serde(default)]

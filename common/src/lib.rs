@@ -14,6 +14,6 @@ pub mod qfunction;
 pub mod query;
 pub mod replay;
 pub mod rng;
-pub mod shaping;
 pub mod runner;
+pub mod shaping;
 pub mod wire;

@@ -11,6 +11,14 @@ pub fn percentile(values: &[f64], p: f64) -> Option<f64> {
     }
     let mut sorted = values.to_vec();
     sorted.sort_by(|a, b| a.total_cmp(b));
+    percentile_of_sorted(&sorted, p)
+}
+
+/// [`percentile`] of values already sorted by `f64::total_cmp`.
+fn percentile_of_sorted(sorted: &[f64], p: f64) -> Option<f64> {
+    if sorted.is_empty() {
+        return None;
+    }
     let rank = (p / 100.0) * (sorted.len() - 1) as f64;
     let lo = rank.floor() as usize;
     let hi = rank.ceil() as usize;
@@ -26,7 +34,9 @@ pub struct QueryRule {
     /// `p_r`: the percentile, in `[0, 100]`, the current divergence must exceed.
     percentile: f64,
     queue: VecDeque<f64>,
-    scratch: Vec<f64>,
+    /// The same values sorted by `total_cmp`, kept up to date on every push and pop so that the
+    /// threshold costs no sort (the act step's hot path).
+    sorted: Vec<f64>,
 }
 
 impl QueryRule {
@@ -41,7 +51,7 @@ impl QueryRule {
             queue_len,
             percentile,
             queue: VecDeque::with_capacity(queue_len),
-            scratch: Vec::with_capacity(queue_len),
+            sorted: Vec::with_capacity(queue_len),
         }
     }
 
@@ -51,20 +61,23 @@ impl QueryRule {
     pub fn observe(&mut self, u: f64) -> bool {
         let threshold = self.threshold();
         if self.queue.len() == self.queue_len {
-            self.queue.pop_front();
+            if let Some(old) = self.queue.pop_front() {
+                // `old` is in `sorted`: total_cmp finds that very value (NaN and -0.0 included).
+                if let Ok(i) = self.sorted.binary_search_by(|x| x.total_cmp(&old)) {
+                    self.sorted.remove(i);
+                }
+            }
         }
         self.queue.push_back(u);
+        let at = self.sorted.partition_point(|x| x.total_cmp(&u).is_lt());
+        self.sorted.insert(at, u);
         matches!(threshold, Some(t) if u > t)
     }
 
-    /// The current threshold `U_threshold`, `None` while the queue is empty.
-    pub fn threshold(&mut self) -> Option<f64> {
-        if self.queue.is_empty() {
-            return None;
-        }
-        self.scratch.clear();
-        self.scratch.extend(self.queue.iter().copied());
-        percentile(&self.scratch, self.percentile)
+    /// The current threshold `U_threshold`, `None` while the queue is empty: [`percentile`] of
+    /// the queue, without sorting it again.
+    pub fn threshold(&self) -> Option<f64> {
+        percentile_of_sorted(&self.sorted, self.percentile)
     }
 
     pub fn len(&self) -> usize {
@@ -172,6 +185,35 @@ mod tests {
         // p = 100 fires only on a new maximum of the last 10; p = 0 on anything above their minimum.
         assert!(fired_never < 30, "{fired_never}");
         assert!(fired_often > 70, "{fired_often}");
+    }
+
+    #[test]
+    fn incremental_threshold_equals_percentile_of_the_queue() {
+        let mut rule = QueryRule::new(7, 35.0);
+        let mut window: VecDeque<f64> = VecDeque::new();
+        for i in 0..200 {
+            // Repeated values, signed zeros and a NaN now and then.
+            let u = match i % 23 {
+                0 => f64::NAN,
+                1 => -0.0,
+                2 => 0.0,
+                _ => ((i * 7919) % 13) as f64 * 0.25,
+            };
+            let expected = percentile(window.make_contiguous(), 35.0);
+            let got = rule.threshold();
+            assert!(
+                got == expected
+                    || (got.is_some_and(f64::is_nan) && expected.is_some_and(f64::is_nan)),
+                "step {i}: {got:?} vs {expected:?}"
+            );
+            let fired = rule.observe(u);
+            assert_eq!(fired, matches!(expected, Some(t) if u > t), "step {i}");
+            if window.len() == 7 {
+                window.pop_front();
+            }
+            window.push_back(u);
+            assert_eq!(rule.len(), window.len());
+        }
     }
 
     #[test]

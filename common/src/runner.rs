@@ -4,7 +4,9 @@
 
 use std::ops::ControlFlow;
 
-use crate::agent::{query_decision, Demonstrator, ExpertCore, NeuralActor, NeuralLearner, TabularAgent};
+use crate::agent::{
+    query_decision, Demonstrator, ExpertCore, NeuralActor, NeuralLearner, TabularAgent,
+};
 use crate::config::{ExperimentConfig, QueryMode};
 use crate::env::{CartPole, CliffWalk, Env};
 use crate::nn::Mlp;
@@ -32,7 +34,8 @@ pub struct EpisodeRecord {
 }
 
 /// The header of `episodes.csv`.
-pub const CSV_HEADER: &str = "episode,return,length,demos_used,mean_js,queries,shaped_steps,total_steps";
+pub const CSV_HEADER: &str =
+    "episode,return,length,demos_used,mean_js,queries,shaped_steps,total_steps";
 
 impl EpisodeRecord {
     /// One CSV row (no newline); floats in Rust's shortest round-trip form, so rows are
@@ -40,7 +43,14 @@ impl EpisodeRecord {
     pub fn csv_row(&self) -> String {
         format!(
             "{},{},{},{},{},{},{},{}",
-            self.episode, self.ret, self.length, self.demos_used, self.mean_js, self.queries, self.shaped_steps, self.total_steps
+            self.episode,
+            self.ret,
+            self.length,
+            self.demos_used,
+            self.mean_js,
+            self.queries,
+            self.shaped_steps,
+            self.total_steps
         )
     }
 }
@@ -83,21 +93,44 @@ pub fn run_tabular(
     demonstrator: &mut dyn Demonstrator<usize>,
     mut on_episode: impl FnMut(&EpisodeRecord, &TabularAgent) -> ControlFlow<()>,
 ) -> TabularRun {
-    let mut agent = TabularAgent::new(&cfg.agent, env.num_states(), env.num_actions(), seeded(derive_seed(cfg.seed, "agent")));
-    let mut expert = ExpertCore::new(cfg.budget(), cfg.expert.model, env.num_actions(), cfg.shaping.schedule());
+    let mut agent = TabularAgent::new(
+        &cfg.agent,
+        env.num_states(),
+        env.num_actions(),
+        seeded(derive_seed(cfg.seed, "agent")),
+    );
+    let mut expert = ExpertCore::new(
+        cfg.budget(),
+        cfg.expert.model,
+        env.num_actions(),
+        cfg.shaping.schedule(),
+    );
     let mut rule = QueryRule::new(cfg.query.queue_len, cfg.query.percentile);
     let sarsa = cfg.agent.kind == crate::config::AgentKind::Sarsa;
     let mut records = Vec::with_capacity(cfg.episodes as usize);
     let mut global_step = 0u64;
 
     // One decision at state s: Algorithm 1 lines 3-16.
-    let mut decide = |agent: &mut TabularAgent, expert: &mut ExpertCore, s: usize, step: u64, js_sum: &mut f64, queries: &mut u32| {
+    let mut decide = |agent: &mut TabularAgent,
+                      expert: &mut ExpertCore,
+                      s: usize,
+                      step: u64,
+                      js_sum: &mut f64,
+                      queries: &mut u32| {
         let js = agent.js_divergence(s);
         *js_sum += js;
         let own = agent.act(s);
-        if query_decision(cfg.query.mode, &mut rule, js, !expert.budget().is_exhausted()) {
+        if query_decision(
+            cfg.query.mode,
+            &mut rule,
+            js,
+            !expert.budget().is_exhausted(),
+        ) {
             let a = demonstrator.act(&s);
-            if expert.record(&[s as f64], a, step, &cfg.expert.name).is_some() {
+            if expert
+                .record(&[s as f64], a, step, &cfg.expert.name)
+                .is_some()
+            {
                 *queries += 1;
                 return a;
             }
@@ -106,12 +139,25 @@ pub fn run_tabular(
     };
 
     for episode in 0..cfg.episodes {
-        let mut s = env.reset(if episode == 0 { Some(derive_seed(cfg.seed, "env")) } else { None });
+        let mut s = env.reset(if episode == 0 {
+            Some(derive_seed(cfg.seed, "env"))
+        } else {
+            None
+        });
         agent.begin_episode();
         let (mut ret, mut length, mut js_sum, mut queries) = (0.0, 0u32, 0.0, 0u32);
-        let mut a = decide(&mut agent, &mut expert, s, global_step, &mut js_sum, &mut queries);
+        let mut a = decide(
+            &mut agent,
+            &mut expert,
+            s,
+            global_step,
+            &mut js_sum,
+            &mut queries,
+        );
         loop {
-            let step = env.step(a).expect("the runner only steps a live episode with a valid action");
+            let step = env
+                .step(a)
+                .expect("the runner only steps a live episode with a valid action");
             ret += step.reward;
             length += 1;
             global_step += 1;
@@ -122,12 +168,26 @@ pub fn run_tabular(
             }
             if sarsa {
                 // SARSA needs the next action before it can update.
-                let a_next = decide(&mut agent, &mut expert, s_next, global_step, &mut js_sum, &mut queries);
+                let a_next = decide(
+                    &mut agent,
+                    &mut expert,
+                    s_next,
+                    global_step,
+                    &mut js_sum,
+                    &mut queries,
+                );
                 agent.learn(s, a, step.reward, s_next, false, Some(a_next));
                 a = a_next;
             } else {
                 agent.learn(s, a, step.reward, s_next, false, None);
-                a = decide(&mut agent, &mut expert, s_next, global_step, &mut js_sum, &mut queries);
+                a = decide(
+                    &mut agent,
+                    &mut expert,
+                    s_next,
+                    global_step,
+                    &mut js_sum,
+                    &mut queries,
+                );
             }
             s = s_next;
         }
@@ -148,7 +208,11 @@ pub fn run_tabular(
         }
     }
     let greedy_policy = agent.greedy_policy();
-    TabularRun { records, greedy_policy, agent }
+    TabularRun {
+        records,
+        greedy_policy,
+        agent,
+    }
 }
 
 /// Runs a neural experiment (CartPole): Algorithm 1 with the actor and the learner in one
@@ -162,17 +226,38 @@ pub fn run_neural(
     let mut env = CartPole::new(cfg.env.max_episode_steps());
     let obs_dim = 4;
     let actions = env.num_actions();
-    let mut learner = NeuralLearner::new(&cfg.agent, obs_dim, actions, seeded(derive_seed(cfg.seed, "learner")));
-    let mut actor = NeuralActor::new(&cfg.agent, &cfg.query, obs_dim, actions, seeded(derive_seed(cfg.seed, "actor-0")));
+    let mut learner = NeuralLearner::new(
+        &cfg.agent,
+        obs_dim,
+        actions,
+        seeded(derive_seed(cfg.seed, "learner")),
+    );
+    let mut actor = NeuralActor::new(
+        &cfg.agent,
+        &cfg.query,
+        obs_dim,
+        actions,
+        seeded(derive_seed(cfg.seed, "actor-0")),
+    );
     actor.copy_weights_from(learner.network(), 0);
-    let mut expert = ExpertCore::new(cfg.budget(), cfg.expert.model, actions, cfg.shaping.schedule());
+    let mut expert = ExpertCore::new(
+        cfg.budget(),
+        cfg.expert.model,
+        actions,
+        cfg.shaping.schedule(),
+    );
     let mut records = Vec::with_capacity(cfg.episodes as usize);
     let mut global_step = 0u64;
 
     for episode in 0..cfg.episodes {
-        let mut obs = env.reset(if episode == 0 { Some(derive_seed(cfg.seed, "env")) } else { None });
+        let mut obs = env.reset(if episode == 0 {
+            Some(derive_seed(cfg.seed, "env"))
+        } else {
+            None
+        });
         actor.begin_episode();
-        let (mut ret, mut length, mut js_sum, mut queries, mut shaped_steps) = (0.0, 0u32, 0.0, 0u32, 0u32);
+        let (mut ret, mut length, mut js_sum, mut queries, mut shaped_steps) =
+            (0.0, 0u32, 0.0, 0u32, 0u32);
         loop {
             let decision = actor.decide(&obs, !expert.budget().is_exhausted());
             js_sum += decision.js;
@@ -185,10 +270,24 @@ pub fn run_neural(
                     queries += 1;
                 }
             }
-            let step = env.step(action).expect("the runner only steps a live episode with a valid action");
-            let shaping = if cfg.shaping_enabled() { expert.shaping_model(global_step) } else { None };
+            let step = env
+                .step(action)
+                .expect("the runner only steps a live episode with a valid action");
+            let shaping = if cfg.shaping_enabled() {
+                expert.shaping_model(global_step)
+            } else {
+                None
+            };
             shaped_steps += u32::from(shaping.is_some());
-            let t = actor.transition(&obs, action, step.reward, &step.observation, step.terminated, demo, shaping);
+            let t = actor.transition(
+                &obs,
+                action,
+                step.reward,
+                &step.observation,
+                step.terminated,
+                demo,
+                shaping,
+            );
             learner.insert(&t);
             let mut updated = false;
             for _ in 0..cfg.agent.updates_per_step {
@@ -221,7 +320,11 @@ pub fn run_neural(
             break;
         }
     }
-    NeuralRun { records, network: learner.network().clone(), expert }
+    NeuralRun {
+        records,
+        network: learner.network().clone(),
+        expert,
+    }
 }
 
 /// Whether a config never asks the expert (so no demonstrator is needed).
@@ -250,14 +353,21 @@ impl ReturnStats {
 
 /// Returns of `episodes` CartPole episodes (limit `max_steps`) played by `policy`, the first reset
 /// seeded with `seed`.
-pub fn evaluate_cartpole(policy: &mut dyn Demonstrator<[f32]>, episodes: usize, seed: u64, max_steps: usize) -> Vec<f64> {
+pub fn evaluate_cartpole(
+    policy: &mut dyn Demonstrator<[f32]>,
+    episodes: usize,
+    seed: u64,
+    max_steps: usize,
+) -> Vec<f64> {
     let mut env = CartPole::new(max_steps);
     (0..episodes)
         .map(|i| {
             let mut obs = env.reset(if i == 0 { Some(seed) } else { None });
             let mut ret = 0.0;
             loop {
-                let step = env.step(policy.act(&obs)).expect("valid action on a live episode");
+                let step = env
+                    .step(policy.act(&obs))
+                    .expect("valid action on a live episode");
                 ret += step.reward;
                 obs = step.observation;
                 if step.done() {
@@ -269,14 +379,21 @@ pub fn evaluate_cartpole(policy: &mut dyn Demonstrator<[f32]>, episodes: usize, 
 }
 
 /// Returns of `episodes` CliffWalk episodes played by `policy` on a clone of `env`.
-pub fn evaluate_cliffwalk(policy: &mut dyn Demonstrator<usize>, env: &CliffWalk, episodes: usize, seed: u64) -> Vec<f64> {
+pub fn evaluate_cliffwalk(
+    policy: &mut dyn Demonstrator<usize>,
+    env: &CliffWalk,
+    episodes: usize,
+    seed: u64,
+) -> Vec<f64> {
     let mut env = env.clone();
     (0..episodes)
         .map(|i| {
             let mut s = env.reset(if i == 0 { Some(seed) } else { None });
             let mut ret = 0.0;
             loop {
-                let step = env.step(policy.act(&s)).expect("valid action on a live episode");
+                let step = env
+                    .step(policy.act(&s))
+                    .expect("valid action on a live episode");
                 ret += step.reward;
                 s = step.observation;
                 if step.done() {

@@ -2,9 +2,7 @@
 //! its gradient against central finite differences of that implementation, the role of masks and
 //! terminal flags, and learning on a small fixed problem.
 
-use alfd_common::nn::{
-    dqn_loss, loss_and_grads, train_step, Adam, Mlp, TrainScratch, PARAM_NAMES,
-};
+use alfd_common::nn::{dqn_loss, loss_and_grads, train_step, Adam, Mlp, TrainScratch, PARAM_NAMES};
 use alfd_common::replay::Batch;
 use alfd_common::rng::{seeded, Rng};
 use rand::Rng as _;
@@ -67,13 +65,31 @@ fn forward64(p: &[f64], hidden: usize, outputs: usize, x: &[f64]) -> Vec<f64> {
 }
 
 /// The loss of `alfd_common::nn::dqn`, written out again in f64.
-fn loss64(online: &[f64], target: &[f64], dims: (usize, usize, usize), b: &Batch, gamma: f64) -> f64 {
+fn loss64(
+    online: &[f64],
+    target: &[f64],
+    dims: (usize, usize, usize),
+    b: &Batch,
+    gamma: f64,
+) -> f64 {
     let (hidden, heads, actions) = dims;
-    let huber = |td: f64| if td.abs() < 1.0 { 0.5 * td * td } else { td.abs() - 0.5 };
+    let huber = |td: f64| {
+        if td.abs() < 1.0 {
+            0.5 * td * td
+        } else {
+            td.abs() - 0.5
+        }
+    };
     let mut total = 0.0;
     for i in 0..b.size {
-        let s: Vec<f64> = b.states[i * OBS..(i + 1) * OBS].iter().map(|&v| v.into()).collect();
-        let s2: Vec<f64> = b.next_states[i * OBS..(i + 1) * OBS].iter().map(|&v| v.into()).collect();
+        let s: Vec<f64> = b.states[i * OBS..(i + 1) * OBS]
+            .iter()
+            .map(|&v| v.into())
+            .collect();
+        let s2: Vec<f64> = b.next_states[i * OBS..(i + 1) * OBS]
+            .iter()
+            .map(|&v| v.into())
+            .collect();
         let q = forward64(online, hidden, heads * actions, &s);
         let qt = forward64(target, hidden, heads * actions, &s2);
         for k in 0..heads {
@@ -81,8 +97,7 @@ fn loss64(online: &[f64], target: &[f64], dims: (usize, usize, usize), b: &Batch
                 .iter()
                 .copied()
                 .fold(f64::NEG_INFINITY, f64::max);
-            let y = f64::from(b.rewards[i])
-                + gamma * (1.0 - f64::from(b.terminated[i])) * max_next;
+            let y = f64::from(b.rewards[i]) + gamma * (1.0 - f64::from(b.terminated[i])) * max_next;
             let td = q[k * actions + b.actions[i] as usize] - y;
             total += f64::from(b.masks[i * heads + k]) * huber(td);
         }
@@ -114,7 +129,10 @@ fn gradient_matches_finite_differences_of_the_loss() {
         (f64::from(loss) - reference).abs() <= 1e-5 * reference,
         "loss {loss} vs f64 {reference}"
     );
-    assert_eq!(loss, dqn_loss(&online, &target, &batch, gamma, &mut scratch));
+    assert_eq!(
+        loss,
+        dqn_loss(&online, &target, &batch, gamma, &mut scratch)
+    );
 
     // Central differences over every parameter (454 of them).
     let eps = 1e-5;
@@ -133,7 +151,11 @@ fn gradient_matches_finite_differences_of_the_loss() {
                 / (2.0 * eps);
             let g = f64::from(grads[j]);
             let err = (g - fd).abs() / (1e-3 * fd.abs() + 1e-6);
-            assert!(err <= 1.0, "{name}[{}]: analytic {g} vs finite difference {fd}", j - offset);
+            assert!(
+                err <= 1.0,
+                "{name}[{}]: analytic {g} vs finite difference {fd}",
+                j - offset
+            );
             worst = worst.max(err);
             largest = largest.max(fd.abs());
             checked += 1;
@@ -186,7 +208,13 @@ fn terminal_steps_do_not_bootstrap_and_others_do() {
     online.forward_one(&batch.states, &mut q);
     target.forward_one(&batch.next_states, &mut qt);
     let q_sa = q[batch.actions[0] as usize];
-    let huber = |td: f32| if td.abs() < 1.0 { 0.5 * td * td } else { td.abs() - 0.5 };
+    let huber = |td: f32| {
+        if td.abs() < 1.0 {
+            0.5 * td * td
+        } else {
+            td.abs() - 0.5
+        }
+    };
     let mut scratch = TrainScratch::default();
 
     batch.terminated = vec![1.0];
@@ -196,7 +224,10 @@ fn terminal_steps_do_not_bootstrap_and_others_do() {
     batch.terminated = vec![0.0];
     let bootstrapped = dqn_loss(&online, &target, &batch, 0.9, &mut scratch);
     let y = 0.25 + 0.9 * qt[0].max(qt[1]);
-    assert!((bootstrapped - huber(q_sa - y)).abs() < 1e-6, "{bootstrapped}");
+    assert!(
+        (bootstrapped - huber(q_sa - y)).abs() < 1e-6,
+        "{bootstrapped}"
+    );
     assert!((terminal - bootstrapped).abs() > 1e-4);
 }
 

@@ -10,7 +10,10 @@ use nalgebra::DMatrix;
 use serde_json::Value;
 
 fn trace() -> Value {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/mlp_torch_trace.json");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/mlp_torch_trace.json"
+    );
     let text = std::fs::read_to_string(path).expect("read the PyTorch trace");
     serde_json::from_str(&text).expect("parse the PyTorch trace")
 }
@@ -79,9 +82,16 @@ fn setup() -> Setup {
     let weights = tensors(&json["weights"]);
     let obs_dim = weights[0].len() / weights[1].len();
     let hidden = weights[1].len();
-    let mut net = Mlp::new(obs_dim, hidden, heads, actions, &mut alfd_common::rng::seeded(0));
+    let mut net = Mlp::new(
+        obs_dim,
+        hidden,
+        heads,
+        actions,
+        &mut alfd_common::rng::seeded(0),
+    );
     let flat_weights: Vec<f32> = weights.concat();
-    net.load_params_flat(&flat_weights).expect("the trace's weights fit the network");
+    net.load_params_flat(&flat_weights)
+        .expect("the trace's weights fit the network");
     let input = flat(&json["input"]);
     let batch = rows(&json["input"]);
     let dq = DMatrix::from_row_slice(batch, heads * actions, &flat(&json["upstream_grad"]));
@@ -140,7 +150,10 @@ fn gradients_match_pytorch() {
 fn five_adam_steps_match_pytorch() {
     let s = setup();
     let source = s.json["source"].as_str().expect("source");
-    assert!(source.contains("sum(Q * G)") && source.contains("5 steps"), "{source}");
+    assert!(
+        source.contains("sum(Q * G)") && source.contains("5 steps"),
+        "{source}"
+    );
     let torch = tensors(&s.json["weights_after_5_adam_steps"]);
     let mut cache = ForwardCache::default();
 

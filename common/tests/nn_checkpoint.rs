@@ -105,7 +105,10 @@ fn file_has_pytorch_names_shapes_and_metadata() {
     let meta = header.metadata().as_ref().expect("metadata");
     assert_eq!(meta.get("heads").map(String::as_str), Some("2"));
     assert_eq!(meta.get("actions").map(String::as_str), Some("2"));
-    assert_eq!(meta.get("format_version").map(String::as_str), Some(FORMAT_VERSION));
+    assert_eq!(
+        meta.get("format_version").map(String::as_str),
+        Some(FORMAT_VERSION)
+    );
     // Serialising twice gives the same bytes.
     assert_eq!(bytes, a.to_safetensors_bytes());
 }
@@ -119,7 +122,10 @@ fn truncated_files_are_refused() {
             matches!(err, NnError::Safetensors(_)),
             "cut at {cut}: {err}"
         );
-        assert!(err.to_string().starts_with("invalid safetensors data"), "{err}");
+        assert!(
+            err.to_string().starts_with("invalid safetensors data"),
+            "{err}"
+        );
     }
 }
 
@@ -129,7 +135,10 @@ fn missing_and_unexpected_tensors_are_named() {
     let mut raw = raw_tensors(&a);
     raw.retain(|t| t.0 != "heads.bias");
     let err = load_err(&write(&raw, Some(metadata("2", "2", "1"))));
-    assert!(matches!(&err, NnError::MissingTensor(n) if n == "heads.bias"), "{err}");
+    assert!(
+        matches!(&err, NnError::MissingTensor(n) if n == "heads.bias"),
+        "{err}"
+    );
     assert!(err.to_string().contains("heads.bias"));
 
     let mut raw = raw_tensors(&a);
@@ -166,7 +175,12 @@ fn wrong_dtype_is_named() {
     let mut raw = raw_tensors(&a);
     // torso.1.bias as F64: 64 values of 8 bytes.
     raw[3].1 = Dtype::F64;
-    raw[3].3 = a.params().b1.iter().flat_map(|&v| f64::from(v).to_le_bytes()).collect();
+    raw[3].3 = a
+        .params()
+        .b1
+        .iter()
+        .flat_map(|&v| f64::from(v).to_le_bytes())
+        .collect();
     let err = load_err(&write(&raw, Some(metadata("2", "2", "1"))));
     assert!(
         matches!(&err, NnError::Dtype { name, found } if name == "torso.1.bias" && found == "F64"),
@@ -178,13 +192,22 @@ fn wrong_dtype_is_named() {
 fn missing_or_bad_metadata_is_named() {
     let raw = raw_tensors(&net());
     let err = load_err(&write(&raw, None));
-    assert!(matches!(&err, NnError::Metadata { key, .. } if key == "format_version"), "{err}");
+    assert!(
+        matches!(&err, NnError::Metadata { key, .. } if key == "format_version"),
+        "{err}"
+    );
     let mut meta = metadata("2", "2", "1");
     meta.remove("heads");
     let err = load_err(&write(&raw, Some(meta)));
-    assert!(matches!(&err, NnError::Metadata { key, .. } if key == "heads"), "{err}");
+    assert!(
+        matches!(&err, NnError::Metadata { key, .. } if key == "heads"),
+        "{err}"
+    );
     let err = load_err(&write(&raw, Some(metadata("2", "two", "1"))));
-    assert!(matches!(&err, NnError::Metadata { key, .. } if key == "actions"), "{err}");
+    assert!(
+        matches!(&err, NnError::Metadata { key, .. } if key == "actions"),
+        "{err}"
+    );
     let err = load_err(&write(&raw, Some(metadata("2", "2", "99"))));
     assert!(err.to_string().contains("format_version"), "{err}");
     assert!(err.to_string().contains("99"), "{err}");

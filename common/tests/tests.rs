@@ -6,3 +6,4 @@ mod env_conformance;
 mod kernel_reference;
 mod mlp_reference;
 mod nn_checkpoint;
+mod runner;

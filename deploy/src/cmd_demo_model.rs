@@ -12,17 +12,7 @@ use alfd_common::demo_model::{DemoModel, DemoModelError, DemoModelKind};
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
 
-/// Bad input from the user (a file, a line, a flag): the command line exits with code 2.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct UsageError(pub String);
-
-impl std::fmt::Display for UsageError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for UsageError {}
+pub use crate::usage::UsageError;
 
 /// Which demonstration model to fit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

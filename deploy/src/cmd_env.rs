@@ -14,10 +14,10 @@ use alfd_common::env::cliffwalk::{
 use alfd_common::env::{cartpole, CartPole, Env};
 use anyhow::Context;
 
-pub use crate::usage::UsageError;
 #[cfg(test)]
 use crate::usage::is_usage_error;
 use crate::usage::usage;
+pub use crate::usage::UsageError;
 
 /// Arguments of `alfd env`.
 #[derive(Debug, clap::Args)]

@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use alfd_common::agent::{NetworkDemonstrator, TablePolicy};
 use alfd_common::config::ExperimentConfig;
-use alfd_common::runner::{evaluate_cartpole, evaluate_cliffwalk, run_neural, run_tabular, ReturnStats};
+use alfd_common::runner::{
+    evaluate_cartpole, evaluate_cliffwalk, run_neural, run_tabular, ReturnStats,
+};
 use alfd_expert::registry::{self, ExpertEntry};
 use anyhow::Context as _;
 
@@ -38,14 +40,28 @@ pub enum ExpertCommand {
 pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
     match args.command {
         ExpertCommand::List => {
-            println!("{:<28} {:<10} {:<16} {:>9} {:>9}", "name", "env", "kind", "mean", "median");
+            println!(
+                "{:<28} {:<10} {:<16} {:>9} {:>9}",
+                "name", "env", "kind", "mean", "median"
+            );
             for e in registry::list() {
                 let f = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.1}"));
-                println!("{:<28} {:<10} {:<16} {:>9} {:>9}", e.name, e.env, e.kind, f(e.mean), f(e.median));
+                println!(
+                    "{:<28} {:<10} {:<16} {:>9} {:>9}",
+                    e.name,
+                    e.env,
+                    e.kind,
+                    f(e.mean),
+                    f(e.median)
+                );
             }
             Ok(())
         }
-        ExpertCommand::Eval { name, episodes, seed } => {
+        ExpertCommand::Eval {
+            name,
+            episodes,
+            seed,
+        } => {
             if episodes == 0 {
                 return Err(usage("--episodes must be at least 1"));
             }
@@ -74,8 +90,10 @@ pub fn evaluate_named(name: &str, episodes: usize, seed: u64) -> anyhow::Result<
 }
 
 fn cliffwalk_config() -> ExperimentConfig {
-    ExperimentConfig::from_toml("seed = 0\nepisodes = 1\n[env]\nname = \"cliffwalk\"\n[agent]\nkind = \"qlearning\"\n")
-        .expect("a valid built-in config")
+    ExperimentConfig::from_toml(
+        "seed = 0\nepisodes = 1\n[env]\nname = \"cliffwalk\"\n[agent]\nkind = \"qlearning\"\n",
+    )
+    .expect("a valid built-in config")
 }
 
 #[derive(Debug, clap::Args)]
@@ -100,11 +118,14 @@ const EVAL_SEED: u64 = 1_000_003;
 const VERIFY_SEED: u64 = 2_000_003;
 
 pub fn train(args: TrainExpertsArgs) -> anyhow::Result<()> {
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
     match args.env.as_str() {
         "cartpole" => train_cartpole(&args),
         "cliffwalk" => train_cliffwalk(&args),
-        other => Err(usage(format!("unknown env `{other}`: expected cartpole or cliffwalk"))),
+        other => Err(usage(format!(
+            "unknown env `{other}`: expected cartpole or cliffwalk"
+        ))),
     }
 }
 
@@ -125,10 +146,15 @@ fn train_cartpole(args: &TrainExpertsArgs) -> anyhow::Result<()> {
     let mut found: Vec<ExpertEntry> = Vec::new();
     for run in 0..args.max_runs {
         let seed = args.seed + run;
-        let cfg = ExperimentConfig::from_toml_with_overrides(DQN_CONFIG, &[format!("seed={seed}")])?;
+        let cfg =
+            ExperimentConfig::from_toml_with_overrides(DQN_CONFIG, &[format!("seed={seed}")])?;
         let mut no_expert = alfd_common::agent::BalancingController;
         run_neural(&cfg, &mut no_expert, |r, net| {
-            let missing: Vec<f64> = LEVELS.iter().copied().filter(|l| !found.iter().any(|e| e.name == level_name(*l))).collect();
+            let missing: Vec<f64> = LEVELS
+                .iter()
+                .copied()
+                .filter(|l| !found.iter().any(|e| e.name == level_name(*l)))
+                .collect();
             if missing.is_empty() {
                 return ControlFlow::Break(());
             }
@@ -136,9 +162,15 @@ fn train_cartpole(args: &TrainExpertsArgs) -> anyhow::Result<()> {
             let stats = ReturnStats::of(&evaluate_cartpole(&mut d, 100, EVAL_SEED, 1000));
             for level in missing {
                 if (stats.mean - level).abs() <= 0.1 * level {
-                    let verify = ReturnStats::of(&evaluate_cartpole(&mut d, 100, VERIFY_SEED, 1000));
+                    let verify =
+                        ReturnStats::of(&evaluate_cartpole(&mut d, 100, VERIFY_SEED, 1000));
                     if (verify.mean - level).abs() > 0.1 * level {
-                        tracing::info!(level, eval = stats.mean, verify = verify.mean, "candidate not verified");
+                        tracing::info!(
+                            level,
+                            eval = stats.mean,
+                            verify = verify.mean,
+                            "candidate not verified"
+                        );
                         continue;
                     }
                     let file = format!("{}.safetensors", level_name(level));
@@ -146,7 +178,10 @@ fn train_cartpole(args: &TrainExpertsArgs) -> anyhow::Result<()> {
                         tracing::error!(error = %e, "cannot save checkpoint");
                         continue;
                     }
-                    eprintln!("saved {file}: seed {seed}, episode {}, mean {:.1}, verified {:.1}", r.episode, stats.mean, verify.mean);
+                    eprintln!(
+                        "saved {file}: seed {seed}, episode {}, mean {:.1}, verified {:.1}",
+                        r.episode, stats.mean, verify.mean
+                    );
                     found.push(ExpertEntry {
                         name: level_name(level),
                         env: "cartpole".into(),
@@ -170,10 +205,18 @@ fn train_cartpole(args: &TrainExpertsArgs) -> anyhow::Result<()> {
             break;
         }
     }
-    let missing: Vec<String> = LEVELS.iter().map(|l| level_name(*l)).filter(|n| !found.iter().any(|e| &e.name == n)).collect();
+    let missing: Vec<String> = LEVELS
+        .iter()
+        .map(|l| level_name(*l))
+        .filter(|n| !found.iter().any(|e| &e.name == n))
+        .collect();
     update_manifest(&args.out, found)?;
     if !missing.is_empty() {
-        anyhow::bail!("no checkpoint reached {} within {} runs", missing.join(", "), args.max_runs);
+        anyhow::bail!(
+            "no checkpoint reached {} within {} runs",
+            missing.join(", "),
+            args.max_runs
+        );
     }
     Ok(())
 }
@@ -184,21 +227,47 @@ fn level_name(level: f64) -> String {
 
 const TABULAR_CONFIG: &str = r#"
 seed = 0
-episodes = 300
+episodes = 3000
 [env]
 name = "cliffwalk"
 [agent]
 kind = "qlearning"
+temperature = 1.0
+learning_rate = 1.0
+learning_rate_decay = 0.6
 [query]
 mode = "never"
 "#;
 
 /// CliffWalk: greedy policies of Q-learning and SARSA at several stages of training.
 fn train_cliffwalk(args: &TrainExpertsArgs) -> anyhow::Result<()> {
-    const STAGES: [u32; 3] = [25, 100, 300];
+    const STAGES: [u32; 4] = [50, 200, 1000, 3000];
     let mut found = Vec::new();
+    {
+        let env = crate::setup::cliffwalk(&cliffwalk_config())?;
+        let mut optimal = registry::cliffwalk("cliffwalk-optimal", &env)?;
+        let stats = ReturnStats::of(&evaluate_cliffwalk(optimal.as_mut(), &env, 1000, EVAL_SEED));
+        let mut entry = registry::list()
+            .into_iter()
+            .find(|e| e.name == "cliffwalk-optimal")
+            .expect("shipped");
+        entry.mean = Some(stats.mean);
+        entry.median = Some(stats.median);
+        entry.std = Some(stats.std);
+        entry.evaluation = Some(format!(
+            "1000 episodes on the default map from seed {EVAL_SEED}"
+        ));
+        eprintln!(
+            "cliffwalk-optimal: mean {:.2}, median {:.2}",
+            stats.mean, stats.median
+        );
+        found.push(entry);
+    }
     for kind in ["qlearning", "sarsa"] {
-        let cfg = ExperimentConfig::from_toml_with_overrides(TABULAR_CONFIG, &[format!("agent.kind={kind}"), format!("seed={}", args.seed)])?;
+        let cfg = ExperimentConfig::from_toml_with_overrides(
+            TABULAR_CONFIG,
+            &[format!("agent.kind={kind}"), format!("seed={}", args.seed)],
+        )?;
         let env = crate::setup::cliffwalk(&cfg)?;
         let mut optimal = registry::cliffwalk("cliffwalk-optimal", &env)?;
         let mut snapshots = Vec::new();
@@ -214,7 +283,10 @@ fn train_cliffwalk(args: &TrainExpertsArgs) -> anyhow::Result<()> {
             let name = format!("cliffwalk-{kind}-{episodes}");
             let file = format!("{name}.json");
             write(&args.out, &file, serde_json::to_string(&table)?.as_bytes())?;
-            eprintln!("saved {file}: mean {:.2}, median {:.2}", stats.mean, stats.median);
+            eprintln!(
+                "saved {file}: mean {:.2}, median {:.2}",
+                stats.mean, stats.median
+            );
             found.push(ExpertEntry {
                 name,
                 env: "cliffwalk".into(),
@@ -235,12 +307,17 @@ fn train_cliffwalk(args: &TrainExpertsArgs) -> anyhow::Result<()> {
 fn update_manifest(dir: &Path, entries: Vec<ExpertEntry>) -> anyhow::Result<()> {
     let path = dir.join("manifest.json");
     let mut all: Vec<ExpertEntry> = match std::fs::read_to_string(&path) {
-        Ok(text) => serde_json::from_str(&text).with_context(|| format!("{} is not a valid manifest", path.display()))?,
+        Ok(text) => serde_json::from_str(&text)
+            .with_context(|| format!("{} is not a valid manifest", path.display()))?,
         Err(_) => Vec::new(),
     };
     for e in entries {
         all.retain(|x| x.name != e.name);
         all.push(e);
     }
-    write(dir, "manifest.json", (serde_json::to_string_pretty(&all)? + "\n").as_bytes())
+    write(
+        dir,
+        "manifest.json",
+        (serde_json::to_string_pretty(&all)? + "\n").as_bytes(),
+    )
 }

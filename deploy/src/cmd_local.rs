@@ -52,8 +52,13 @@ pub struct RunSummary {
 }
 
 /// Runs `cfg` in this process and writes its outputs to `out`.
-pub fn run_config(cfg: &ExperimentConfig, out: &Path, progress: bool) -> anyhow::Result<RunSummary> {
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create output directory {}", out.display()))?;
+pub fn run_config(
+    cfg: &ExperimentConfig,
+    out: &Path,
+    progress: bool,
+) -> anyhow::Result<RunSummary> {
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create output directory {}", out.display()))?;
     write(out, "config.toml", cfg.to_toml().as_bytes())?;
     let bar = progress_bar(cfg.episodes as u64, progress);
     let show = |r: &EpisodeRecord| {
@@ -72,12 +77,21 @@ pub fn run_config(cfg: &ExperimentConfig, out: &Path, progress: bool) -> anyhow:
             let s0 = env.map().start();
             let table = serde_json::json!({ "actions": run.greedy_policy });
             write(out, "policy.json", table.to_string().as_bytes())?;
-            (run.records, Vec::new(), Some(greedy[s0]), Some(vi.values[s0]))
+            (
+                run.records,
+                Vec::new(),
+                Some(greedy[s0]),
+                Some(vi.values[s0]),
+            )
         }
         EnvName::Cartpole => {
             let mut demonstrator = alfd_expert::registry::cartpole(&cfg.expert.name)?;
             let run = run_neural(cfg, demonstrator.as_mut(), |r, _| show(r));
-            write(out, "weights.safetensors", &run.network.to_safetensors_bytes())?;
+            write(
+                out,
+                "weights.safetensors",
+                &run.network.to_safetensors_bytes(),
+            )?;
             (run.records, run.expert.demos().to_vec(), None, None)
         }
     };
@@ -99,7 +113,11 @@ pub fn run_config(cfg: &ExperimentConfig, out: &Path, progress: bool) -> anyhow:
         greedy_value_at_start: greedy,
         optimal_value_at_start: optimal,
     };
-    write(out, "summary.json", serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    write(
+        out,
+        "summary.json",
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
     Ok(summary)
 }
 
@@ -109,9 +127,11 @@ fn progress_bar(len: u64, show: bool) -> indicatif::ProgressBar {
     }
     let bar = indicatif::ProgressBar::new(len);
     bar.set_style(
-        indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} episodes  {msg}  (eta {eta})")
-            .expect("valid template")
-            .progress_chars("=> "),
+        indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:30}] {pos}/{len} episodes  {msg}  (eta {eta})",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
     );
     bar
 }
@@ -120,8 +140,10 @@ fn progress_bar(len: u64, show: bool) -> indicatif::ProgressBar {
 pub fn write(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
     let path = dir.join(name);
     let tmp = dir.join(format!(".{name}.tmp"));
-    let mut f = std::fs::File::create(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
-    f.write_all(bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
+    let mut f =
+        std::fs::File::create(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
+    f.write_all(bytes)
+        .with_context(|| format!("cannot write {}", tmp.display()))?;
     f.sync_all().ok();
     std::fs::rename(&tmp, &path).with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())

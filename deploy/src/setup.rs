@@ -11,14 +11,20 @@ use crate::usage::usage;
 
 /// Logs to stderr; `RUST_LOG` sets the filter (default `warn`).
 pub fn init_logging() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
 }
 
 /// Reads and validates an experiment config, with `--set` overrides.
 pub fn load_config(path: &Path, overrides: &[String]) -> anyhow::Result<ExperimentConfig> {
-    let text = std::fs::read_to_string(path).map_err(|e| usage(format!("cannot read config {}: {e}", path.display())))?;
-    ExperimentConfig::from_toml_with_overrides(&text, overrides).with_context(|| format!("in config {}", path.display()))
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| usage(format!("cannot read config {}: {e}", path.display())))?;
+    ExperimentConfig::from_toml_with_overrides(&text, overrides)
+        .with_context(|| format!("in config {}", path.display()))
 }
 
 /// Reads a CliffWalk map file, or the built-in map.
@@ -26,7 +32,8 @@ pub fn load_map(path: Option<&str>) -> anyhow::Result<CliffMap> {
     match path {
         None => Ok(CliffMap::default_map()),
         Some(p) => {
-            let text = std::fs::read_to_string(p).map_err(|e| usage(format!("cannot read map {p}: {e}")))?;
+            let text = std::fs::read_to_string(p)
+                .map_err(|e| usage(format!("cannot read map {p}: {e}")))?;
             CliffMap::parse(&text).with_context(|| format!("in map {p}"))
         }
     }
@@ -36,5 +43,9 @@ pub fn load_map(path: Option<&str>) -> anyhow::Result<CliffMap> {
 pub fn cliffwalk(cfg: &ExperimentConfig) -> anyhow::Result<CliffWalk> {
     anyhow::ensure!(cfg.env.name == EnvName::Cliffwalk, "not a cliffwalk config");
     let map = load_map(cfg.env.map.as_deref())?;
-    Ok(CliffWalk::new(map, cfg.env.p_success, cfg.env.max_episode_steps())?)
+    Ok(CliffWalk::new(
+        map,
+        cfg.env.p_success,
+        cfg.env.max_episode_steps(),
+    )?)
 }

@@ -34,6 +34,7 @@ pub fn exit_code(err: &anyhow::Error) -> i32 {
 }
 
 /// Whether `err` is the user's to fix (exit code 2).
+#[cfg(test)]
 pub fn is_usage_error(err: &anyhow::Error) -> bool {
     exit_code(err) == 2
 }

@@ -37,7 +37,11 @@ pub struct ExpertEntry {
 #[derive(Debug, thiserror::Error)]
 pub enum RegistryError {
     #[error("unknown expert `{name}` for {env}; known: {known}")]
-    Unknown { name: String, env: String, known: String },
+    Unknown {
+        name: String,
+        env: String,
+        known: String,
+    },
     #[error("expert `{name}` is corrupt: {reason}")]
     Corrupt { name: String, reason: String },
 }
@@ -50,7 +54,60 @@ fn shipped_file(file: &str) -> Option<&'static [u8]> {
 }
 
 /// Files compiled in. Keep in step with `manifest.json` (a test checks it).
-const SHIPPED: &[(&str, &[u8])] = &[];
+const SHIPPED: &[(&str, &[u8])] = &[
+    (
+        "cartpole-100.safetensors",
+        include_bytes!("../demonstrators/cartpole-100.safetensors"),
+    ),
+    (
+        "cartpole-1000.safetensors",
+        include_bytes!("../demonstrators/cartpole-1000.safetensors"),
+    ),
+    (
+        "cartpole-200.safetensors",
+        include_bytes!("../demonstrators/cartpole-200.safetensors"),
+    ),
+    (
+        "cartpole-50.safetensors",
+        include_bytes!("../demonstrators/cartpole-50.safetensors"),
+    ),
+    (
+        "cartpole-500.safetensors",
+        include_bytes!("../demonstrators/cartpole-500.safetensors"),
+    ),
+    (
+        "cliffwalk-qlearning-1000.json",
+        include_bytes!("../demonstrators/cliffwalk-qlearning-1000.json"),
+    ),
+    (
+        "cliffwalk-qlearning-200.json",
+        include_bytes!("../demonstrators/cliffwalk-qlearning-200.json"),
+    ),
+    (
+        "cliffwalk-qlearning-3000.json",
+        include_bytes!("../demonstrators/cliffwalk-qlearning-3000.json"),
+    ),
+    (
+        "cliffwalk-qlearning-50.json",
+        include_bytes!("../demonstrators/cliffwalk-qlearning-50.json"),
+    ),
+    (
+        "cliffwalk-sarsa-1000.json",
+        include_bytes!("../demonstrators/cliffwalk-sarsa-1000.json"),
+    ),
+    (
+        "cliffwalk-sarsa-200.json",
+        include_bytes!("../demonstrators/cliffwalk-sarsa-200.json"),
+    ),
+    (
+        "cliffwalk-sarsa-3000.json",
+        include_bytes!("../demonstrators/cliffwalk-sarsa-3000.json"),
+    ),
+    (
+        "cliffwalk-sarsa-50.json",
+        include_bytes!("../demonstrators/cliffwalk-sarsa-50.json"),
+    ),
+];
 
 /// Every demonstrator in the manifest.
 pub fn list() -> Vec<ExpertEntry> {
@@ -59,11 +116,19 @@ pub fn list() -> Vec<ExpertEntry> {
 
 fn entry(name: &str, env: &str) -> Result<ExpertEntry, RegistryError> {
     let all = list();
-    all.iter().find(|e| e.name == name && e.env == env).cloned().ok_or_else(|| RegistryError::Unknown {
-        name: name.to_owned(),
-        env: env.to_owned(),
-        known: all.iter().filter(|e| e.env == env).map(|e| e.name.as_str()).collect::<Vec<_>>().join(", "),
-    })
+    all.iter()
+        .find(|e| e.name == name && e.env == env)
+        .cloned()
+        .ok_or_else(|| RegistryError::Unknown {
+            name: name.to_owned(),
+            env: env.to_owned(),
+            known: all
+                .iter()
+                .filter(|e| e.env == env)
+                .map(|e| e.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
 }
 
 /// A CartPole demonstrator by name.
@@ -73,30 +138,48 @@ pub fn cartpole(name: &str) -> Result<Box<dyn Demonstrator<[f32]> + Send>, Regis
         "analytic" => Ok(Box::new(BalancingController)),
         "dqn-checkpoint" => {
             let file = e.file.as_deref().unwrap_or_default();
-            let bytes = shipped_file(file)
-                .ok_or_else(|| RegistryError::Corrupt { name: name.to_owned(), reason: format!("file `{file}` is not compiled in") })?;
-            let net = Mlp::from_safetensors_bytes(bytes)
-                .map_err(|err| RegistryError::Corrupt { name: name.to_owned(), reason: err.to_string() })?;
+            let bytes = shipped_file(file).ok_or_else(|| RegistryError::Corrupt {
+                name: name.to_owned(),
+                reason: format!("file `{file}` is not compiled in"),
+            })?;
+            let net = Mlp::from_safetensors_bytes(bytes).map_err(|err| RegistryError::Corrupt {
+                name: name.to_owned(),
+                reason: err.to_string(),
+            })?;
             Ok(Box::new(NetworkDemonstrator::new(net)))
         }
-        other => Err(RegistryError::Corrupt { name: name.to_owned(), reason: format!("kind `{other}` is not a cartpole kind") }),
+        other => Err(RegistryError::Corrupt {
+            name: name.to_owned(),
+            reason: format!("kind `{other}` is not a cartpole kind"),
+        }),
     }
 }
 
 /// A CliffWalk demonstrator by name, for `env` (the optimal one is computed for its map).
-pub fn cliffwalk(name: &str, env: &CliffWalk) -> Result<Box<dyn Demonstrator<usize> + Send>, RegistryError> {
+pub fn cliffwalk(
+    name: &str,
+    env: &CliffWalk,
+) -> Result<Box<dyn Demonstrator<usize> + Send>, RegistryError> {
     let e = entry(name, "cliffwalk")?;
     match e.kind.as_str() {
         "value-iteration" => {
-            let vi = value_iteration(env, 0.99, 1e-10).map_err(|err| RegistryError::Corrupt { name: name.to_owned(), reason: err.to_string() })?;
+            let vi = value_iteration(env, 0.99, 1e-10).map_err(|err| RegistryError::Corrupt {
+                name: name.to_owned(),
+                reason: err.to_string(),
+            })?;
             Ok(Box::new(TablePolicy { actions: vi.policy }))
         }
         "policy-table" => {
             let file = e.file.as_deref().unwrap_or_default();
-            let bytes = shipped_file(file)
-                .ok_or_else(|| RegistryError::Corrupt { name: name.to_owned(), reason: format!("file `{file}` is not compiled in") })?;
-            let table: TablePolicy = serde_json::from_slice(bytes)
-                .map_err(|err| RegistryError::Corrupt { name: name.to_owned(), reason: err.to_string() })?;
+            let bytes = shipped_file(file).ok_or_else(|| RegistryError::Corrupt {
+                name: name.to_owned(),
+                reason: format!("file `{file}` is not compiled in"),
+            })?;
+            let table: TablePolicy =
+                serde_json::from_slice(bytes).map_err(|err| RegistryError::Corrupt {
+                    name: name.to_owned(),
+                    reason: err.to_string(),
+                })?;
             if table.actions.len() != env.num_states() || table.actions.iter().any(|&a| a >= 4) {
                 return Err(RegistryError::Corrupt {
                     name: name.to_owned(),
@@ -105,7 +188,10 @@ pub fn cliffwalk(name: &str, env: &CliffWalk) -> Result<Box<dyn Demonstrator<usi
             }
             Ok(Box::new(table))
         }
-        other => Err(RegistryError::Corrupt { name: name.to_owned(), reason: format!("kind `{other}` is not a cliffwalk kind") }),
+        other => Err(RegistryError::Corrupt {
+            name: name.to_owned(),
+            reason: format!("kind `{other}` is not a cliffwalk kind"),
+        }),
     }
 }
 
@@ -119,17 +205,27 @@ mod tests {
         assert!(all.iter().any(|e| e.name == "cartpole-perfect"));
         for e in &all {
             if let Some(f) = &e.file {
-                assert!(shipped_file(f).is_some(), "{} names {f}, which SHIPPED lacks", e.name);
+                assert!(
+                    shipped_file(f).is_some(),
+                    "{} names {f}, which SHIPPED lacks",
+                    e.name
+                );
             }
         }
         for (f, _) in SHIPPED {
-            assert!(all.iter().any(|e| e.file.as_deref() == Some(f)), "{f} is compiled in but not in the manifest");
+            assert!(
+                all.iter().any(|e| e.file.as_deref() == Some(f)),
+                "{f} is compiled in but not in the manifest"
+            );
         }
     }
 
     #[test]
     fn unknown_names_are_refused_with_the_known_ones() {
         let err = cartpole("cartpole-9000").err().unwrap().to_string();
-        assert!(err.contains("cartpole-9000") && err.contains("cartpole-perfect"), "{err}");
+        assert!(
+            err.contains("cartpole-9000") && err.contains("cartpole-perfect"),
+            "{err}"
+        );
     }
 }

@@ -103,7 +103,12 @@ pub struct ExpertCore {
 }
 
 impl ExpertCore {
-    pub fn new(budget: u32, choice: DemoModelChoice, num_actions: usize, schedule: ShapingSchedule) -> Self {
+    pub fn new(
+        budget: u32,
+        choice: DemoModelChoice,
+        num_actions: usize,
+        schedule: ShapingSchedule,
+    ) -> Self {
         Self {
             budget: Budget::new(budget),
             demos: Vec::new(),
@@ -125,7 +130,13 @@ impl ExpertCore {
 
     /// Spends one unit of budget on `action`, the demonstrator's answer at `state` (global step
     /// `step`), records it and refits the model. `None` when the budget is exhausted.
-    pub fn record(&mut self, state: &[f64], action: usize, step: u64, expert: &str) -> Option<&DemoRecord> {
+    pub fn record(
+        &mut self,
+        state: &[f64],
+        action: usize,
+        step: u64,
+        expert: &str,
+    ) -> Option<&DemoRecord> {
         if !self.budget.try_spend() {
             return None;
         }
@@ -143,7 +154,13 @@ impl ExpertCore {
     }
 
     /// Asks `demonstrator` at `obs` if budget remains (Algorithm 1 lines 8-10).
-    pub fn answer(&mut self, demonstrator: &mut dyn Demonstrator<[f32]>, obs: &[f32], step: u64, expert: &str) -> Option<usize> {
+    pub fn answer(
+        &mut self,
+        demonstrator: &mut dyn Demonstrator<[f32]>,
+        obs: &[f32],
+        step: u64,
+        expert: &str,
+    ) -> Option<usize> {
         if self.budget.is_exhausted() {
             return None;
         }

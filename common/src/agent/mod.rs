@@ -8,7 +8,9 @@ pub mod expert;
 pub mod neural;
 pub mod tabular;
 
-pub use expert::{BalancingController, DemoRecord, Demonstrator, ExpertCore, NetworkDemonstrator, TablePolicy};
+pub use expert::{
+    BalancingController, DemoRecord, Demonstrator, ExpertCore, NetworkDemonstrator, TablePolicy,
+};
 pub use neural::{Decision, NeuralActor, NeuralLearner};
 pub use tabular::TabularAgent;
 

@@ -50,7 +50,13 @@ pub struct NeuralActor {
 impl NeuralActor {
     /// An actor whose network has the architecture of `cfg`; it acts on whatever weights it is
     /// given with [`NeuralActor::set_weights`] (a fresh initialisation until then).
-    pub fn new(agent: &AgentConfig, query: &QueryConfig, obs_dim: usize, actions: usize, mut rng: Rng) -> Self {
+    pub fn new(
+        agent: &AgentConfig,
+        query: &QueryConfig,
+        obs_dim: usize,
+        actions: usize,
+        mut rng: Rng,
+    ) -> Self {
         let heads = agent.heads();
         let net = Mlp::new(obs_dim, agent.hidden, heads, actions, &mut rng);
         Self {
@@ -59,7 +65,11 @@ impl NeuralActor {
             actions,
             exploration: agent.exploration(),
             temperature: agent.temperature,
-            epsilon: (agent.epsilon_start, agent.epsilon_end, agent.epsilon_decay_steps),
+            epsilon: (
+                agent.epsilon_start,
+                agent.epsilon_end,
+                agent.epsilon_decay_steps,
+            ),
             bootstrap_probability: agent.bootstrap_probability,
             mode: query.mode,
             rule: QueryRule::new(query.queue_len, query.percentile),
@@ -82,7 +92,9 @@ impl NeuralActor {
 
     /// Copies the weights of `net` (same architecture) without going through a flat buffer.
     pub fn copy_weights_from(&mut self, net: &Mlp, version: u64) {
-        self.net.copy_params_from(net).expect("actor and learner networks share one architecture");
+        self.net
+            .copy_params_from(net)
+            .expect("actor and learner networks share one architecture");
         self.weights_version = version;
     }
 
@@ -116,7 +128,11 @@ impl NeuralActor {
         for (q, &v) in self.q.iter_mut().zip(&self.q32) {
             *q = f64::from(v);
         }
-        let js = if self.heads > 1 { js_divergence(&self.q, self.heads, self.temperature) } else { 0.0 };
+        let js = if self.heads > 1 {
+            js_divergence(&self.q, self.heads, self.temperature)
+        } else {
+            0.0
+        };
         let query = query_decision(self.mode, &mut self.rule, js, budget_left);
         let a = self.actions;
         let head = &self.q[self.arm * a..(self.arm + 1) * a];
@@ -143,7 +159,11 @@ impl NeuralActor {
     /// `π(a|s)` of the episode's head at the state last passed to [`NeuralActor::decide`] (eq. 2).
     pub fn policy_prob(&mut self, action: usize) -> f64 {
         let a = self.actions;
-        softmax_into(&self.q[self.arm * a..(self.arm + 1) * a], self.temperature, &mut self.probs);
+        softmax_into(
+            &self.q[self.arm * a..(self.arm + 1) * a],
+            self.temperature,
+            &mut self.probs,
+        );
         self.probs[action]
     }
 
@@ -172,7 +192,8 @@ impl NeuralActor {
         };
         let mask = (0..self.heads)
             .map(|_| {
-                if demo || self.heads == 1 || self.rng.random::<f64>() < self.bootstrap_probability {
+                if demo || self.heads == 1 || self.rng.random::<f64>() < self.bootstrap_probability
+                {
                     1.0
                 } else {
                     0.0
@@ -212,7 +233,13 @@ impl NeuralLearner {
         let heads = agent.heads();
         let online = Mlp::new(obs_dim, agent.hidden, heads, actions, &mut rng);
         let target = online.clone();
-        let adam = Adam::with_config(&online, AdamConfig { lr: agent.learning_rate(), ..AdamConfig::default() });
+        let adam = Adam::with_config(
+            &online,
+            AdamConfig {
+                lr: agent.learning_rate(),
+                ..AdamConfig::default()
+            },
+        );
         let scratch = TrainScratch::default();
         Self {
             online,
@@ -240,11 +267,21 @@ impl NeuralLearner {
         if self.replay.len() < self.batch_size {
             return None;
         }
-        self.replay.sample_into(self.batch_size, &mut self.rng, &mut self.batch);
-        let loss = crate::nn::train_step(&mut self.online, &self.target, &mut self.adam, &self.batch, self.gamma, &mut self.scratch);
+        self.replay
+            .sample_into(self.batch_size, &mut self.rng, &mut self.batch);
+        let loss = crate::nn::train_step(
+            &mut self.online,
+            &self.target,
+            &mut self.adam,
+            &self.batch,
+            self.gamma,
+            &mut self.scratch,
+        );
         self.updates += 1;
         if self.updates % self.target_update_every == 0 {
-            self.target.copy_params_from(&self.online).expect("online and target networks share one architecture");
+            self.target
+                .copy_params_from(&self.online)
+                .expect("online and target networks share one architecture");
         }
         Some(loss)
     }

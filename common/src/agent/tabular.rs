@@ -16,6 +16,9 @@ pub struct TabularAgent {
     q: TabularQ,
     temperature: f64,
     lr: f64,
+    lr_decay: f64,
+    /// Updates of each (state, head, action), for the decaying step size.
+    visits: Vec<u32>,
     gamma: f64,
     bootstrap_probability: f64,
     epsilon: (f64, f64, f64),
@@ -35,6 +38,8 @@ impl TabularAgent {
             q: TabularQ::new(states, heads, actions, 0.0),
             temperature: cfg.temperature,
             lr: cfg.learning_rate(),
+            lr_decay: cfg.learning_rate_decay,
+            visits: vec![0; states * heads * actions],
             gamma: cfg.gamma,
             bootstrap_probability: cfg.bootstrap_probability,
             epsilon: (cfg.epsilon_start, cfg.epsilon_end, cfg.epsilon_decay_steps),
@@ -93,7 +98,15 @@ impl TabularAgent {
 
     /// Learns from one transition. `next_action` is the action taken at `s_next` (SARSA's target;
     /// ignored by Q-learning). A terminal transition does not bootstrap; a truncated one does.
-    pub fn learn(&mut self, s: usize, a: usize, r: f64, s_next: usize, terminated: bool, next_action: Option<usize>) {
+    pub fn learn(
+        &mut self,
+        s: usize,
+        a: usize,
+        r: f64,
+        s_next: usize,
+        terminated: bool,
+        next_action: Option<usize>,
+    ) {
         for k in 0..self.q.heads() {
             // Randomized update keeping the heads diverse: head k learns with probability p.
             if self.q.heads() > 1 && self.rng.random::<f64>() >= self.bootstrap_probability {
@@ -107,7 +120,14 @@ impl TabularAgent {
                     _ => self.q.max_value(s_next, k),
                 }
             };
-            self.q.update_towards(s, k, a, r + self.gamma * next, self.lr);
+            let i = (s * self.q.heads() + k) * self.q.actions() + a;
+            self.visits[i] = self.visits[i].saturating_add(1);
+            let lr = if self.lr_decay == 0.0 {
+                self.lr
+            } else {
+                self.lr / f64::from(self.visits[i]).powf(self.lr_decay)
+            };
+            self.q.update_towards(s, k, a, r + self.gamma * next, lr);
         }
     }
 
@@ -154,37 +174,74 @@ mod tests {
 
     #[test]
     fn qlearning_and_sarsa_targets_differ_as_they_should() {
-        let mut ql = TabularAgent::new(&cfg("qlearning", "learning_rate = 1.0\ngamma = 0.5"), 2, 2, crate::rng::seeded(0));
-        let mut sa = TabularAgent::new(&cfg("sarsa", "learning_rate = 1.0\ngamma = 0.5"), 2, 2, crate::rng::seeded(0));
+        let mut ql = TabularAgent::new(
+            &cfg("qlearning", "learning_rate = 1.0\ngamma = 0.5"),
+            2,
+            2,
+            crate::rng::seeded(0),
+        );
+        let mut sa = TabularAgent::new(
+            &cfg("sarsa", "learning_rate = 1.0\ngamma = 0.5"),
+            2,
+            2,
+            crate::rng::seeded(0),
+        );
         for agent in [&mut ql, &mut sa] {
             agent.q.set(1, 0, 0, 4.0);
             agent.q.set(1, 0, 1, -2.0);
             agent.learn(0, 1, 1.0, 1, false, Some(1));
         }
-        assert_eq!(ql.q.get(0, 0, 1), 1.0 + 0.5 * 4.0, "Q-learning bootstraps from the max");
-        assert_eq!(sa.q.get(0, 0, 1), 1.0 + 0.5 * -2.0, "SARSA bootstraps from the action taken");
+        assert_eq!(
+            ql.q.get(0, 0, 1),
+            1.0 + 0.5 * 4.0,
+            "Q-learning bootstraps from the max"
+        );
+        assert_eq!(
+            sa.q.get(0, 0, 1),
+            1.0 + 0.5 * -2.0,
+            "SARSA bootstraps from the action taken"
+        );
         ql.learn(0, 0, 3.0, 1, true, None);
-        assert_eq!(ql.q.get(0, 0, 0), 3.0, "a terminal transition does not bootstrap");
+        assert_eq!(
+            ql.q.get(0, 0, 0),
+            3.0,
+            "a terminal transition does not bootstrap"
+        );
     }
 
     #[test]
     fn masked_updates_train_each_head_about_half_the_time() {
-        let mut agent = TabularAgent::new(&cfg("bootstrapped-q", "heads = 4\nlearning_rate = 1.0"), 1000, 2, crate::rng::seeded(1));
+        let mut agent = TabularAgent::new(
+            &cfg("bootstrapped-q", "heads = 4\nlearning_rate = 1.0"),
+            1000,
+            2,
+            crate::rng::seeded(1),
+        );
         for s in 0..1000 {
             agent.learn(s, 0, 1.0, s, true, None);
         }
         for k in 0..4 {
             let trained = (0..1000).filter(|&s| agent.q.get(s, k, 0) == 1.0).count();
-            assert!((400..600).contains(&trained), "head {k} trained on {trained} of 1000");
+            assert!(
+                (400..600).contains(&trained),
+                "head {k} trained on {trained} of 1000"
+            );
         }
         // The heads now disagree, so the divergence is positive somewhere.
-        let max_js = (0..1000).map(|s| agent.js_divergence(s)).fold(0.0, f64::max);
+        let max_js = (0..1000)
+            .map(|s| agent.js_divergence(s))
+            .fold(0.0, f64::max);
         assert!(max_js > 0.01, "{max_js}");
     }
 
     #[test]
     fn softmax_exploration_follows_the_policy() {
-        let mut agent = TabularAgent::new(&cfg("qlearning", "temperature = 1.0"), 1, 2, crate::rng::seeded(2));
+        let mut agent = TabularAgent::new(
+            &cfg("qlearning", "temperature = 1.0"),
+            1,
+            2,
+            crate::rng::seeded(2),
+        );
         agent.q.set(0, 0, 1, 2f64.ln()); // pi = (1/3, 2/3)
         let ones = (0..30_000).filter(|_| agent.act(0) == 1).count();
         assert!((ones as f64 / 30_000.0 - 2.0 / 3.0).abs() < 0.01, "{ones}");

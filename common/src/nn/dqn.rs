@@ -112,18 +112,52 @@ fn check_batch(online: &Mlp, target: &Mlp, batch: &Batch) {
         target.params().shapes(),
         "online and target networks differ in shape"
     );
-    assert_eq!(online.heads(), target.heads(), "online and target heads differ");
+    assert_eq!(
+        online.heads(),
+        target.heads(),
+        "online and target heads differ"
+    );
     let (n, d, k) = (batch.size, online.obs_dim(), online.heads());
-    assert_eq!(batch.heads, k, "batch masks are for another number of heads");
-    assert_eq!(batch.states.len(), n * d, "batch states have the wrong length");
-    assert_eq!(batch.next_states.len(), n * d, "batch next states have the wrong length");
-    assert_eq!(batch.actions.len(), n, "batch actions have the wrong length");
-    assert_eq!(batch.rewards.len(), n, "batch rewards have the wrong length");
-    assert_eq!(batch.terminated.len(), n, "batch terminal flags have the wrong length");
-    assert_eq!(batch.masks.len(), n * k, "batch masks have the wrong length");
+    assert_eq!(
+        batch.heads, k,
+        "batch masks are for another number of heads"
+    );
+    assert_eq!(
+        batch.states.len(),
+        n * d,
+        "batch states have the wrong length"
+    );
+    assert_eq!(
+        batch.next_states.len(),
+        n * d,
+        "batch next states have the wrong length"
+    );
+    assert_eq!(
+        batch.actions.len(),
+        n,
+        "batch actions have the wrong length"
+    );
+    assert_eq!(
+        batch.rewards.len(),
+        n,
+        "batch rewards have the wrong length"
+    );
+    assert_eq!(
+        batch.terminated.len(),
+        n,
+        "batch terminal flags have the wrong length"
+    );
+    assert_eq!(
+        batch.masks.len(),
+        n * k,
+        "batch masks have the wrong length"
+    );
     assert!(n > 0, "empty batch");
     assert!(
-        batch.actions.iter().all(|&a| (a as usize) < online.actions()),
+        batch
+            .actions
+            .iter()
+            .all(|&a| (a as usize) < online.actions()),
         "batch action out of range"
     );
 }
@@ -144,7 +178,7 @@ fn td_loss(
         if scratch.dq.shape() != (n, heads * actions) {
             scratch.dq = DMatrix::zeros(n, heads * actions);
         } else {
-            scratch.dq.fill(0.0);
+            scratch.dq.as_mut_slice().fill(0.0);
         }
     }
     let q = scratch.online.q();

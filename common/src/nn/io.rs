@@ -81,21 +81,23 @@ impl Mlp {
         let file = SafeTensors::deserialize(bytes)?;
         let meta = header.metadata().as_ref();
         let read_meta = |key: &str| -> Result<usize> {
-            let value = meta.and_then(|m| m.get(key)).ok_or_else(|| NnError::Metadata {
-                key: key.to_string(),
-                reason: "missing".to_string(),
-            })?;
+            let value = meta
+                .and_then(|m| m.get(key))
+                .ok_or_else(|| NnError::Metadata {
+                    key: key.to_string(),
+                    reason: "missing".to_string(),
+                })?;
             value.parse::<usize>().map_err(|e| NnError::Metadata {
                 key: key.to_string(),
                 reason: format!("`{value}` is not a non-negative integer: {e}"),
             })
         };
-        let version = meta
-            .and_then(|m| m.get("format_version"))
-            .ok_or_else(|| NnError::Metadata {
-                key: "format_version".to_string(),
-                reason: "missing".to_string(),
-            })?;
+        let version =
+            meta.and_then(|m| m.get("format_version"))
+                .ok_or_else(|| NnError::Metadata {
+                    key: "format_version".to_string(),
+                    reason: "missing".to_string(),
+                })?;
         if version != FORMAT_VERSION {
             return Err(NnError::Metadata {
                 key: "format_version".to_string(),

@@ -7,7 +7,8 @@
 //! `Z = A W^T + b = A * w + b`. The 64x64 products go to nalgebra's `gemm` (matrixmultiply); the
 //! thin ones (4 inputs, K*A outputs) become dot products or axpys over contiguous columns.
 
-use nalgebra::{DMatrix, DMatrixView, DVector, Dyn};
+use nalgebra::storage::Storage;
+use nalgebra::{DMatrix, DMatrixView, DVector, Dyn, Matrix};
 use rand::Rng as _;
 
 use super::{torch_shapes, NnError, Params, Result};
@@ -215,7 +216,12 @@ impl Mlp {
                 self.heads
             )));
         }
-        for (dst, src) in self.params.tensors_mut().into_iter().zip(other.params.tensors()) {
+        for (dst, src) in self
+            .params
+            .tensors_mut()
+            .into_iter()
+            .zip(other.params.tensors())
+        {
             dst.copy_from_slice(src);
         }
         Ok(())
@@ -300,17 +306,17 @@ impl Mlp {
         let p = &self.params;
         let c = cache;
         // Output layer: Q = h1 * wh + bh.
-        grads.wh.gemm_tr(1.0, &c.h1, dq, 0.0);
+        tr_matmul(&mut grads.wh, &c.h1, dq);
         column_sums(dq, &mut grads.bh);
-        c.dz1.gemm(1.0, dq, &transposed(&p.wh), 0.0);
+        matmul(&mut c.dz1, dq, &transposed(&p.wh), 0.0);
         relu_backward(&mut c.dz1, &c.h1);
         // torso.1: h1 = relu(h0 * w1 + b1).
-        grads.w1.gemm(1.0, &transposed(&c.h0), &c.dz1, 0.0);
+        tr_matmul(&mut grads.w1, &c.h0, &c.dz1);
         column_sums(&c.dz1, &mut grads.b1);
-        c.dz0.gemm(1.0, &c.dz1, &transposed(&p.w1), 0.0);
+        matmul(&mut c.dz0, &c.dz1, &transposed(&p.w1), 0.0);
         relu_backward(&mut c.dz0, &c.h0);
         // torso.0: h0 = relu(x * w0 + b0).
-        grads.w0.gemm_tr(1.0, &c.x, &c.dz0, 0.0);
+        tr_matmul(&mut grads.w0, &c.x, &c.dz0);
         column_sums(&c.dz0, &mut grads.b0);
     }
 }
@@ -338,10 +344,117 @@ fn transposed(m: &DMatrix<f32>) -> DMatrixView<'_, f32, Dyn, Dyn> {
 
 /// `out = input * w + b` (b broadcast over rows).
 fn linear(out: &mut DMatrix<f32>, input: &DMatrix<f32>, w: &DMatrix<f32>, b: &DVector<f32>) {
-    for (mut col, &bias) in out.column_iter_mut().zip(b.iter()) {
+    let rows = out.nrows().max(1);
+    for (col, &bias) in out.as_mut_slice().chunks_exact_mut(rows).zip(b.iter()) {
         col.fill(bias);
     }
-    out.gemm(1.0, input, w, 1.0);
+    matmul(out, input, w, 1.0);
+}
+
+/// Below this, a dimension is "thin": nalgebra hands products to matrixmultiply only when every
+/// dimension exceeds 5, and does the rest with generic per-element code.
+const THIN: usize = 5;
+
+/// `out = beta * out + a * b`. Products whose dimensions all exceed [`THIN`] go to nalgebra's
+/// `gemm` (matrixmultiply); thin ones become axpys over the contiguous columns of `a`, which
+/// vectorise.
+fn matmul<S>(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &Matrix<f32, Dyn, Dyn, S>, beta: f32)
+where
+    S: Storage<f32, Dyn, Dyn>,
+{
+    let (m, k) = a.shape();
+    let n = b.ncols();
+    debug_assert_eq!(b.nrows(), k);
+    debug_assert_eq!(out.shape(), (m, n));
+    if m > THIN && k > THIN && n > THIN {
+        out.gemm(1.0, a, b, beta);
+        return;
+    }
+    if beta == 0.0 {
+        out.as_mut_slice().fill(0.0);
+    } else if beta != 1.0 {
+        for v in out.as_mut_slice() {
+            *v *= beta;
+        }
+    }
+    if m == 0 {
+        return;
+    }
+    let a = a.as_slice();
+    for (j, out_col) in out.as_mut_slice().chunks_exact_mut(m).enumerate() {
+        // Four columns of `a` per pass over the output column.
+        let mut blocks = a.chunks_exact(4 * m);
+        let mut p = 0;
+        for block in &mut blocks {
+            let (a0, rest) = block.split_at(m);
+            let (a1, rest) = rest.split_at(m);
+            let (a2, a3) = rest.split_at(m);
+            let s = [b[(p, j)], b[(p + 1, j)], b[(p + 2, j)], b[(p + 3, j)]];
+            axpy4(out_col, s, [a0, a1, a2, a3]);
+            p += 4;
+        }
+        for a_col in blocks.remainder().chunks_exact(m) {
+            axpy(out_col, b[(p, j)], a_col);
+            p += 1;
+        }
+    }
+}
+
+/// `out = a^T * b` (overwritten), `a` and `b` with the same number of rows (the batch). Thin
+/// products become dot products of contiguous columns.
+fn tr_matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &DMatrix<f32>) {
+    let (m, k) = a.shape();
+    let n = b.ncols();
+    debug_assert_eq!(b.nrows(), m);
+    debug_assert_eq!(out.shape(), (k, n));
+    if m > THIN && k > THIN && n > THIN {
+        out.gemm(1.0, &transposed(a), b, 0.0);
+        return;
+    }
+    if m == 0 {
+        out.as_mut_slice().fill(0.0);
+        return;
+    }
+    let a = a.as_slice();
+    for (out_col, b_col) in out
+        .as_mut_slice()
+        .chunks_exact_mut(k.max(1))
+        .zip(b.as_slice().chunks_exact(m))
+    {
+        // Four columns of `a` against the same column of `b`.
+        let mut outs = out_col.chunks_exact_mut(4);
+        let mut blocks = a.chunks_exact(4 * m);
+        for (o, block) in (&mut outs).zip(&mut blocks) {
+            let (a0, rest) = block.split_at(m);
+            let (a1, rest) = rest.split_at(m);
+            let (a2, a3) = rest.split_at(m);
+            o.copy_from_slice(&dot4([a0, a1, a2, a3], b_col));
+        }
+        for (o, a_col) in outs
+            .into_remainder()
+            .iter_mut()
+            .zip(blocks.remainder().chunks_exact(m))
+        {
+            *o = dot(a_col, b_col);
+        }
+    }
+}
+
+/// `y += s[0] * x[0] + s[1] * x[1] + s[2] * x[2] + s[3] * x[3]`, added left to right as four
+/// [`axpy`]s would.
+#[inline]
+fn axpy4(y: &mut [f32], s: [f32; 4], x: [&[f32]; 4]) {
+    for ((((y, &a), &b), &c), &d) in y.iter_mut().zip(x[0]).zip(x[1]).zip(x[2]).zip(x[3]) {
+        *y = *y + s[0] * a + s[1] * b + s[2] * c + s[3] * d;
+    }
+}
+
+/// `y += alpha * x`.
+#[inline]
+fn axpy(y: &mut [f32], alpha: f32, x: &[f32]) {
+    for (y, &x) in y.iter_mut().zip(x) {
+        *y += alpha * x;
+    }
 }
 
 fn relu(m: &mut DMatrix<f32>) {
@@ -352,10 +465,9 @@ fn relu(m: &mut DMatrix<f32>) {
 
 /// Zeroes the gradient where the ReLU output is not positive (as PyTorch's `threshold_backward`).
 fn relu_backward(grad: &mut DMatrix<f32>, out: &DMatrix<f32>) {
+    // A select rather than a conditional store, so that it vectorises without branches.
     for (g, &h) in grad.as_mut_slice().iter_mut().zip(out.as_slice()) {
-        if h <= 0.0 {
-            *g = 0.0;
-        }
+        *g = if h > 0.0 { *g } else { 0.0 };
     }
 }
 
@@ -368,25 +480,76 @@ fn column_sums(m: &DMatrix<f32>, out: &mut DVector<f32>) {
 }
 
 /// One dense layer for one input: `out[o] = b[o] + w[:, o] . x`, with ReLU if asked; `w` is
-/// `(in, out)` column-major, so each output's weights are contiguous.
+/// `(in, out)` column-major, so each output's weights are contiguous. Four outputs at a time
+/// share the loads of `x` and keep independent accumulators.
 fn dense_one(w: &DMatrix<f32>, b: &DVector<f32>, x: &[f32], out: &mut [f32], relu: bool) {
     let n_in = w.nrows();
-    for ((o, col), &bias) in out
+    let finish = |v: f32| if relu { v.max(0.0) } else { v };
+    let w = w.as_slice();
+    let b = b.as_slice();
+    let mut out_blocks = out.chunks_exact_mut(4);
+    let mut w_blocks = w.chunks_exact(4 * n_in);
+    let mut b_blocks = b.chunks_exact(4);
+    for ((o, wb), bb) in (&mut out_blocks).zip(&mut w_blocks).zip(&mut b_blocks) {
+        let (w0, rest) = wb.split_at(n_in);
+        let (w1, rest) = rest.split_at(n_in);
+        let (w2, w3) = rest.split_at(n_in);
+        let d = dot4([w0, w1, w2, w3], x);
+        for ((o, d), &bias) in o.iter_mut().zip(d).zip(bb) {
+            *o = finish(d + bias);
+        }
+    }
+    let w_rest = w_blocks.remainder();
+    for ((o, col), &bias) in out_blocks
+        .into_remainder()
         .iter_mut()
-        .zip(w.as_slice().chunks_exact(n_in))
-        .zip(b.iter())
+        .zip(w_rest.chunks_exact(n_in))
+        .zip(b_blocks.remainder())
     {
-        let v = dot(col, x) + bias;
-        *o = if relu { v.max(0.0) } else { v };
+        *o = finish(dot(col, x) + bias);
     }
 }
 
-/// Dot product with eight independent accumulators, so that it vectorises.
+/// Four dot products with the same `x`.
+#[inline(always)]
+fn dot4(w: [&[f32]; 4], x: &[f32]) -> [f32; 4] {
+    let n = x.len();
+    let full = n - n % 8;
+    let mut acc = [[0.0f32; 8]; 4];
+    let mut i = 0;
+    while i < full {
+        let xs = lanes(&x[i..i + 8]);
+        for (acc, w) in acc.iter_mut().zip(&w) {
+            let ws = lanes(&w[i..i + 8]);
+            for ((s, w), x) in acc.iter_mut().zip(ws).zip(xs) {
+                *s += w * x;
+            }
+        }
+        i += 8;
+    }
+    let mut out = [0.0f32; 4];
+    for ((o, a), w) in out.iter_mut().zip(&acc).zip(&w) {
+        let t: f32 = w[full..n].iter().zip(&x[full..]).map(|(w, x)| w * x).sum();
+        *o = ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])) + t;
+    }
+    out
+}
+
+/// Eight values as an array, so that the compiler sees the length.
+#[inline(always)]
+fn lanes(v: &[f32]) -> [f32; 8] {
+    let mut out = [0.0f32; 8];
+    out.copy_from_slice(v);
+    out
+}
+
+/// Dot product with sixteen independent accumulators, so that it vectorises and the additions
+/// do not wait on one another.
 #[inline]
 fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let ca = a.chunks_exact(8);
-    let cb = b.chunks_exact(8);
+    let mut acc = [0.0f32; 16];
+    let ca = a.chunks_exact(16);
+    let cb = b.chunks_exact(16);
     let tail: f32 = ca
         .remainder()
         .iter()
@@ -398,7 +561,11 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
             *s += x * y;
         }
     }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+    let mut half = [0.0f32; 8];
+    for (h, (&lo, &hi)) in half.iter_mut().zip(acc[..8].iter().zip(&acc[8..])) {
+        *h = lo + hi;
+    }
+    ((half[0] + half[4]) + (half[1] + half[5])) + ((half[2] + half[6]) + (half[3] + half[7])) + tail
 }
 
 /// Sum with eight independent accumulators, so that it vectorises.
@@ -488,6 +655,36 @@ mod tests {
         bad.b1 = DVector::zeros(3);
         let err = Mlp::from_params(bad, 2, 3).unwrap_err();
         assert!(err.to_string().contains("torso.1.bias"), "{err}");
+    }
+
+    #[test]
+    fn matmul_kernels_match_nalgebra_products() {
+        let mut rng = crate::rng::seeded(4);
+        let mut rand =
+            |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random_range(-1.0f32..1.0));
+        // Thin (axpy and dot kernels) and wide (matrixmultiply) shapes.
+        for (m, k, n) in [(64, 4, 64), (64, 64, 4), (7, 3, 2), (64, 64, 64), (9, 8, 7)] {
+            let a = rand(m, k);
+            let b = rand(k, n);
+            let mut out = rand(m, n);
+            let expected = &a * &b + &out * 0.5;
+            matmul(&mut out, &a, &b, 0.5);
+            assert!((out - &expected).abs().max() < 1e-5, "matmul {m}x{k}x{n}");
+            let bt = b.transpose();
+            let mut out = rand(m, n);
+            matmul(&mut out, &a, &transposed(&bt), 0.0);
+            assert!(
+                (out - &a * &b).abs().max() < 1e-5,
+                "matmul by a view {m}x{k}x{n}"
+            );
+            let c = rand(m, n);
+            let mut out = rand(k, n);
+            tr_matmul(&mut out, &a, &c);
+            assert!(
+                (out - a.transpose() * &c).abs().max() < 1e-5,
+                "tr_matmul {m}x{k}x{n}"
+            );
+        }
     }
 
     #[test]

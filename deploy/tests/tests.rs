@@ -1,0 +1,3 @@
+//! Integration tests of the `alfd` command line and of the multi-process runtime (one binary).
+
+mod cli;
