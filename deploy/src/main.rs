@@ -5,6 +5,8 @@ mod cmd_demo_model;
 mod cmd_env;
 mod cmd_expert;
 mod cmd_local;
+mod cmd_run;
+mod launcher;
 mod setup;
 mod usage;
 
@@ -22,6 +24,10 @@ struct Cli {
 enum Command {
     /// Run an experiment config in one process.
     Local(cmd_local::LocalArgs),
+    /// Run an experiment as separate processes: learner, expert and N actors over iceoryx2.
+    Run(cmd_run::RunArgs),
+    /// Replace the expert of a live run (make before break).
+    SwapExpert(cmd_run::SwapArgs),
     /// Environments: roll out CartPole from a state, show a CliffWalk map.
     Env(cmd_env::EnvArgs),
     /// Demonstrators: list them, evaluate one.
@@ -40,6 +46,8 @@ fn main() {
     setup::init_logging();
     let result = match cli.command {
         Command::Local(a) => cmd_local::run(a),
+        Command::Run(a) => cmd_run::run(a),
+        Command::SwapExpert(a) => cmd_run::swap(a),
         Command::Env(a) => cmd_env::run(a),
         Command::Expert(a) => cmd_expert::run(a),
         Command::TrainExperts(a) => cmd_expert::train(a),

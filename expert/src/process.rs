@@ -239,6 +239,8 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             status(&mut progress, state, &core)?;
             last_status = Instant::now();
         }
+        // An actor that subscribed since the last publication gets the history sample now.
+        model_tx.update_connections()?;
         if waiter.wait(Duration::from_millis(100))? == Wake::Signal {
             break "termination signal";
         }

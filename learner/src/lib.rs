@@ -287,6 +287,9 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         if status.due() {
             status.send(&mut progress, process_state::RUNNING, &book, &learner)?;
         }
+        // A process that subscribed since the last publication gets the history sample now.
+        weights_tx.update_connections()?;
+        credits_tx.update_connections()?;
         control.poll()?;
         if control.shutdown_requested() {
             stop_reason = "the launcher said stop";

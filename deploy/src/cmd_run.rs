@@ -1,0 +1,150 @@
+//! `alfd run`: a multi-process run (learner, expert, N actors over iceoryx2), and
+//! `alfd swap-expert`: replace the expert of a live run.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use alfd_common::config::{EnvName, ExperimentConfig};
+use alfd_common::wire::MAX_ACTORS;
+use anyhow::Context as _;
+
+use crate::launcher::{self, Plan, SwapRequest, SwapResponse, SWAP_REQUEST, SWAP_RESPONSE};
+use crate::setup;
+use crate::usage::usage;
+
+/// The default experiment: CartPole, Bootstrapped DQN with KRR shaping, the 1000 expert.
+pub const DEFAULT_CONFIG: &str = include_str!("../configs/cartpole-bdqn-krr.toml");
+
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// The experiment config (TOML); default: CartPole, BDQN + KRR, the 1000 expert.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Number of actor processes.
+    #[arg(long, default_value_t = 2)]
+    pub actors: usize,
+    /// Override a config value, e.g. `--set budget.total=20` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// The run directory; default `runs/<run id>`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print no progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Credit window: steps an actor may run ahead of the learner's updates (1..=64).
+    #[arg(long, default_value_t = 64)]
+    pub window: u64,
+    /// Milliseconds an actor waits for the expert's answer before acting on its own.
+    #[arg(long, default_value_t = 1000)]
+    pub query_timeout_ms: u64,
+    /// The learner publishes its weights every this many updates.
+    #[arg(long, default_value_t = 1)]
+    pub weights_every: u64,
+    /// Restarts allowed per actor before the run fails.
+    #[arg(long, default_value_t = 5)]
+    pub max_restarts: u32,
+}
+
+pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    let cfg = match &args.config {
+        Some(path) => setup::load_config(path, &args.set)?,
+        None => ExperimentConfig::from_toml_with_overrides(DEFAULT_CONFIG, &args.set)
+            .context("in the default config")?,
+    };
+    if cfg.env.name != EnvName::Cartpole || cfg.agent.kind.is_tabular() {
+        return Err(usage(
+            "`alfd run` runs neural agents (dqn, bdqn) on cartpole; run tabular configs with `alfd local`",
+        ));
+    }
+    if !(1..=MAX_ACTORS).contains(&args.actors) {
+        return Err(usage(format!("--actors must be in 1..={MAX_ACTORS}, got {}", args.actors)));
+    }
+    if !(1..=alfd_common::wire::MAX_CREDIT_WINDOW).contains(&args.window) {
+        return Err(usage(format!("--window must be in 1..=64, got {}", args.window)));
+    }
+    if args.weights_every == 0 {
+        return Err(usage("--weights-every must be at least 1"));
+    }
+    // Fail before starting anything if the expert is unknown.
+    alfd_expert::registry::cartpole(&cfg.expert.name)?;
+    let run_id = launcher::new_run_id();
+    let run_dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("runs").join(&run_id));
+    let plan = Plan {
+        cfg,
+        actors: args.actors,
+        run_dir: run_dir.clone(),
+        run_id,
+        window: args.window,
+        query_timeout_ms: args.query_timeout_ms,
+        weights_every: args.weights_every,
+        max_restarts: args.max_restarts,
+        progress: !args.quiet,
+        bin_dir: launcher::bin_dir()?,
+    };
+    let summary = launcher::launch(&plan)?;
+    crate::cmd_local::write(
+        &run_dir,
+        "summary.json",
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    println!("{}", serde_json::to_string(&summary)?);
+    if summary.interrupted {
+        eprintln!("interrupted: the run was stopped cleanly; its directory is {}", run_dir.display());
+        std::process::exit(130);
+    }
+    Ok(())
+}
+
+#[derive(Debug, clap::Args)]
+pub struct SwapArgs {
+    /// The run directory of a live run.
+    #[arg(long)]
+    pub run: PathBuf,
+    /// The new demonstrator, by name (`alfd expert list`).
+    #[arg(long)]
+    pub expert: String,
+    /// Seconds to wait for the swap to complete.
+    #[arg(long, default_value_t = 90)]
+    pub timeout: u64,
+}
+
+/// Asks the launcher of a live run to replace its expert, and waits for the outcome.
+pub fn swap(args: SwapArgs) -> anyhow::Result<()> {
+    alfd_expert::registry::cartpole(&args.expert)?;
+    let info = launcher::read_run_info(&args.run).map_err(|e| usage(format!("{e:#}")))?;
+    if !PathBuf::from(format!("/proc/{}", info.launcher_pid)).exists() {
+        return Err(usage(format!(
+            "run {} is not live (its launcher, pid {}, has exited)",
+            info.run_id, info.launcher_pid
+        )));
+    }
+    let id = format!("{}-{}", std::process::id(), launcher::new_run_id());
+    let request = SwapRequest {
+        id: id.clone(),
+        expert: args.expert.clone(),
+    };
+    crate::cmd_local::write(&args.run, SWAP_REQUEST, serde_json::to_string(&request)?.as_bytes())?;
+    let start = Instant::now();
+    loop {
+        if let Ok(text) = std::fs::read_to_string(args.run.join(SWAP_RESPONSE)) {
+            if let Ok(r) = serde_json::from_str::<SwapResponse>(&text) {
+                if r.id == id {
+                    println!("{}", serde_json::to_string(&r)?);
+                    anyhow::ensure!(r.ok, "expert swap failed: {}", r.message);
+                    return Ok(());
+                }
+            }
+        }
+        anyhow::ensure!(
+            start.elapsed() < Duration::from_secs(args.timeout),
+            "no answer from the launcher of run {} within {} s",
+            info.run_id,
+            args.timeout
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}

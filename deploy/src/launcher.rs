@@ -1,0 +1,810 @@
+//! The launcher of a multi-process run: starts the learner, the expert and N actors as separate OS
+//! processes under one run id (with its own iceoryx2 prefix), shows progress, writes the run
+//! directory, restarts crashed actors, carries out expert swaps, and stops everything cleanly.
+//!
+//! # Expert swap (make before break)
+//! `alfd swap-expert` drops `swap-expert.request.json` into the run directory; the launcher
+//! 1. starts the new expert (generation g + 1); it loads its demonstrator, checks `demos.jsonl`,
+//!    joins the run and reports `standby` (a new expert that fails here leaves the run untouched);
+//! 2. announces generation g + 1 as the newest: the old expert stops answering and exits;
+//! 3. once the old process has exited, makes the new one active: it reads `demos.jsonl` back
+//!    (budget left, demonstration set, model) and answers from then on;
+//! 4. writes `swap-expert.response.json`.
+//!
+//! Only the active expert answers, and it is made active only after its predecessor exited, so
+//! no demonstration is counted twice and the budget is never exceeded. Queries asked in the short
+//! gap go unanswered and the actors act on their own.
+
+use std::collections::VecDeque;
+use std::fs::File;
+use std::io::Write as _;
+use std::os::unix::process::CommandExt as _;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+use alfd_common::config::ExperimentConfig;
+use alfd_common::runner::{EpisodeRecord, CSV_HEADER};
+use alfd_common::wire::{
+    self, command, process_state, progress_kind, Bell, Control, Doorbell, Process, Progress, Role,
+    Wake, Wire, WireError, CONTROL_PERIOD,
+};
+use anyhow::{bail, Context as _};
+use serde::{Deserialize, Serialize};
+use tracing::{debug, info, warn};
+
+/// Everything a launch needs.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub cfg: ExperimentConfig,
+    pub actors: usize,
+    pub run_dir: PathBuf,
+    pub run_id: String,
+    /// Credit window of the actors, in steps.
+    pub window: u64,
+    pub query_timeout_ms: u64,
+    pub weights_every: u64,
+    /// Restarts allowed per actor before the run fails.
+    pub max_restarts: u32,
+    pub progress: bool,
+    /// Where `alfd-learner`, `alfd-actor` and `alfd-expert` are.
+    pub bin_dir: PathBuf,
+}
+
+/// What `run.json` records: how to reach a live run.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RunInfo {
+    pub run_id: String,
+    pub prefix: String,
+    pub launcher_pid: u32,
+    pub actors: usize,
+    pub schema_version: u32,
+}
+
+/// `swap-expert.request.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SwapRequest {
+    pub id: String,
+    pub expert: String,
+}
+
+/// `swap-expert.response.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SwapResponse {
+    pub id: String,
+    pub ok: bool,
+    pub message: String,
+    pub from: String,
+    pub to: String,
+    pub generation: u32,
+    /// Episodes recorded when the new expert became active.
+    pub at_episode: u64,
+}
+
+pub const SWAP_REQUEST: &str = "swap-expert.request.json";
+pub const SWAP_RESPONSE: &str = "swap-expert.response.json";
+
+/// What a finished run reports (also written as `summary.json`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RunSummary {
+    pub run_id: String,
+    pub episodes: usize,
+    pub mean_return_last_50: f64,
+    /// Lines of `demos.jsonl`.
+    pub demos: usize,
+    pub env_steps: u64,
+    pub updates: u64,
+    pub wall_clock_s: f64,
+    pub env_steps_per_s: f64,
+    pub updates_per_s: f64,
+    pub actor_restarts: u32,
+    pub expert_swaps: u32,
+    /// The run was stopped by Ctrl-C (or SIGTERM) before its last episode.
+    pub interrupted: bool,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Kind {
+    Learner,
+    Expert { generation: u16, name: String },
+    Actor { id: u16, incarnation: u64 },
+}
+
+/// One child process.
+#[derive(Debug)]
+struct Proc {
+    name: String,
+    kind: Kind,
+    child: Child,
+}
+
+/// A swap in progress.
+#[derive(Debug)]
+struct Swap {
+    request: SwapRequest,
+    from: u16,
+    to: u16,
+    phase: SwapPhase,
+    started: Instant,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum SwapPhase {
+    /// The new expert is starting.
+    Starting,
+    /// The new one is up; the old one was told to go.
+    OldLeaving,
+    /// The old one has gone; the new one was made active.
+    Activating,
+}
+
+/// The latest status of each process, as reported on `progress`.
+#[derive(Debug, Default)]
+struct Seen {
+    learner_state: u32,
+    learner_env_steps: u64,
+    learner_updates: u64,
+    /// (generation, state, demos).
+    experts: Vec<(u16, u32, u64)>,
+}
+
+impl Seen {
+    fn expert(&self, generation: u16) -> Option<(u32, u64)> {
+        self.experts
+            .iter()
+            .find(|e| e.0 == generation)
+            .map(|e| (e.1, e.2))
+    }
+
+    fn set_expert(&mut self, generation: u16, state: u32, demos: u64) {
+        match self.experts.iter_mut().find(|e| e.0 == generation) {
+            Some(e) => *e = (generation, state, demos),
+            None => self.experts.push((generation, state, demos)),
+        }
+    }
+}
+
+/// A run id: the time and the launcher's pid, `r<unix seconds>-<pid>`.
+pub fn new_run_id() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    format!("r{secs}-{}", std::process::id())
+}
+
+/// Where the process binaries are: `ALFD_BIN_DIR`, else next to the running `alfd`.
+pub fn bin_dir() -> anyhow::Result<PathBuf> {
+    if let Some(d) = std::env::var_os("ALFD_BIN_DIR") {
+        return Ok(PathBuf::from(d));
+    }
+    let exe = std::env::current_exe().context("cannot locate the running alfd binary")?;
+    Ok(exe
+        .parent()
+        .context("the alfd binary has no parent directory")?
+        .to_owned())
+}
+
+/// Runs the plan to the end (or to Ctrl-C); an error names the process that failed.
+pub fn launch(plan: &Plan) -> anyhow::Result<RunSummary> {
+    for bin in ["alfd-learner", "alfd-actor", "alfd-expert"] {
+        let p = plan.bin_dir.join(bin);
+        anyhow::ensure!(
+            p.is_file(),
+            "{bin} not found in {} (build every binary: `cargo build --release`, or use deploy/run.sh)",
+            plan.bin_dir.display()
+        );
+    }
+    std::fs::create_dir_all(&plan.run_dir)
+        .with_context(|| format!("cannot create run directory {}", plan.run_dir.display()))?;
+    crate::cmd_local::write(&plan.run_dir, "config.toml", plan.cfg.to_toml().as_bytes())?;
+    let info = RunInfo {
+        run_id: plan.run_id.clone(),
+        prefix: wire::run_prefix(&plan.run_id),
+        launcher_pid: std::process::id(),
+        actors: plan.actors,
+        schema_version: wire::SCHEMA_VERSION,
+    };
+    crate::cmd_local::write(
+        &plan.run_dir,
+        "run.json",
+        serde_json::to_string_pretty(&info)?.as_bytes(),
+    )?;
+    let _ = std::fs::remove_file(plan.run_dir.join(SWAP_REQUEST));
+    let _ = std::fs::remove_file(plan.run_dir.join(SWAP_RESPONSE));
+
+    let result = {
+        let wire = Wire::connect(&plan.run_id, Process::new(Role::Launcher, 0), wire::SCHEMA_VERSION)
+            .context("cannot create the run's iceoryx2 node")?;
+        let mut launcher = Launcher::new(plan, &wire)?;
+        let result = launcher.run();
+        // Whatever happened, no child outlives the launcher.
+        launcher.stop_all();
+        result
+    };
+    // Every node of the run is gone: remove what iceoryx2 keeps per prefix.
+    if let Err(e) = wire::close_run(&plan.run_id) {
+        warn!("cannot close the run's iceoryx2 resources: {e}");
+    }
+    let left = wire::leftover_files(&plan.run_id);
+    if !left.is_empty() {
+        warn!(files = ?left, "iceoryx2 files left behind");
+    }
+    result
+}
+
+struct Launcher<'a, 'w> {
+    plan: &'a Plan,
+    control: Control,
+    control_tx: wire::Sender<'w, Control>,
+    progress_rx: wire::Receiver<'w, Progress>,
+    waiter: wire::Waiter,
+    bells: [Bell; 3],
+    procs: Vec<Proc>,
+    seen: Seen,
+    csv: File,
+    recorded: u64,
+    returns: VecDeque<f64>,
+    all_returns: Vec<f64>,
+    demos_used: u64,
+    restarts: u32,
+    swaps: u32,
+    swap: Option<Swap>,
+    generation: u16,
+    expert_name: String,
+    started: Instant,
+    last_control: Instant,
+    bar: indicatif::ProgressBar,
+    rate: RateMeter,
+}
+
+impl<'a, 'w> Launcher<'a, 'w> {
+    fn new(plan: &'a Plan, wire: &'w Wire) -> anyhow::Result<Self> {
+        let control = Control {
+            command: command::RUN,
+            active_expert: 0,
+            newest_expert: 1,
+            ..Control::default()
+        };
+        let mut control_tx = wire.control_sender()?;
+        control_tx.send(control)?;
+        let mut csv = File::create(plan.run_dir.join("episodes.csv"))
+            .context("cannot create episodes.csv")?;
+        writeln!(csv, "{CSV_HEADER},actor")?;
+        let bar = if plan.progress {
+            let bar = indicatif::ProgressBar::new(u64::from(plan.cfg.episodes));
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{elapsed_precise} [{bar:25}] {pos}/{len} episodes  {msg}",
+                )
+                .expect("valid template")
+                .progress_chars("=> "),
+            );
+            bar
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
+        Ok(Self {
+            plan,
+            control,
+            control_tx,
+            progress_rx: wire.progress_receiver()?,
+            waiter: wire.waiter(Doorbell::Launcher)?,
+            bells: [
+                wire.bell(Doorbell::Learner)?,
+                wire.bell(Doorbell::Expert)?,
+                wire.bell(Doorbell::Actors)?,
+            ],
+            procs: Vec::new(),
+            seen: Seen::default(),
+            csv,
+            recorded: 0,
+            returns: VecDeque::new(),
+            all_returns: Vec::new(),
+            demos_used: 0,
+            restarts: 0,
+            swaps: 0,
+            swap: None,
+            generation: 1,
+            expert_name: plan.cfg.expert.name.clone(),
+            started: Instant::now(),
+            last_control: Instant::now(),
+            bar,
+            rate: RateMeter::default(),
+        })
+    }
+
+    fn run(&mut self) -> anyhow::Result<RunSummary> {
+        info!(run_id = %self.plan.run_id, actors = self.plan.actors, "run starting");
+        self.spawn(Kind::Learner)?;
+        let name = self.expert_name.clone();
+        self.spawn(Kind::Expert {
+            generation: 1,
+            name,
+        })?;
+        // The learner and the expert are up before the first actor asks anything.
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            if self.tick()? == Wake::Signal {
+                return Ok(self.summary(true));
+            }
+            self.check_children()?;
+            if self.seen.learner_state == process_state::RUNNING
+                && self.seen.expert(1).is_some_and(|(s, _)| s == process_state::STANDBY)
+            {
+                break;
+            }
+            anyhow::ensure!(
+                Instant::now() < deadline,
+                "the learner and the expert did not come up within 60 s (see learner.log, expert-1.log)"
+            );
+        }
+        self.control.active_expert = 1;
+        self.publish_control()?;
+        for id in 0..self.plan.actors as u16 {
+            self.spawn(Kind::Actor { id, incarnation: 1 })?;
+        }
+        let interrupted = loop {
+            if self.tick()? == Wake::Signal {
+                break true;
+            }
+            self.check_children()?;
+            self.check_swap()?;
+            if self.recorded >= u64::from(self.plan.cfg.episodes) {
+                break false;
+            }
+        };
+        self.shutdown()?;
+        self.bar.finish_and_clear();
+        Ok(self.summary(interrupted))
+    }
+
+    /// Waits for news (at most 100 ms), takes in progress, keeps the heartbeat going.
+    fn tick(&mut self) -> anyhow::Result<Wake> {
+        let wake = self.waiter.wait(Duration::from_millis(100))?;
+        self.drain_progress()?;
+        if self.last_control.elapsed() >= CONTROL_PERIOD {
+            self.publish_control()?;
+        }
+        self.show();
+        Ok(wake)
+    }
+
+    fn publish_control(&mut self) -> anyhow::Result<()> {
+        self.control_tx.send(self.control)?;
+        for b in &self.bells {
+            b.ring()?;
+        }
+        self.last_control = Instant::now();
+        Ok(())
+    }
+
+    fn drain_progress(&mut self) -> anyhow::Result<()> {
+        loop {
+            let p = match self.progress_rx.receive() {
+                Ok(Some(p)) => p,
+                Ok(None) => return Ok(()),
+                Err(e @ WireError::SchemaMismatch { .. }) => {
+                    warn!("{e}; progress message dropped");
+                    continue;
+                }
+                Err(e) => return Err(e.into()),
+            };
+            let role = Role::from_u16(p.header.role);
+            match (p.kind, role) {
+                (progress_kind::EPISODE, Some(Role::Actor)) => self.record_episode(&p)?,
+                (progress_kind::STATUS, Some(Role::Learner)) => {
+                    self.seen.learner_state = p.state;
+                    self.seen.learner_env_steps = p.env_steps;
+                    self.seen.learner_updates = p.updates;
+                    self.rate.observe(p.env_steps, p.updates);
+                }
+                (progress_kind::STATUS, Some(Role::Expert)) => {
+                    debug!(generation = p.header.id, state = p.state, demos = p.demos, "expert status");
+                    self.seen.set_expert(p.header.id, p.state, p.demos);
+                    if p.header.id == self.control.active_expert as u16 {
+                        self.demos_used = self.demos_used.max(p.demos);
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+
+    fn record_episode(&mut self, p: &Progress) -> anyhow::Result<()> {
+        if self.recorded >= u64::from(self.plan.cfg.episodes) {
+            return Ok(());
+        }
+        self.demos_used = self.demos_used.max(p.demos_used);
+        let r = EpisodeRecord {
+            episode: self.recorded as u32,
+            ret: p.episode_return,
+            length: p.length as u32,
+            demos_used: self.demos_used as u32,
+            mean_js: p.mean_js,
+            queries: p.queries as u32,
+            shaped_steps: p.shaped_steps as u32,
+            total_steps: p.total_steps,
+        };
+        writeln!(self.csv, "{},{}", r.csv_row(), p.header.id)?;
+        self.recorded += 1;
+        self.returns.push_back(p.episode_return);
+        if self.returns.len() > 20 {
+            self.returns.pop_front();
+        }
+        self.all_returns.push(p.episode_return);
+        self.bar.inc(1);
+        Ok(())
+    }
+
+    fn show(&self) {
+        let mean = if self.returns.is_empty() {
+            0.0
+        } else {
+            self.returns.iter().sum::<f64>() / self.returns.len() as f64
+        };
+        let (sps, ups) = self.rate.rates();
+        self.bar.set_message(format!(
+            "return {mean:.1} (last 20)  demos {}/{}  {sps:.0} steps/s  {ups:.0} updates/s",
+            self.demos_used,
+            self.plan.cfg.budget()
+        ));
+    }
+
+    fn spawn(&mut self, kind: Kind) -> anyhow::Result<()> {
+        let plan = self.plan;
+        let (bin, name, mut args) = match &kind {
+            Kind::Learner => (
+                "alfd-learner",
+                "learner".to_owned(),
+                vec![
+                    format!("--window={}", plan.window),
+                    format!("--weights-every={}", plan.weights_every),
+                ],
+            ),
+            Kind::Expert { generation, name } => (
+                "alfd-expert",
+                format!("expert-{generation}"),
+                vec![format!("--generation={generation}"), format!("--expert={name}")],
+            ),
+            Kind::Actor { id, incarnation } => (
+                "alfd-actor",
+                format!("actor-{id}"),
+                vec![
+                    format!("--actor-id={id}"),
+                    format!("--incarnation={incarnation}"),
+                    format!("--window={}", plan.window),
+                    format!("--query-timeout-ms={}", plan.query_timeout_ms),
+                ],
+            ),
+        };
+        args.push(format!("--run-id={}", plan.run_id));
+        args.push(format!("--run-dir={}", plan.run_dir.display()));
+        let log_path = plan.run_dir.join(format!("{name}.log"));
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&log_path)
+            .with_context(|| format!("cannot open {}", log_path.display()))?;
+        let child = Command::new(plan.bin_dir.join(bin))
+            .args(&args)
+            .stdin(Stdio::null())
+            .stdout(log.try_clone()?)
+            .stderr(log)
+            // Its own process group: Ctrl-C reaches the launcher only, which stops the run in order.
+            .process_group(0)
+            .spawn()
+            .with_context(|| format!("cannot start {bin}"))?;
+        info!(process = %name, pid = child.id(), "started");
+        self.procs.push(Proc { name, kind, child });
+        Ok(())
+    }
+
+    /// Reaps exited children: restarts actors, fails the run for anything else unexpected.
+    fn check_children(&mut self) -> anyhow::Result<()> {
+        let mut i = 0;
+        while i < self.procs.len() {
+            let Some(status) = self.procs[i].child.try_wait()? else {
+                i += 1;
+                continue;
+            };
+            let proc = self.procs.remove(i);
+            let how = describe(status);
+            match proc.kind {
+                Kind::Actor { id, incarnation } => {
+                    warn!(process = %proc.name, "{how}");
+                    let restarts = (incarnation - 1) as u32;
+                    if restarts >= self.plan.max_restarts {
+                        bail!(
+                            "alfd-actor {} {how}, and was restarted {restarts} times already; see {}",
+                            proc.name,
+                            self.log_of(&proc.name)
+                        );
+                    }
+                    // The dead process's iceoryx2 node goes before its successor comes.
+                    match wire::cleanup_dead_nodes(&self.plan.run_id) {
+                        Ok(removed) if !removed.is_empty() => info!(?removed, "dead nodes cleaned up"),
+                        Ok(_) => {}
+                        Err(e) => warn!("cannot clean up dead nodes: {e}"),
+                    }
+                    self.restarts += 1;
+                    self.spawn(Kind::Actor {
+                        id,
+                        incarnation: incarnation + 1,
+                    })?;
+                }
+                Kind::Expert { generation, .. }
+                    if self
+                        .swap
+                        .as_ref()
+                        .is_some_and(|s| s.from == generation && s.phase == SwapPhase::OldLeaving) =>
+                {
+                    info!(process = %proc.name, "{how} (replaced)");
+                    let _ = wire::cleanup_dead_nodes(&self.plan.run_id);
+                    let to = self.swap.as_ref().map(|s| s.to).unwrap_or_default();
+                    self.control.active_expert = u32::from(to);
+                    self.publish_control()?;
+                    if let Some(s) = self.swap.as_mut() {
+                        s.phase = SwapPhase::Activating;
+                    }
+                }
+                Kind::Expert { generation, .. }
+                    if self
+                        .swap
+                        .as_ref()
+                        .is_some_and(|s| s.to == generation && s.phase == SwapPhase::Starting) =>
+                {
+                    warn!(process = %proc.name, "{how} before it was ready; swap abandoned");
+                    let swap = self.swap.take().expect("checked above");
+                    self.respond(&swap, false, format!("the new expert {how}; see {}", self.log_of(&proc.name)))?;
+                    self.control.newest_expert = u32::from(swap.from);
+                }
+                _ => bail!(
+                    "{} {how}; see {}",
+                    proc_binary(&proc.kind, &proc.name),
+                    self.log_of(&proc.name)
+                ),
+            }
+        }
+        Ok(())
+    }
+
+    fn log_of(&self, name: &str) -> String {
+        self.plan.run_dir.join(format!("{name}.log")).display().to_string()
+    }
+
+    /// Takes a swap request, and moves a swap in progress along.
+    fn check_swap(&mut self) -> anyhow::Result<()> {
+        let request_path = self.plan.run_dir.join(SWAP_REQUEST);
+        if request_path.exists() {
+            let text = std::fs::read_to_string(&request_path).unwrap_or_default();
+            let _ = std::fs::remove_file(&request_path);
+            match serde_json::from_str::<SwapRequest>(&text) {
+                Err(e) => warn!("ignoring a malformed swap request: {e}"),
+                Ok(request) if self.swap.is_some() => {
+                    let fake = Swap {
+                        request,
+                        from: self.generation,
+                        to: self.generation,
+                        phase: SwapPhase::Starting,
+                        started: Instant::now(),
+                    };
+                    self.respond(&fake, false, "another swap is in progress".to_owned())?;
+                }
+                Ok(request) => {
+                    let from = self.generation;
+                    let to = from + 1;
+                    info!(from, to, expert = %request.expert, "expert swap requested");
+                    self.spawn(Kind::Expert {
+                        generation: to,
+                        name: request.expert.clone(),
+                    })?;
+                    self.swap = Some(Swap {
+                        request,
+                        from,
+                        to,
+                        phase: SwapPhase::Starting,
+                        started: Instant::now(),
+                    });
+                }
+            }
+        }
+        let Some(swap) = self.swap.as_mut() else {
+            return Ok(());
+        };
+        let new_state = self.seen.expert(swap.to).map(|(s, _)| s);
+        match swap.phase {
+            SwapPhase::Starting if new_state == Some(process_state::STANDBY) => {
+                // Make before break: the new expert is up; now the old one goes.
+                swap.phase = SwapPhase::OldLeaving;
+                self.control.newest_expert = u32::from(swap.to);
+                self.control.active_expert = 0;
+                self.publish_control()?;
+            }
+            SwapPhase::Activating if new_state == Some(process_state::RUNNING) => {
+                let swap = self.swap.take().expect("in progress");
+                self.generation = swap.to;
+                self.expert_name = swap.request.expert.clone();
+                self.swaps += 1;
+                info!(generation = swap.to, expert = %swap.request.expert, "expert swapped");
+                self.respond(&swap, true, "swapped".to_owned())?;
+            }
+            SwapPhase::Starting if swap.started.elapsed() > Duration::from_secs(60) => {
+                let swap = self.swap.take().expect("in progress");
+                if let Some(i) = self.procs.iter().position(|p| {
+                    p.kind
+                        == Kind::Expert {
+                            generation: swap.to,
+                            name: swap.request.expert.clone(),
+                        }
+                }) {
+                    let mut p = self.procs.remove(i);
+                    let _ = p.child.kill();
+                    let _ = p.child.wait();
+                }
+                self.respond(&swap, false, "the new expert did not come up within 60 s".to_owned())?;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn respond(&self, swap: &Swap, ok: bool, message: String) -> anyhow::Result<()> {
+        let r = SwapResponse {
+            id: swap.request.id.clone(),
+            ok,
+            message,
+            from: self.expert_name.clone(),
+            to: swap.request.expert.clone(),
+            generation: u32::from(swap.to),
+            at_episode: self.recorded,
+        };
+        if !ok {
+            warn!(message = %r.message, "expert swap failed");
+        }
+        crate::cmd_local::write(
+            &self.plan.run_dir,
+            SWAP_RESPONSE,
+            serde_json::to_string_pretty(&r)?.as_bytes(),
+        )
+    }
+
+    /// Tells every process to stop and waits for them (the learner saves its weights).
+    fn shutdown(&mut self) -> anyhow::Result<()> {
+        info!(episodes = self.recorded, "stopping the run");
+        self.control.command = command::SHUTDOWN;
+        self.publish_control()?;
+        let deadline = Instant::now() + Duration::from_secs(30);
+        let mut failures = Vec::new();
+        while !self.procs.is_empty() && Instant::now() < deadline {
+            let wake = self.waiter.wait(Duration::from_millis(50))?;
+            self.drain_progress()?;
+            if self.last_control.elapsed() >= CONTROL_PERIOD {
+                self.publish_control()?;
+            }
+            let mut i = 0;
+            while i < self.procs.len() {
+                match self.procs[i].child.try_wait()? {
+                    None => i += 1,
+                    Some(status) => {
+                        let p = self.procs.remove(i);
+                        if !status.success() {
+                            failures.push(format!(
+                                "{} {}; see {}",
+                                proc_binary(&p.kind, &p.name),
+                                describe(status),
+                                self.log_of(&p.name)
+                            ));
+                        }
+                    }
+                }
+            }
+            let _ = wake;
+        }
+        for p in &self.procs {
+            failures.push(format!("{} did not stop within 30 s and was killed", p.name));
+        }
+        self.stop_all();
+        self.drain_progress()?;
+        if !failures.is_empty() {
+            bail!("{}", failures.join("; "));
+        }
+        anyhow::ensure!(
+            self.plan.run_dir.join("weights.safetensors").is_file(),
+            "the learner stopped without saving weights.safetensors; see {}",
+            self.log_of("learner")
+        );
+        Ok(())
+    }
+
+    /// Kills whatever child is still running (used on errors) and reaps it.
+    fn stop_all(&mut self) {
+        for p in &mut self.procs {
+            if matches!(p.child.try_wait(), Ok(None)) {
+                warn!(process = %p.name, "killing");
+                let _ = p.child.kill();
+            }
+            let _ = p.child.wait();
+        }
+        self.procs.clear();
+        let _ = wire::cleanup_dead_nodes(&self.plan.run_id);
+    }
+
+    fn summary(&self, interrupted: bool) -> RunSummary {
+        let tail = &self.all_returns[self.all_returns.len().saturating_sub(50)..];
+        let wall = self.started.elapsed().as_secs_f64();
+        let demos = std::fs::read_to_string(self.plan.run_dir.join("demos.jsonl"))
+            .map(|t| t.lines().count())
+            .unwrap_or(0);
+        RunSummary {
+            run_id: self.plan.run_id.clone(),
+            episodes: self.all_returns.len(),
+            mean_return_last_50: tail.iter().sum::<f64>() / tail.len().max(1) as f64,
+            demos,
+            env_steps: self.seen.learner_env_steps,
+            updates: self.seen.learner_updates,
+            wall_clock_s: wall,
+            env_steps_per_s: self.seen.learner_env_steps as f64 / wall.max(1e-9),
+            updates_per_s: self.seen.learner_updates as f64 / wall.max(1e-9),
+            actor_restarts: self.restarts,
+            expert_swaps: self.swaps,
+            interrupted,
+        }
+    }
+}
+
+/// The binary a process runs, for messages.
+fn proc_binary(kind: &Kind, name: &str) -> String {
+    match kind {
+        Kind::Learner => "alfd-learner".to_owned(),
+        Kind::Expert { .. } => format!("alfd-expert ({name})"),
+        Kind::Actor { .. } => format!("alfd-actor ({name})"),
+    }
+}
+
+/// "exited with status 1", "was killed by signal 9".
+fn describe(status: ExitStatus) -> String {
+    use std::os::unix::process::ExitStatusExt as _;
+    match (status.code(), status.signal()) {
+        (Some(c), _) => format!("exited with status {c}"),
+        (None, Some(s)) => format!("was killed by signal {s}"),
+        _ => "exited".to_owned(),
+    }
+}
+
+/// Environment steps and updates per second over the last few seconds.
+#[derive(Debug, Default)]
+struct RateMeter {
+    samples: VecDeque<(Instant, u64, u64)>,
+}
+
+impl RateMeter {
+    fn observe(&mut self, steps: u64, updates: u64) {
+        let now = Instant::now();
+        self.samples.push_back((now, steps, updates));
+        while self
+            .samples
+            .front()
+            .is_some_and(|s| now.duration_since(s.0) > Duration::from_secs(5))
+        {
+            self.samples.pop_front();
+        }
+    }
+
+    fn rates(&self) -> (f64, f64) {
+        match (self.samples.front(), self.samples.back()) {
+            (Some(a), Some(b)) if b.0 > a.0 => {
+                let dt = b.0.duration_since(a.0).as_secs_f64();
+                ((b.1 - a.1) as f64 / dt, (b.2 - a.2) as f64 / dt)
+            }
+            _ => (0.0, 0.0),
+        }
+    }
+}
+
+/// Reads `run.json` of a run directory.
+pub fn read_run_info(run_dir: &Path) -> anyhow::Result<RunInfo> {
+    let path = run_dir.join("run.json");
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("{} is not a run directory (no run.json)", run_dir.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("malformed {}", path.display()))
+}
