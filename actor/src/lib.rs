@@ -93,6 +93,29 @@ struct ExpertView {
     last_demo_step: u64,
 }
 
+impl ExpertView {
+    /// Takes in the newest demonstration model, if one arrived.
+    fn take_model(
+        &mut self,
+        rx: &wire::DemoModelReceiver<'_>,
+        bytes: &mut Vec<u8>,
+    ) -> anyhow::Result<()> {
+        if let Some(h) = rx.latest_into(bytes)? {
+            self.model = if h.len == 0 {
+                None
+            } else {
+                Some(postcard::from_bytes(bytes).context("malformed demonstration model")?)
+            };
+            self.model_demos = h.demos as usize;
+            self.last_demo_step = h.last_demo_step;
+            self.budget_left = h.budget_left;
+            self.demos = self.demos.max(u64::from(h.demos));
+            debug!(version = h.version, demos = h.demos, "demonstration model");
+        }
+        Ok(())
+    }
+}
+
 /// Runs the actor until the launcher says stop or a termination signal arrives.
 pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     anyhow::ensure!(
@@ -158,7 +181,12 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         );
         waiter.wait(Duration::from_millis(50))?;
     }
-    info!(actor = id, incarnation, weights = actor.weights_version(), "actor running");
+    info!(
+        actor = id,
+        incarnation,
+        weights = actor.weights_version(),
+        "actor running"
+    );
 
     let schedule = cfg.shaping.schedule();
     let mut view = ExpertView {
@@ -179,6 +207,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let mut timeouts = 0u64;
     let mut since_check = 0u32;
     let mut last_status = Instant::now();
+    let (mut credit_waits, mut credit_wait) = (0u64, Duration::ZERO);
 
     // Sends the batch (if any) and starts the next one at `next_seq`.
     let flush = |batch: &mut TransitionBatch,
@@ -200,22 +229,49 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         let (mut ret, mut length, mut js_sum) = (0.0f64, 0u64, 0.0f64);
         let (mut queries, mut shaped_steps) = (0u64, 0u64);
         loop {
-            // Take in the news: weights, demonstration model, credits, control.
+            // The credit throttle: wait for the learner rather than run ahead of it.
+            let granted = |c: &Option<Credits>| {
+                c.as_ref()
+                    .and_then(|c| c.granted_for(id, incarnation))
+                    .unwrap_or(0)
+                    .max(args.window)
+            };
+            if next_seq >= granted(&credits) {
+                flush(&mut batch, &mut tx, next_seq)?;
+                let blocked = Instant::now();
+                credit_waits += 1;
+                while next_seq >= granted(&credits) {
+                    if waiter.wait(Duration::from_millis(100))? == Wake::Signal {
+                        break 'run "termination signal";
+                    }
+                    if let Some(c) = credits_rx.latest()? {
+                        credits = Some(c);
+                    }
+                    control.poll()?;
+                    if control.shutdown_requested() {
+                        break 'run "the launcher said stop";
+                    }
+                    anyhow::ensure!(
+                        control.silence() < LAUNCHER_SILENCE,
+                        "no word from the launcher for {:?}: giving up",
+                        control.silence()
+                    );
+                }
+                credit_wait += blocked.elapsed();
+                if blocked.elapsed() > Duration::from_millis(5) {
+                    debug!(
+                        waited_ms = blocked.elapsed().as_millis() as u64,
+                        next_seq,
+                        granted = granted(&credits),
+                        "long credit wait"
+                    );
+                }
+            }
+            // Take in the news (after any wait): weights, demonstration model, credits, control.
             if let Some(h) = weights_rx.latest_into(&mut params)? {
                 actor.set_weights(&params, h.version)?;
             }
-            if let Some(h) = model_rx.latest_into(&mut model_bytes)? {
-                view.model = if h.len == 0 {
-                    None
-                } else {
-                    Some(postcard::from_bytes(&model_bytes).context("malformed demonstration model")?)
-                };
-                view.model_demos = h.demos as usize;
-                view.last_demo_step = h.last_demo_step;
-                view.budget_left = h.budget_left;
-                view.demos = view.demos.max(u64::from(h.demos));
-                debug!(version = h.version, demos = h.demos, "demonstration model");
-            }
+            view.take_model(&model_rx, &mut model_bytes)?;
             if let Some(c) = credits_rx.latest()? {
                 credits = Some(c);
             }
@@ -237,33 +293,6 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 if last_status.elapsed() >= Duration::from_secs(1) {
                     progress.send(status(pid, incarnation, next_seq, &view, &actor))?;
                     last_status = Instant::now();
-                }
-            }
-            // The credit throttle: wait for the learner rather than run ahead of it.
-            let granted = |c: &Option<Credits>| {
-                c.as_ref()
-                    .and_then(|c| c.granted_for(id, incarnation))
-                    .unwrap_or(0)
-                    .max(args.window)
-            };
-            if next_seq >= granted(&credits) {
-                flush(&mut batch, &mut tx, next_seq)?;
-                while next_seq >= granted(&credits) {
-                    if waiter.wait(Duration::from_millis(100))? == Wake::Signal {
-                        break 'run "termination signal";
-                    }
-                    if let Some(c) = credits_rx.latest()? {
-                        credits = Some(c);
-                    }
-                    control.poll()?;
-                    if control.shutdown_requested() {
-                        break 'run "the launcher said stop";
-                    }
-                    anyhow::ensure!(
-                        control.silence() < LAUNCHER_SILENCE,
-                        "no word from the launcher for {:?}: giving up",
-                        control.silence()
-                    );
                 }
             }
             let global_step = credits
@@ -288,6 +317,9 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                         action = r.action as usize;
                         demo = true;
                         queries += 1;
+                        // The expert published the model refitted with this demonstration
+                        // before answering: shape this very step with it, as Algorithm 1 does.
+                        view.take_model(&model_rx, &mut model_bytes)?;
                         view.budget_left = r.budget_left;
                         view.demos = view.demos.max(u64::from(r.demo_index) + 1);
                     }
@@ -351,14 +383,28 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         })?;
         episode += 1;
     };
-    info!(reason = stop_reason, episodes = episode, steps = next_seq, timeouts, "actor stopping");
+    info!(
+        reason = stop_reason,
+        episodes = episode,
+        steps = next_seq,
+        timeouts,
+        credit_waits,
+        credit_wait_s = credit_wait.as_secs_f64(),
+        "actor stopping"
+    );
     let mut last = status(pid, incarnation, next_seq, &view, &actor);
     last.state = process_state::EXITING;
     progress.send(last)?;
     Ok(())
 }
 
-fn status(pid: u32, incarnation: u64, steps: u64, view: &ExpertView, actor: &NeuralActor) -> Progress {
+fn status(
+    pid: u32,
+    incarnation: u64,
+    steps: u64,
+    view: &ExpertView,
+    actor: &NeuralActor,
+) -> Progress {
     Progress {
         kind: progress_kind::STATUS,
         state: process_state::RUNNING,
@@ -414,7 +460,11 @@ impl Query<'_, '_> {
             if now >= deadline {
                 return Ok(Answer::Timeout);
             }
-            if self.waiter.wait((deadline - now).min(Duration::from_millis(50)))? == Wake::Signal {
+            if self
+                .waiter
+                .wait((deadline - now).min(Duration::from_millis(50)))?
+                == Wake::Signal
+            {
                 return Ok(Answer::Timeout);
             }
         }
@@ -428,11 +478,21 @@ mod tests {
     #[test]
     fn actor_zero_uses_the_single_process_streams_and_restarts_new_ones() {
         assert_eq!(seed_streams(0, 1), ("actor-0".to_owned(), "env".to_owned()));
-        assert_eq!(seed_streams(3, 1), ("actor-3".to_owned(), "env-3".to_owned()));
-        assert_eq!(seed_streams(0, 2), ("actor-0-r2".to_owned(), "env-0-r2".to_owned()));
+        assert_eq!(
+            seed_streams(3, 1),
+            ("actor-3".to_owned(), "env-3".to_owned())
+        );
+        assert_eq!(
+            seed_streams(0, 2),
+            ("actor-0-r2".to_owned(), "env-0-r2".to_owned())
+        );
         let all: std::collections::HashSet<_> = (0..4u16)
             .flat_map(|a| (1..4u64).map(move |i| seed_streams(a, i)))
             .collect();
-        assert_eq!(all.len(), 12, "every actor and incarnation has its own streams");
+        assert_eq!(
+            all.len(),
+            12,
+            "every actor and incarnation has its own streams"
+        );
     }
 }

@@ -32,7 +32,11 @@ fn init_logging(run_dir: &Path, name: &str) {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let path = run_dir.join(format!("{name}.log"));
-    match std::fs::OpenOptions::new().create(true).append(true).open(&path) {
+    match std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&path)
+    {
         Ok(file) => {
             let _ = tracing_subscriber::fmt()
                 .with_env_filter(filter)
@@ -41,7 +45,10 @@ fn init_logging(run_dir: &Path, name: &str) {
                 .try_init();
         }
         Err(e) => {
-            eprintln!("alfd-actor: cannot open log {}: {e}; logging to stderr", path.display());
+            eprintln!(
+                "alfd-actor: cannot open log {}: {e}; logging to stderr",
+                path.display()
+            );
             let _ = tracing_subscriber::fmt()
                 .with_env_filter(filter)
                 .with_writer(std::io::stderr)

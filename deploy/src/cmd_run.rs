@@ -58,10 +58,16 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         ));
     }
     if !(1..=MAX_ACTORS).contains(&args.actors) {
-        return Err(usage(format!("--actors must be in 1..={MAX_ACTORS}, got {}", args.actors)));
+        return Err(usage(format!(
+            "--actors must be in 1..={MAX_ACTORS}, got {}",
+            args.actors
+        )));
     }
     if !(1..=alfd_common::wire::MAX_CREDIT_WINDOW).contains(&args.window) {
-        return Err(usage(format!("--window must be in 1..=64, got {}", args.window)));
+        return Err(usage(format!(
+            "--window must be in 1..=64, got {}",
+            args.window
+        )));
     }
     if args.weights_every == 0 {
         return Err(usage("--weights-every must be at least 1"));
@@ -93,7 +99,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     )?;
     println!("{}", serde_json::to_string(&summary)?);
     if summary.interrupted {
-        eprintln!("interrupted: the run was stopped cleanly; its directory is {}", run_dir.display());
+        eprintln!(
+            "interrupted: the run was stopped cleanly; its directory is {}",
+            run_dir.display()
+        );
         std::process::exit(130);
     }
     Ok(())
@@ -127,7 +136,11 @@ pub fn swap(args: SwapArgs) -> anyhow::Result<()> {
         id: id.clone(),
         expert: args.expert.clone(),
     };
-    crate::cmd_local::write(&args.run, SWAP_REQUEST, serde_json::to_string(&request)?.as_bytes())?;
+    crate::cmd_local::write(
+        &args.run,
+        SWAP_REQUEST,
+        serde_json::to_string(&request)?.as_bytes(),
+    )?;
     let start = Instant::now();
     loop {
         if let Ok(text) = std::fs::read_to_string(args.run.join(SWAP_RESPONSE)) {

@@ -95,6 +95,7 @@ pub struct RunSummary {
     pub env_steps: u64,
     pub updates: u64,
     pub wall_clock_s: f64,
+    /// Rates over the time the actors ran (from their start to the end of the run).
     pub env_steps_per_s: f64,
     pub updates_per_s: f64,
     pub actor_restarts: u32,
@@ -213,8 +214,12 @@ pub fn launch(plan: &Plan) -> anyhow::Result<RunSummary> {
     let _ = std::fs::remove_file(plan.run_dir.join(SWAP_RESPONSE));
 
     let result = {
-        let wire = Wire::connect(&plan.run_id, Process::new(Role::Launcher, 0), wire::SCHEMA_VERSION)
-            .context("cannot create the run's iceoryx2 node")?;
+        let wire = Wire::connect(
+            &plan.run_id,
+            Process::new(Role::Launcher, 0),
+            wire::SCHEMA_VERSION,
+        )
+        .context("cannot create the run's iceoryx2 node")?;
         let mut launcher = Launcher::new(plan, &wire)?;
         let result = launcher.run();
         // Whatever happened, no child outlives the launcher.
@@ -252,6 +257,8 @@ struct Launcher<'a, 'w> {
     generation: u16,
     expert_name: String,
     started: Instant,
+    /// When the actors were started (rates are measured from here).
+    running_since: Instant,
     last_control: Instant,
     bar: indicatif::ProgressBar,
     rate: RateMeter,
@@ -307,6 +314,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             generation: 1,
             expert_name: plan.cfg.expert.name.clone(),
             started: Instant::now(),
+            running_since: Instant::now(),
             last_control: Instant::now(),
             bar,
             rate: RateMeter::default(),
@@ -329,7 +337,10 @@ impl<'a, 'w> Launcher<'a, 'w> {
             }
             self.check_children()?;
             if self.seen.learner_state == process_state::RUNNING
-                && self.seen.expert(1).is_some_and(|(s, _)| s == process_state::STANDBY)
+                && self
+                    .seen
+                    .expert(1)
+                    .is_some_and(|(s, _)| s == process_state::STANDBY)
             {
                 break;
             }
@@ -340,6 +351,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         }
         self.control.active_expert = 1;
         self.publish_control()?;
+        self.running_since = Instant::now();
         for id in 0..self.plan.actors as u16 {
             self.spawn(Kind::Actor { id, incarnation: 1 })?;
         }
@@ -399,7 +411,12 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     self.rate.observe(p.env_steps, p.updates);
                 }
                 (progress_kind::STATUS, Some(Role::Expert)) => {
-                    debug!(generation = p.header.id, state = p.state, demos = p.demos, "expert status");
+                    debug!(
+                        generation = p.header.id,
+                        state = p.state,
+                        demos = p.demos,
+                        "expert status"
+                    );
                     self.seen.set_expert(p.header.id, p.state, p.demos);
                     if p.header.id == self.control.active_expert as u16 {
                         self.demos_used = self.demos_used.max(p.demos);
@@ -464,7 +481,10 @@ impl<'a, 'w> Launcher<'a, 'w> {
             Kind::Expert { generation, name } => (
                 "alfd-expert",
                 format!("expert-{generation}"),
-                vec![format!("--generation={generation}"), format!("--expert={name}")],
+                vec![
+                    format!("--generation={generation}"),
+                    format!("--expert={name}"),
+                ],
             ),
             Kind::Actor { id, incarnation } => (
                 "alfd-actor",
@@ -522,7 +542,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     }
                     // The dead process's iceoryx2 node goes before its successor comes.
                     match wire::cleanup_dead_nodes(&self.plan.run_id) {
-                        Ok(removed) if !removed.is_empty() => info!(?removed, "dead nodes cleaned up"),
+                        Ok(removed) if !removed.is_empty() => {
+                            info!(?removed, "dead nodes cleaned up")
+                        }
                         Ok(_) => {}
                         Err(e) => warn!("cannot clean up dead nodes: {e}"),
                     }
@@ -533,10 +555,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     })?;
                 }
                 Kind::Expert { generation, .. }
-                    if self
-                        .swap
-                        .as_ref()
-                        .is_some_and(|s| s.from == generation && s.phase == SwapPhase::OldLeaving) =>
+                    if self.swap.as_ref().is_some_and(|s| {
+                        s.from == generation && s.phase == SwapPhase::OldLeaving
+                    }) =>
                 {
                     info!(process = %proc.name, "{how} (replaced)");
                     let _ = wire::cleanup_dead_nodes(&self.plan.run_id);
@@ -555,7 +576,11 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 {
                     warn!(process = %proc.name, "{how} before it was ready; swap abandoned");
                     let swap = self.swap.take().expect("checked above");
-                    self.respond(&swap, false, format!("the new expert {how}; see {}", self.log_of(&proc.name)))?;
+                    self.respond(
+                        &swap,
+                        false,
+                        format!("the new expert {how}; see {}", self.log_of(&proc.name)),
+                    )?;
                     self.control.newest_expert = u32::from(swap.from);
                 }
                 _ => bail!(
@@ -569,7 +594,11 @@ impl<'a, 'w> Launcher<'a, 'w> {
     }
 
     fn log_of(&self, name: &str) -> String {
-        self.plan.run_dir.join(format!("{name}.log")).display().to_string()
+        self.plan
+            .run_dir
+            .join(format!("{name}.log"))
+            .display()
+            .to_string()
     }
 
     /// Takes a swap request, and moves a swap in progress along.
@@ -641,7 +670,11 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     let _ = p.child.kill();
                     let _ = p.child.wait();
                 }
-                self.respond(&swap, false, "the new expert did not come up within 60 s".to_owned())?;
+                self.respond(
+                    &swap,
+                    false,
+                    "the new expert did not come up within 60 s".to_owned(),
+                )?;
             }
             _ => {}
         }
@@ -701,7 +734,10 @@ impl<'a, 'w> Launcher<'a, 'w> {
             let _ = wake;
         }
         for p in &self.procs {
-            failures.push(format!("{} did not stop within 30 s and was killed", p.name));
+            failures.push(format!(
+                "{} did not stop within 30 s and was killed",
+                p.name
+            ));
         }
         self.stop_all();
         self.drain_progress()?;
@@ -732,6 +768,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
     fn summary(&self, interrupted: bool) -> RunSummary {
         let tail = &self.all_returns[self.all_returns.len().saturating_sub(50)..];
         let wall = self.started.elapsed().as_secs_f64();
+        let running = self.running_since.elapsed().as_secs_f64().max(1e-9);
         let demos = std::fs::read_to_string(self.plan.run_dir.join("demos.jsonl"))
             .map(|t| t.lines().count())
             .unwrap_or(0);
@@ -743,8 +780,8 @@ impl<'a, 'w> Launcher<'a, 'w> {
             env_steps: self.seen.learner_env_steps,
             updates: self.seen.learner_updates,
             wall_clock_s: wall,
-            env_steps_per_s: self.seen.learner_env_steps as f64 / wall.max(1e-9),
-            updates_per_s: self.seen.learner_updates as f64 / wall.max(1e-9),
+            env_steps_per_s: self.seen.learner_env_steps as f64 / running,
+            updates_per_s: self.seen.learner_updates as f64 / running,
             actor_restarts: self.restarts,
             expert_swaps: self.swaps,
             interrupted,

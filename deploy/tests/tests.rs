@@ -1,3 +1,4 @@
 //! Integration tests of the `alfd` command line and of the multi-process runtime (one binary).
 
 mod cli;
+mod runtime;

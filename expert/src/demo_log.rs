@@ -138,7 +138,10 @@ mod tests {
     fn appended_records_read_back_identical() {
         let d = dir("roundtrip");
         let path = d.join("demos.jsonl");
-        assert!(read(&path).unwrap().is_empty(), "a missing file holds no demos");
+        assert!(
+            read(&path).unwrap().is_empty(),
+            "a missing file holds no demos"
+        );
         let mut log = DemoLog::open(&path).unwrap();
         for i in 0..3 {
             log.append(&record(i)).unwrap();
@@ -150,7 +153,11 @@ mod tests {
         assert_eq!(back, (0..4).map(record).collect::<Vec<_>>());
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(text.lines().count(), 4);
-        assert!(text.lines().next().unwrap().contains("\"expert\":\"cartpole-perfect\""));
+        assert!(text
+            .lines()
+            .next()
+            .unwrap()
+            .contains("\"expert\":\"cartpole-perfect\""));
     }
 
     #[test]
@@ -158,18 +165,36 @@ mod tests {
         let d = dir("malformed");
         let path = d.join("demos.jsonl");
         let good = |i| serde_json::to_string(&record(i)).unwrap();
-        let text = format!("{}\n{}\n{{\"index\": 2, \"state\": oops}}\n{}\n", good(0), good(1), good(3));
+        let text = format!(
+            "{}\n{}\n{{\"index\": 2, \"state\": oops}}\n{}\n",
+            good(0),
+            good(1),
+            good(3)
+        );
         std::fs::write(&path, &text).unwrap();
         let err = read(&path).unwrap_err().to_string();
-        assert!(err.contains("line 3") && err.contains("not a demonstration record"), "{err}");
-        assert_eq!(std::fs::read_to_string(&path).unwrap(), text, "the file is untouched");
+        assert!(
+            err.contains("line 3") && err.contains("not a demonstration record"),
+            "{err}"
+        );
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            text,
+            "the file is untouched"
+        );
 
         std::fs::write(&path, format!("{}\n{}\n", good(0), good(2))).unwrap();
         let err = read(&path).unwrap_err().to_string();
-        assert!(err.contains("line 2") && err.contains("index 2 where 1 was expected"), "{err}");
+        assert!(
+            err.contains("line 2") && err.contains("index 2 where 1 was expected"),
+            "{err}"
+        );
 
         std::fs::write(&path, format!("{}\n{}", good(0), &good(1)[..10])).unwrap();
         let err = read(&path).unwrap_err().to_string();
-        assert!(err.contains("line 2") && err.contains("incomplete last line"), "{err}");
+        assert!(
+            err.contains("line 2") && err.contains("incomplete last line"),
+            "{err}"
+        );
     }
 }

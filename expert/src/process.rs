@@ -84,7 +84,10 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| args.run_dir.join("config.toml"));
     let cfg = load_config(&config_path)?;
-    let name = args.expert.clone().unwrap_or_else(|| cfg.expert.name.clone());
+    let name = args
+        .expert
+        .clone()
+        .unwrap_or_else(|| cfg.expert.name.clone());
     let mut demonstrator = registry::cartpole(&name)?;
     let demos_path = args.run_dir.join("demos.jsonl");
     // Read the demonstrations now, to refuse a bad file before the run depends on us; they are
@@ -206,17 +209,28 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             };
             match core.answer(demonstrator.as_mut(), request.state(), step, &name) {
                 Some(action) => {
-                    let record = core.demos().last().expect("answer recorded a demonstration");
+                    let record = core
+                        .demos()
+                        .last()
+                        .expect("answer recorded a demonstration");
                     // On disk before the answer goes out: no demonstration is ever lost.
                     log.append(record)?;
                     response.outcome = outcome::ANSWERED;
                     response.action = action as u32;
                     response.demo_index = record.index;
                     response.budget_left = core.budget().remaining();
+                    debug!(
+                        index = record.index,
+                        actor = request.actor,
+                        action,
+                        step,
+                        "demonstration"
+                    );
+                    // The model refitted with this demonstration goes out first, so the actor
+                    // shapes the step it asked about with it (as in one process).
+                    publish_model(&mut model_tx, &core, args.generation, &name)?;
                     query.answer(response)?;
                     answered += 1;
-                    debug!(index = record.index, actor = request.actor, action, step, "demonstration");
-                    publish_model(&mut model_tx, &core, args.generation, &name)?;
                 }
                 None => {
                     response.outcome = outcome::BUDGET_EXHAUSTED;

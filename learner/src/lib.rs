@@ -116,14 +116,22 @@ impl CreditBook {
     pub fn accept(&mut self, b: &TransitionBatch, queue: &mut VecDeque<Queued>) -> usize {
         let a = b.actor as usize;
         if a >= MAX_ACTORS {
-            warn!(actor = a, "transitions from an actor id beyond the credit table; dropped");
+            warn!(
+                actor = a,
+                "transitions from an actor id beyond the credit table; dropped"
+            );
             return 0;
         }
         let book = &mut self.actors[a];
         let current = b.incarnation >= book.incarnation;
         if b.incarnation > book.incarnation {
             if book.incarnation != 0 {
-                info!(actor = a, old = book.incarnation, new = b.incarnation, "actor restarted");
+                info!(
+                    actor = a,
+                    old = book.incarnation,
+                    new = b.incarnation,
+                    "actor restarted"
+                );
             }
             *book = ActorBook {
                 incarnation: b.incarnation,
@@ -133,7 +141,10 @@ impl CreditBook {
         if current {
             if b.first_seq > book.received {
                 let gap = b.first_seq - book.received;
-                warn!(actor = a, gap, "transitions lost on the way; counted as received");
+                warn!(
+                    actor = a,
+                    gap, "transitions lost on the way; counted as received"
+                );
                 book.lost += gap;
             }
             book.received = book.received.max(b.end_seq());
@@ -214,9 +225,9 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let updates_per_step = cfg.agent.updates_per_step;
 
     let publish_weights = |learner: &NeuralLearner,
-                               params: &mut Vec<f32>,
-                               tx: &mut wire::WeightsSender<'_>,
-                               env_steps: u64|
+                           params: &mut Vec<f32>,
+                           tx: &mut wire::WeightsSender<'_>,
+                           env_steps: u64|
      -> anyhow::Result<()> {
         learner.network().copy_params_into(params)?;
         tx.publish(learner.updates(), learner.updates(), env_steps, params)?;
@@ -225,7 +236,11 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     publish_weights(&learner, &mut params, &mut weights_tx, 0)?;
     credits_tx.send(book.credits(0))?;
     actors.ring()?;
-    info!(params = params.len(), window = args.window, "learner running");
+    info!(
+        params = params.len(),
+        window = args.window,
+        "learner running"
+    );
 
     let mut status = Status::new(std::process::id());
     status.send(&mut progress, process_state::RUNNING, &book, &learner)?;
@@ -233,6 +248,10 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let mut published_version = 0u64;
     let mut credits_dirty = false;
     let mut since_check = 0u32;
+    let (mut idle_waits, mut idle) = (0u64, Duration::ZERO);
+    let mut first_step: Option<Instant> = None;
+    let mut idle_running = Duration::ZERO;
+    let mut publish_time = Duration::ZERO;
     let stop_reason;
     loop {
         // Take in whatever arrived.
@@ -249,6 +268,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             }
         }
         if let Some(q) = queue.pop_front() {
+            first_step.get_or_insert_with(Instant::now);
             // Algorithm 1 lines 19-20, U times per step.
             learner.insert(&q.transition);
             for _ in 0..updates_per_step {
@@ -258,7 +278,9 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             }
             book.learned(q.actor, q.incarnation);
             if learner.updates() >= published_version + args.weights_every {
+                let t = Instant::now();
                 publish_weights(&learner, &mut params, &mut weights_tx, book.env_steps())?;
+                publish_time += t.elapsed();
                 published_version = learner.updates();
             }
             credits_dirty = true;
@@ -304,22 +326,48 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             "no word from the launcher for {:?}: giving up",
             control.silence()
         );
-        if queue.is_empty() && waiter.wait(Duration::from_millis(100))? == Wake::Signal {
-            stop_reason = "termination signal";
-            break;
+        if queue.is_empty() {
+            let idle_since = Instant::now();
+            idle_waits += 1;
+            let wake = waiter.wait(Duration::from_millis(100))?;
+            idle += idle_since.elapsed();
+            if first_step.is_some() {
+                idle_running += idle_since.elapsed();
+            }
+            if idle_since.elapsed() > Duration::from_millis(5) {
+                debug!(
+                    waited_ms = idle_since.elapsed().as_millis() as u64,
+                    ?wake,
+                    env_steps = book.env_steps(),
+                    "long idle wait"
+                );
+            }
+            if wake == Wake::Signal {
+                stop_reason = "termination signal";
+                break;
+            }
         }
     }
     info!(
         reason = stop_reason,
         updates = learner.updates(),
         env_steps = book.env_steps(),
+        idle_waits,
+        idle_s = idle.as_secs_f64(),
+        idle_running_s = idle_running.as_secs_f64(),
+        publish_s = publish_time.as_secs_f64(),
+        updates_per_s = learner.updates() as f64
+            / first_step.map_or(f64::INFINITY, |t| t.elapsed().as_secs_f64()),
         "learner stopping"
     );
     let path = args.run_dir.join("weights.safetensors");
     write_atomically(&path, &learner.network().to_safetensors_bytes())?;
     info!(path = %path.display(), "final weights saved");
     status.send(&mut progress, process_state::EXITING, &book, &learner)?;
-    debug!(lost = (0..MAX_ACTORS as u16).map(|a| book.lost(a)).sum::<u64>(), "lost steps");
+    debug!(
+        lost = (0..MAX_ACTORS as u16).map(|a| book.lost(a)).sum::<u64>(),
+        "lost steps"
+    );
     Ok(())
 }
 
@@ -372,8 +420,8 @@ impl Status {
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     use std::io::Write as _;
     let tmp = path.with_extension("tmp");
-    let mut f = std::fs::File::create(&tmp)
-        .with_context(|| format!("cannot write {}", tmp.display()))?;
+    let mut f =
+        std::fs::File::create(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
     f.write_all(bytes)
         .and_then(|()| f.sync_all())
         .with_context(|| format!("cannot write {}", tmp.display()))?;
@@ -413,7 +461,11 @@ mod tests {
         assert_eq!(book.accept(&batch(1, 1, 0, 10), &mut q), 10);
         assert_eq!(book.env_steps(), 42);
         let c = book.credits(0);
-        assert_eq!(c.granted_for(0, 1), Some(64), "nothing learned yet: window only");
+        assert_eq!(
+            c.granted_for(0, 1),
+            Some(64),
+            "nothing learned yet: window only"
+        );
         assert_eq!(c.received[0], 32);
         assert_eq!(c.global_step_for(0, 1, 40), 42 + 8);
 

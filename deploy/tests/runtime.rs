@@ -1,0 +1,508 @@
+//! The multi-process runtime with real processes (`alfd run`: learner, expert and actors over
+//! iceoryx2), asserting on the run directory: a small run, equivalence with the single-process
+//! runner, an expert swap, kill -9 of an actor, two concurrent runs, a refused schema version, and
+//! a failing process named by the launcher.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use alfd_common::wire;
+
+/// The expert every test uses (the registry's perfect CartPole controller).
+const EXPERT: &str = "cartpole-perfect";
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+/// The directory holding `alfd` and the process binaries. `cargo test` builds only this
+/// package's binary, so the three process binaries are built here once (same profile, same
+/// target directory), unless `ALFD_BIN_DIR` points at them.
+fn bin_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        if let Some(d) = std::env::var_os("ALFD_BIN_DIR") {
+            return PathBuf::from(d);
+        }
+        let dir = Path::new(env!("CARGO_BIN_EXE_alfd"))
+            .parent()
+            .unwrap()
+            .to_path_buf();
+        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+        let mut cmd = Command::new(cargo);
+        cmd.args([
+            "build",
+            "-p",
+            "alfd-actor",
+            "-p",
+            "alfd-learner",
+            "-p",
+            "alfd-expert",
+        ])
+        .current_dir(repo());
+        if dir.ends_with("release") {
+            cmd.arg("--release");
+        }
+        let status = cmd.status().expect("cargo runs");
+        assert!(status.success(), "cannot build the process binaries");
+        dir
+    })
+}
+
+fn alfd() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_alfd"));
+    c.env("ALFD_BIN_DIR", bin_dir()).current_dir(repo());
+    c
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("alfd-rt-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "status {:?}\nstdout: {}\nstderr: {}",
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// `alfd run` on the shipped BDQN + KRR config with the perfect expert, to the end.
+fn run(out: &Path, actors: usize, sets: &[&str]) -> Output {
+    let mut c = alfd();
+    c.args([
+        "run",
+        "--config",
+        "deploy/configs/cartpole-bdqn-krr.toml",
+        "--quiet",
+    ])
+    .arg(format!("--actors={actors}"))
+    .arg(format!("--out={}", out.display()))
+    .args(["--set", &format!("expert.name={EXPERT}")]);
+    for s in sets {
+        c.args(["--set", s]);
+    }
+    c.output().expect("alfd runs")
+}
+
+/// The same, in the background (the caller stops it with SIGINT).
+fn spawn_run(out: &Path, actors: usize, sets: &[&str]) -> Child {
+    let mut c = alfd();
+    c.args([
+        "run",
+        "--config",
+        "deploy/configs/cartpole-bdqn-krr.toml",
+        "--quiet",
+    ])
+    .arg(format!("--actors={actors}"))
+    .arg(format!("--out={}", out.display()))
+    .args(["--set", &format!("expert.name={EXPERT}")]);
+    for s in sets {
+        c.args(["--set", s]);
+    }
+    c.stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("alfd runs")
+}
+
+/// Rows of `episodes.csv` (without the header), each split on commas.
+fn rows(dir: &Path) -> Vec<Vec<String>> {
+    std::fs::read_to_string(dir.join("episodes.csv"))
+        .unwrap_or_default()
+        .lines()
+        .skip(1)
+        .filter(|l| l.split(',').count() == 9)
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect()
+}
+
+/// Waits until `episodes.csv` has at least `n` rows.
+fn wait_rows(dir: &Path, n: usize, child: &mut Child) {
+    let start = Instant::now();
+    while rows(dir).len() < n {
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("the run ended ({status}) before {n} episodes");
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(90),
+            "fewer than {n} episodes in 90 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Stops a background run with SIGINT (Ctrl-C) and returns its output.
+fn interrupt(child: Child) -> Output {
+    let ok = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    child.wait_with_output().unwrap()
+}
+
+fn run_id(dir: &Path) -> String {
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).unwrap()).unwrap();
+    info["run_id"].as_str().unwrap().to_owned()
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+/// What every finished run must satisfy: a valid `demos.jsonl` within the budget and counted in
+/// the summary, weights saved, one log per process, nothing left in iceoryx2's directories.
+fn check_run_dir(dir: &Path, budget: usize) -> Vec<alfd_common::agent::DemoRecord> {
+    let demos = alfd_expert::demo_log::read(&dir.join("demos.jsonl")).expect("demos.jsonl valid");
+    assert!(
+        demos.len() <= budget,
+        "{} demos for a budget of {budget}",
+        demos.len()
+    );
+    assert_eq!(summary(dir)["demos"], demos.len());
+    let weights = std::fs::read(dir.join("weights.safetensors")).expect("weights saved");
+    let net = alfd_common::nn::Mlp::from_safetensors_bytes(&weights).unwrap();
+    assert_eq!((net.heads(), net.actions(), net.num_params()), (2, 2, 4740));
+    for log in ["learner.log", "expert-1.log", "actor-0.log"] {
+        assert!(dir.join(log).is_file(), "{log} missing");
+    }
+    let id = run_id(dir);
+    assert_eq!(
+        wire::leftover_files(&id),
+        Vec::<PathBuf>::new(),
+        "stale iceoryx2 files"
+    );
+    assert_eq!(wire::alive_nodes(&id).unwrap(), Vec::<String>::new());
+    demos
+}
+
+#[test]
+fn a_small_run_with_two_actors_fills_its_run_directory() {
+    let out = tmp("small");
+    // `first`: the budget goes on the first steps, so exactly B demonstrations are made.
+    let o = run(
+        &out,
+        2,
+        &["episodes=40", "budget.total=10", "query.mode=first"],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let s = summary(&out);
+    assert_eq!(s["episodes"], 40);
+    assert_eq!(s["interrupted"], false);
+    let rows = rows(&out);
+    assert_eq!(rows.len(), 40);
+    let header = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert_eq!(
+        header.lines().next().unwrap(),
+        format!("{},actor", alfd_common::runner::CSV_HEADER)
+    );
+    for (i, r) in rows.iter().enumerate() {
+        assert_eq!(
+            r[0],
+            i.to_string(),
+            "episodes are numbered in order of arrival"
+        );
+        assert!(r[8] == "0" || r[8] == "1", "actor {}", r[8]);
+        let ret: f64 = r[1].parse().unwrap();
+        assert!(
+            ret >= 1.0 && r[1] == r[2],
+            "CartPole's return is its length"
+        );
+    }
+    assert!(rows.iter().any(|r| r[8] == "0") && rows.iter().any(|r| r[8] == "1"));
+    let demos = check_run_dir(&out, 10);
+    assert_eq!(demos.len(), 10);
+    assert!(demos.iter().all(|d| d.expert == EXPERT));
+    let queries: u32 = rows.iter().map(|r| r[5].parse::<u32>().unwrap()).sum();
+    assert_eq!(queries, 10, "every demonstration was used by an actor");
+    assert_eq!(rows.last().unwrap()[3], "10", "demos_used");
+    assert!(out.join("actor-1.log").is_file());
+    let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(
+        config.contains("cartpole-perfect"),
+        "the config used is recorded"
+    );
+}
+
+#[test]
+fn one_actor_in_lockstep_reproduces_the_single_process_run() {
+    // With one actor and a credit window of 1 the actor always acts on the newest weights, as in
+    // one process: the same seeds give the same episodes, to the byte.
+    let (local, multi) = (tmp("equiv-local"), tmp("equiv-multi"));
+    let sets = ["episodes=60", &format!("expert.name={EXPERT}")];
+    let o = alfd()
+        .args([
+            "local",
+            "--config",
+            "deploy/configs/cartpole-bdqn-krr.toml",
+            "--quiet",
+        ])
+        .arg(format!("--out={}", local.display()))
+        .args(["--set", sets[0], "--set", sets[1]])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let o = alfd()
+        .args([
+            "run",
+            "--config",
+            "deploy/configs/cartpole-bdqn-krr.toml",
+            "--quiet",
+        ])
+        .args(["--actors=1", "--window=1"])
+        .arg(format!("--out={}", multi.display()))
+        .args(["--set", sets[0], "--set", sets[1]])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let single = std::fs::read_to_string(local.join("episodes.csv")).unwrap();
+    let many: String = std::fs::read_to_string(multi.join("episodes.csv"))
+        .unwrap()
+        .lines()
+        .map(|l| format!("{}\n", l.rsplit_once(',').unwrap().0))
+        .collect();
+    assert_eq!(single.lines().count(), 61);
+    assert_eq!(many, single);
+    // The demonstrations too (the multi-process run may have a few more, asked in the episode
+    // that was still running when the run stopped).
+    let d1 = alfd_expert::demo_log::read(&local.join("demos.jsonl")).unwrap();
+    let d2 = check_run_dir(&multi, 100);
+    assert!(!d1.is_empty());
+    assert_eq!(d2[..d1.len()], d1[..]);
+}
+
+#[test]
+fn the_expert_is_swapped_in_a_live_run_without_losing_or_repeating_a_demonstration() {
+    let out = tmp("swap");
+    let mut child = spawn_run(
+        &out,
+        2,
+        &["episodes=1000000", "budget.total=60", "query.percentile=90"],
+    );
+    wait_rows(&out, 20, &mut child);
+    let before = alfd_expert::demo_log::read(&out.join("demos.jsonl"))
+        .unwrap()
+        .len();
+    let o = alfd()
+        .args(["swap-expert", "--run"])
+        .arg(&out)
+        .args(["--expert", EXPERT])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let response: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(response["ok"], true);
+    assert_eq!(response["generation"], 2);
+    let at = response["at_episode"].as_u64().unwrap() as usize;
+    wait_rows(&out, at + 20, &mut child);
+    let o = interrupt(child);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    let s = summary(&out);
+    assert_eq!(
+        (s["interrupted"].as_bool(), s["expert_swaps"].as_u64()),
+        (Some(true), Some(1))
+    );
+    // Read back whole: indices 0.. in order, none missing or repeated, within the budget.
+    let demos = check_run_dir(&out, 60);
+    assert!(demos.len() >= before);
+    let old = std::fs::read_to_string(out.join("expert-1.log")).unwrap();
+    assert!(old.contains("replaced by a newer expert"), "{old}");
+    let new = std::fs::read_to_string(out.join("expert-2.log")).unwrap();
+    assert!(new.contains("active: answering queries"), "{new}");
+    // The new expert restored everything the old one recorded before it left.
+    let restored: usize = new
+        .lines()
+        .find(|l| l.contains("active: answering queries"))
+        .and_then(|l| l.split("demos=").nth(1))
+        .and_then(|v| v.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .expect("the activation line names the demonstrations restored");
+    assert!(
+        before <= restored && restored <= demos.len(),
+        "{before} <= {restored} <= {}",
+        demos.len()
+    );
+    assert!(rows(&out).len() > at, "episodes went on after the swap");
+}
+
+#[test]
+fn an_actor_killed_with_sigkill_is_restarted_and_the_run_goes_on() {
+    let out = tmp("kill");
+    let mut child = spawn_run(&out, 2, &["episodes=1000000"]);
+    wait_rows(&out, 10, &mut child);
+    let id = run_id(&out);
+    let pid = find_process("alfd-actor", &[&format!("--run-id={id}"), "--actor-id=1"])
+        .expect("actor 1 is running");
+    assert!(Command::new("kill")
+        .args(["-9", &pid.to_string()])
+        .status()
+        .unwrap()
+        .success());
+    // The launcher starts a second incarnation of actor 1.
+    let start = Instant::now();
+    loop {
+        if find_process(
+            "alfd-actor",
+            &[&format!("--run-id={id}"), "--actor-id=1", "--incarnation=2"],
+        )
+        .is_some()
+        {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "actor 1 was not restarted"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let killed_at = rows(&out).len();
+    wait_rows(&out, killed_at + 10, &mut child);
+    // The new incarnation finishes episodes of its own.
+    let log_start = Instant::now();
+    while !std::fs::read_to_string(out.join("actor-1.log"))
+        .unwrap()
+        .contains("incarnation=2")
+    {
+        assert!(log_start.elapsed() < Duration::from_secs(30));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let o = interrupt(child);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    assert_eq!(summary(&out)["actor_restarts"], 1);
+    check_run_dir(&out, 100);
+    let launcher_log = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(
+        launcher_log.contains("killed by signal 9"),
+        "{launcher_log}"
+    );
+}
+
+#[test]
+fn two_concurrent_runs_do_not_see_each_other() {
+    let (a, b) = (tmp("iso-a"), tmp("iso-b"));
+    let run_a = std::thread::spawn({
+        let a = a.clone();
+        move || {
+            run(
+                &a,
+                1,
+                &[
+                    "episodes=30",
+                    "budget.total=5",
+                    "query.mode=first",
+                    "seed=1",
+                ],
+            )
+        }
+    });
+    let ob = run(
+        &b,
+        2,
+        &[
+            "episodes=30",
+            "budget.total=7",
+            "query.mode=first",
+            "seed=2",
+        ],
+    );
+    let oa = run_a.join().unwrap();
+    assert!(oa.status.success(), "{}", text(&oa));
+    assert!(ob.status.success(), "{}", text(&ob));
+    assert_ne!(run_id(&a), run_id(&b));
+    // Each expert spent its own run's budget, and each launcher saw only its own actors.
+    assert_eq!(check_run_dir(&a, 5).len(), 5);
+    assert_eq!(check_run_dir(&b, 7).len(), 7);
+    assert!(rows(&a).iter().all(|r| r[8] == "0"));
+    assert_eq!(rows(&a).len(), 30);
+    assert_eq!(rows(&b).len(), 30);
+}
+
+#[test]
+fn a_process_of_another_schema_version_is_refused() {
+    let out = tmp("schema");
+    let mut child = spawn_run(&out, 1, &["episodes=1000000"]);
+    wait_rows(&out, 5, &mut child);
+    let id = run_id(&out);
+    let o = Command::new(bin_dir().join("alfd-actor"))
+        .args([
+            "--run-dir",
+            out.to_str().unwrap(),
+            "--run-id",
+            &id,
+            "--actor-id",
+            "5",
+        ])
+        .env("ALFD_SCHEMA_VERSION_OVERRIDE", "999")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("schema version 999")
+            && err.contains(&format!("schema version {}", wire::SCHEMA_VERSION)),
+        "{err}"
+    );
+    // The run did not notice.
+    let n = rows(&out).len();
+    wait_rows(&out, n + 5, &mut child);
+    let o = interrupt(child);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    assert!(rows(&out).iter().all(|r| r[8] == "0"));
+    check_run_dir(&out, 100);
+}
+
+#[test]
+fn a_failing_process_is_named_and_the_run_stops_cleanly() {
+    let out = tmp("failing");
+    // A demos.jsonl with a malformed line: the expert refuses to start (and keeps the file).
+    let bad = "{\"index\":0,\"state\":[0.0,0.0,0.0,0.0],\"action\":1,\"step\":0,\"expert\":\"x\"}\nnot json\n";
+    std::fs::write(out.join("demos.jsonl"), bad).unwrap();
+    let o = run(&out, 2, &["episodes=10"]);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        err.contains("alfd-expert (expert-1) exited with status 1"),
+        "{err}"
+    );
+    let log = std::fs::read_to_string(out.join("expert-1.log")).unwrap();
+    assert!(log.contains("line 2"), "{log}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("demos.jsonl")).unwrap(),
+        bad
+    );
+    let id = run_id(&out);
+    assert_eq!(wire::leftover_files(&id), Vec::<PathBuf>::new());
+}
+
+/// The pid of a running `binary` whose command line holds every one of `args`.
+fn find_process(binary: &str, args: &[&str]) -> Option<u32> {
+    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(cmdline) = std::fs::read(entry.path().join("cmdline")) else {
+            continue;
+        };
+        let parts: Vec<String> = cmdline
+            .split(|&b| b == 0)
+            .map(|p| String::from_utf8_lossy(p).into_owned())
+            .collect();
+        if parts.first().is_some_and(|p| p.ends_with(binary))
+            && args.iter().all(|a| parts.iter().any(|p| p == a))
+        {
+            return Some(pid);
+        }
+    }
+    None
+}
