@@ -48,8 +48,7 @@ pub fn read(path: &Path) -> Result<Vec<DemoRecord>, DemoLogError> {
         reason,
     };
     let mut records = Vec::new();
-    let mut lines = text.split_inclusive('\n').enumerate().peekable();
-    while let Some((i, raw)) = lines.next() {
+    for (i, raw) in text.split_inclusive('\n').enumerate() {
         let line = i + 1;
         if !raw.ends_with('\n') {
             return Err(malformed(
