@@ -30,7 +30,11 @@ fn js_divergence_matches_numpy_on_every_case() {
         let flat: Vec<f64> = c.q_values.concat();
         let js = js_divergence(&flat, heads, 1.0);
         worst = worst.max((js - c.js).abs());
-        assert!((js - c.js).abs() <= 1e-9, "case {i} (K = {heads}): {js} vs {}", c.js);
+        assert!(
+            (js - c.js).abs() <= 1e-9,
+            "case {i} (K = {heads}): {js} vs {}",
+            c.js
+        );
     }
     assert!(worst <= 1e-9);
 }

@@ -8,3 +8,4 @@ mod kernel_reference;
 mod mlp_reference;
 mod nn_checkpoint;
 mod runner;
+mod tidy;
