@@ -4,7 +4,6 @@
 use std::hint::black_box;
 
 use alfd_common::nn::{train_step, Adam, Mlp, TrainScratch};
-use alfd_common::policy::js_divergence;
 use alfd_common::query::QueryRule;
 use alfd_common::replay::{Batch, ReplayBuffer, Transition};
 use alfd_common::rng::seeded;
@@ -84,8 +83,7 @@ fn bench_act_step(c: &mut Criterion) {
     let mut rng = seeded(2);
     let net = Mlp::new(OBS, HIDDEN, HEADS, ACTIONS, &mut rng);
     let states: Vec<Vec<f32>> = (0..256).map(|_| random_state(&mut rng)).collect();
-    // L_q = 100 (the query rule's queue), p_r = 90.
-    let mut rule = QueryRule::new(100, 90.0);
+    let mut rule = QueryRule::new(1000, 99.0);
     let mut i = 0;
 
     c.bench_function("forward_one_k2_a2", |b| {
@@ -96,21 +94,23 @@ fn bench_act_step(c: &mut Criterion) {
             black_box(q)
         })
     });
-    // Algorithm 1 lines 3-7: the K heads' Q-values, their JS divergence, the query decision.
+    // Algorithm 1 lines 3-16 as the actor runs them (`NeuralActor::decide`): the K heads'
+    // Q-values, their JS divergence, the query decision (L_q = 1000, p_r = 99, the CartPole
+    // configs' values) and the greedy action of the episode's head.
     c.bench_function("act_step_k2_a2", |b| {
-        let mut q = [0.0f32; HEADS * ACTIONS];
-        let mut q64 = [0.0f64; HEADS * ACTIONS];
+        let cfg = alfd_common::config::ExperimentConfig::from_toml(
+            "seed = 0\nepisodes = 1\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"bdqn\"\n[query]\nmode = \"active\"\nqueue_len = 1000\npercentile = 99.0\n",
+        )
+        .expect("valid config");
+        let mut actor = alfd_common::agent::NeuralActor::new(&cfg.agent, &cfg.query, OBS, ACTIONS, seeded(3));
+        actor.copy_weights_from(&net, 0);
+        actor.begin_episode();
         b.iter(|| {
             i = (i + 1) % states.len();
-            net.forward_one(black_box(&states[i]), &mut q);
-            for (d, &s) in q64.iter_mut().zip(&q) {
-                *d = f64::from(s);
-            }
-            let u = js_divergence(&q64, HEADS, 1.0);
-            black_box(rule.observe(u))
+            black_box(actor.decide(black_box(&states[i]), true))
         })
     });
-    c.bench_function("query_rule_observe_lq100", |b| {
+    c.bench_function("query_rule_observe_lq1000", |b| {
         b.iter(|| {
             i = (i + 1) % states.len();
             black_box(rule.observe(black_box(f64::from(states[i][0]).abs())))

@@ -351,31 +351,40 @@ impl ReturnStats {
     }
 }
 
-/// Returns of `episodes` CartPole episodes (limit `max_steps`) played by `policy`, the first reset
-/// seeded with `seed`.
+/// Returns of `episodes` episodes of `env` played by `act`, the first reset seeded with `seed`.
+pub fn evaluate<E: Env>(
+    env: &mut E,
+    episodes: usize,
+    seed: u64,
+    mut act: impl FnMut(&E::Observation) -> usize,
+) -> Vec<f64> {
+    (0..episodes)
+        .map(|i| {
+            let mut obs = env.reset(if i == 0 { Some(seed) } else { None });
+            let mut ret = 0.0;
+            loop {
+                let step = env.step(act(&obs)).expect("valid action on a live episode");
+                ret += step.reward;
+                let done = step.done();
+                obs = step.observation;
+                if done {
+                    return ret;
+                }
+            }
+        })
+        .collect()
+}
+
+/// Returns of `episodes` CartPole episodes (limit `max_steps`) played by `policy`.
 pub fn evaluate_cartpole(
     policy: &mut dyn Demonstrator<[f32]>,
     episodes: usize,
     seed: u64,
     max_steps: usize,
 ) -> Vec<f64> {
-    let mut env = CartPole::new(max_steps);
-    (0..episodes)
-        .map(|i| {
-            let mut obs = env.reset(if i == 0 { Some(seed) } else { None });
-            let mut ret = 0.0;
-            loop {
-                let step = env
-                    .step(policy.act(&obs))
-                    .expect("valid action on a live episode");
-                ret += step.reward;
-                obs = step.observation;
-                if step.done() {
-                    return ret;
-                }
-            }
-        })
-        .collect()
+    evaluate(&mut CartPole::new(max_steps), episodes, seed, |obs| {
+        policy.act(obs)
+    })
 }
 
 /// Returns of `episodes` CliffWalk episodes played by `policy` on a clone of `env`.
@@ -385,21 +394,5 @@ pub fn evaluate_cliffwalk(
     episodes: usize,
     seed: u64,
 ) -> Vec<f64> {
-    let mut env = env.clone();
-    (0..episodes)
-        .map(|i| {
-            let mut s = env.reset(if i == 0 { Some(seed) } else { None });
-            let mut ret = 0.0;
-            loop {
-                let step = env
-                    .step(policy.act(&s))
-                    .expect("valid action on a live episode");
-                ret += step.reward;
-                s = step.observation;
-                if step.done() {
-                    return ret;
-                }
-            }
-        })
-        .collect()
+    evaluate(&mut env.clone(), episodes, seed, |s| policy.act(s))
 }

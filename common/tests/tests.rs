@@ -3,7 +3,9 @@
 mod cartpole_reference;
 mod dqn_loss;
 mod env_conformance;
+mod js_reference;
 mod kernel_reference;
 mod mlp_reference;
 mod nn_checkpoint;
 mod runner;
+mod tidy;

@@ -5,11 +5,18 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn alfd(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_alfd")).args(args).current_dir(repo()).output().expect("alfd runs")
+    Command::new(env!("CARGO_BIN_EXE_alfd"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("alfd runs")
 }
 
 fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
 }
 
 fn tmp(name: &str) -> PathBuf {
@@ -27,7 +34,16 @@ fn stderr(o: &Output) -> String {
 fn local_writes_a_byte_identical_episodes_csv_for_the_same_seed() {
     let (a, b) = (tmp("local-a"), tmp("local-b"));
     for out in [&a, &b] {
-        let o = alfd(&["local", "--config", "deploy/configs/cliffwalk-bootstrapped.toml", "--set", "episodes=100", "--out", out.to_str().unwrap(), "--quiet"]);
+        let o = alfd(&[
+            "local",
+            "--config",
+            "deploy/configs/cliffwalk-bootstrapped.toml",
+            "--set",
+            "episodes=100",
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ]);
         assert!(o.status.success(), "{}", stderr(&o));
         let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         assert_eq!(summary["episodes"], 100);
@@ -41,22 +57,49 @@ fn local_writes_a_byte_identical_episodes_csv_for_the_same_seed() {
     }
     // The recorded config runs again as it is.
     let c = tmp("local-c");
-    let o = alfd(&["local", "--config", a.join("config.toml").to_str().unwrap(), "--out", c.to_str().unwrap(), "--quiet"]);
+    let o = alfd(&[
+        "local",
+        "--config",
+        a.join("config.toml").to_str().unwrap(),
+        "--out",
+        c.to_str().unwrap(),
+        "--quiet",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert_eq!(std::fs::read(c.join("episodes.csv")).unwrap(), text.as_bytes());
+    assert_eq!(
+        std::fs::read(c.join("episodes.csv")).unwrap(),
+        text.as_bytes()
+    );
 }
 
 #[test]
 fn local_cartpole_saves_weights_and_demos() {
     let out = tmp("local-cartpole");
-    let o = alfd(&["local", "--config", "deploy/configs/cartpole-bdqn-krr.toml", "--set", "episodes=20", "--out", out.to_str().unwrap(), "--quiet"]);
+    let o = alfd(&[
+        "local",
+        "--config",
+        "deploy/configs/cartpole-bdqn-krr.toml",
+        "--set",
+        "episodes=20",
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let weights = std::fs::read(out.join("weights.safetensors")).unwrap();
     let net = alfd_common::nn::Mlp::from_safetensors_bytes(&weights).unwrap();
     assert_eq!((net.heads(), net.actions()), (2, 2));
     let demos = std::fs::read_to_string(out.join("demos.jsonl")).unwrap();
     let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
-    let last_used: usize = csv.lines().last().unwrap().split(',').nth(3).unwrap().parse().unwrap();
+    let last_used: usize = csv
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .nth(3)
+        .unwrap()
+        .parse()
+        .unwrap();
     assert_eq!(demos.lines().count(), last_used);
     for line in demos.lines() {
         let d: serde_json::Value = serde_json::from_str(line).unwrap();
@@ -68,7 +111,11 @@ fn local_cartpole_saves_weights_and_demos() {
 fn assert_usage_error(args: &[&str], needle: &str) {
     let o = alfd(args);
     assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
-    assert!(stderr(&o).contains(needle), "{args:?}: expected `{needle}` in: {}", stderr(&o));
+    assert!(
+        stderr(&o).contains(needle),
+        "{args:?}: expected `{needle}` in: {}",
+        stderr(&o)
+    );
     assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
 }
 
@@ -77,28 +124,131 @@ fn bad_configs_are_refused_with_exit_code_2_naming_the_field() {
     let out = tmp("bad");
     let o = out.to_str().unwrap();
     let cfg = "deploy/configs/cliffwalk-bootstrapped.toml";
-    assert_usage_error(&["local", "--config", cfg, "--set", "agent.heads=0", "--out", o], "agent.heads");
-    assert_usage_error(&["local", "--config", cfg, "--set", "query.percentile=120", "--out", o], "query.percentile");
-    assert_usage_error(&["local", "--config", cfg, "--set", "budget.total=-1", "--out", o], "budget.total");
-    assert_usage_error(&["local", "--config", cfg, "--set", "env.p_success=1.2", "--out", o], "env.p_success");
-    assert_usage_error(&["local", "--config", cfg, "--set", "agent.colour=3", "--out", o], "colour");
-    assert_usage_error(&["local", "--config", cfg, "--set", "expert.name=nobody", "--out", o], "nobody");
-    assert_usage_error(&["local", "--config", "no/such.toml", "--out", o], "no/such.toml");
+    assert_usage_error(
+        &[
+            "local",
+            "--config",
+            cfg,
+            "--set",
+            "agent.heads=0",
+            "--out",
+            o,
+        ],
+        "agent.heads",
+    );
+    assert_usage_error(
+        &[
+            "local",
+            "--config",
+            cfg,
+            "--set",
+            "query.percentile=120",
+            "--out",
+            o,
+        ],
+        "query.percentile",
+    );
+    assert_usage_error(
+        &[
+            "local",
+            "--config",
+            cfg,
+            "--set",
+            "budget.total=-1",
+            "--out",
+            o,
+        ],
+        "budget.total",
+    );
+    assert_usage_error(
+        &[
+            "local",
+            "--config",
+            cfg,
+            "--set",
+            "env.p_success=1.2",
+            "--out",
+            o,
+        ],
+        "env.p_success",
+    );
+    assert_usage_error(
+        &[
+            "local",
+            "--config",
+            cfg,
+            "--set",
+            "agent.colour=3",
+            "--out",
+            o,
+        ],
+        "colour",
+    );
+    assert_usage_error(
+        &[
+            "local",
+            "--config",
+            cfg,
+            "--set",
+            "expert.name=nobody",
+            "--out",
+            o,
+        ],
+        "nobody",
+    );
+    assert_usage_error(
+        &["local", "--config", "no/such.toml", "--out", o],
+        "no/such.toml",
+    );
     let map = out.join("ragged.txt");
     std::fs::write(&map, "S..\n..\n..G\n").unwrap();
-    assert_usage_error(&["local", "--config", cfg, "--set", &format!("env.map=\"{}\"", map.display()), "--out", o], "line 2");
+    assert_usage_error(
+        &[
+            "local",
+            "--config",
+            cfg,
+            "--set",
+            &format!("env.map=\"{}\"", map.display()),
+            "--out",
+            o,
+        ],
+        "line 2",
+    );
     let nomap = out.join("nogoal.txt");
     std::fs::write(&nomap, "S..\n...\n").unwrap();
-    assert_usage_error(&["env", "show", "--env", "cliffwalk", "--map", nomap.to_str().unwrap()], "G");
+    assert_usage_error(
+        &[
+            "env",
+            "show",
+            "--env",
+            "cliffwalk",
+            "--map",
+            nomap.to_str().unwrap(),
+        ],
+        "G",
+    );
     assert_usage_error(&["env", "show", "--env", "mountaincar"], "mountaincar");
     assert_usage_error(&["expert", "eval", "cartpole-123"], "cartpole-123");
 }
 
 #[test]
 fn env_rollout_prints_one_json_object_per_step() {
-    let o = alfd(&["env", "rollout", "--env", "cartpole", "--initial-state", "0,0,0.01,0", "--actions", "1,0,1"]);
+    let o = alfd(&[
+        "env",
+        "rollout",
+        "--env",
+        "cartpole",
+        "--initial-state",
+        "0,0,0.01,0",
+        "--actions",
+        "1,0,1",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let lines: Vec<serde_json::Value> = String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines: Vec<serde_json::Value> = String::from_utf8(o.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
     assert_eq!(lines.len(), 3);
     // After pushing right from rest, the cart moves right: x_dot = 0.02 * a, a > 0.
     assert!(lines[0]["state"][1].as_f64().unwrap() > 0.19);
@@ -116,7 +266,15 @@ fn expert_eval_prints_mean_median_std() {
     assert_eq!(v["std"], 0.0);
     let list = alfd(&["expert", "list"]);
     let text = String::from_utf8(list.stdout).unwrap();
-    for name in ["cartpole-50", "cartpole-100", "cartpole-200", "cartpole-500", "cartpole-1000", "cartpole-perfect", "cliffwalk-optimal"] {
+    for name in [
+        "cartpole-50",
+        "cartpole-100",
+        "cartpole-200",
+        "cartpole-500",
+        "cartpole-1000",
+        "cartpole-perfect",
+        "cliffwalk-optimal",
+    ] {
         assert!(text.contains(name), "{name} not listed");
     }
 }

@@ -14,8 +14,12 @@ pub use expert::{
 pub use neural::{Decision, NeuralActor, NeuralLearner};
 pub use tabular::TabularAgent;
 
-use crate::config::QueryMode;
+use rand::Rng as _;
+
+use crate::config::{AgentConfig, Exploration, QueryMode};
+use crate::policy::{argmax, softmax_into};
 use crate::query::QueryRule;
+use crate::rng::Rng;
 
 /// Algorithm 1 lines 3-8 for one state: given the divergence `u`, whether to query the expert.
 /// The divergence is pushed to the queue only while budget remains, as in the paper.
@@ -28,4 +32,65 @@ pub fn query_decision(mode: QueryMode, rule: &mut QueryRule, u: f64, budget_left
         QueryMode::First => true,
         QueryMode::Active => rule.observe(u),
     }
+}
+
+/// How an agent picks its own action from the Q-values of the head it follows: greedily, ε-greedily
+/// with ε decaying over its steps, or by sampling the softmax policy (eq. 2).
+#[derive(Debug, Clone)]
+pub struct Explorer {
+    exploration: Exploration,
+    temperature: f64,
+    config: AgentConfig,
+    steps: u64,
+    probs: Vec<f64>,
+}
+
+impl Explorer {
+    pub fn new(cfg: &AgentConfig, actions: usize) -> Self {
+        Self {
+            exploration: cfg.exploration(),
+            temperature: cfg.temperature,
+            config: cfg.clone(),
+            steps: 0,
+            probs: vec![0.0; actions],
+        }
+    }
+
+    /// Actions chosen so far (the clock of ε).
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The agent's own action given the acting head's Q-values.
+    pub fn act(&mut self, head: &[f64], rng: &mut Rng) -> usize {
+        let action = match self.exploration {
+            Exploration::GreedyHead => argmax(head),
+            Exploration::EpsilonGreedy => {
+                if rng.random::<f64>() < self.config.epsilon(self.steps) {
+                    rng.random_range(0..head.len())
+                } else {
+                    argmax(head)
+                }
+            }
+            Exploration::Softmax => {
+                softmax_into(head, self.temperature, &mut self.probs);
+                sample(&self.probs, rng)
+            }
+        };
+        self.steps += 1;
+        action
+    }
+}
+
+/// Samples an index from a probability vector.
+pub(crate) fn sample(probs: &[f64], rng: &mut Rng) -> usize {
+    let u: f64 = rng.random();
+    let mut acc = 0.0;
+    for (i, p) in probs.iter().enumerate() {
+        acc += p;
+        if u < acc {
+            return i;
+        }
+    }
+    probs.len() - 1
 }

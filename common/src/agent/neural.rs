@@ -4,11 +4,11 @@
 
 use rand::Rng as _;
 
-use crate::agent::query_decision;
-use crate::config::{AgentConfig, Exploration, QueryConfig, QueryMode};
+use crate::agent::{query_decision, Explorer};
+use crate::config::{AgentConfig, QueryConfig, QueryMode};
 use crate::demo_model::DemoModel;
 use crate::nn::{Adam, AdamConfig, Mlp, NnError, TrainScratch};
-use crate::policy::{argmax, js_divergence, softmax_into};
+use crate::policy::{js_divergence, softmax_into};
 use crate::query::QueryRule;
 use crate::replay::{Batch, ReplayBuffer, Transition};
 use crate::rng::Rng;
@@ -31,15 +31,13 @@ pub struct NeuralActor {
     net: Mlp,
     heads: usize,
     actions: usize,
-    exploration: Exploration,
+    explorer: Explorer,
     temperature: f64,
-    epsilon: (f64, f64, f64),
     bootstrap_probability: f64,
     mode: QueryMode,
     rule: QueryRule,
     rng: Rng,
     arm: usize,
-    steps: u64,
     q32: Vec<f32>,
     /// Q-values of the last state passed to [`NeuralActor::decide`].
     q: Vec<f64>,
@@ -63,19 +61,13 @@ impl NeuralActor {
             net,
             heads,
             actions,
-            exploration: agent.exploration(),
+            explorer: Explorer::new(agent, actions),
             temperature: agent.temperature,
-            epsilon: (
-                agent.epsilon_start,
-                agent.epsilon_end,
-                agent.epsilon_decay_steps,
-            ),
             bootstrap_probability: agent.bootstrap_probability,
             mode: query.mode,
             rule: QueryRule::new(query.queue_len, query.percentile),
             rng,
             arm: 0,
-            steps: 0,
             q32: vec![0.0; heads * actions],
             q: vec![0.0; heads * actions],
             probs: vec![0.0; actions],
@@ -113,7 +105,7 @@ impl NeuralActor {
 
     /// Environment steps taken by this actor (drives ε).
     pub fn steps(&self) -> u64 {
-        self.steps
+        self.explorer.steps()
     }
 
     /// Algorithm 1 line 1: sample the head to follow this episode.
@@ -135,24 +127,9 @@ impl NeuralActor {
         };
         let query = query_decision(self.mode, &mut self.rule, js, budget_left);
         let a = self.actions;
-        let head = &self.q[self.arm * a..(self.arm + 1) * a];
-        let action = match self.exploration {
-            Exploration::GreedyHead => argmax(head),
-            Exploration::EpsilonGreedy => {
-                let (start, end, decay) = self.epsilon;
-                let eps = end + (start - end) * (-(self.steps as f64) / decay).exp();
-                if self.rng.random::<f64>() < eps {
-                    self.rng.random_range(0..a)
-                } else {
-                    argmax(head)
-                }
-            }
-            Exploration::Softmax => {
-                softmax_into(head, self.temperature, &mut self.probs);
-                crate::agent::tabular::sample(&self.probs, &mut self.rng)
-            }
-        };
-        self.steps += 1;
+        let action = self
+            .explorer
+            .act(&self.q[self.arm * a..(self.arm + 1) * a], &mut self.rng);
         Decision { action, js, query }
     }
 

@@ -3,8 +3,9 @@
 
 use rand::Rng as _;
 
-use crate::config::{AgentConfig, AgentKind, Exploration};
-use crate::policy::{argmax, softmax_into};
+use crate::agent::Explorer;
+use crate::config::{AgentConfig, AgentKind};
+use crate::policy::argmax;
 use crate::qfunction::{QFunction, TabularQ};
 use crate::rng::Rng;
 
@@ -12,7 +13,7 @@ use crate::rng::Rng;
 #[derive(Debug, Clone)]
 pub struct TabularAgent {
     kind: AgentKind,
-    exploration: Exploration,
+    explorer: Explorer,
     q: TabularQ,
     temperature: f64,
     lr: f64,
@@ -21,12 +22,9 @@ pub struct TabularAgent {
     visits: Vec<u32>,
     gamma: f64,
     bootstrap_probability: f64,
-    epsilon: (f64, f64, f64),
     rng: Rng,
     /// The head followed this episode (Algorithm 1 line 1).
     arm: usize,
-    steps: u64,
-    scratch: Vec<f64>,
 }
 
 impl TabularAgent {
@@ -34,7 +32,7 @@ impl TabularAgent {
         let heads = cfg.heads();
         Self {
             kind: cfg.kind,
-            exploration: cfg.exploration(),
+            explorer: Explorer::new(cfg, actions),
             q: TabularQ::new(states, heads, actions, 0.0),
             temperature: cfg.temperature,
             lr: cfg.learning_rate(),
@@ -42,11 +40,8 @@ impl TabularAgent {
             visits: vec![0; states * heads * actions],
             gamma: cfg.gamma,
             bootstrap_probability: cfg.bootstrap_probability,
-            epsilon: (cfg.epsilon_start, cfg.epsilon_end, cfg.epsilon_decay_steps),
             rng,
             arm: 0,
-            steps: 0,
-            scratch: vec![0.0; heads * actions],
         }
     }
 
@@ -73,27 +68,8 @@ impl TabularAgent {
 
     /// The agent's own action at `s` on the episode's head.
     pub fn act(&mut self, s: usize) -> usize {
-        let a = self.q.actions();
-        let values = self.q.head_values(s, self.arm);
-        let action = match self.exploration {
-            Exploration::GreedyHead => argmax(values),
-            Exploration::EpsilonGreedy => {
-                let (start, end, decay) = self.epsilon;
-                let eps = end + (start - end) * (-(self.steps as f64) / decay).exp();
-                if self.rng.random::<f64>() < eps {
-                    self.rng.random_range(0..a)
-                } else {
-                    argmax(values)
-                }
-            }
-            Exploration::Softmax => {
-                let probs = &mut self.scratch[..a];
-                softmax_into(values, self.temperature, probs);
-                sample(probs, &mut self.rng)
-            }
-        };
-        self.steps += 1;
-        action
+        self.explorer
+            .act(self.q.head_values(s, self.arm), &mut self.rng)
     }
 
     /// Learns from one transition. `next_action` is the action taken at `s_next` (SARSA's target;
@@ -147,19 +123,6 @@ impl TabularAgent {
             })
             .collect()
     }
-}
-
-/// Samples an index from a probability vector.
-pub(crate) fn sample(probs: &[f64], rng: &mut Rng) -> usize {
-    let u: f64 = rng.random();
-    let mut acc = 0.0;
-    for (i, p) in probs.iter().enumerate() {
-        acc += p;
-        if u < acc {
-            return i;
-        }
-    }
-    probs.len() - 1
 }
 
 #[cfg(test)]
