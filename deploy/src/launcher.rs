@@ -123,6 +123,8 @@ struct Proc {
 #[derive(Debug)]
 struct Swap {
     request: SwapRequest,
+    /// The expert being replaced.
+    from_name: String,
     from: u16,
     to: u16,
     phase: SwapPhase,
@@ -250,7 +252,11 @@ struct Launcher<'a, 'w> {
     recorded: u64,
     returns: VecDeque<f64>,
     all_returns: Vec<f64>,
+    /// Demonstrations used, as the actors reported them with their episodes (monotone).
     demos_used: u64,
+    /// Demonstrations answered, as the active expert reports them (for the progress bar only:
+    /// its reports arrive in no fixed order with the actors' episodes).
+    demos_answered: u64,
     restarts: u32,
     swaps: u32,
     swap: Option<Swap>,
@@ -308,6 +314,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             returns: VecDeque::new(),
             all_returns: Vec::new(),
             demos_used: 0,
+            demos_answered: 0,
             restarts: 0,
             swaps: 0,
             swap: None,
@@ -419,7 +426,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     );
                     self.seen.set_expert(p.header.id, p.state, p.demos);
                     if p.header.id == self.control.active_expert as u16 {
-                        self.demos_used = self.demos_used.max(p.demos);
+                        self.demos_answered = self.demos_answered.max(p.demos);
                     }
                 }
                 _ => {}
@@ -462,7 +469,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         let (sps, ups) = self.rate.rates();
         self.bar.set_message(format!(
             "return {mean:.1} (last 20)  demos {}/{}  {sps:.0} steps/s  {ups:.0} updates/s",
-            self.demos_used,
+            self.demos_used.max(self.demos_answered),
             self.plan.cfg.budget()
         ));
     }
@@ -612,6 +619,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 Ok(request) if self.swap.is_some() => {
                     let fake = Swap {
                         request,
+                        from_name: self.expert_name.clone(),
                         from: self.generation,
                         to: self.generation,
                         phase: SwapPhase::Starting,
@@ -629,6 +637,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     })?;
                     self.swap = Some(Swap {
                         request,
+                        from_name: self.expert_name.clone(),
                         from,
                         to,
                         phase: SwapPhase::Starting,
@@ -686,7 +695,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             id: swap.request.id.clone(),
             ok,
             message,
-            from: self.expert_name.clone(),
+            from: swap.from_name.clone(),
             to: swap.request.expert.clone(),
             generation: u32::from(swap.to),
             at_episode: self.recorded,
