@@ -94,8 +94,35 @@ fn run(out: &Path, actors: usize, sets: &[&str]) -> Output {
     c.output().expect("alfd runs")
 }
 
-/// The same, in the background (the caller stops it with SIGINT).
-fn spawn_run(out: &Path, actors: usize, sets: &[&str]) -> Child {
+/// A run in the background; stopped with SIGINT when dropped (so a failed test leaves no
+/// processes behind).
+struct Background(Option<Child>);
+
+impl Background {
+    fn child(&mut self) -> &mut Child {
+        self.0.as_mut().expect("running")
+    }
+}
+
+impl Drop for Background {
+    fn drop(&mut self) {
+        if let Some(mut child) = self.0.take() {
+            let _ = Command::new("kill")
+                .args(["-INT", &child.id().to_string()])
+                .status();
+            let start = Instant::now();
+            while matches!(child.try_wait(), Ok(None)) && start.elapsed() < Duration::from_secs(30)
+            {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// The same, in the background (the caller stops it with [`interrupt`]).
+fn spawn_run(out: &Path, actors: usize, sets: &[&str]) -> Background {
     let mut c = alfd();
     c.args([
         "run",
@@ -109,10 +136,12 @@ fn spawn_run(out: &Path, actors: usize, sets: &[&str]) -> Child {
     for s in sets {
         c.args(["--set", s]);
     }
-    c.stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("alfd runs")
+    Background(Some(
+        c.stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("alfd runs"),
+    ))
 }
 
 /// Rows of `episodes.csv` (without the header), each split on commas.
@@ -127,7 +156,8 @@ fn rows(dir: &Path) -> Vec<Vec<String>> {
 }
 
 /// Waits until `episodes.csv` has at least `n` rows.
-fn wait_rows(dir: &Path, n: usize, child: &mut Child) {
+fn wait_rows(dir: &Path, n: usize, run: &mut Background) {
+    let child = run.child();
     let start = Instant::now();
     while rows(dir).len() < n {
         if let Some(status) = child.try_wait().unwrap() {
@@ -142,7 +172,8 @@ fn wait_rows(dir: &Path, n: usize, child: &mut Child) {
 }
 
 /// Stops a background run with SIGINT (Ctrl-C) and returns its output.
-fn interrupt(child: Child) -> Output {
+fn interrupt(mut run: Background) -> Output {
+    let child = run.0.take().expect("running");
     let ok = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
