@@ -44,7 +44,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     pub incarnation: u64,
     /// Credit window: steps this actor may run ahead of the learner (as the learner's `--window`).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 32)]
     pub window: u64,
     /// Milliseconds to wait for the expert's answer before acting on its own.
     #[arg(long, default_value_t = 1000)]

@@ -33,7 +33,7 @@ pub struct RunArgs {
     #[arg(long)]
     pub quiet: bool,
     /// Credit window: steps an actor may run ahead of the learner's updates (1..=64).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 32)]
     pub window: u64,
     /// Milliseconds an actor waits for the expert's answer before acting on its own.
     #[arg(long, default_value_t = 1000)]

@@ -35,7 +35,7 @@ pub struct Args {
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Credit window: how many steps an actor may run ahead of the learner's updates.
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 32)]
     pub window: u64,
     /// Publish the weights every this many updates.
     #[arg(long, default_value_t = 1)]
@@ -247,6 +247,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let mut queue: VecDeque<Queued> = VecDeque::new();
     let mut published_version = 0u64;
     let mut credits_dirty = false;
+    let mut learned_since_credits = 0u64;
     let mut since_check = 0u32;
     let (mut idle_waits, mut idle) = (0u64, Duration::ZERO);
     let mut first_step: Option<Instant> = None;
@@ -284,10 +285,14 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 published_version = learner.updates();
             }
             credits_dirty = true;
-            if q.last_of_batch {
+            learned_since_credits += 1;
+            // Credits go back every few steps (so an actor refills its batch while the learner
+            // works through the rest of the queue) and at the end of every batch.
+            if q.last_of_batch || learned_since_credits >= CREDITS_EVERY {
                 credits_tx.send(book.credits(learner.updates()))?;
                 actors.ring()?;
                 credits_dirty = false;
+                learned_since_credits = 0;
             }
             since_check += 1;
             if since_check < 32 {
@@ -370,6 +375,9 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     );
     Ok(())
 }
+
+/// Credits are returned after at most this many learned steps.
+pub const CREDITS_EVERY: u64 = 8;
 
 /// How long the launcher may stay silent before a process gives up on the run.
 pub const LAUNCHER_SILENCE: Duration = Duration::from_secs(10);
