@@ -139,7 +139,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
 
     let wire = Wire::connect(&args.run_id, Process::new(Role::Actor, id), schema)
         .context("cannot join the run")?;
-    let waiter = wire.waiter(Doorbell::Actors)?;
+    let waiter = wire.waiter(Doorbell::Actor(id))?;
     let mut control = ControlWatch::new(&wire)?;
     let handshake = Duration::from_secs(args.handshake_timeout);
     control
@@ -237,15 +237,28 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                     .max(args.window)
             };
             if next_seq >= granted(&credits) {
-                flush(&mut batch, &mut tx, next_seq)?;
+                if let Some(c) = credits_rx.latest()? {
+                    credits = Some(c);
+                }
+            }
+            if next_seq >= granted(&credits) {
+                // Out of credits: send what is batched, flagged so that the learner rings when
+                // new credits are there (an empty batch if need be), and wait.
+                batch.blocked = 1;
+                tx.send(batch)?;
+                learner.ring()?;
+                batch = TransitionBatch::new(id, incarnation, OBS_DIM, heads, next_seq)?;
                 let blocked = Instant::now();
                 credit_waits += 1;
-                while next_seq >= granted(&credits) {
-                    if waiter.wait(Duration::from_millis(100))? == Wake::Signal {
-                        break 'run "termination signal";
-                    }
+                loop {
                     if let Some(c) = credits_rx.latest()? {
                         credits = Some(c);
+                    }
+                    if next_seq < granted(&credits) {
+                        break;
+                    }
+                    if waiter.wait(Duration::from_millis(100))? == Wake::Signal {
+                        break 'run "termination signal";
                     }
                     control.poll()?;
                     if control.shutdown_requested() {

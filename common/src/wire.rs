@@ -14,10 +14,11 @@
 //! | `query`             | request/response  | actors → expert → actor | [`QueryRequest`] → [`QueryResponse`] |
 //! | `progress`          | pub/sub           | every process → launcher| [`Progress`]                 |
 //! | `control`           | pub/sub, hist. 1  | launcher → every process| [`Control`]                  |
-//! | `doorbell/<role>`   | event             | anyone → a role         | (wakes a blocked process)    |
+//! | `doorbell/<who>`    | event             | anyone → one process    | (wakes a blocked process)    |
 //!
-//! Data services never wake anybody: a sender rings the receiver's doorbell, and a process with
-//! nothing to do blocks on its doorbell in a WaitSet, so nothing spins when idle.
+//! Data services never wake anybody: a sender rings the receiver's doorbell (`learner`, `expert`,
+//! `launcher`, `actor-<id>`), and a process with nothing to do blocks on its own doorbell in a
+//! WaitSet, so nothing spins when idle.
 //!
 //! # Credits (the replay-ratio throttle)
 //! The learner makes `U` updates per environment step it receives. Every transition an actor
@@ -27,7 +28,9 @@
 //! it never runs more than `window` steps ahead of the learner (the idea of Reverb's
 //! `SampleToInsertRatio`). Grants are cumulative and all actors' grants travel in one message, so
 //! a lost or overwritten message loses nothing. A new actor process (after a crash) has a new
-//! incarnation and starts with an implicit grant of `window`.
+//! incarnation and starts with an implicit grant of `window`. An actor out of credits flags its
+//! last batch `blocked` (an empty one if need be) and sleeps on its doorbell; the learner rings it
+//! as soon as a grant lets it go on, and never otherwise.
 //!
 //! # Schema version
 //! Every message carries a [`Header`] with the sender's schema version. A receiver meeting another
@@ -140,18 +143,19 @@ impl fmt::Display for Process {
 pub enum Doorbell {
     Learner,
     Expert,
-    /// All actors share one doorbell; each checks whether the news is for it.
-    Actors,
+    /// One actor (by id): the learner rings it when credits it waits for arrive, the expert when
+    /// its answer is there.
+    Actor(u16),
     Launcher,
 }
 
 impl Doorbell {
-    fn topic(self) -> &'static str {
+    fn topic(self) -> String {
         match self {
-            Doorbell::Learner => "doorbell/learner",
-            Doorbell::Expert => "doorbell/expert",
-            Doorbell::Actors => "doorbell/actors",
-            Doorbell::Launcher => "doorbell/launcher",
+            Doorbell::Learner => "doorbell/learner".to_owned(),
+            Doorbell::Expert => "doorbell/expert".to_owned(),
+            Doorbell::Actor(id) => format!("doorbell/actor-{id}"),
+            Doorbell::Launcher => "doorbell/launcher".to_owned(),
         }
     }
 }
@@ -305,7 +309,9 @@ pub struct TransitionBatch {
     /// Sequence number of `records[0]` among all steps this incarnation sent (the credit count).
     pub first_seq: u64,
     pub len: u32,
-    pub _pad: u32,
+    /// 1 when the actor has used up its credits with this batch and blocks until it hears of
+    /// new ones (the learner then rings its doorbell); 0 otherwise.
+    pub blocked: u32,
     pub records: [TransitionRecord; TRANSITIONS_PER_BATCH],
 }
 message!(TransitionBatch, "transitions");
@@ -984,7 +990,7 @@ impl Wire {
         &self,
         bell: Doorbell,
     ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Transport>> {
-        let name = self.service_name(bell.topic())?;
+        let name = self.service_name(&bell.topic())?;
         self.node
             .service_builder(&name)
             .event()
@@ -1615,6 +1621,49 @@ impl Bell {
         self.port
             .notify()
             .map_err(transport("notify", self.bell.topic()))
+    }
+}
+
+/// The doorbells of the actors, opened as needed.
+pub struct ActorBells<'w> {
+    wire: &'w Wire,
+    bells: Vec<Option<Bell>>,
+}
+
+impl fmt::Debug for ActorBells<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "ActorBells({})", self.bells.iter().flatten().count())
+    }
+}
+
+impl<'w> ActorBells<'w> {
+    pub fn new(wire: &'w Wire) -> Self {
+        Self {
+            wire,
+            bells: (0..MAX_ACTORS).map(|_| None).collect(),
+        }
+    }
+
+    /// Wakes actor `id` if it waits on its doorbell.
+    pub fn ring(&mut self, id: u16) -> Result<()> {
+        let Some(slot) = self.bells.get_mut(id as usize) else {
+            return Ok(());
+        };
+        if slot.is_none() {
+            *slot = Some(self.wire.bell(Doorbell::Actor(id))?);
+        }
+        if let Some(bell) = slot {
+            bell.ring()?;
+        }
+        Ok(())
+    }
+
+    /// Wakes actors `0..n`.
+    pub fn ring_all(&mut self, n: usize) -> Result<()> {
+        for id in 0..n.min(MAX_ACTORS) {
+            self.ring(id as u16)?;
+        }
+        Ok(())
     }
 }
 

@@ -44,6 +44,10 @@ pub struct RunArgs {
     /// Restarts allowed per actor before the run fails.
     #[arg(long, default_value_t = 5)]
     pub max_restarts: u32,
+    /// Pin the learner to CPU 0 and the other processes to the other CPUs (`taskset`); helps on
+    /// an otherwise idle machine, hurts on a shared one.
+    #[arg(long)]
+    pub pin: bool,
 }
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
@@ -89,6 +93,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         weights_every: args.weights_every,
         max_restarts: args.max_restarts,
         progress: !args.quiet,
+        pin: args.pin,
         bin_dir: launcher::bin_dir()?,
     };
     let summary = launcher::launch(&plan)?;

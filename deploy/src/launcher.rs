@@ -26,8 +26,8 @@ use std::time::{Duration, Instant};
 use alfd_common::config::ExperimentConfig;
 use alfd_common::runner::{EpisodeRecord, CSV_HEADER};
 use alfd_common::wire::{
-    self, command, process_state, progress_kind, Bell, Control, Doorbell, Process, Progress, Role,
-    Wake, Wire, WireError, CONTROL_PERIOD,
+    self, command, process_state, progress_kind, ActorBells, Bell, Control, Doorbell, Process,
+    Progress, Role, Wake, Wire, WireError, CONTROL_PERIOD,
 };
 use anyhow::{bail, Context as _};
 use serde::{Deserialize, Serialize};
@@ -47,6 +47,8 @@ pub struct Plan {
     /// Restarts allowed per actor before the run fails.
     pub max_restarts: u32,
     pub progress: bool,
+    /// Pin the learner to CPU 0 and the other processes to the other CPUs (with `taskset`).
+    pub pin: bool,
     /// Where `alfd-learner`, `alfd-actor` and `alfd-expert` are.
     pub bin_dir: PathBuf,
 }
@@ -245,7 +247,8 @@ struct Launcher<'a, 'w> {
     control_tx: wire::Sender<'w, Control>,
     progress_rx: wire::Receiver<'w, Progress>,
     waiter: wire::Waiter,
-    bells: [Bell; 3],
+    bells: [Bell; 2],
+    actor_bells: ActorBells<'w>,
     procs: Vec<Proc>,
     seen: Seen,
     csv: File,
@@ -302,11 +305,8 @@ impl<'a, 'w> Launcher<'a, 'w> {
             control_tx,
             progress_rx: wire.progress_receiver()?,
             waiter: wire.waiter(Doorbell::Launcher)?,
-            bells: [
-                wire.bell(Doorbell::Learner)?,
-                wire.bell(Doorbell::Expert)?,
-                wire.bell(Doorbell::Actors)?,
-            ],
+            bells: [wire.bell(Doorbell::Learner)?, wire.bell(Doorbell::Expert)?],
+            actor_bells: ActorBells::new(wire),
             procs: Vec::new(),
             seen: Seen::default(),
             csv,
@@ -393,6 +393,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         for b in &self.bells {
             b.ring()?;
         }
+        self.actor_bells.ring_all(self.plan.actors)?;
         self.last_control = Instant::now();
         Ok(())
     }
@@ -522,6 +523,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
             .spawn()
             .with_context(|| format!("cannot start {bin}"))?;
         info!(process = %name, pid = child.id(), "started");
+        if plan.pin {
+            pin(child.id(), matches!(kind, Kind::Learner));
+        }
         self.procs.push(Proc { name, kind, child });
         Ok(())
     }
@@ -795,6 +799,29 @@ impl<'a, 'w> Launcher<'a, 'w> {
             expert_swaps: self.swaps,
             interrupted,
         }
+    }
+}
+
+/// Gives the learner (the bottleneck: one train step per environment step) a CPU of its own, and
+/// the other processes the rest, so that waking an actor never preempts the learner. Best effort:
+/// without `taskset` or with one CPU, nothing is pinned.
+fn pin(pid: u32, learner: bool) {
+    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if cpus < 2 {
+        return;
+    }
+    let list = if learner {
+        "0".to_owned()
+    } else {
+        format!("1-{}", cpus - 1)
+    };
+    let done = Command::new("taskset")
+        .args(["-pc", &list, &pid.to_string()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status();
+    if !matches!(done, Ok(s) if s.success()) {
+        debug!(pid, "cannot pin the process to CPUs {list} (no taskset?)");
     }
 }
 

@@ -14,8 +14,8 @@ use std::time::{Duration, Instant};
 use alfd_common::agent::ExpertCore;
 use alfd_common::config::{EnvName, ExperimentConfig};
 use alfd_common::wire::{
-    name_to_bytes, outcome, process_state, progress_kind, ControlWatch, DemoModelHeader, Doorbell,
-    Process, Progress, QueryResponse, Role, Wake, Wire, WireError,
+    name_to_bytes, outcome, process_state, progress_kind, ActorBells, ControlWatch,
+    DemoModelHeader, Doorbell, Process, Progress, QueryResponse, Role, Wake, Wire, WireError,
 };
 use anyhow::Context as _;
 use tracing::{debug, info};
@@ -104,7 +104,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         .context("no handshake with the launcher")?;
     let server = wire.query_server()?;
     let mut model_tx = wire.demo_model_sender()?;
-    let actors = wire.bell(Doorbell::Actors)?;
+    let mut actors = ActorBells::new(&wire);
     let launcher = wire.bell(Doorbell::Launcher)?;
     let mut progress = wire.progress_sender()?;
 
@@ -163,7 +163,6 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             log = Some(DemoLog::open(&demos_path)?);
             mode = Mode::Active;
             publish_model(&mut model_tx, &core, args.generation, &name)?;
-            actors.ring()?;
             status(&mut progress, process_state::RUNNING, &core)?;
             launcher.ring()?;
             info!(
@@ -179,7 +178,6 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             launcher.ring()?;
         }
 
-        let mut rang = false;
         loop {
             let query = match server.receive() {
                 Ok(Some(q)) => q,
@@ -230,19 +228,17 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                     // shapes the step it asked about with it (as in one process).
                     publish_model(&mut model_tx, &core, args.generation, &name)?;
                     query.answer(response)?;
+                    actors.ring(request.actor as u16)?;
                     answered += 1;
                 }
                 None => {
                     response.outcome = outcome::BUDGET_EXHAUSTED;
                     response.budget_left = 0;
                     query.answer(response)?;
+                    actors.ring(request.actor as u16)?;
                     refused += 1;
                 }
             }
-            rang = true;
-        }
-        if rang {
-            actors.ring()?;
         }
         if last_status.elapsed() >= Duration::from_millis(500) {
             let state = if mode == Mode::Active {

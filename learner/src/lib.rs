@@ -11,8 +11,8 @@ use alfd_common::config::{EnvName, ExperimentConfig};
 use alfd_common::replay::Transition;
 use alfd_common::rng::{derive_seed, seeded};
 use alfd_common::wire::{
-    self, process_state, progress_kind, ControlWatch, Credits, Doorbell, Process, Progress, Role,
-    TransitionBatch, Wake, Wire, WireError, MAX_ACTORS, MAX_CREDIT_WINDOW,
+    self, process_state, progress_kind, ActorBells, ControlWatch, Credits, Doorbell, Process,
+    Progress, Role, TransitionBatch, Wake, Wire, WireError, MAX_ACTORS, MAX_CREDIT_WINDOW,
 };
 use anyhow::Context as _;
 use tracing::{debug, info, warn};
@@ -73,6 +73,8 @@ struct ActorBook {
     /// Steps received and not yet learned from.
     queued: u64,
     lost: u64,
+    /// The actor is blocked until its grant exceeds this sequence number.
+    blocked_until: Option<u64>,
 }
 
 /// The learner's accounts: what each actor sent, what is learned from, and the grants.
@@ -149,6 +151,9 @@ impl CreditBook {
             }
             book.received = book.received.max(b.end_seq());
             book.queued += b.len() as u64;
+            if b.blocked != 0 {
+                book.blocked_until = Some(b.end_seq());
+            }
         }
         let n = b.len().min(wire::TRANSITIONS_PER_BATCH);
         for (i, transition) in b.transitions().enumerate() {
@@ -170,6 +175,27 @@ impl CreditBook {
                 book.queued = book.queued.saturating_sub(1);
             }
         }
+    }
+
+    /// Whether an actor waits for credits.
+    pub fn any_blocked(&self) -> bool {
+        self.actors.iter().any(|a| a.blocked_until.is_some())
+    }
+
+    /// The grants to publish now, and the actors to wake: those blocked for want of credits
+    /// that the new grants let go on.
+    pub fn grant(&mut self, updates: u64) -> (Credits, Vec<u16>) {
+        let c = self.credits(updates);
+        let mut wake = Vec::new();
+        for (i, b) in self.actors.iter_mut().enumerate() {
+            if let Some(until) = b.blocked_until {
+                if c.granted[i] > until {
+                    wake.push(i as u16);
+                    b.blocked_until = None;
+                }
+            }
+        }
+        (c, wake)
     }
 
     /// The grants: each actor may send up to `window` steps beyond those learned from.
@@ -210,7 +236,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         .context("no handshake with the launcher")?;
     let rx = wire.transitions_receiver()?;
     let mut credits_tx = wire.credits_sender()?;
-    let actors = wire.bell(Doorbell::Actors)?;
+    let mut actors = ActorBells::new(&wire);
     let mut progress = wire.progress_sender()?;
 
     let mut learner = NeuralLearner::new(
@@ -235,7 +261,6 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     };
     publish_weights(&learner, &mut params, &mut weights_tx, 0)?;
     credits_tx.send(book.credits(0))?;
-    actors.ring()?;
     info!(
         params = params.len(),
         window = args.window,
@@ -268,6 +293,10 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 Err(e) => return Err(e.into()),
             }
         }
+        if book.any_blocked() {
+            // Its grant may already be there (it blocked on stale news): wake it at once.
+            send_credits(&mut book, &mut credits_tx, &mut actors, learner.updates())?;
+        }
         if let Some(q) = queue.pop_front() {
             first_step.get_or_insert_with(Instant::now);
             // Algorithm 1 lines 19-20, U times per step.
@@ -289,8 +318,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             // Credits go back every few steps (so an actor refills its batch while the learner
             // works through the rest of the queue) and at the end of every batch.
             if q.last_of_batch || learned_since_credits >= CREDITS_EVERY {
-                credits_tx.send(book.credits(learner.updates()))?;
-                actors.ring()?;
+                send_credits(&mut book, &mut credits_tx, &mut actors, learner.updates())?;
                 credits_dirty = false;
                 learned_since_credits = 0;
             }
@@ -306,8 +334,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 published_version = learner.updates();
             }
             if credits_dirty {
-                credits_tx.send(book.credits(learner.updates()))?;
-                actors.ring()?;
+                send_credits(&mut book, &mut credits_tx, &mut actors, learner.updates())?;
                 credits_dirty = false;
             }
         }
@@ -373,6 +400,21 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         lost = (0..MAX_ACTORS as u16).map(|a| book.lost(a)).sum::<u64>(),
         "lost steps"
     );
+    Ok(())
+}
+
+/// Publishes the grants, and wakes the actors that wait for them.
+fn send_credits(
+    book: &mut CreditBook,
+    tx: &mut wire::Sender<'_, Credits>,
+    actors: &mut ActorBells<'_>,
+    updates: u64,
+) -> anyhow::Result<()> {
+    let (credits, wake) = book.grant(updates);
+    tx.send(credits)?;
+    for id in wake {
+        actors.ring(id)?;
+    }
     Ok(())
 }
 
@@ -493,6 +535,50 @@ mod tests {
         assert!(last.last_of_batch && last.actor == 0);
         assert_eq!(book.credits(0).granted_for(0, 1), Some(96));
         assert_eq!(book.credits(0).granted_for(1, 1), Some(64));
+    }
+
+    #[test]
+    fn a_blocked_actor_is_woken_once_its_grant_lets_it_go_on() {
+        let mut book = CreditBook::new(4);
+        let mut q = VecDeque::new();
+        let mut b = batch(1, 1, 0, 4);
+        b.blocked = 1; // sent steps 0..4 with a grant of 4: blocked
+        book.accept(&b, &mut q);
+        book.accept(&batch(0, 1, 0, 2), &mut q);
+        assert!(book.any_blocked());
+        let (c, wake) = book.grant(0);
+        assert_eq!(
+            (c.granted_for(1, 1), wake),
+            (Some(4), vec![]),
+            "nothing learned yet"
+        );
+        let s = q.pop_front().unwrap();
+        book.learned(s.actor, s.incarnation);
+        let (c, wake) = book.grant(1);
+        assert_eq!((c.granted_for(1, 1), wake), (Some(5), vec![1]));
+        assert!(!book.any_blocked(), "woken once");
+        let s = q.pop_front().unwrap();
+        book.learned(s.actor, s.incarnation);
+        assert_eq!(book.grant(2).1, Vec::<u16>::new());
+        // Actor 0 uses its grant of 4, then blocks with nothing batched: an empty flagged batch.
+        book.accept(&batch(0, 1, 2, 2), &mut q);
+        let mut empty = batch(0, 1, 4, 0);
+        empty.blocked = 1;
+        book.accept(&empty, &mut q);
+        assert_eq!(
+            book.grant(2).1,
+            Vec::<u16>::new(),
+            "granted 4, blocked at 4: not yet"
+        );
+        while let Some(s) = q.pop_front() {
+            book.learned(s.actor, s.incarnation);
+        }
+        assert_eq!(book.grant(8).1, vec![0]);
+        // One that blocked on stale news (its grant is already beyond) is woken at once.
+        let mut stale = batch(0, 1, 4, 1);
+        stale.blocked = 1;
+        book.accept(&stale, &mut q);
+        assert_eq!(book.grant(8).1, vec![0]);
     }
 
     #[test]

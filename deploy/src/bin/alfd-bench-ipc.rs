@@ -118,7 +118,7 @@ fn measure(bench: Bench, n: usize) -> anyhow::Result<serde_json::Value> {
             command: command::SHUTDOWN,
             ..Control::default()
         })?;
-        for bell in [Doorbell::Expert, Doorbell::Actors, Doorbell::Learner] {
+        for bell in [Doorbell::Expert, Doorbell::Actor(0), Doorbell::Learner] {
             me.bell(bell)?.ring()?;
         }
         wait_child(&mut child)?;
@@ -162,7 +162,7 @@ fn percentiles(mut ns: Vec<u64>) -> serde_json::Value {
 fn query(me: &Wire, n: usize, block: bool) -> anyhow::Result<serde_json::Value> {
     let mut client = me.query_client()?;
     let expert = me.bell(Doorbell::Expert)?;
-    let waiter = me.waiter(Doorbell::Actors)?;
+    let waiter = me.waiter(Doorbell::Actor(0))?;
     let state = [0.01f32, -0.02, 0.03, -0.04];
     let warmup = n / 10;
     let mut ns = Vec::with_capacity(n);
@@ -261,7 +261,7 @@ fn peer(bench: Bench, run_id: &str, n: usize) -> anyhow::Result<()> {
     let me = Wire::connect(run_id, role, SCHEMA_VERSION)?;
     let waiter = me.waiter(match bench {
         Bench::QueryPoll | Bench::QueryBlock => Doorbell::Expert,
-        Bench::Transitions => Doorbell::Actors,
+        Bench::Transitions => Doorbell::Actor(0),
         Bench::Weights => Doorbell::Learner,
     })?;
     let mut control = ControlWatch::new(&me)?;
@@ -275,7 +275,7 @@ fn peer(bench: Bench, run_id: &str, n: usize) -> anyhow::Result<()> {
     match bench {
         Bench::QueryPoll | Bench::QueryBlock => {
             let server = me.query_server()?;
-            let actors = me.bell(Doorbell::Actors)?;
+            let actors = me.bell(Doorbell::Actor(0))?;
             progress.send(ready)?;
             let block = bench == Bench::QueryBlock;
             while !control.shutdown_requested() {
