@@ -1,0 +1,3 @@
+//! Integration tests of the `alfd` binary, in one test binary.
+
+mod sweep;
