@@ -66,7 +66,7 @@ pub enum DemoSource {
     ExpertTrajectory,
     /// The states a training run with this config queries (seed, budget and expert are set per
     /// run by [`queries_config`]).
-    Queries(ExperimentConfig),
+    Queries(Box<ExperimentConfig>),
 }
 
 /// The config of the training run whose queries give the demonstrations of run `seed`.
@@ -100,7 +100,7 @@ pub fn run(args: DemoModelPolicyArgs) -> anyhow::Result<()> {
         Some(path) => {
             let cfg = setup::load_config(path, &[])?;
             queries_config(&cfg, &args.expert, args.demos, 0)?;
-            DemoSource::Queries(cfg)
+            DemoSource::Queries(Box::new(cfg))
         }
     };
     let returns = (args.seed..args.seed + args.runs)
@@ -174,12 +174,13 @@ pub fn play(
             }
         }
     }
-    let fitted = DemoModel::fit(model, &states, &actions, env.num_actions()).with_context(|| {
-        format!(
-            "fitting the {model} model on {} demonstrations",
-            states.len()
-        )
-    })?;
+    let fitted =
+        DemoModel::fit(model, &states, &actions, env.num_actions()).with_context(|| {
+            format!(
+                "fitting the {model} model on {} demonstrations",
+                states.len()
+            )
+        })?;
     let mut obs = env.reset(Some(derive_seed(seed, "eval")));
     let (mut ret, mut length) = (0.0, 0u32);
     loop {

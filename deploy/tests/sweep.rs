@@ -14,11 +14,16 @@ const LAST: usize = 5;
 const THRESHOLDS: [f64; 3] = [-40.0, 15.0, 1000.0];
 
 fn alfd(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_alfd"))
-        .args(args)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("the alfd binary runs")
+    alfd_with_env(args, &[])
+}
+
+fn alfd_with_env(args: &[&str], env: &[(&str, &str)]) -> Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_alfd"));
+    cmd.args(args).env("RUST_LOG", "warn");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    cmd.output().expect("the alfd binary runs")
 }
 
 fn text(bytes: &[u8]) -> String {
@@ -27,7 +32,9 @@ fn text(bytes: &[u8]) -> String {
 
 /// A fresh scratch directory for one test.
 fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("sweep").join(name);
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("sweep")
+        .join(name);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
@@ -155,7 +162,11 @@ fn mtimes(out: &Path) -> Vec<SystemTime> {
     let mut v = Vec::new();
     for m in METHODS {
         for s in 0..SEEDS {
-            let p = out.join("runs").join(m).join(s.to_string()).join("summary.json");
+            let p = out
+                .join("runs")
+                .join(m)
+                .join(s.to_string())
+                .join("summary.json");
             v.push(std::fs::metadata(p).unwrap().modified().unwrap());
         }
     }
@@ -193,7 +204,10 @@ fn tiny_sweep_writes_curves_and_summary_that_match_the_runs() {
     }
     // The two seeds of a method are different runs.
     assert_ne!(runs["bdqn-krr"][0].0, runs["bdqn-krr"][1].0);
-    assert!(runs["bdqn-krr"][0].1 > 0.0, "BDQN+KRR asked for demonstrations");
+    assert!(
+        runs["bdqn-krr"][0].1 > 0.0,
+        "BDQN+KRR asked for demonstrations"
+    );
 
     // curves.csv: mean, std, median and count per method and episode, recomputed.
     let curves = std::fs::read_to_string(out.join("curves.csv")).unwrap();
@@ -203,7 +217,10 @@ fn tiny_sweep_writes_curves_and_summary_that_match_the_runs() {
     assert_eq!(rows.len(), METHODS.len() * EPISODES);
     let mut means: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
     for row in &rows {
-        let m = METHODS.iter().find(|m| **m == row[0]).expect("a known method");
+        let m = METHODS
+            .iter()
+            .find(|m| **m == row[0])
+            .expect("a known method");
         let e: usize = row[1].parse().unwrap();
         let values: Vec<f64> = runs[m].iter().map(|(r, _)| r[e]).collect();
         let (mean, std, median) = stats(&values);
@@ -233,10 +250,16 @@ fn tiny_sweep_writes_curves_and_summary_that_match_the_runs() {
         }
         let tail = mean[EPISODES - LAST..].iter().sum::<f64>() / LAST as f64;
         let got: f64 = row[&format!("last {LAST}")].parse().unwrap();
-        assert!((got - tail).abs() <= 0.005 + 1e-9, "{m}: last {got} vs {tail}");
+        assert!(
+            (got - tail).abs() <= 0.005 + 1e-9,
+            "{m}: last {got} vs {tail}"
+        );
         let demos = runs[m].iter().map(|(_, d)| d).sum::<f64>() / SEEDS as f64;
         let got: f64 = row["demos"].parse().unwrap();
-        assert!((got - demos).abs() <= 0.005 + 1e-9, "{m}: demos {got} vs {demos}");
+        assert!(
+            (got - demos).abs() <= 0.005 + 1e-9,
+            "{m}: demos {got} vs {demos}"
+        );
         let per_run: f64 = row["s/run"].parse().unwrap();
         assert!(per_run >= 0.0);
     }
@@ -301,6 +324,39 @@ fn tiny_sweep_writes_curves_and_summary_that_match_the_runs() {
     assert!(text(&changed.stderr).contains("different config"));
 }
 
+#[test]
+fn without_a_font_the_plot_is_svg_only_and_the_sweep_succeeds() {
+    let dir = scratch("no-font");
+    let experiment = write_experiment(&dir, "");
+    let out = dir.join("out");
+    // A PNG of an earlier sweep must not survive as if it were this one's.
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("tiny.png"), b"stale").unwrap();
+    let args = [
+        "sweep",
+        "--config",
+        experiment.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+        "--seeds",
+        "1",
+        "--episodes",
+        "3",
+    ];
+    let res = alfd_with_env(&args, &[("ALFD_FONT", "")]);
+    assert_ok(&res);
+    assert!(
+        text(&res.stderr).contains("no font found"),
+        "{}",
+        text(&res.stderr)
+    );
+    assert!(out.join("tiny.svg").is_file());
+    assert!(!out.join("tiny.png").exists());
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(md.contains("Plot: tiny.svg —"), "{md}");
+}
+
 /// Runs `alfd sweep` on an experiment with `extra` appended to its second method (or replacing
 /// the whole file when `whole` is given) and checks it is refused with exit code 2, a message
 /// containing every one of `needles`, and nothing run.
@@ -346,13 +402,7 @@ fn bad_experiments_are_refused_before_anything_runs() {
         &["method `bdqn-krr`", "flavour"],
     );
     assert_refused("zero-seeds", "", None, &["--seeds", "0"], &["seeds", "0"]);
-    assert_refused(
-        "unknown-key",
-        "colour = \"red\"",
-        None,
-        &[],
-        &["colour"],
-    );
+    assert_refused("unknown-key", "colour = \"red\"", None, &[], &["colour"]);
     assert_refused(
         "seed-in-set",
         "set = [\"seed=4\"]",

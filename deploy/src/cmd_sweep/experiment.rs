@@ -7,6 +7,10 @@
 //! episodes = 300             # optional: overrides every method's config
 //! log_y = true               # plot the return on a log scale (as the paper does)
 //! thresholds = [100, 200, 500]
+//! last = 50                  # the summary's "mean over the last episodes"
+//! smooth = 1                 # the plot's moving average, in episodes (tables are never smoothed)
+//! y_range = [5, 1500]        # optional: the plot's y range
+//! legend = "upper-left"      # or upper-right, lower-left, lower-right
 //!
 //! [[method]]
 //! name = "bdqn-krr"                           # the run directory name: letters, digits, - _ .
@@ -44,6 +48,17 @@ pub enum ExperimentKind {
     DemoModelPolicy,
 }
 
+/// Where a plot's legend goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LegendPosition {
+    #[default]
+    UpperLeft,
+    UpperRight,
+    LowerLeft,
+    LowerRight,
+}
+
 /// The experiment file as written.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -73,6 +88,9 @@ struct ExperimentFile {
     /// The plot's y range (default: fitted to the curves).
     #[serde(default)]
     y_range: Option<[f64; 2]>,
+    /// Where the plot's legend goes.
+    #[serde(default)]
+    legend: LegendPosition,
     #[serde(rename = "method")]
     methods: Vec<MethodFile>,
 }
@@ -125,6 +143,7 @@ pub struct Experiment {
     pub last: u32,
     pub smooth: usize,
     pub y_range: Option<(f64, f64)>,
+    pub legend: LegendPosition,
     pub methods: Vec<Method>,
 }
 
@@ -173,13 +192,8 @@ impl Method {
             overrides.push(format!("episodes={e}"));
         }
         overrides.push(format!("seed={seed}"));
-        ExperimentConfig::from_toml_with_overrides(config_text, &overrides).with_context(|| {
-            format!(
-                "method `{}` (config {})",
-                self.name,
-                config_path.display()
-            )
-        })
+        ExperimentConfig::from_toml_with_overrides(config_text, &overrides)
+            .with_context(|| format!("method `{}` (config {})", self.name, config_path.display()))
     }
 }
 
@@ -188,8 +202,12 @@ impl Experiment {
     /// Every method's config is loaded and checked, and its expert looked up, so that a bad entry
     /// is refused before anything runs.
     pub fn load(path: &Path, seeds: Option<u64>, episodes: Option<u32>) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| usage(format!("cannot read experiment file {}: {e}", path.display())))?;
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            usage(format!(
+                "cannot read experiment file {}: {e}",
+                path.display()
+            ))
+        })?;
         let file: ExperimentFile = toml::from_str(&text).map_err(|e| {
             usage(format!(
                 "invalid experiment file {}: {}",
@@ -281,6 +299,7 @@ impl Experiment {
             last: file.last,
             smooth: file.smooth,
             y_range,
+            legend: file.legend,
             methods,
         })
     }
@@ -340,7 +359,7 @@ fn policy_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {
             let cfg = ExperimentConfig::from_toml_with_overrides(&text, &m.set)
                 .with_context(|| format!("in config {}", path.display()))?;
             queries_config(&cfg, &expert, demos, 0)?;
-            DemoSource::Queries(cfg)
+            DemoSource::Queries(Box::new(cfg))
         }
     };
     Ok(MethodSpec::DemoModelPolicy {
@@ -371,7 +390,6 @@ fn valid_name(s: &str) -> bool {
     !s.is_empty()
         && s != "."
         && s != ".."
-        && s
-            .chars()
+        && s.chars()
             .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }

@@ -173,7 +173,13 @@ fn is_complete(dir: &Path, cfg: &ExperimentConfig) -> anyhow::Result<bool> {
 }
 
 /// Runs the jobs on `jobs` threads, showing progress over `total` runs of which `done` are done.
-fn run_jobs(pending: &[Job], jobs: usize, total: u64, done: u64, progress: bool) -> anyhow::Result<()> {
+fn run_jobs(
+    pending: &[Job],
+    jobs: usize,
+    total: u64,
+    done: u64,
+    progress: bool,
+) -> anyhow::Result<()> {
     let bar = if progress {
         indicatif::ProgressBar::new(total)
     } else {
@@ -273,7 +279,11 @@ struct MethodResult<'a> {
     wall_clock_s: Vec<f64>,
 }
 
-fn method_result<'a>(out: &Path, method: &'a Method, seeds: u64) -> anyhow::Result<MethodResult<'a>> {
+fn method_result<'a>(
+    out: &Path,
+    method: &'a Method,
+    seeds: u64,
+) -> anyhow::Result<MethodResult<'a>> {
     let mut returns = Vec::with_capacity(seeds as usize);
     let mut demos_used = Vec::with_capacity(seeds as usize);
     let mut wall_clock_s = Vec::with_capacity(seeds as usize);
@@ -380,20 +390,24 @@ fn write_plot(ctx: &Ctx, series: &[plot::Series], x_desc: &str) -> anyhow::Resul
         y_desc: &y_desc,
         log_y: exp.log_y,
         y_range: exp.y_range,
+        legend: exp.legend,
         series,
     })?;
     let mut files = vec![format!("{}.svg", exp.name)];
     write(ctx.out, &files[0], svg.as_bytes())?;
+    let png_name = format!("{}.png", exp.name);
     match plot::png_from_svg(&svg)? {
         Some(png) => {
-            files.push(format!("{}.png", exp.name));
-            write(ctx.out, &files[1], &png)?;
+            write(ctx.out, &png_name, &png)?;
+            files.push(png_name);
         }
-        None => eprintln!(
-            "warning: no font found (install fonts-dejavu-core or set ALFD_FONT to a .ttf file): \
-             wrote {} only, no PNG",
-            files[0]
-        ),
+        // No stale PNG of an earlier sweep next to the new SVG.
+        None => match std::fs::remove_file(ctx.out.join(&png_name)) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(e).with_context(|| format!("cannot remove the stale {png_name}"))
+            }
+            _ => {}
+        },
     }
     Ok(files)
 }
@@ -470,7 +484,8 @@ fn training_summary(
         results.len() as u64 * exp.seeds,
         ctx.jobs
     );
-    let _ = writeln!(
+    let _ =
+        writeln!(
         md,
         "Plot: {} — the line is the mean return over the seeds, the band ± 1 standard deviation \
          (what the paper calls \"variance\"){}.",

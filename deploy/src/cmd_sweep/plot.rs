@@ -2,8 +2,9 @@
 //! write it) and a PNG rasterised from that SVG with resvg, which needs a font for the text.
 //!
 //! Fonts for the PNG: the file named by `ALFD_FONT` if set, else the system's fonts (the usual
-//! font directories, `/usr/share/fonts` on Linux). With no font at all the PNG is not written and
-//! [`png_from_svg`] says why; the SVG always is.
+//! font directories, `/usr/share/fonts` on Linux; `fonts-dejavu-core` is enough). With no font at
+//! all (or `ALFD_FONT` set but empty) the PNG is not written and a warning says why; the SVG
+//! always is, and the sweep succeeds either way.
 
 use std::sync::Arc;
 
@@ -11,6 +12,8 @@ use anyhow::Context as _;
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+
+use super::experiment::LegendPosition;
 
 /// One line of a plot with its band.
 #[derive(Debug, Clone)]
@@ -32,6 +35,7 @@ pub struct Plot<'a> {
     pub log_y: bool,
     /// The y range; fitted to the data when `None`.
     pub y_range: Option<(f64, f64)>,
+    pub legend: LegendPosition,
     pub series: &'a [Series],
 }
 
@@ -139,15 +143,17 @@ where
     for (i, s) in plot.series.iter().enumerate() {
         let color = PALETTE[i % PALETTE.len()];
         if !s.lo.is_empty() {
-            let band: Vec<(f64, f64)> = s
-                .x
-                .iter()
-                .zip(&s.hi)
-                .map(|(&x, &h)| (x, clamp(h)))
-                .chain(s.x.iter().zip(&s.lo).rev().map(|(&x, &l)| (x, clamp(l))))
-                .collect();
+            let band: Vec<(f64, f64)> =
+                s.x.iter()
+                    .zip(&s.hi)
+                    .map(|(&x, &h)| (x, clamp(h)))
+                    .chain(s.x.iter().zip(&s.lo).rev().map(|(&x, &l)| (x, clamp(l))))
+                    .collect();
             chart
-                .draw_series(std::iter::once(Polygon::new(band, color.mix(0.15).filled())))
+                .draw_series(std::iter::once(Polygon::new(
+                    band,
+                    color.mix(0.10).filled(),
+                )))
                 .map_err(err)?;
         }
     }
@@ -160,11 +166,18 @@ where
             // The legend box is sized from an estimate of the text's width that runs short for
             // common fonts; trailing spaces (not rendered) widen it.
             .label(format!("{}{}", s.label, " ".repeat(2 + s.label.len() / 5)))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
+            });
     }
     chart
         .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
+        .position(match plot.legend {
+            LegendPosition::UpperLeft => SeriesLabelPosition::UpperLeft,
+            LegendPosition::UpperRight => SeriesLabelPosition::UpperRight,
+            LegendPosition::LowerLeft => SeriesLabelPosition::LowerLeft,
+            LegendPosition::LowerRight => SeriesLabelPosition::LowerRight,
+        })
         .label_font(("sans-serif", 15))
         .background_style(WHITE.mix(0.85))
         .border_style(RGBColor(160, 160, 160))
@@ -195,14 +208,22 @@ const PREFERRED_FAMILIES: [&str; 6] = [
 ];
 
 /// Rasterises an SVG to PNG bytes. `Ok(None)` when no font is available (the text could not be
-/// drawn); the reason is logged.
+/// drawn), with a warning on stderr saying why.
+///
+/// Fonts: `ALFD_FONT` unset: the system's; set to a file: that font; set but empty: none (SVG only).
 pub fn png_from_svg(svg: &str) -> anyhow::Result<Option<Vec<u8>>> {
     let mut db = resvg::usvg::fontdb::Database::new();
     match std::env::var_os("ALFD_FONT") {
-        Some(path) => db
-            .load_font_file(&path)
-            .with_context(|| format!("cannot load the font ALFD_FONT={}", path.to_string_lossy()))?,
         None => db.load_system_fonts(),
+        Some(path) if path.is_empty() => {}
+        Some(path) => {
+            if let Err(e) = db.load_font_file(&path) {
+                eprintln!(
+                    "warning: cannot load the font ALFD_FONT={}: {e}",
+                    path.to_string_lossy()
+                );
+            }
+        }
     }
     let families: Vec<String> = db
         .faces()
@@ -214,7 +235,10 @@ pub fn png_from_svg(svg: &str) -> anyhow::Result<Option<Vec<u8>>> {
         .map(|p| p.to_string())
         .or_else(|| families.first().cloned())
     else {
-        tracing::warn!("no font found (install one, e.g. fonts-dejavu-core, or set ALFD_FONT to a .ttf file): PNG not written");
+        eprintln!(
+            "warning: no font found (install one, e.g. fonts-dejavu-core, or set ALFD_FONT to a \
+             .ttf file): the plot is written as SVG only, no PNG"
+        );
         return Ok(None);
     };
     tracing::debug!(%family, "PNG font");
@@ -261,6 +285,7 @@ mod tests {
                 y_desc: "return",
                 log_y,
                 y_range: None,
+                legend: LegendPosition::UpperLeft,
                 series: &s,
             };
             let svg = svg(&plot).unwrap();
@@ -281,6 +306,7 @@ mod tests {
             y_desc: "y",
             log_y: true,
             y_range: None,
+            legend: LegendPosition::UpperLeft,
             series: &s,
         };
         let (lo, hi) = fit_range(&plot);
