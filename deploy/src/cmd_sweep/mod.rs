@@ -277,6 +277,9 @@ struct MethodResult<'a> {
     demos_used: Vec<f64>,
     /// Each run's wall-clock time, from its `summary.json`.
     wall_clock_s: Vec<f64>,
+    /// CliffWalk: each run's value at S of its learned greedy policy, and the optimal value.
+    greedy_value: Vec<f64>,
+    optimal_value: Option<f64>,
 }
 
 fn method_result<'a>(
@@ -287,6 +290,8 @@ fn method_result<'a>(
     let mut returns = Vec::with_capacity(seeds as usize);
     let mut demos_used = Vec::with_capacity(seeds as usize);
     let mut wall_clock_s = Vec::with_capacity(seeds as usize);
+    let mut greedy_value = Vec::new();
+    let mut optimal_value = None;
     for seed in 0..seeds {
         let dir = run_dir(out, &method.name, seed);
         let path = dir.join("episodes.csv");
@@ -303,12 +308,16 @@ fn method_result<'a>(
         )
         .with_context(|| format!("in {}", path.display()))?;
         wall_clock_s.push(summary.wall_clock_s);
+        greedy_value.extend(summary.greedy_value_at_start);
+        optimal_value = optimal_value.or(summary.optimal_value_at_start);
     }
     Ok(MethodResult {
         method,
         curve: stats::curve(&returns),
         demos_used,
         wall_clock_s,
+        greedy_value,
+        optimal_value,
     })
 }
 
@@ -447,7 +456,9 @@ fn training_summary(
         "\"crosses T\": the first episode (0-based, as in `curves.csv`) at which the mean return \
          over the seeds is ≥ T; \"never\" if it never is. \"last {last}\": the mean return over the \
          last {last} episodes and the seeds. \"demos\": demonstrations used by the end of a run, \
-         mean over the seeds. \"s/run\": mean wall-clock time of one run; \"run-s\": their sum.\n",
+         mean over the seeds. \"s/run\": mean wall-clock time of one run; \"run-s\": their sum. \
+         CliffWalk: \"greedy V(S)\": the value at S (γ = 0.99) of each run's final greedy policy, \
+         mean over the seeds, next to the optimal one (value iteration).\n",
         last = exp.last
     );
     let mut header = String::from("| method |");
@@ -458,6 +469,14 @@ fn training_summary(
     }
     let _ = write!(header, " last {} | demos | s/run | run-s |", exp.last);
     rule.push_str("---:|---:|---:|---:|");
+    // CliffWalk runs also report the value at S of their greedy policy.
+    let greedy = results
+        .iter()
+        .all(|r| r.greedy_value.len() == r.wall_clock_s.len() && r.optimal_value.is_some());
+    if greedy {
+        header.push_str(" greedy V(S) | optimal V(S) |");
+        rule.push_str("---:|---:|");
+    }
     let _ = writeln!(md, "{header}\n{rule}");
     for r in results {
         let mut row = format!("| {} |", r.method.name);
@@ -476,6 +495,14 @@ fn training_summary(
             mean(&r.wall_clock_s),
             r.wall_clock_s.iter().sum::<f64>()
         );
+        if greedy {
+            let _ = write!(
+                row,
+                " {:.3} | {:.3} |",
+                mean(&r.greedy_value),
+                r.optimal_value.unwrap_or(f64::NAN)
+            );
+        }
         let _ = writeln!(md, "{row}");
     }
     let _ = writeln!(
