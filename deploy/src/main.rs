@@ -2,10 +2,12 @@
 //! arguments, installs logging, and maps errors to exit codes (2 for bad input, 1 otherwise).
 
 mod cmd_demo_model;
+mod cmd_demo_model_policy;
 mod cmd_env;
 mod cmd_expert;
 mod cmd_local;
 mod cmd_run;
+mod cmd_sweep;
 mod launcher;
 mod setup;
 mod usage;
@@ -36,6 +38,10 @@ enum Command {
     TrainExperts(cmd_expert::TrainExpertsArgs),
     /// Fit a demonstration model (KRR or SVM) on demonstrations and query it.
     DemoModel(cmd_demo_model::DemoModelArgs),
+    /// Run an experiment file over many seeds: curves, plot, summary table.
+    Sweep(cmd_sweep::SweepArgs),
+    /// Evaluate a demonstration model fitted on an expert's demonstrations as a policy.
+    DemoModelPolicy(cmd_demo_model_policy::DemoModelPolicyArgs),
 }
 
 fn main() {
@@ -52,6 +58,8 @@ fn main() {
         Command::Expert(a) => cmd_expert::run(a),
         Command::TrainExperts(a) => cmd_expert::train(a),
         Command::DemoModel(a) => cmd_demo_model::run(a),
+        Command::Sweep(a) => cmd_sweep::run(a),
+        Command::DemoModelPolicy(a) => cmd_demo_model_policy::run(a),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

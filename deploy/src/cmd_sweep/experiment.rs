@@ -1,0 +1,395 @@
+//! Experiment files (`deploy/experiments/*.toml`): which methods a sweep runs, over how many seeds,
+//! and how its results are summarised. Parsed and validated in full before anything runs.
+//!
+//! ```toml
+//! title = "Figure 4: CartPole"
+//! seeds = 50                 # runs use seeds 0..seeds
+//! episodes = 300             # optional: overrides every method's config
+//! log_y = true               # plot the return on a log scale (as the paper does)
+//! thresholds = [100, 200, 500]
+//! last = 50                  # the summary's "mean over the last episodes"
+//! smooth = 1                 # the plot's moving average, in episodes (tables are never smoothed)
+//! y_range = [5, 1500]        # optional: the plot's y range
+//! legend = "upper-left"      # or upper-right, lower-left, lower-right
+//!
+//! [[method]]
+//! name = "bdqn-krr"                           # the run directory name: letters, digits, - _ .
+//! label = "BDQN+KRR"                          # optional: the legend entry
+//! config = "../configs/cartpole-bdqn-krr.toml" # relative to this file's directory
+//! set = ["budget.total=50"]                   # optional `--set` overrides
+//! ```
+//!
+//! An experiment of `kind = "demo-model-policy"` instead evaluates demonstration models as
+//! policies (`alfd demo-model-policy`); its methods name `expert`, `demos` (default 100) and `model`
+//! (default `krr`), and optionally a training `config` (with `set`) whose queries give the
+//! demonstrations instead of the expert's own trajectory.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use alfd_common::config::{EnvName, ExperimentConfig};
+use alfd_common::demo_model::DemoModelKind;
+use anyhow::Context as _;
+use serde::Deserialize;
+
+use crate::cmd_demo_model_policy::{queries_config, DemoSource};
+use crate::setup;
+use crate::usage::usage;
+
+/// What an experiment does with its methods.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExperimentKind {
+    /// Train every method over the seeds and compare their learning curves.
+    #[default]
+    Training,
+    /// Fit a demonstration model on an expert's demonstrations and play it as a policy, once per
+    /// seed (`alfd demo-model-policy`).
+    DemoModelPolicy,
+}
+
+/// Where a plot's legend goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LegendPosition {
+    #[default]
+    UpperLeft,
+    UpperRight,
+    LowerLeft,
+    LowerRight,
+}
+
+/// The experiment file as written.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ExperimentFile {
+    /// The plot's caption and the summary's heading.
+    title: String,
+    #[serde(default)]
+    kind: ExperimentKind,
+    /// Number of seeds; runs use seeds `0..seeds`.
+    seeds: u64,
+    /// Training episodes of every run (overrides the configs').
+    #[serde(default)]
+    episodes: Option<u32>,
+    /// Plot the return on a log scale.
+    #[serde(default)]
+    log_y: bool,
+    /// The summary reports the first episode at which the mean return reaches each of these.
+    #[serde(default = "default_thresholds")]
+    thresholds: Vec<f64>,
+    /// The summary reports the mean return over this many final episodes.
+    #[serde(default = "default_last")]
+    last: u32,
+    /// The plotted curves are smoothed by a centred moving average of this many episodes (the
+    /// tables never are).
+    #[serde(default = "default_smooth")]
+    smooth: usize,
+    /// The plot's y range (default: fitted to the curves).
+    #[serde(default)]
+    y_range: Option<[f64; 2]>,
+    /// Where the plot's legend goes.
+    #[serde(default)]
+    legend: LegendPosition,
+    #[serde(rename = "method")]
+    methods: Vec<MethodFile>,
+}
+
+fn default_thresholds() -> Vec<f64> {
+    vec![100.0, 200.0, 500.0]
+}
+fn default_last() -> u32 {
+    50
+}
+fn default_smooth() -> usize {
+    1
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MethodFile {
+    name: String,
+    #[serde(default)]
+    label: Option<String>,
+    /// Training: the base config, relative to the experiment file's directory. Demo-model-policy:
+    /// the training config whose queries give the demonstrations.
+    #[serde(default)]
+    config: Option<String>,
+    /// Training: `key=value` overrides of the config, as `alfd local --set`.
+    #[serde(default)]
+    set: Vec<String>,
+    /// Demo-model-policy: the demonstrator (`alfd expert list`).
+    #[serde(default)]
+    expert: Option<String>,
+    /// Demo-model-policy: how many demonstrations the model is fitted on.
+    #[serde(default)]
+    demos: Option<usize>,
+    /// Demo-model-policy: `krr` or `svm`.
+    #[serde(default)]
+    model: Option<String>,
+}
+
+/// A validated experiment.
+#[derive(Debug, Clone)]
+pub struct Experiment {
+    /// The file stem (`fig4-cartpole`): names the plot files.
+    pub name: String,
+    pub title: String,
+    pub kind: ExperimentKind,
+    pub seeds: u64,
+    pub episodes: Option<u32>,
+    pub log_y: bool,
+    pub thresholds: Vec<f64>,
+    pub last: u32,
+    pub smooth: usize,
+    pub y_range: Option<(f64, f64)>,
+    pub legend: LegendPosition,
+    pub methods: Vec<Method>,
+}
+
+/// One method of an experiment.
+#[derive(Debug, Clone)]
+pub struct Method {
+    pub name: String,
+    pub label: String,
+    pub spec: MethodSpec,
+}
+
+#[derive(Debug, Clone)]
+pub enum MethodSpec {
+    /// A training config and its overrides.
+    Training {
+        config_path: PathBuf,
+        config_text: String,
+        set: Vec<String>,
+    },
+    /// A demonstration model played as a policy; its demonstrations come from the expert's own
+    /// trajectory, or from the queries of a training config (`config` given).
+    DemoModelPolicy {
+        expert: String,
+        demos: usize,
+        model: DemoModelKind,
+        source: DemoSource,
+        /// Where the demonstrations come from, for the summary.
+        source_desc: String,
+    },
+}
+
+impl Method {
+    /// The config of this method's run with `seed`: the base config, then the method's `set`,
+    /// then the episodes override, then the seed.
+    pub fn config(&self, seed: u64, episodes: Option<u32>) -> anyhow::Result<ExperimentConfig> {
+        let MethodSpec::Training {
+            config_path,
+            config_text,
+            set,
+        } = &self.spec
+        else {
+            anyhow::bail!("method `{}` is not a training method", self.name);
+        };
+        let mut overrides = set.clone();
+        if let Some(e) = episodes {
+            overrides.push(format!("episodes={e}"));
+        }
+        overrides.push(format!("seed={seed}"));
+        ExperimentConfig::from_toml_with_overrides(config_text, &overrides)
+            .with_context(|| format!("method `{}` (config {})", self.name, config_path.display()))
+    }
+}
+
+impl Experiment {
+    /// Reads and validates an experiment file; `seeds` and `episodes` override the file's.
+    /// Every method's config is loaded and checked, and its expert looked up, so that a bad entry
+    /// is refused before anything runs.
+    pub fn load(path: &Path, seeds: Option<u64>, episodes: Option<u32>) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            usage(format!(
+                "cannot read experiment file {}: {e}",
+                path.display()
+            ))
+        })?;
+        let file: ExperimentFile = toml::from_str(&text).map_err(|e| {
+            usage(format!(
+                "invalid experiment file {}: {}",
+                path.display(),
+                e.to_string().trim()
+            ))
+        })?;
+        let name = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .filter(|s| valid_name(s))
+            .ok_or_else(|| {
+                usage(format!(
+                    "experiment file {}: its name must be made of letters, digits, '-', '_' or '.'",
+                    path.display()
+                ))
+            })?
+            .to_owned();
+        let bad = |msg: String| usage(format!("experiment file {}: {msg}", path.display()));
+        let seeds = seeds.unwrap_or(file.seeds);
+        if seeds == 0 {
+            return Err(bad("`seeds` (or --seeds) must be at least 1, got 0".into()));
+        }
+        let episodes = episodes.or(file.episodes);
+        if episodes == Some(0) {
+            return Err(bad("`episodes` must be at least 1, got 0".into()));
+        }
+        if file.methods.is_empty() {
+            return Err(bad("no [[method]] entries".into()));
+        }
+        if let Some(t) = file.thresholds.iter().find(|t| !t.is_finite()) {
+            return Err(bad(format!("threshold {t} is not a finite number")));
+        }
+        if file.last == 0 {
+            return Err(bad("`last` must be at least 1".into()));
+        }
+        if file.smooth == 0 {
+            return Err(bad("`smooth` must be at least 1".into()));
+        }
+        let y_range = match file.y_range {
+            None => None,
+            Some([lo, hi]) if lo.is_finite() && hi.is_finite() && lo < hi => {
+                if file.log_y && lo <= 0.0 {
+                    return Err(bad("`y_range` must be positive with `log_y`".into()));
+                }
+                Some((lo, hi))
+            }
+            Some([lo, hi]) => return Err(bad(format!("`y_range` [{lo}, {hi}] is not a range"))),
+        };
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let mut names = BTreeSet::new();
+        let mut methods = Vec::with_capacity(file.methods.len());
+        for m in &file.methods {
+            if !valid_name(&m.name) {
+                return Err(bad(format!(
+                    "method name `{}` must be made of letters, digits, '-', '_' or '.' (it names a directory)",
+                    m.name
+                )));
+            }
+            if !names.insert(m.name.clone()) {
+                return Err(bad(format!("method `{}` is listed twice", m.name)));
+            }
+            let method = Method {
+                name: m.name.clone(),
+                label: m.label.clone().unwrap_or_else(|| m.name.clone()),
+                spec: match file.kind {
+                    ExperimentKind::Training => training_spec(m, dir)
+                        .map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?,
+                    ExperimentKind::DemoModelPolicy => policy_spec(m, dir)
+                        .map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?,
+                },
+            };
+            if file.kind == ExperimentKind::Training {
+                let cfg = method
+                    .config(0, episodes)
+                    .map_err(|e| bad(format!("{e:#}")))?;
+                check_expert(&cfg).map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?;
+            }
+            methods.push(method);
+        }
+        Ok(Self {
+            name,
+            title: file.title,
+            kind: file.kind,
+            seeds,
+            episodes,
+            log_y: file.log_y,
+            thresholds: file.thresholds,
+            last: file.last,
+            smooth: file.smooth,
+            y_range,
+            legend: file.legend,
+            methods,
+        })
+    }
+}
+
+fn training_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {
+    if m.expert.is_some() || m.demos.is_some() || m.model.is_some() {
+        anyhow::bail!("`expert`, `demos` and `model` belong to demo-model-policy experiments; a training method takes `config` and `set`");
+    }
+    let config = m
+        .config
+        .as_deref()
+        .ok_or_else(|| anyhow::anyhow!("`config` is missing"))?;
+    let config_path = dir.join(config);
+    let config_text = std::fs::read_to_string(&config_path)
+        .with_context(|| format!("cannot read config {}", config_path.display()))?;
+    if let Some(s) = m
+        .set
+        .iter()
+        .find(|s| s.split('=').next().map(str::trim) == Some("seed"))
+    {
+        anyhow::bail!("`set` entry `{s}`: the sweep sets the seed of each run");
+    }
+    Ok(MethodSpec::Training {
+        config_path,
+        config_text,
+        set: m.set.clone(),
+    })
+}
+
+fn policy_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {
+    let expert = m
+        .expert
+        .clone()
+        .ok_or_else(|| anyhow::anyhow!("`expert` is missing"))?;
+    alfd_expert::registry::cartpole(&expert)?;
+    let demos = m.demos.unwrap_or(100);
+    if demos == 0 {
+        anyhow::bail!("`demos` must be at least 1");
+    }
+    let model = m
+        .model
+        .as_deref()
+        .unwrap_or("krr")
+        .parse::<DemoModelKind>()?;
+    let source_desc = match &m.config {
+        None => "the expert's trajectory".to_owned(),
+        Some(c) => format!("the queries of `{c}`"),
+    };
+    let source = match &m.config {
+        None if !m.set.is_empty() => anyhow::bail!("`set` needs a `config`"),
+        None => DemoSource::ExpertTrajectory,
+        Some(config) => {
+            let path = dir.join(config);
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("cannot read config {}", path.display()))?;
+            let cfg = ExperimentConfig::from_toml_with_overrides(&text, &m.set)
+                .with_context(|| format!("in config {}", path.display()))?;
+            queries_config(&cfg, &expert, demos, 0)?;
+            DemoSource::Queries(Box::new(cfg))
+        }
+    };
+    Ok(MethodSpec::DemoModelPolicy {
+        expert,
+        demos,
+        model,
+        source,
+        source_desc,
+    })
+}
+
+/// The config's demonstrator exists for its environment (and a CliffWalk map loads).
+fn check_expert(cfg: &ExperimentConfig) -> anyhow::Result<()> {
+    match cfg.env.name {
+        EnvName::Cartpole => {
+            alfd_expert::registry::cartpole(&cfg.expert.name)?;
+        }
+        EnvName::Cliffwalk => {
+            let env = setup::cliffwalk(cfg)?;
+            alfd_expert::registry::cliffwalk(&cfg.expert.name, &env)?;
+        }
+    }
+    Ok(())
+}
+
+/// A name usable as a directory name.
+fn valid_name(s: &str) -> bool {
+    !s.is_empty()
+        && s != "."
+        && s != ".."
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+}

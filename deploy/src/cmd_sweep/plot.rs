@@ -1,0 +1,316 @@
+//! Plots of a sweep: one SVG drawn with plotters (text as SVG `<text>`, so no font is needed to
+//! write it) and a PNG rasterised from that SVG with resvg, which needs a font for the text.
+//!
+//! Fonts for the PNG: the file named by `ALFD_FONT` if set, else the system's fonts (the usual
+//! font directories, `/usr/share/fonts` on Linux; `fonts-dejavu-core` is enough). With no font at
+//! all (or `ALFD_FONT` set but empty) the PNG is not written and a warning says why; the SVG
+//! always is, and the sweep succeeds either way.
+
+use std::sync::Arc;
+
+use anyhow::Context as _;
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::experiment::LegendPosition;
+
+/// One line of a plot with its band.
+#[derive(Debug, Clone)]
+pub struct Series {
+    pub label: String,
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+    /// The band's lower and upper edges (empty: no band).
+    pub lo: Vec<f64>,
+    pub hi: Vec<f64>,
+}
+
+/// What to draw.
+#[derive(Debug, Clone)]
+pub struct Plot<'a> {
+    pub title: &'a str,
+    pub x_desc: &'a str,
+    pub y_desc: &'a str,
+    pub log_y: bool,
+    /// The y range; fitted to the data when `None`.
+    pub y_range: Option<(f64, f64)>,
+    pub legend: LegendPosition,
+    pub series: &'a [Series],
+}
+
+const WIDTH: u32 = 960;
+const HEIGHT: u32 = 600;
+
+/// Line colours (the "tab10" palette).
+const PALETTE: [RGBColor; 10] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
+];
+
+/// The plot as an SVG document.
+pub fn svg(plot: &Plot) -> anyhow::Result<String> {
+    let mut out = String::new();
+    {
+        let root = SVGBackend::with_string(&mut out, (WIDTH, HEIGHT)).into_drawing_area();
+        let (lo, hi) = plot.y_range.unwrap_or_else(|| fit_range(plot));
+        if plot.log_y {
+            draw(&root, plot, (lo..hi).log_scale(), lo, hi)?;
+        } else {
+            draw(&root, plot, lo..hi, lo, hi)?;
+        }
+        root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
+    }
+    Ok(out)
+}
+
+/// The y range that holds every line and band (log scale: the positive part).
+fn fit_range(plot: &Plot) -> (f64, f64) {
+    let all = || {
+        plot.series
+            .iter()
+            .flat_map(|s| s.y.iter().chain(&s.lo).chain(&s.hi).copied())
+            .filter(|v| v.is_finite())
+    };
+    if plot.log_y {
+        // From just below the lowest line (the bands may reach 0 or below) to above the highest.
+        let lines = plot.series.iter().flat_map(|s| s.y.iter().copied());
+        let lo = lines
+            .filter(|v| *v > 0.0)
+            .fold(f64::INFINITY, f64::min)
+            .min(10.0);
+        let lo = if lo.is_finite() { lo * 0.5 } else { 1.0 };
+        let hi = all().fold(lo * 10.0, f64::max) * 1.3;
+        (lo, hi)
+    } else {
+        let lo = all().fold(f64::INFINITY, f64::min);
+        let hi = all().fold(f64::NEG_INFINITY, f64::max);
+        if !(lo.is_finite() && hi.is_finite()) {
+            return (0.0, 1.0);
+        }
+        let pad = ((hi - lo) * 0.05).max(1e-9);
+        (lo - pad, hi + pad)
+    }
+}
+
+fn draw<DB, Y>(
+    root: &DrawingArea<DB, Shift>,
+    plot: &Plot,
+    y_spec: Y,
+    y_lo: f64,
+    y_hi: f64,
+) -> anyhow::Result<()>
+where
+    DB: DrawingBackend,
+    Y: AsRangedCoord<Value = f64>,
+    Y::CoordDescType: ValueFormatter<f64>,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("drawing the plot: {e}");
+    root.fill(&WHITE).map_err(err)?;
+    let x_max = plot
+        .series
+        .iter()
+        .flat_map(|s| s.x.iter().copied())
+        .fold(1.0, f64::max);
+    let mut chart = ChartBuilder::on(root)
+        .caption(plot.title, ("sans-serif", 24))
+        .margin(16)
+        .x_label_area_size(48)
+        .y_label_area_size(72)
+        .build_cartesian_2d(0.0..x_max, y_spec)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc(plot.x_desc)
+        .y_desc(plot.y_desc)
+        .axis_desc_style(("sans-serif", 16))
+        .label_style(("sans-serif", 14))
+        .x_label_formatter(&|v| format_number(*v))
+        .y_label_formatter(&|v| format_number(*v))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(205, 205, 205))
+        .draw()
+        .map_err(err)?;
+    let clamp = |v: f64| v.clamp(y_lo, y_hi);
+    for (i, s) in plot.series.iter().enumerate() {
+        let color = PALETTE[i % PALETTE.len()];
+        if !s.lo.is_empty() {
+            let band: Vec<(f64, f64)> =
+                s.x.iter()
+                    .zip(&s.hi)
+                    .map(|(&x, &h)| (x, clamp(h)))
+                    .chain(s.x.iter().zip(&s.lo).rev().map(|(&x, &l)| (x, clamp(l))))
+                    .collect();
+            chart
+                .draw_series(std::iter::once(Polygon::new(
+                    band,
+                    color.mix(0.10).filled(),
+                )))
+                .map_err(err)?;
+        }
+    }
+    for (i, s) in plot.series.iter().enumerate() {
+        let color = PALETTE[i % PALETTE.len()];
+        let points = s.x.iter().zip(&s.y).map(|(&x, &y)| (x, clamp(y)));
+        chart
+            .draw_series(LineSeries::new(points, color.stroke_width(2)))
+            .map_err(err)?
+            // The legend box is sized from an estimate of the text's width that runs short for
+            // common fonts; trailing spaces (not rendered) widen it.
+            .label(format!("{}{}", s.label, " ".repeat(2 + s.label.len() / 5)))
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
+            });
+    }
+    chart
+        .configure_series_labels()
+        .position(match plot.legend {
+            LegendPosition::UpperLeft => SeriesLabelPosition::UpperLeft,
+            LegendPosition::UpperRight => SeriesLabelPosition::UpperRight,
+            LegendPosition::LowerLeft => SeriesLabelPosition::LowerLeft,
+            LegendPosition::LowerRight => SeriesLabelPosition::LowerRight,
+        })
+        .label_font(("sans-serif", 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .draw()
+        .map_err(err)?;
+    Ok(())
+}
+
+/// Axis labels: integers without a fraction, others with up to 3 significant decimals.
+fn format_number(v: f64) -> String {
+    if v == v.round() && v.abs() < 1e9 {
+        format!("{}", v as i64)
+    } else if v.abs() >= 10.0 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.2}")
+    }
+}
+
+/// Font families the PNG prefers for `sans-serif`, in order, before any other installed family.
+const PREFERRED_FAMILIES: [&str; 6] = [
+    "DejaVu Sans",
+    "Liberation Sans",
+    "Noto Sans",
+    "FreeSans",
+    "Arial",
+    "Helvetica",
+];
+
+/// Rasterises an SVG to PNG bytes. `Ok(None)` when no font is available (the text could not be
+/// drawn), with a warning on stderr saying why.
+///
+/// Fonts: `ALFD_FONT` unset: the system's; set to a file: that font; set but empty: none (SVG only).
+pub fn png_from_svg(svg: &str) -> anyhow::Result<Option<Vec<u8>>> {
+    let mut db = resvg::usvg::fontdb::Database::new();
+    match std::env::var_os("ALFD_FONT") {
+        None => db.load_system_fonts(),
+        Some(path) if path.is_empty() => {}
+        Some(path) => {
+            if let Err(e) = db.load_font_file(&path) {
+                eprintln!(
+                    "warning: cannot load the font ALFD_FONT={}: {e}",
+                    path.to_string_lossy()
+                );
+            }
+        }
+    }
+    let families: Vec<String> = db
+        .faces()
+        .flat_map(|f| f.families.iter().map(|(name, _)| name.clone()))
+        .collect();
+    let Some(family) = PREFERRED_FAMILIES
+        .iter()
+        .find(|p| families.iter().any(|f| f == *p))
+        .map(|p| p.to_string())
+        .or_else(|| families.first().cloned())
+    else {
+        eprintln!(
+            "warning: no font found (install one, e.g. fonts-dejavu-core, or set ALFD_FONT to a \
+             .ttf file): the plot is written as SVG only, no PNG"
+        );
+        return Ok(None);
+    };
+    tracing::debug!(%family, "PNG font");
+    db.set_sans_serif_family(family.clone());
+    let mut opt = resvg::usvg::Options {
+        font_family: family,
+        ..Default::default()
+    };
+    opt.fontdb = Arc::new(db);
+    let tree = resvg::usvg::Tree::from_str(svg, &opt).context("parsing the SVG")?;
+    let size = tree.size().to_int_size();
+    let mut pixmap = resvg::tiny_skia::Pixmap::new(size.width(), size.height())
+        .context("the plot has no size")?;
+    pixmap.fill(resvg::tiny_skia::Color::WHITE);
+    resvg::render(
+        &tree,
+        resvg::tiny_skia::Transform::default(),
+        &mut pixmap.as_mut(),
+    );
+    Ok(Some(pixmap.encode_png().context("encoding the PNG")?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn series() -> Vec<Series> {
+        vec![Series {
+            label: "method-a".into(),
+            x: vec![0.0, 1.0, 2.0],
+            y: vec![10.0, 20.0, 300.0],
+            lo: vec![5.0, -3.0, 200.0],
+            hi: vec![15.0, 40.0, 400.0],
+        }]
+    }
+
+    #[test]
+    fn svg_has_the_title_axes_and_legend() {
+        for log_y in [false, true] {
+            let s = series();
+            let plot = Plot {
+                title: "A title",
+                x_desc: "episode",
+                y_desc: "return",
+                log_y,
+                y_range: None,
+                legend: LegendPosition::UpperLeft,
+                series: &s,
+            };
+            let svg = svg(&plot).unwrap();
+            assert!(svg.starts_with("<svg"), "{}", &svg[..40]);
+            for text in ["A title", "episode", "return", "method-a"] {
+                assert!(svg.contains(text), "{text} missing");
+            }
+            assert!(svg.contains("<polygon") || svg.contains("<path"));
+        }
+    }
+
+    #[test]
+    fn log_range_starts_below_the_lowest_line() {
+        let s = series();
+        let plot = Plot {
+            title: "t",
+            x_desc: "x",
+            y_desc: "y",
+            log_y: true,
+            y_range: None,
+            legend: LegendPosition::UpperLeft,
+            series: &s,
+        };
+        let (lo, hi) = fit_range(&plot);
+        assert_eq!(lo, 5.0);
+        assert_eq!(hi, 400.0 * 1.3);
+    }
+}
