@@ -496,7 +496,7 @@ impl ExperimentConfig {
                 return Err(invalid(field, format!("must be in [0, 1], got {v}")));
             }
         }
-        if !(a.epsilon_decay_steps > 0.0) {
+        if a.epsilon_decay_steps.is_nan() || a.epsilon_decay_steps <= 0.0 {
             return Err(invalid("agent.epsilon_decay_steps", "must be > 0"));
         }
         if !(a.bootstrap_probability > 0.0 && a.bootstrap_probability <= 1.0) {

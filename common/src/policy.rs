@@ -52,7 +52,7 @@ pub fn argmax<T: PartialOrd + Copy>(v: &[T]) -> usize {
 /// to the heap above that.
 pub fn js_divergence(q: &[f64], heads: usize, temperature: f64) -> f64 {
     assert!(
-        heads > 0 && q.len() % heads == 0,
+        heads > 0 && q.len().is_multiple_of(heads),
         "q must hold heads * actions values"
     );
     let actions = q.len() / heads;

@@ -1,58 +1,21 @@
 //! `alfd-learner`: the learner process (started by `alfd run`). Logs to `RUN_DIR/learner.log`.
 
-use std::path::Path;
-
 use clap::Parser as _;
 
 fn main() {
     let args = alfd_learner::Args::parse();
-    init_logging(&args.run_dir, &alfd_learner::log_name(&args));
-    if let Err(err) = alfd_learner::run(&args, schema_version()) {
+    alfd_common::wire::init_process_logging(
+        "alfd-learner",
+        &args.run_dir,
+        &alfd_learner::log_name(&args),
+    );
+    let schema = alfd_common::wire::schema_version_from_env().unwrap_or_else(|e| {
+        eprintln!("alfd-learner: {e}");
+        std::process::exit(2)
+    });
+    if let Err(err) = alfd_learner::run(&args, schema) {
         tracing::error!("{err:#}");
         eprintln!("alfd-learner: error: {err:#}");
         std::process::exit(1);
-    }
-}
-
-/// The schema version this process speaks: [`SCHEMA_VERSION`](alfd_common::wire::SCHEMA_VERSION),
-/// unless the hidden test hook `ALFD_SCHEMA_VERSION_OVERRIDE` says otherwise.
-fn schema_version() -> u32 {
-    match std::env::var("ALFD_SCHEMA_VERSION_OVERRIDE") {
-        Ok(v) => v.parse().unwrap_or_else(|_| {
-            eprintln!("alfd-learner: ALFD_SCHEMA_VERSION_OVERRIDE must be a number, got {v:?}");
-            std::process::exit(2)
-        }),
-        Err(_) => alfd_common::wire::SCHEMA_VERSION,
-    }
-}
-
-/// Logs to `RUN_DIR/NAME.log` (appended to); `RUST_LOG` sets the filter (default `info`).
-fn init_logging(run_dir: &Path, name: &str) {
-    alfd_common::wire::quiet_transport_logs();
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let path = run_dir.join(format!("{name}.log"));
-    match std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(&path)
-    {
-        Ok(file) => {
-            let _ = tracing_subscriber::fmt()
-                .with_env_filter(filter)
-                .with_ansi(false)
-                .with_writer(std::sync::Mutex::new(file))
-                .try_init();
-        }
-        Err(e) => {
-            eprintln!(
-                "alfd-learner: cannot open log {}: {e}; logging to stderr",
-                path.display()
-            );
-            let _ = tracing_subscriber::fmt()
-                .with_env_filter(filter)
-                .with_writer(std::io::stderr)
-                .try_init();
-        }
     }
 }

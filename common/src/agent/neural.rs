@@ -255,7 +255,7 @@ impl NeuralLearner {
             &mut self.scratch,
         );
         self.updates += 1;
-        if self.updates % self.target_update_every == 0 {
+        if self.updates.is_multiple_of(self.target_update_every) {
             self.target
                 .copy_params_from(&self.online)
                 .expect("online and target networks share one architecture");
