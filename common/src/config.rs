@@ -408,6 +408,18 @@ impl ExperimentConfig {
         Self::from_toml_with_overrides(text, &[])
     }
 
+    /// Parses a config for the multi-process runtime, which runs the neural agents on CartPole.
+    pub fn for_multi_process(text: &str) -> Result<Self> {
+        let cfg = Self::from_toml(text)?;
+        if cfg.env.name != EnvName::Cartpole || cfg.agent.kind.is_tabular() {
+            return Err(invalid(
+                "agent.kind",
+                "the multi-process runtime runs neural agents (dqn, bdqn) on cartpole; run tabular configs with `alfd local`",
+            ));
+        }
+        Ok(cfg)
+    }
+
     /// The config as TOML (what a run directory records as `config.toml`).
     pub fn to_toml(&self) -> String {
         toml::to_string(self).expect("an ExperimentConfig always serialises")

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use alfd_common::agent::NeuralLearner;
-use alfd_common::config::{EnvName, ExperimentConfig};
+use alfd_common::config::ExperimentConfig;
 use alfd_common::replay::Transition;
 use alfd_common::rng::{derive_seed, seeded};
 use alfd_common::wire::{
@@ -54,14 +54,8 @@ pub fn log_name(_args: &Args) -> String {
 pub fn load_config(path: &Path) -> anyhow::Result<ExperimentConfig> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read config {}", path.display()))?;
-    let cfg = ExperimentConfig::from_toml(&text)
-        .with_context(|| format!("in config {}", path.display()))?;
-    anyhow::ensure!(
-        cfg.env.name == EnvName::Cartpole && !cfg.agent.kind.is_tabular(),
-        "the multi-process runtime runs neural agents (dqn, bdqn) on cartpole; \
-         run tabular configs with `alfd local`"
-    );
-    Ok(cfg)
+    ExperimentConfig::for_multi_process(&text)
+        .with_context(|| format!("in config {}", path.display()))
 }
 
 /// Where the credits of each actor stand.
