@@ -340,10 +340,13 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             }
             // Lines 17-19: act, shape, store.
             let step = env.step(action)?;
-            let shaping = if cfg.shaping_enabled()
-                && schedule.active(global_step, view.model_demos, view.last_demo_step)
-            {
-                view.model.as_ref().map(|m| (m, schedule.lambda))
+            let shaping = if cfg.shaping_enabled() {
+                schedule.model_for(
+                    global_step,
+                    view.model_demos,
+                    view.last_demo_step,
+                    view.model.as_ref(),
+                )
             } else {
                 None
             };

@@ -26,6 +26,21 @@ impl ShapingSchedule {
             && demos >= self.min_demos
             && (step as f64) < self.stop_multiple * (last_demo_step as f64)
     }
+
+    /// The model and λ to shape the reward of global step `step` with (Algorithm 1 line 18), or
+    /// `None` when shaping is off then or no model is fitted yet. `demos` and `last_demo_step`
+    /// describe the demonstration set `model` was fitted on.
+    pub fn model_for<'a, M>(
+        &self,
+        step: u64,
+        demos: usize,
+        last_demo_step: u64,
+        model: Option<&'a M>,
+    ) -> Option<(&'a M, f64)> {
+        let model = model?;
+        self.active(step, demos, last_demo_step)
+            .then_some((model, self.lambda))
+    }
 }
 
 #[cfg(test)]
@@ -53,5 +68,11 @@ mod tests {
         // A new demonstration moves the end.
         assert!(s.active(150, 11, 100));
         assert!(!s.active(0, 0, 0));
+        assert_eq!(
+            s.model_for(50, 10, 40, Some(&"model")),
+            Some((&"model", 0.75))
+        );
+        assert_eq!(s.model_for::<&str>(50, 10, 40, None), None);
+        assert_eq!(s.model_for(80, 10, 40, Some(&"model")), None);
     }
 }

@@ -210,9 +210,11 @@ impl ExpertCore {
 
     /// The model to shape the reward of global step `step` with, if shaping is on then.
     pub fn shaping_model(&self, step: u64) -> Option<(&DemoModel, f64)> {
-        let model = self.model.as_ref()?;
-        self.schedule
-            .active(step, self.demos.len(), self.last_demo_step())
-            .then_some((model, self.schedule.lambda))
+        self.schedule.model_for(
+            step,
+            self.demos.len(),
+            self.last_demo_step(),
+            self.model.as_ref(),
+        )
     }
 }
