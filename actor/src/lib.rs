@@ -11,9 +11,9 @@ use alfd_common::config::ExperimentConfig;
 use alfd_common::demo_model::DemoModel;
 use alfd_common::env::{CartPole, Env};
 use alfd_common::rng::{derive_seed, seeded};
-use alfd_common::wire::{
-    self, outcome, process_state, progress_kind, Bell, ControlWatch, Credits, Doorbell, Process,
-    Progress, QueryRequest, QueryResponse, Role, TransitionBatch, Wake, Wire, MAX_ACTORS,
+use alfd_wire::{
+    self as wire, outcome, process_state, progress_kind, Bell, ControlWatch, Credits, Doorbell,
+    Process, Progress, QueryRequest, QueryResponse, Role, TransitionBatch, Wake, Wire, MAX_ACTORS,
     MAX_CREDIT_WINDOW,
 };
 use anyhow::Context as _;

@@ -1,8 +1,9 @@
 //! The pure, seeded core of alfd (active learning from demonstrations).
 //!
-//! Nothing in this crate opens a file, takes a lock or talks to another process, except the
-//! `wire` module, which is the one place that knows about iceoryx2. Everything else is exactly
-//! reproducible from a seed, so the same experiment runs in one process or in many.
+//! Nothing in this crate opens a file, takes a lock or talks to another process: everything is
+//! exactly reproducible from a seed, so the same experiment runs in one process or in many. The
+//! processes of a multi-process run talk through `alfd-wire` (the one crate that knows
+//! iceoryx2) and start up through `alfd-harness`.
 
 pub mod agent;
 pub mod config;
@@ -16,4 +17,3 @@ pub mod replay;
 pub mod rng;
 pub mod runner;
 pub mod shaping;
-pub mod wire;

@@ -1,8 +1,12 @@
 //! Checks of the workspace's own habits (after rust-analyzer's tidy): every Rust file says what
-//! it is for, and the core keeps its invariants (no I/O, iceoryx2 only in `wire.rs`, no
-//! dependency on the other crates of the workspace).
+//! it is for, the core does no I/O, and the dependency graph keeps its shape (the core reaches
+//! neither iceoryx2 nor tracing-subscriber; only `alfd-wire` depends on iceoryx2), read from
+//! `cargo metadata`.
 
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
+
+use serde_json::Value;
 
 fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -28,7 +32,15 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
 #[test]
 fn every_rust_file_opens_with_a_doc_line() {
     let mut files = Vec::new();
-    for krate in ["common", "actor", "learner", "expert", "deploy"] {
+    for krate in [
+        "common",
+        "common/wire",
+        "common/harness",
+        "actor",
+        "learner",
+        "expert",
+        "deploy",
+    ] {
         for sub in ["src", "tests", "benches"] {
             rust_files(&workspace().join(krate).join(sub), &mut files);
         }
@@ -50,42 +62,459 @@ fn every_rust_file_opens_with_a_doc_line() {
     );
 }
 
+// ---------------------------------------------------------------------------------------------
+// The core does no I/O
+// ---------------------------------------------------------------------------------------------
+
+/// Paths the core may not name (from the crate root), with what they would bring in. A path is
+/// refused when it starts with one of these, in code or in a `use` (groups expanded), whatever
+/// the spacing; comments and string literals are not code.
+const FORBIDDEN_PATHS: &[(&[&str], &str)] = &[
+    (&["std", "fs"], "files"),
+    (&["std", "net"], "sockets"),
+    (&["std", "thread"], "threads"),
+    (&["std", "process"], "processes"),
+    (&["std", "env"], "environment variables"),
+    (&["tokio"], "an async runtime"),
+    (&["iceoryx2"], "the transport (only alfd-wire knows it)"),
+    (&["tracing_subscriber"], "a log sink"),
+];
+
+/// Names the core may not use in any path, however they were imported.
+const FORBIDDEN_NAMES: &[(&str, &str)] = &[
+    ("File", "files"),
+    ("OpenOptions", "files"),
+    ("Instant", "clocks"),
+    ("SystemTime", "clocks"),
+];
+
+/// `text` without comments, string literals and character literals (each replaced by a space),
+/// so that what is left is code.
+fn code_only(text: &str) -> String {
+    let c: Vec<char> = text.chars().collect();
+    let mut out = String::with_capacity(text.len());
+    let mut i = 0;
+    while i < c.len() {
+        let next = c.get(i + 1).copied();
+        if c[i] == '/' && next == Some('/') {
+            while i < c.len() && c[i] != '\n' {
+                i += 1;
+            }
+        } else if c[i] == '/' && next == Some('*') {
+            let mut depth = 0;
+            while i < c.len() {
+                if c[i] == '/' && c.get(i + 1) == Some(&'*') {
+                    depth += 1;
+                    i += 2;
+                } else if c[i] == '*' && c.get(i + 1) == Some(&'/') {
+                    depth -= 1;
+                    i += 2;
+                    if depth == 0 {
+                        break;
+                    }
+                } else {
+                    i += 1;
+                }
+            }
+            out.push(' ');
+        } else if c[i] == 'r'
+            && (next == Some('"') || next == Some('#'))
+            && !(i > 0 && (c[i - 1].is_alphanumeric() || c[i - 1] == '_'))
+        {
+            // A raw string: r"..." or r#"..."#.
+            let mut j = i + 1;
+            let mut hashes = 0;
+            while c.get(j) == Some(&'#') {
+                hashes += 1;
+                j += 1;
+            }
+            if c.get(j) != Some(&'"') {
+                out.push(c[i]);
+                i += 1;
+                continue;
+            }
+            j += 1;
+            loop {
+                if j >= c.len() {
+                    break;
+                }
+                if c[j] == '"' && (1..=hashes).all(|h| c.get(j + h) == Some(&'#')) {
+                    j += 1 + hashes;
+                    break;
+                }
+                j += 1;
+            }
+            i = j;
+            out.push(' ');
+        } else if c[i] == '"' {
+            i += 1;
+            while i < c.len() && c[i] != '"' {
+                if c[i] == '\\' {
+                    i += 1;
+                }
+                i += 1;
+            }
+            i += 1;
+            out.push(' ');
+        } else if c[i] == '\'' && next == Some('\\') {
+            // An escaped character literal: '\n', '\'', '\u{..}'.
+            i += 2;
+            while i < c.len() && c[i] != '\'' {
+                i += 1;
+            }
+            i += 1;
+            out.push(' ');
+        } else if c[i] == '\'' && c.get(i + 2) == Some(&'\'') {
+            i += 3;
+            out.push(' ');
+        } else {
+            // Lifetimes ('a) and everything else.
+            out.push(c[i]);
+            i += 1;
+        }
+    }
+    out
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Token {
+    Ident(String),
+    PathSep,
+    Punct(char),
+}
+
+fn tokens(code: &str) -> Vec<Token> {
+    let c: Vec<char> = code.chars().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < c.len() {
+        if c[i].is_alphabetic() || c[i] == '_' {
+            let start = i;
+            while i < c.len() && (c[i].is_alphanumeric() || c[i] == '_') {
+                i += 1;
+            }
+            out.push(Token::Ident(c[start..i].iter().collect()));
+        } else if c[i] == ':' && c.get(i + 1) == Some(&':') {
+            out.push(Token::PathSep);
+            i += 2;
+        } else if c[i].is_whitespace() {
+            i += 1;
+        } else {
+            out.push(Token::Punct(c[i]));
+            i += 1;
+        }
+    }
+    out
+}
+
+/// Expands a `use` tree starting at `t[*i]` under `prefix` into full paths; stops after the
+/// tree (at `,`, `}` or `;`, not consumed).
+fn use_tree(t: &[Token], i: &mut usize, prefix: Vec<String>, out: &mut Vec<Vec<String>>) {
+    let mut path = prefix;
+    loop {
+        match t.get(*i) {
+            Some(Token::Ident(w)) if w == "as" => {
+                *i += 2; // the alias names the same path
+            }
+            Some(Token::Ident(w)) => {
+                if w != "self" {
+                    path.push(w.clone());
+                }
+                *i += 1;
+            }
+            Some(Token::PathSep) => *i += 1,
+            Some(Token::Punct('*')) => *i += 1,
+            Some(Token::Punct('{')) => {
+                *i += 1;
+                loop {
+                    match t.get(*i) {
+                        Some(Token::Punct('}')) => {
+                            *i += 1;
+                            break;
+                        }
+                        Some(Token::Punct(',')) => *i += 1,
+                        None => break,
+                        _ => use_tree(t, i, path.clone(), out),
+                    }
+                }
+                return;
+            }
+            _ => {
+                out.push(path);
+                return;
+            }
+        }
+    }
+}
+
+/// Every path `code` names: the expanded `use` declarations and every `a::b::c` in the code,
+/// each without a leading `::`.
+fn paths(code: &str) -> Vec<Vec<String>> {
+    let t = tokens(code);
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < t.len() {
+        if t[i] == Token::Ident("use".to_owned()) {
+            i += 1;
+            use_tree(&t, &mut i, Vec::new(), &mut out);
+            continue;
+        }
+        if let Token::Ident(w) = &t[i] {
+            let mut path = vec![w.clone()];
+            i += 1;
+            while let (Some(Token::PathSep), Some(Token::Ident(w))) = (t.get(i), t.get(i + 1)) {
+                path.push(w.clone());
+                i += 2;
+            }
+            out.push(path);
+        } else {
+            i += 1;
+        }
+    }
+    out
+}
+
+/// What in `text` breaks the core's no-I/O rule, one line per finding.
+fn io_findings(text: &str) -> Vec<String> {
+    let mut found = BTreeSet::new();
+    for path in paths(&code_only(text)) {
+        for (forbidden, what) in FORBIDDEN_PATHS {
+            if path.len() >= forbidden.len()
+                && path.iter().zip(forbidden.iter()).all(|(a, b)| a == b)
+            {
+                found.insert(format!("`{}` ({what})", path.join("::")));
+            }
+        }
+        for (name, what) in FORBIDDEN_NAMES {
+            if path.iter().any(|segment| segment == name) {
+                found.insert(format!("`{}` ({what})", path.join("::")));
+            }
+        }
+    }
+    found.into_iter().collect()
+}
+
 #[test]
-fn the_core_does_no_io_and_only_wire_knows_iceoryx2() {
+fn the_io_check_sees_through_groups_spacing_and_aliases_but_not_comments() {
+    for code in [
+        "use std::{fs, io};",
+        "use std::{collections::HashMap, fs::{self, File as F}};",
+        "fn f() { std :: fs :: read(\"x\"); }",
+        "fn f() { ::std::fs::read(\"x\"); }",
+        "use std::time::{Duration, Instant};",
+        "fn f() { let t = std::time::SystemTime::now(); }",
+        "use std::env::var as get;",
+        "use std::thread;",
+        "fn f() { iceoryx2::prelude::set_log_level(); }",
+        "use tracing_subscriber::fmt;",
+    ] {
+        assert!(!io_findings(code).is_empty(), "not caught: {code}");
+    }
+    for code in [
+        "// std::fs and Instant::now in a comment\nfn f() {}",
+        "/// Reads no files (std::fs), no clocks (SystemTime).\nfn f() {}",
+        "fn f() -> &'static str { \"std::fs::read\" }",
+        "const S: &str = r#\"File::open(\"x\")\"#; fn f(c: char) -> bool { c == '\"' }",
+        "use crate::env::CartPole; fn f() { env::CartPole::new(); }",
+        "struct Profile; fn f() { let profile_file = 1; }",
+        "use std::time::Duration; use std::collections::HashMap;",
+    ] {
+        assert_eq!(io_findings(code), Vec::<String>::new(), "flagged: {code}");
+    }
+}
+
+#[test]
+fn the_core_does_no_io() {
     let mut files = Vec::new();
     rust_files(&workspace().join("common/src"), &mut files);
-    let forbidden = [
-        "std::fs",
-        "File::",
-        "Instant::now",
-        "SystemTime",
-        "env::var",
-        "std::net",
-        "std::thread",
-        "tokio",
-    ];
+    assert!(files.len() > 10, "found only {} files", files.len());
+    let mut problems = Vec::new();
     for f in &files {
         let text = std::fs::read_to_string(f).unwrap();
         let name = f.strip_prefix(workspace()).unwrap().display().to_string();
-        if name.ends_with("common/src/wire.rs") {
-            continue;
+        for finding in io_findings(&text) {
+            problems.push(format!("{name}: {finding}"));
         }
-        assert!(
-            !text.contains("iceoryx2::"),
-            "{name} uses iceoryx2: only common/src/wire.rs may"
-        );
-        for word in forbidden {
+    }
+    assert!(
+        problems.is_empty(),
+        "the core does no I/O, but:\n{}",
+        problems.join("\n")
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// The dependency graph, from `cargo metadata`
+// ---------------------------------------------------------------------------------------------
+
+/// The workspace's resolved dependency graph: package names by id, the workspace members, and
+/// per package its dependencies (package ids) of every kind (normal, build and dev), so that a
+/// test-only dependency counts too.
+struct Graph {
+    names: BTreeMap<String, String>,
+    members: Vec<String>,
+    deps: BTreeMap<String, Vec<String>>,
+}
+
+impl Graph {
+    /// Runs `cargo metadata` (offline) on the workspace, for the host's platform: the
+    /// dependencies of other platforms are not in the local registry, and none is the
+    /// transport or a log sink.
+    fn load() -> Graph {
+        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| env!("CARGO").into());
+        let run = |args: &[&str]| -> Vec<u8> {
+            let output = std::process::Command::new(&cargo)
+                .args(args)
+                .output()
+                .expect("run cargo");
             assert!(
-                !text.contains(word),
-                "{name} uses `{word}`: the core does no I/O"
+                output.status.success(),
+                "cargo {args:?} failed: {}",
+                String::from_utf8_lossy(&output.stderr)
             );
+            output.stdout
+        };
+        let version = String::from_utf8(run(&["-vV"])).unwrap();
+        let host = version
+            .lines()
+            .find_map(|l| l.strip_prefix("host: "))
+            .expect("a host line in `cargo -vV`")
+            .to_owned();
+        let manifest = workspace().join("Cargo.toml");
+        let stdout = run(&[
+            "metadata",
+            "--format-version",
+            "1",
+            "--offline",
+            "--filter-platform",
+            &host,
+            "--manifest-path",
+            manifest.to_str().unwrap(),
+        ]);
+        let meta: Value = serde_json::from_slice(&stdout).expect("cargo metadata JSON");
+        let names = meta["packages"]
+            .as_array()
+            .expect("packages")
+            .iter()
+            .map(|p| {
+                (
+                    p["id"].as_str().unwrap().to_owned(),
+                    p["name"].as_str().unwrap().to_owned(),
+                )
+            })
+            .collect();
+        let members = meta["workspace_members"]
+            .as_array()
+            .expect("workspace_members")
+            .iter()
+            .map(|id| id.as_str().unwrap().to_owned())
+            .collect();
+        let mut deps = BTreeMap::new();
+        for node in meta["resolve"]["nodes"].as_array().expect("resolve.nodes") {
+            let of_node: Vec<String> = node["dependencies"]
+                .as_array()
+                .expect("dependencies")
+                .iter()
+                .map(|d| d.as_str().unwrap().to_owned())
+                .collect();
+            deps.insert(node["id"].as_str().unwrap().to_owned(), of_node);
+        }
+        Graph {
+            names,
+            members,
+            deps,
         }
     }
-    let manifest = std::fs::read_to_string(workspace().join("common/Cargo.toml")).unwrap();
-    for krate in ["alfd-actor", "alfd-learner", "alfd-expert", "alfd-deploy"] {
-        assert!(
-            !manifest.contains(krate),
-            "common must not depend on {krate}"
-        );
+
+    fn name(&self, id: &str) -> &str {
+        &self.names[id]
     }
+
+    fn id(&self, name: &str) -> &str {
+        self.members
+            .iter()
+            .find(|id| self.name(id) == name)
+            .unwrap_or_else(|| panic!("{name} is not a workspace member"))
+    }
+
+    fn direct(&self, name: &str) -> BTreeSet<&str> {
+        self.deps[self.id(name)]
+            .iter()
+            .map(|d| self.name(d))
+            .collect()
+    }
+
+    /// Every package `name` depends on, directly or not, each with the chain that leads to it.
+    fn transitive(&self, name: &str) -> BTreeMap<&str, String> {
+        let mut seen: BTreeMap<&str, String> = BTreeMap::new();
+        let mut stack = vec![(self.id(name), name.to_owned())];
+        let mut visited = BTreeSet::new();
+        while let Some((id, chain)) = stack.pop() {
+            for d in &self.deps[id] {
+                if visited.insert(d.as_str()) {
+                    let chain = format!("{chain} -> {}", self.name(d));
+                    seen.entry(self.name(d)).or_insert_with(|| chain.clone());
+                    stack.push((d.as_str(), chain));
+                }
+            }
+        }
+        seen
+    }
+}
+
+fn is_transport_or_log_sink(package: &str) -> bool {
+    package.starts_with("iceoryx2") || package == "tracing-subscriber"
+}
+
+#[test]
+fn the_dependency_graph_keeps_its_shape() {
+    let g = Graph::load();
+
+    // The core reaches neither the transport nor a log sink, not even through another crate.
+    let core = g.transitive("alfd-common");
+    assert!(
+        core.contains_key("nalgebra"),
+        "the graph is incomplete: {core:?}"
+    );
+    let bad: Vec<&String> = core
+        .iter()
+        .filter(|(name, _)| is_transport_or_log_sink(name))
+        .map(|(_, chain)| chain)
+        .collect();
+    assert!(bad.is_empty(), "alfd-common must not depend on: {bad:?}");
+    // The same search finds them where they are.
+    let harness = g.transitive("alfd-harness");
+    assert!(
+        harness.contains_key("iceoryx2") && harness.contains_key("tracing-subscriber"),
+        "{harness:?}"
+    );
+
+    // Only alfd-wire depends on iceoryx2 directly.
+    let users: Vec<&str> = g
+        .members
+        .iter()
+        .map(|id| g.name(id))
+        .filter(|m| g.direct(m).iter().any(|d| d.starts_with("iceoryx2")))
+        .collect();
+    assert_eq!(
+        users,
+        ["alfd-wire"],
+        "workspace members depending on iceoryx2"
+    );
+
+    // Dependencies inside the workspace point one way: common <- wire <- harness <- binaries.
+    let inside = |name: &str| -> BTreeSet<&str> {
+        let members: BTreeSet<&str> = g.members.iter().map(|id| g.name(id)).collect();
+        g.direct(name)
+            .into_iter()
+            .filter(|d| members.contains(d))
+            .collect()
+    };
+    assert_eq!(inside("alfd-common"), BTreeSet::new());
+    assert_eq!(inside("alfd-wire"), BTreeSet::from(["alfd-common"]));
+    assert!(
+        inside("alfd-harness").is_subset(&BTreeSet::from(["alfd-common", "alfd-wire"])),
+        "{:?}",
+        inside("alfd-harness")
+    );
 }

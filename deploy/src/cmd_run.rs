@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use alfd_common::config::{EnvName, ExperimentConfig};
-use alfd_common::wire::MAX_ACTORS;
+use alfd_wire::MAX_ACTORS;
 use anyhow::Context as _;
 
 use crate::launcher::{self, Plan, SwapRequest, SwapResponse, SWAP_REQUEST, SWAP_RESPONSE};
@@ -67,7 +67,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             args.actors
         )));
     }
-    if !(1..=alfd_common::wire::MAX_CREDIT_WINDOW).contains(&args.window) {
+    if !(1..=alfd_wire::MAX_CREDIT_WINDOW).contains(&args.window) {
         return Err(usage(format!(
             "--window must be in 1..=64, got {}",
             args.window

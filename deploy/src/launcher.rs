@@ -25,9 +25,9 @@ use std::time::{Duration, Instant};
 
 use alfd_common::config::ExperimentConfig;
 use alfd_common::runner::{EpisodeRecord, CSV_HEADER};
-use alfd_common::wire::{
-    self, command, process_state, progress_kind, ActorBells, Bell, Control, Doorbell, Process,
-    Progress, Role, Wake, Wire, WireError, CONTROL_PERIOD,
+use alfd_wire::{
+    self as wire, command, process_state, progress_kind, ActorBells, Bell, Control, Doorbell,
+    Process, Progress, Role, Wake, Wire, WireError, CONTROL_PERIOD,
 };
 use anyhow::{bail, Context as _};
 use serde::{Deserialize, Serialize};

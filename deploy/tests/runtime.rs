@@ -8,7 +8,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use alfd_common::wire;
+use alfd_wire as wire;
 
 /// The expert every test uses (the registry's perfect CartPole controller).
 const EXPERT: &str = "cartpole-perfect";

@@ -4,12 +4,8 @@ use clap::Parser as _;
 
 fn main() {
     let args = alfd_expert::Args::parse();
-    alfd_common::wire::init_process_logging(
-        "alfd-expert",
-        &args.run_dir,
-        &alfd_expert::log_name(&args),
-    );
-    let schema = alfd_common::wire::schema_version_from_env().unwrap_or_else(|e| {
+    alfd_harness::init_process_logging("alfd-expert", &args.run_dir, &alfd_expert::log_name(&args));
+    let schema = alfd_harness::schema_version_from_env().unwrap_or_else(|e| {
         eprintln!("alfd-expert: {e}");
         std::process::exit(2)
     });

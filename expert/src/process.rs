@@ -2,7 +2,7 @@
 //! budget B (the core's [`ExpertCore`]), appends every answer to `demos.jsonl` before sending it,
 //! and publishes the refitted demonstration model.
 //!
-//! An expert answers only while the launcher's [`Control`](alfd_common::wire::Control) names its
+//! An expert answers only while the launcher's [`Control`](alfd_wire::Control) names its
 //! generation as the active one; a newer generation makes it exit. Swaps are made before broken:
 //! the new expert is up (standby) before the old one goes, and becomes active only after the old
 //! one has exited, reading `demos.jsonl` back at that moment. So at most one expert ever spends
@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use alfd_common::agent::ExpertCore;
 use alfd_common::config::ExperimentConfig;
-use alfd_common::wire::{
+use alfd_wire::{
     name_to_bytes, outcome, process_state, progress_kind, ActorBells, ControlWatch,
     DemoModelHeader, Doorbell, Process, Progress, QueryResponse, Role, Wake, Wire, WireError,
 };
@@ -111,7 +111,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let mut log: Option<DemoLog> = None;
     let mut mode = Mode::Standby;
     let pid = std::process::id();
-    let status = |progress: &mut alfd_common::wire::Sender<'_, Progress>,
+    let status = |progress: &mut alfd_wire::Sender<'_, Progress>,
                   state: u32,
                   core: &ExpertCore|
      -> anyhow::Result<()> {
@@ -265,7 +265,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
 /// Publishes the current demonstration model (empty bytes when there is none yet), with the
 /// budget and the step of the last demonstration.
 fn publish_model(
-    tx: &mut alfd_common::wire::DemoModelSender<'_>,
+    tx: &mut alfd_wire::DemoModelSender<'_>,
     core: &ExpertCore,
     generation: u16,
     name: &str,

@@ -10,9 +10,9 @@ use alfd_common::agent::NeuralLearner;
 use alfd_common::config::ExperimentConfig;
 use alfd_common::replay::Transition;
 use alfd_common::rng::{derive_seed, seeded};
-use alfd_common::wire::{
-    self, process_state, progress_kind, ActorBells, ControlWatch, Credits, Doorbell, Process,
-    Progress, Role, TransitionBatch, Wake, Wire, WireError, MAX_ACTORS, MAX_CREDIT_WINDOW,
+use alfd_wire::{
+    self as wire, process_state, progress_kind, ActorBells, ControlWatch, Credits, Doorbell,
+    Process, Progress, Role, TransitionBatch, Wake, Wire, WireError, MAX_ACTORS, MAX_CREDIT_WINDOW,
 };
 use anyhow::Context as _;
 use tracing::{debug, info, warn};

@@ -4,12 +4,12 @@ use clap::Parser as _;
 
 fn main() {
     let args = alfd_learner::Args::parse();
-    alfd_common::wire::init_process_logging(
+    alfd_harness::init_process_logging(
         "alfd-learner",
         &args.run_dir,
         &alfd_learner::log_name(&args),
     );
-    let schema = alfd_common::wire::schema_version_from_env().unwrap_or_else(|e| {
+    let schema = alfd_harness::schema_version_from_env().unwrap_or_else(|e| {
         eprintln!("alfd-learner: {e}");
         std::process::exit(2)
     });

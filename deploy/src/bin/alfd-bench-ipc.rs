@@ -9,10 +9,10 @@ use std::process::{Child, Command};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use alfd_common::replay::Transition;
-use alfd_common::wire::{
-    self, command, process_state, progress_kind, Control, ControlWatch, Credits, Doorbell, Process,
-    Progress, QueryRequest, QueryResponse, Role, TransitionBatch, Wake, Wire, SCHEMA_VERSION,
-    TRANSITIONS_PER_BATCH,
+use alfd_wire::{
+    self as wire, command, process_state, progress_kind, Control, ControlWatch, Credits, Doorbell,
+    Process, Progress, QueryRequest, QueryResponse, Role, TransitionBatch, Wake, Wire,
+    SCHEMA_VERSION, TRANSITIONS_PER_BATCH,
 };
 use anyhow::{bail, Context as _};
 

@@ -1,0 +1,325 @@
+//! Run housekeeping: run ids and their iceoryx2 prefix, the files a run leaves in the system,
+//! and the removal of what dead processes and finished runs leave behind.
+
+use std::path::PathBuf;
+
+use iceoryx2::node::NodeView;
+use iceoryx2::prelude::*;
+
+use crate::error::{transport, Result, WireError};
+use crate::services::Transport;
+
+/// Checks a run id: 1 to 64 ASCII letters, digits, `-` or `_`.
+pub fn validate_run_id(run_id: &str) -> Result<()> {
+    let ok = !run_id.is_empty()
+        && run_id.len() <= 64
+        && run_id
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
+    if ok {
+        Ok(())
+    } else {
+        Err(WireError::InvalidRunId(run_id.to_owned()))
+    }
+}
+
+/// The iceoryx2 file prefix of a run: every file it creates starts with this.
+pub fn run_prefix(run_id: &str) -> String {
+    format!("alfd_{run_id}_")
+}
+
+/// The iceoryx2 config of a run: the defaults (no config file is read), with the run's prefix.
+pub(crate) fn run_config(run_id: &str) -> Result<Config> {
+    validate_run_id(run_id)?;
+    let mut cfg = Config::default();
+    cfg.global.prefix = FileName::new(run_prefix(run_id).as_bytes())
+        .map_err(transport("name the prefix of", run_id))?;
+    Ok(cfg)
+}
+
+/// Files of run `run_id` left in iceoryx2's directories (`/tmp/iceoryx2`, `/dev/shm`). Empty once
+/// every process of the run has exited cleanly.
+pub fn leftover_files(run_id: &str) -> Vec<PathBuf> {
+    let prefix = run_prefix(run_id);
+    let mut found = Vec::new();
+    let mut stack = vec![PathBuf::from("/tmp/iceoryx2"), PathBuf::from("/dev/shm")];
+    while let Some(dir) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            let is_dir = entry.file_type().map(|t| t.is_dir()).unwrap_or(false);
+            if entry.file_name().to_string_lossy().starts_with(&prefix) {
+                found.push(path);
+            } else if is_dir {
+                stack.push(path);
+            }
+        }
+    }
+    found.sort();
+    found
+}
+
+/// Removes the resources of dead processes of run `run_id` (killed with SIGKILL, say); returns
+/// the names of the nodes it removed.
+pub fn cleanup_dead_nodes(run_id: &str) -> Result<Vec<String>> {
+    let cfg = run_config(run_id)?;
+    let mut dead = Vec::new();
+    Node::<Transport>::list(&cfg, |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(transport("list the nodes of", run_id))?;
+    let mut removed = Vec::new();
+    for view in dead {
+        let name = view
+            .details()
+            .as_ref()
+            .map(|d| d.name().to_string())
+            .unwrap_or_else(|| "?".to_owned());
+        if view.try_remove_stale_resources().is_ok() {
+            removed.push(name);
+        }
+    }
+    Ok(removed)
+}
+
+/// Names of the nodes of run `run_id` whose process is alive.
+pub fn alive_nodes(run_id: &str) -> Result<Vec<String>> {
+    let cfg = run_config(run_id)?;
+    let mut alive = Vec::new();
+    Node::<Transport>::list(&cfg, |state| {
+        if let NodeState::Alive(view) = state {
+            alive.push(
+                view.details()
+                    .as_ref()
+                    .map(|d| d.name().to_string())
+                    .unwrap_or_else(|| "?".to_owned()),
+            );
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(transport("list the nodes of", run_id))?;
+    Ok(alive)
+}
+
+/// Removes what run `run_id` left in the system after its last process exited: the resources of
+/// dead nodes, and the run's node counter (a persistent segment iceoryx2 keeps per prefix).
+/// Refuses while a node of the run is alive (including one of the calling process), and never
+/// touches another run, even one whose id starts with this one's.
+///
+/// iceoryx2 0.10 creates the node counter without an owner, so no node removes it, and offers
+/// no public way to: the dead-node clean-up above (`Node::list`, `DeadNodeView`) leaves it, and
+/// `Node::force_remove_service` removes services only. The one remover is
+/// `iceoryx2::testing::remove_global_mgmt_segment` (`#[doc(hidden)]`, `unsafe`), called here
+/// and nowhere else.
+pub fn close_run(run_id: &str) -> Result<()> {
+    let cfg = run_config(run_id)?;
+    cleanup_dead_nodes(run_id)?;
+    let alive = alive_nodes(run_id)?;
+    if !alive.is_empty() {
+        return Err(WireError::RunAlive {
+            run_id: run_id.to_owned(),
+            nodes: alive.join(", "),
+        });
+    }
+    #[allow(unsafe_code)]
+    // SAFETY: the contract is that no other process currently uses the same iceoryx2 domain.
+    // - The domain is `cfg`: default root path, prefix `alfd_<run_id>_`, used only by processes
+    //   of this run (`run_config` builds every config of the crate). The segment is removed by
+    //   its exact name, derived from `cfg` (`alfd_<run_id>_<hash>_node.0_10_0.global_mgmt` in
+    //   `/dev/shm`), so never another run's, even one whose id starts with this one's.
+    // - In iceoryx2 0.10 the segment is used only while a node is created (its unique id takes
+    //   the next counter value; the segment is opened, incremented and dropped), and no node of
+    //   the run is alive (dead ones were cleaned, live ones refused, just above).
+    // - No node is created between that check and the removal: the callers are the process
+    //   that started the run's processes (the launcher; `alfd-bench-ipc` for its own runs),
+    //   after its children exited and its own `Wire` was dropped, and tests after dropping
+    //   every node. Should a late tool join in that window anyway, the segment is POSIX shared
+    //   memory, so its mapping stays valid after the unlink; node ids also carry the pid and the
+    //   creation time, so a counter restarting at 0 repeats none.
+    let removed = unsafe { iceoryx2::testing::remove_global_mgmt_segment::<Transport>(&cfg) };
+    removed.map_err(transport("remove the node counter of", run_id))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::PathBuf;
+
+    use crate::test_support::{run_id, wire};
+    use crate::*;
+
+    /// A control message goes from `tx` to `rx` (the newest `rx` holds): the run still works.
+    fn control_round_trip(tx: &mut Sender<'_, Control>, rx: &Receiver<'_, Control>, expert: u32) {
+        tx.send(Control {
+            command: command::RUN,
+            active_expert: expert,
+            ..Control::default()
+        })
+        .unwrap();
+        assert_eq!(rx.latest().unwrap().unwrap().active_expert, expert);
+    }
+
+    /// The files `leftover_files` reports for a run, each checked to exist.
+    fn existing_files(run: &str) -> Vec<PathBuf> {
+        let files = leftover_files(run);
+        assert!(files.iter().all(|p| p.exists()), "{files:?}");
+        files
+    }
+
+    #[test]
+    fn closing_or_cleaning_another_run_leaves_a_live_run_alone() {
+        // Besides the live run, a finished run whose id the live run's extends, and one whose id
+        // extends the live run's: their file prefixes (`alfd_<id>_`) start one another.
+        let shorter = run_id("live");
+        let live = format!("{shorter}_y");
+        let longer = format!("{live}_z");
+        assert!(run_prefix(&live).starts_with(&run_prefix(&shorter)));
+        assert!(run_prefix(&longer).starts_with(&run_prefix(&live)));
+        let launcher = wire(&live, Role::Launcher, 0);
+        let actor = wire(&live, Role::Actor, 0);
+        let mut tx = launcher.control_sender().unwrap();
+        let rx = actor.control_receiver().unwrap();
+        control_round_trip(&mut tx, &rx, 1);
+        let before = existing_files(&live);
+        assert!(!before.is_empty(), "a live run has files");
+
+        for other in [&longer, &shorter] {
+            drop(wire(other, Role::Launcher, 0));
+            assert_eq!(alive_nodes(other).unwrap(), Vec::<String>::new());
+            assert_eq!(cleanup_dead_nodes(other).unwrap(), Vec::<String>::new());
+            close_run(other).unwrap();
+            // `leftover_files` matches names by prefix, so the shorter id's list shows the live
+            // run's files: they must be all it shows.
+            assert!(
+                existing_files(other)
+                    .iter()
+                    .all(|p| p.to_string_lossy().contains(&run_prefix(&live))),
+                "closing `{other}` left its own files"
+            );
+        }
+        assert_eq!(cleanup_dead_nodes(&live).unwrap(), Vec::<String>::new());
+        assert_eq!(launcher.cleanup_dead_nodes(), 0);
+
+        let after = existing_files(&live);
+        assert!(
+            before.iter().all(|p| after.contains(p)),
+            "a live run lost files: before {before:?}, after {after:?}"
+        );
+        assert_eq!(alive_nodes(&live).unwrap().len(), 2);
+        control_round_trip(&mut tx, &rx, 2);
+        // A process joining later still finds the run's services.
+        let late = wire(&live, Role::Actor, 1);
+        let late_rx = late.control_receiver().unwrap();
+        control_round_trip(&mut tx, &late_rx, 3);
+
+        drop((tx, rx, late_rx));
+        drop((late, actor, launcher));
+        close_run(&live).unwrap();
+        assert_eq!(leftover_files(&live), Vec::<PathBuf>::new());
+    }
+
+    #[test]
+    fn closing_a_live_run_is_refused_and_removes_nothing() {
+        let run = run_id("close-live");
+        let launcher = wire(&run, Role::Launcher, 0);
+        let learner = wire(&run, Role::Learner, 0);
+        let mut tx = launcher.control_sender().unwrap();
+        let rx = learner.control_receiver().unwrap();
+        control_round_trip(&mut tx, &rx, 1);
+        let before = existing_files(&run);
+
+        match close_run(&run) {
+            Err(WireError::RunAlive { run_id, nodes }) => {
+                assert_eq!(run_id, run);
+                assert!(
+                    nodes.contains("launcher") && nodes.contains("learner"),
+                    "{nodes}"
+                );
+            }
+            other => panic!("close_run of a live run: {other:?}"),
+        }
+        assert_eq!(
+            existing_files(&run),
+            before,
+            "a refused close removed files"
+        );
+        control_round_trip(&mut tx, &rx, 2);
+        // The node counter survived: another process still joins.
+        let late = wire(&run, Role::Actor, 0);
+        control_round_trip(&mut tx, &late.control_receiver().unwrap(), 3);
+
+        drop((tx, rx));
+        drop((late, learner));
+        let refused = close_run(&run);
+        assert!(
+            matches!(&refused, Err(WireError::RunAlive { nodes, .. }) if nodes == "launcher"),
+            "one live node is enough to refuse: {refused:?}"
+        );
+        drop(launcher);
+        close_run(&run).unwrap();
+        assert_eq!(leftover_files(&run), Vec::<PathBuf>::new());
+    }
+
+    #[test]
+    fn two_runs_do_not_see_each_other_and_leave_nothing_behind() {
+        let run_a = run_id("iso-a");
+        let run_b = run_id("iso-b");
+        {
+            let a_launcher = wire(&run_a, Role::Launcher, 0);
+            let b_launcher = wire(&run_b, Role::Launcher, 0);
+            let a_actor = wire(&run_a, Role::Actor, 0);
+            let b_actor = wire(&run_b, Role::Actor, 0);
+            let mut a_tx = a_launcher.control_sender().unwrap();
+            let mut b_tx = b_launcher.control_sender().unwrap();
+            let a_rx = a_actor.control_receiver().unwrap();
+            let b_rx = b_actor.control_receiver().unwrap();
+            a_tx.send(Control {
+                command: command::SHUTDOWN,
+                ..Control::default()
+            })
+            .unwrap();
+            assert_eq!(a_rx.receive().unwrap().unwrap().command, command::SHUTDOWN);
+            assert!(
+                b_rx.receive().unwrap().is_none(),
+                "run b saw run a's control"
+            );
+            b_tx.send(Control {
+                command: command::RUN,
+                active_expert: 4,
+                ..Control::default()
+            })
+            .unwrap();
+            assert!(a_rx.receive().unwrap().is_none());
+            assert_eq!(b_rx.receive().unwrap().unwrap().active_expert, 4);
+            assert!(!leftover_files(&run_a).is_empty(), "a live run has files");
+            assert!(leftover_files(&run_a)
+                .iter()
+                .all(|p| p.to_string_lossy().contains(&run_prefix(&run_a))));
+            assert!(matches!(close_run(&run_a), Err(WireError::RunAlive { .. })));
+            assert_eq!(alive_nodes(&run_b).unwrap().len(), 2);
+        }
+        assert_eq!(cleanup_dead_nodes(&run_a).unwrap(), Vec::<String>::new());
+        assert_eq!(alive_nodes(&run_a).unwrap(), Vec::<String>::new());
+        close_run(&run_a).unwrap();
+        close_run(&run_b).unwrap();
+        assert_eq!(leftover_files(&run_a), Vec::<std::path::PathBuf>::new());
+        assert_eq!(leftover_files(&run_b), Vec::<std::path::PathBuf>::new());
+    }
+
+    #[test]
+    fn run_ids_are_checked() {
+        assert!(validate_run_id("20250101-120000_ab12").is_ok());
+        for bad in ["", "a/b", "a b", "ü", &"x".repeat(65)] {
+            assert_eq!(
+                validate_run_id(bad),
+                Err(WireError::InvalidRunId(bad.to_owned()))
+            );
+        }
+        assert!(Wire::connect("bad/id", Process::new(Role::Tool, 0), SCHEMA_VERSION).is_err());
+    }
+}

@@ -1,0 +1,80 @@
+//! The wire of alfd: the one crate that knows iceoryx2. Message types, the schema version, and
+//! one builder function per service, so that every process builds a service with the same
+//! settings.
+//!
+//! # Services of one run
+//! Every run has its own iceoryx2 `global.prefix` (`alfd_<run id>_`) and its service names start
+//! with `alfd/<run id>/`, so two runs on one host never see each other.
+//!
+//! | service             | pattern           | from → to               | payload                      |
+//! |---------------------|-------------------|-------------------------|------------------------------|
+//! | `transitions`       | pub/sub           | actors → learner        | [`TransitionBatch`]          |
+//! | `credits`           | pub/sub, hist. 1  | learner → actors        | [`Credits`]                  |
+//! | `weights`           | pub/sub, hist. 1  | learner → actors        | `[f32]` + [`WeightsHeader`]  |
+//! | `demo-model`        | pub/sub, hist. 1  | expert → actors         | `[u8]` + [`DemoModelHeader`] |
+//! | `query`             | request/response  | actors → expert → actor | [`QueryRequest`] → [`QueryResponse`] |
+//! | `progress`          | pub/sub           | every process → launcher| [`Progress`]                 |
+//! | `control`           | pub/sub, hist. 1  | launcher → every process| [`Control`]                  |
+//! | `doorbell/<who>`    | event             | anyone → one process    | (wakes a blocked process)    |
+//!
+//! Data services never wake anybody: a sender rings the receiver's doorbell (`learner`, `expert`,
+//! `launcher`, `actor-<id>`), and a process with nothing to do blocks on its own doorbell in a
+//! WaitSet, so nothing spins when idle.
+//!
+//! # Credits (the replay-ratio throttle)
+//! The learner makes `U` updates per environment step it receives. Every transition an actor
+//! sends carries a per-actor sequence number; the learner processes transitions in order and
+//! publishes, per actor, `granted = paid + window`, where `paid` counts the actor's transitions
+//! whose `U` updates are done. An actor may send transition `seq` only while `seq < granted`, so
+//! it never runs more than `window` steps ahead of the learner (the idea of Reverb's
+//! `SampleToInsertRatio`). Grants are cumulative and all actors' grants travel in one message, so
+//! a lost or overwritten message loses nothing. A new actor process (after a crash) has a new
+//! incarnation and starts with an implicit grant of `window`. An actor out of credits flags its
+//! last batch `blocked` (an empty one if need be) and sleeps on its doorbell; the learner rings it
+//! as soon as a grant lets it go on, and never otherwise.
+//!
+//! # Schema version
+//! Every message carries a [`Header`] with the sender's schema version. A receiver meeting another
+//! version gets [`WireError::SchemaMismatch`], which names both versions.
+//!
+//! # Where things are
+//! - `messages`: limits, [`Role`] and [`Process`], the [`Header`] and every message type.
+//! - `error`: [`WireError`] and [`Result`].
+//! - `services`: [`Wire`] (joining a run, one builder per service, the port constructors).
+//! - `ports`: [`Sender`], [`Receiver`], the weights and demonstration-model slices, and both
+//!   sides of a query.
+//! - `wakeups`: doorbells ([`Doorbell`], [`Bell`], [`ActorBells`]) and the [`Waiter`].
+//! - `control`: [`ControlWatch`], a process's view of the launcher.
+//! - `housekeeping`: run ids and prefixes, the files a run leaves, and their removal
+//!   ([`cleanup_dead_nodes`], [`close_run`]).
+//!
+//! Processes start up through `alfd-harness` (logging, the schema hook), not through this crate.
+
+mod control;
+mod error;
+mod housekeeping;
+mod messages;
+mod ports;
+mod services;
+mod wakeups;
+
+#[cfg(test)]
+mod test_support;
+
+pub use control::{ControlWatch, CONTROL_PERIOD};
+pub use error::{Result, WireError};
+pub use housekeeping::{
+    alive_nodes, cleanup_dead_nodes, close_run, leftover_files, run_prefix, validate_run_id,
+};
+pub use messages::{
+    command, flags, name_from_bytes, name_to_bytes, outcome, process_state, progress_kind, Control,
+    Credits, DemoModelHeader, Header, Message, Process, Progress, QueryRequest, QueryResponse,
+    Role, TransitionBatch, TransitionRecord, WeightsHeader, MAX_ACTORS, MAX_CREDIT_WINDOW,
+    MAX_HEADS, MAX_OBS_DIM, NAME_LEN, SCHEMA_VERSION, TRANSITIONS_BUFFER, TRANSITIONS_PER_BATCH,
+};
+pub use ports::{
+    DemoModelReceiver, DemoModelSender, IncomingQuery, PendingQuery, QueryClient, QueryServer,
+    Receiver, Sender, WeightsReceiver, WeightsSender,
+};
+pub use services::{quiet_transport_logs, Wire};
+pub use wakeups::{ActorBells, Bell, Doorbell, Waiter, Wake};

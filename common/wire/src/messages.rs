@@ -1,0 +1,615 @@
+//! The messages of the wire: limits, identities, the [`Header`] every message starts with, and
+//! one fixed-size, plain-data type per service (iceoryx2 copies them as they are).
+
+use std::fmt;
+
+use alfd_common::replay::Transition;
+use iceoryx2::prelude::ZeroCopySend;
+
+use crate::error::{Result, WireError};
+
+/// The version of the messages below. Bump it whenever a message changes.
+pub const SCHEMA_VERSION: u32 = 1;
+/// Actors per run (the credit table has one slot per actor id).
+pub const MAX_ACTORS: usize = 16;
+/// Largest observation a transition or a query can carry.
+pub const MAX_OBS_DIM: usize = 8;
+/// Largest number of heads (K) a bootstrap mask can carry.
+pub const MAX_HEADS: usize = 8;
+/// Transitions per [`TransitionBatch`].
+pub const TRANSITIONS_PER_BATCH: usize = 32;
+/// The learner's subscriber queue per actor, in batches. The credit window may not exceed it:
+/// an actor never has more batches in flight than unpaid steps, so no batch is ever dropped.
+pub const TRANSITIONS_BUFFER: usize = 64;
+/// Largest credit window, in environment steps.
+pub const MAX_CREDIT_WINDOW: u64 = TRANSITIONS_BUFFER as u64;
+/// Nodes a service may have: launcher, learner, two experts during a swap, the actors, actors
+/// killed but not yet cleaned up, and a few tools (benchmarks, monitors).
+/// Nodes a service may have: launcher, learner, two experts during a swap, the actors, actors
+/// killed but not yet cleaned up, and a few tools (benchmarks, monitors).
+pub(crate) const MAX_NODES: usize = 2 * MAX_ACTORS + 16;
+/// Bytes of an expert name in a message.
+pub const NAME_LEN: usize = 32;
+
+// ---------------------------------------------------------------------------------------------
+// Identities
+// ---------------------------------------------------------------------------------------------
+
+/// What a process is in a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u16)]
+pub enum Role {
+    Launcher = 1,
+    Learner = 2,
+    Expert = 3,
+    Actor = 4,
+    /// Benchmarks, monitors, the `swap-expert` command.
+    Tool = 5,
+}
+
+impl Role {
+    pub fn from_u16(v: u16) -> Option<Role> {
+        Some(match v {
+            1 => Role::Launcher,
+            2 => Role::Learner,
+            3 => Role::Expert,
+            4 => Role::Actor,
+            5 => Role::Tool,
+            _ => return None,
+        })
+    }
+
+    fn as_str(self) -> &'static str {
+        match self {
+            Role::Launcher => "launcher",
+            Role::Learner => "learner",
+            Role::Expert => "expert",
+            Role::Actor => "actor",
+            Role::Tool => "tool",
+        }
+    }
+}
+
+/// One process of a run: its role and its id within the role (actor id, expert generation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Process {
+    pub role: Role,
+    pub id: u16,
+}
+
+impl Process {
+    pub fn new(role: Role, id: u16) -> Self {
+        Self { role, id }
+    }
+}
+
+impl fmt::Display for Process {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.role {
+            Role::Launcher | Role::Learner => write!(f, "{}", self.role.as_str()),
+            _ => write!(f, "{}-{}", self.role.as_str(), self.id),
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Messages
+// ---------------------------------------------------------------------------------------------
+
+/// What every message starts with: the schema version, the sender, and the sender's sequence
+/// number on that service (0, 1, 2, ...).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("alfd.Header")]
+pub struct Header {
+    pub schema: u32,
+    /// [`Role`] of the sender, as `u16`.
+    pub role: u16,
+    pub id: u16,
+    pub seq: u64,
+}
+
+impl Header {
+    /// The sender, for messages; `"unknown-<role>-<id>"` when the role is not known.
+    pub fn sender(&self) -> String {
+        match Role::from_u16(self.role) {
+            Some(role) => Process::new(role, self.id).to_string(),
+            None => format!("unknown-{}-{}", self.role, self.id),
+        }
+    }
+}
+
+/// A message with a [`Header`], sent by value.
+pub trait Message: Copy + fmt::Debug + ZeroCopySend + 'static {
+    /// The service it travels on (for error messages).
+    const SERVICE: &'static str;
+    fn header(&self) -> &Header;
+    fn header_mut(&mut self) -> &mut Header;
+}
+
+macro_rules! message {
+    ($t:ty, $service:expr) => {
+        impl Message for $t {
+            const SERVICE: &'static str = $service;
+            fn header(&self) -> &Header {
+                &self.header
+            }
+            fn header_mut(&mut self) -> &mut Header {
+                &mut self.header
+            }
+        }
+    };
+}
+
+/// `flags` of a [`TransitionRecord`].
+pub mod flags {
+    pub const TERMINATED: u32 = 1;
+    pub const TRUNCATED: u32 = 2;
+    pub const DEMO: u32 = 4;
+    /// Last step of its episode (terminated or truncated).
+    pub const EPISODE_END: u32 = 8;
+}
+
+/// One environment step as it travels from an actor to the learner.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("alfd.TransitionRecord")]
+pub struct TransitionRecord {
+    pub state: [f32; MAX_OBS_DIM],
+    pub next_state: [f32; MAX_OBS_DIM],
+    /// The Bernoulli bootstrap mask, one value per head.
+    pub mask: [f32; MAX_HEADS],
+    pub action: u32,
+    /// The reward learned from (shaped when shaping was on).
+    pub reward: f32,
+    /// The actor's episode number.
+    pub episode: u32,
+    /// See [`flags`].
+    pub flags: u32,
+}
+
+/// Up to [`TRANSITIONS_PER_BATCH`] consecutive steps of one actor.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("alfd.TransitionBatch")]
+pub struct TransitionBatch {
+    pub header: Header,
+    pub actor: u32,
+    pub obs_dim: u16,
+    pub heads: u16,
+    /// Differs for every process that plays this actor id (a restarted actor is a new incarnation).
+    pub incarnation: u64,
+    /// Sequence number of `records[0]` among all steps this incarnation sent (the credit count).
+    pub first_seq: u64,
+    pub len: u32,
+    /// 1 when the actor has used up its credits with this batch and blocks until it hears of
+    /// new ones (the learner then rings its doorbell); 0 otherwise.
+    pub blocked: u32,
+    pub records: [TransitionRecord; TRANSITIONS_PER_BATCH],
+}
+message!(TransitionBatch, "transitions");
+
+impl TransitionBatch {
+    /// An empty batch whose first step will have sequence number `first_seq`.
+    pub fn new(
+        actor: u16,
+        incarnation: u64,
+        obs_dim: usize,
+        heads: usize,
+        first_seq: u64,
+    ) -> Result<Self> {
+        if obs_dim > MAX_OBS_DIM {
+            return Err(WireError::TooLarge {
+                what: "observation",
+                got: obs_dim,
+                max: MAX_OBS_DIM,
+            });
+        }
+        if heads > MAX_HEADS {
+            return Err(WireError::TooLarge {
+                what: "bootstrap mask",
+                got: heads,
+                max: MAX_HEADS,
+            });
+        }
+        Ok(Self {
+            actor: u32::from(actor),
+            obs_dim: obs_dim as u16,
+            heads: heads as u16,
+            incarnation,
+            first_seq,
+            ..Self::default()
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.len as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    pub fn is_full(&self) -> bool {
+        self.len() == TRANSITIONS_PER_BATCH
+    }
+
+    /// Sequence number one past the last step of this batch.
+    pub fn end_seq(&self) -> u64 {
+        self.first_seq + u64::from(self.len)
+    }
+
+    /// Appends a step; `truncated` marks the end of an episode cut by the step limit.
+    pub fn push(&mut self, t: &Transition, episode: u32, truncated: bool) -> Result<()> {
+        if self.is_full() {
+            return Err(WireError::TooLarge {
+                what: "transition batch",
+                got: TRANSITIONS_PER_BATCH + 1,
+                max: TRANSITIONS_PER_BATCH,
+            });
+        }
+        let d = self.obs_dim as usize;
+        let h = self.heads as usize;
+        if t.state.len() != d || t.next_state.len() != d {
+            return Err(WireError::TooLarge {
+                what: "transition state (batch obs_dim differs)",
+                got: t.state.len().max(t.next_state.len()),
+                max: d,
+            });
+        }
+        if t.mask.len() != h {
+            return Err(WireError::TooLarge {
+                what: "transition mask (batch heads differ)",
+                got: t.mask.len(),
+                max: h,
+            });
+        }
+        let r = &mut self.records[self.len as usize];
+        *r = TransitionRecord::default();
+        r.state[..d].copy_from_slice(&t.state);
+        r.next_state[..d].copy_from_slice(&t.next_state);
+        r.mask[..h].copy_from_slice(&t.mask);
+        r.action = t.action;
+        r.reward = t.reward;
+        r.episode = episode;
+        r.flags = (if t.terminated { flags::TERMINATED } else { 0 })
+            | (if truncated { flags::TRUNCATED } else { 0 })
+            | (if t.demo { flags::DEMO } else { 0 })
+            | (if t.terminated || truncated {
+                flags::EPISODE_END
+            } else {
+                0
+            });
+        self.len += 1;
+        Ok(())
+    }
+
+    /// Step `i` of the batch as the replay buffer stores it.
+    pub fn transition(&self, i: usize) -> Transition {
+        let d = (self.obs_dim as usize).min(MAX_OBS_DIM);
+        let h = (self.heads as usize).min(MAX_HEADS);
+        let r = &self.records[i];
+        Transition {
+            state: r.state[..d].to_vec(),
+            action: r.action,
+            reward: r.reward,
+            next_state: r.next_state[..d].to_vec(),
+            terminated: r.flags & flags::TERMINATED != 0,
+            mask: r.mask[..h].to_vec(),
+            demo: r.flags & flags::DEMO != 0,
+        }
+    }
+
+    /// The steps of the batch, in order.
+    pub fn transitions(&self) -> impl Iterator<Item = Transition> + '_ {
+        (0..self.len().min(TRANSITIONS_PER_BATCH)).map(|i| self.transition(i))
+    }
+}
+
+/// The learner's grants to all actors, and its global counters.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("alfd.Credits")]
+pub struct Credits {
+    pub header: Header,
+    /// Environment steps the learner has received from all actors: the run's global step.
+    pub env_steps: u64,
+    /// Updates the learner has made.
+    pub updates: u64,
+    /// Per actor id: steps of that incarnation received so far.
+    pub received: [u64; MAX_ACTORS],
+    /// Per actor id: the incarnation the grant is for (0: none yet).
+    pub incarnation: [u64; MAX_ACTORS],
+    /// Per actor id: the actor may send steps with sequence numbers below this.
+    pub granted: [u64; MAX_ACTORS],
+}
+message!(Credits, "credits");
+
+impl Credits {
+    /// The grant for `actor` if it is for this `incarnation`.
+    pub fn granted_for(&self, actor: u16, incarnation: u64) -> Option<u64> {
+        let a = actor as usize;
+        (a < MAX_ACTORS && self.incarnation[a] == incarnation).then(|| self.granted[a])
+    }
+
+    /// The global step as `actor` (incarnation `incarnation`) sees it after producing `produced`
+    /// steps: the learner's count plus the actor's own steps it has not received yet.
+    pub fn global_step_for(&self, actor: u16, incarnation: u64, produced: u64) -> u64 {
+        let a = actor as usize;
+        let received = if a < MAX_ACTORS && self.incarnation[a] == incarnation {
+            self.received[a]
+        } else {
+            0
+        };
+        self.env_steps + produced.saturating_sub(received)
+    }
+}
+
+/// User header of the `weights` slice.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("alfd.WeightsHeader")]
+pub struct WeightsHeader {
+    pub header: Header,
+    /// Increases with every publication.
+    pub version: u64,
+    pub updates: u64,
+    pub env_steps: u64,
+    pub len: u64,
+}
+
+/// User header of the `demo-model` slice (postcard bytes of the fitted model).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("alfd.DemoModelHeader")]
+pub struct DemoModelHeader {
+    pub header: Header,
+    /// Increases with every publication of the same expert; a new expert starts above the old.
+    pub version: u64,
+    /// Global step of the last demonstration (shaping stops at a multiple of it).
+    pub last_demo_step: u64,
+    pub demos: u32,
+    pub budget_total: u32,
+    pub budget_left: u32,
+    /// Generation of the expert that published it.
+    pub expert: u32,
+    pub expert_name: [u8; NAME_LEN],
+    pub len: u64,
+}
+
+impl DemoModelHeader {
+    pub fn expert_name(&self) -> String {
+        name_from_bytes(&self.expert_name)
+    }
+}
+
+/// An actor asks the expert for the action at `state`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("alfd.QueryRequest")]
+pub struct QueryRequest {
+    pub header: Header,
+    pub actor: u32,
+    pub obs_dim: u32,
+    pub incarnation: u64,
+    /// The global step as the actor knows it.
+    pub global_step: u64,
+    pub state: [f32; MAX_OBS_DIM],
+}
+message!(QueryRequest, "query");
+
+impl QueryRequest {
+    pub fn new(actor: u16, incarnation: u64, global_step: u64, state: &[f32]) -> Result<Self> {
+        if state.len() > MAX_OBS_DIM {
+            return Err(WireError::TooLarge {
+                what: "query state",
+                got: state.len(),
+                max: MAX_OBS_DIM,
+            });
+        }
+        let mut s = [0.0; MAX_OBS_DIM];
+        s[..state.len()].copy_from_slice(state);
+        Ok(Self {
+            actor: u32::from(actor),
+            obs_dim: state.len() as u32,
+            incarnation,
+            global_step,
+            state: s,
+            ..Self::default()
+        })
+    }
+
+    pub fn state(&self) -> &[f32] {
+        &self.state[..(self.obs_dim as usize).min(MAX_OBS_DIM)]
+    }
+}
+
+/// `outcome` of a [`QueryResponse`].
+pub mod outcome {
+    /// `action` is the expert's demonstration.
+    pub const ANSWERED: u32 = 1;
+    /// The budget is spent: no demonstration, act on your own.
+    pub const BUDGET_EXHAUSTED: u32 = 2;
+}
+
+/// The expert's answer.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("alfd.QueryResponse")]
+pub struct QueryResponse {
+    pub header: Header,
+    /// `header.seq` of the request answered.
+    pub request_seq: u64,
+    pub actor: u32,
+    /// See [`outcome`].
+    pub outcome: u32,
+    pub action: u32,
+    /// Generation of the expert that answered.
+    pub expert: u32,
+    /// Index of the demonstration in `demos.jsonl` (0-based).
+    pub demo_index: u32,
+    pub budget_total: u32,
+    pub budget_left: u32,
+    pub _pad: u32,
+    pub expert_name: [u8; NAME_LEN],
+}
+message!(QueryResponse, "query");
+
+impl QueryResponse {
+    pub fn expert_name(&self) -> String {
+        name_from_bytes(&self.expert_name)
+    }
+}
+
+/// `kind` of a [`Progress`] message.
+pub mod progress_kind {
+    /// An actor finished an episode.
+    pub const EPISODE: u32 = 1;
+    /// A process reports its state and counters.
+    pub const STATUS: u32 = 2;
+}
+
+/// `state` of a status [`Progress`] message.
+pub mod process_state {
+    pub const STARTING: u32 = 1;
+    pub const RUNNING: u32 = 2;
+    /// An expert that is up but not answering (it waits to be made active).
+    pub const STANDBY: u32 = 3;
+    pub const EXITING: u32 = 4;
+}
+
+/// Progress and metrics, from every process to the launcher. An episode message carries the
+/// fields of the single-process runner's `EpisodeRecord`; the sender is `header.id`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("alfd.Progress")]
+pub struct Progress {
+    pub header: Header,
+    /// See [`progress_kind`].
+    pub kind: u32,
+    /// See [`process_state`] (status messages).
+    pub state: u32,
+    pub pid: u32,
+    pub _pad: u32,
+    pub incarnation: u64,
+    // --- an episode (kind EPISODE) ---
+    /// The actor's own episode number.
+    pub episode: u64,
+    /// The environment's return (never the shaped one).
+    pub episode_return: f64,
+    pub length: u64,
+    /// Demonstrations used so far in the run, as far as the actor knows.
+    pub demos_used: u64,
+    /// Mean JS divergence over the episode's steps.
+    pub mean_js: f64,
+    /// Queries answered during the episode.
+    pub queries: u64,
+    /// Steps whose reward was shaped during the episode.
+    pub shaped_steps: u64,
+    /// The global step at the end of the episode, as far as the actor knows.
+    pub total_steps: u64,
+    // --- counters (status) ---
+    /// Environment steps: sent (actor), received (learner).
+    pub env_steps: u64,
+    pub updates: u64,
+    /// Demonstrations answered in the whole run (expert).
+    pub demos: u64,
+    pub budget_left: u64,
+    pub weights_version: u64,
+    /// Last training loss (learner), NaN when none.
+    pub loss: f64,
+}
+message!(Progress, "progress");
+
+/// `command` of a [`Control`] message.
+pub mod command {
+    pub const RUN: u32 = 1;
+    pub const SHUTDOWN: u32 = 2;
+}
+
+/// The launcher's word to every process. Published with history 1 and republished periodically,
+/// so a late process gets it; it doubles as the launcher's heartbeat.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("alfd.Control")]
+pub struct Control {
+    pub header: Header,
+    /// See [`command`].
+    pub command: u32,
+    /// Generation of the expert allowed to answer queries (0: none).
+    pub active_expert: u32,
+    /// Generation of the newest expert; an expert older than this stops answering and exits.
+    pub newest_expert: u32,
+    pub _pad: u32,
+}
+message!(Control, "control");
+
+/// `name` in the fixed-size form messages carry (truncated to [`NAME_LEN`] bytes).
+pub fn name_to_bytes(name: &str) -> [u8; NAME_LEN] {
+    let mut out = [0u8; NAME_LEN];
+    let mut n = name.len().min(NAME_LEN);
+    while !name.is_char_boundary(n) {
+        n -= 1;
+    }
+    out[..n].copy_from_slice(&name.as_bytes()[..n]);
+    out
+}
+
+/// The inverse of [`name_to_bytes`].
+pub fn name_from_bytes(bytes: &[u8; NAME_LEN]) -> String {
+    let end = bytes.iter().position(|&b| b == 0).unwrap_or(NAME_LEN);
+    String::from_utf8_lossy(&bytes[..end]).into_owned()
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::test_support::transition;
+    use crate::*;
+
+    #[test]
+    fn a_batch_refuses_what_it_cannot_carry() {
+        assert!(matches!(
+            TransitionBatch::new(0, 1, MAX_OBS_DIM + 1, 2, 0),
+            Err(WireError::TooLarge {
+                max: MAX_OBS_DIM,
+                ..
+            })
+        ));
+        assert!(matches!(
+            TransitionBatch::new(0, 1, 4, MAX_HEADS + 1, 0),
+            Err(WireError::TooLarge { max: MAX_HEADS, .. })
+        ));
+        let mut b = TransitionBatch::new(0, 1, 4, 2, 0).unwrap();
+        let mut wrong = transition(1.0, false, false);
+        wrong.state.push(9.0);
+        assert!(b.push(&wrong, 0, false).is_err());
+        assert!(b.is_empty(), "a refused step is not stored");
+        for i in 0..TRANSITIONS_PER_BATCH {
+            b.push(&transition(i as f32, false, false), 0, false)
+                .unwrap();
+        }
+        assert!(b.is_full());
+        assert!(b.push(&transition(0.0, false, false), 0, false).is_err());
+        let truncated = {
+            let mut b = TransitionBatch::new(0, 1, 4, 2, 0).unwrap();
+            b.push(&transition(1.0, false, false), 0, true).unwrap();
+            b.records[0].flags
+        };
+        assert_eq!(truncated, flags::TRUNCATED | flags::EPISODE_END);
+        assert!(QueryRequest::new(0, 1, 0, &[0.0; MAX_OBS_DIM + 1]).is_err());
+    }
+
+    #[test]
+    fn names_and_identities_are_checked() {
+        assert_eq!(
+            name_from_bytes(&name_to_bytes("cartpole-200")),
+            "cartpole-200"
+        );
+        let long = "é".repeat(20); // 40 bytes: cut on a character boundary
+        assert_eq!(name_from_bytes(&name_to_bytes(&long)), "é".repeat(16));
+        assert_eq!(Process::new(Role::Actor, 3).to_string(), "actor-3");
+        assert_eq!(Process::new(Role::Learner, 0).to_string(), "learner");
+        assert_eq!(Role::from_u16(Role::Expert as u16), Some(Role::Expert));
+        assert_eq!(Role::from_u16(0), None);
+    }
+}

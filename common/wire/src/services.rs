@@ -1,0 +1,516 @@
+//! [`Wire`]: a process's connection to its run, with one builder function per service (so that
+//! every process creates a service with the same settings) and the constructors of the ports.
+
+use std::fmt;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+
+use crate::error::{transport, Result, WireError};
+use crate::housekeeping::run_config;
+use crate::messages::{
+    Control, Credits, DemoModelHeader, Header, Message, Process, Progress, QueryRequest,
+    QueryResponse, TransitionBatch, WeightsHeader, MAX_ACTORS, MAX_NODES, TRANSITIONS_BUFFER,
+};
+use crate::ports::{
+    DemoModelReceiver, DemoModelSender, QueryClient, QueryServer, Receiver, Sender,
+    WeightsReceiver, WeightsSender,
+};
+use crate::wakeups::{Bell, Doorbell, Waiter};
+
+/// The iceoryx2 transport used by every process.
+pub(crate) type Transport = ipc::Service;
+
+/// Set once a process received SIGINT or SIGTERM (iceoryx2 reports a signal only once).
+pub(crate) static TERMINATION_REQUESTED: AtomicBool = AtomicBool::new(false);
+
+/// Routes iceoryx2's own log output: only its warnings and errors (or `IOX2_LOG_LEVEL`).
+pub fn quiet_transport_logs() {
+    set_log_level_from_env_or(LogLevel::Warn);
+}
+
+/// A process's connection to its run: an iceoryx2 node with the run's config, and who we are.
+pub struct Wire {
+    node: Node<Transport>,
+    run_id: String,
+    me: Process,
+    schema: u32,
+}
+
+impl fmt::Debug for Wire {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Wire")
+            .field("run_id", &self.run_id)
+            .field("me", &self.me)
+            .field("schema", &self.schema)
+            .finish()
+    }
+}
+
+impl Wire {
+    /// Joins run `run_id` as `me`, speaking schema version `schema` (normally
+    /// [`SCHEMA_VERSION`](crate::SCHEMA_VERSION)). SIGINT and SIGTERM are caught from here on: see
+    /// [`Wire::termination_requested`].
+    pub fn connect(run_id: &str, me: Process, schema: u32) -> Result<Self> {
+        let cfg = run_config(run_id)?;
+        let name =
+            NodeName::new(&me.to_string()).map_err(transport("name node", me.to_string()))?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            .config(&cfg)
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<Transport>()
+            .map_err(transport("create node", me.to_string()))?;
+        let wire = Self {
+            node,
+            run_id: run_id.to_owned(),
+            me,
+            schema,
+        };
+        // Installs iceoryx2's signal handler now rather than at the first wait.
+        wire.termination_requested();
+        Ok(wire)
+    }
+
+    pub fn run_id(&self) -> &str {
+        &self.run_id
+    }
+
+    pub fn me(&self) -> Process {
+        self.me
+    }
+
+    pub fn schema(&self) -> u32 {
+        self.schema
+    }
+
+    /// Whether SIGINT or SIGTERM arrived (sticky).
+    pub fn termination_requested(&self) -> bool {
+        if TERMINATION_REQUESTED.load(Ordering::Relaxed) {
+            return true;
+        }
+        if self.node.wait(Duration::ZERO).is_err() {
+            TERMINATION_REQUESTED.store(true, Ordering::Relaxed);
+        }
+        TERMINATION_REQUESTED.load(Ordering::Relaxed)
+    }
+
+    /// Removes what crashed processes of this run left behind; returns how many nodes it removed.
+    pub fn cleanup_dead_nodes(&self) -> usize {
+        let state = self.node.try_cleanup_dead_nodes();
+        state.cleanups as usize
+    }
+
+    fn service_name(&self, topic: &str) -> Result<ServiceName> {
+        let name = format!("alfd/{}/{}", self.run_id, topic);
+        ServiceName::new(&name).map_err(transport("name service", name.clone()))
+    }
+
+    pub(crate) fn header(&self, seq: u64) -> Header {
+        Header {
+            schema: self.schema,
+            role: self.me.role as u16,
+            id: self.me.id,
+            seq,
+        }
+    }
+
+    pub(crate) fn check(&self, service: &'static str, h: &Header) -> Result<()> {
+        if h.schema == self.schema {
+            Ok(())
+        } else {
+            Err(WireError::SchemaMismatch {
+                service,
+                ours: self.schema,
+                theirs: h.schema,
+                sender: h.sender(),
+            })
+        }
+    }
+
+    // --- one builder per service: every process opens it with these settings ---------------
+
+    fn transitions_service(
+        &self,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+            Transport,
+            TransitionBatch,
+            (),
+        >,
+    > {
+        let name = self.service_name("transitions")?;
+        self.node
+            .service_builder(&name)
+            .publish_subscribe::<TransitionBatch>()
+            .max_publishers(2 * MAX_ACTORS + 4)
+            .max_subscribers(4)
+            .max_nodes(MAX_NODES)
+            .history_size(0)
+            .subscriber_max_buffer_size(TRANSITIONS_BUFFER)
+            .enable_safe_overflow(false)
+            .open_or_create()
+            .map_err(transport("open", name.to_string()))
+    }
+
+    fn credits_service(
+        &self,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, Credits, ()>,
+    > {
+        let name = self.service_name("credits")?;
+        self.node
+            .service_builder(&name)
+            .publish_subscribe::<Credits>()
+            .max_publishers(2)
+            .max_subscribers(2 * MAX_ACTORS + 4)
+            .max_nodes(MAX_NODES)
+            .history_size(1)
+            .subscriber_max_buffer_size(2)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(transport("open", name.to_string()))
+    }
+
+    fn weights_service(
+        &self,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+            Transport,
+            [f32],
+            WeightsHeader,
+        >,
+    > {
+        let name = self.service_name("weights")?;
+        self.node
+            .service_builder(&name)
+            .publish_subscribe::<[f32]>()
+            .user_header::<WeightsHeader>()
+            .max_publishers(2)
+            .max_subscribers(2 * MAX_ACTORS + 4)
+            .max_nodes(MAX_NODES)
+            .history_size(1)
+            .subscriber_max_buffer_size(2)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(transport("open", name.to_string()))
+    }
+
+    fn demo_model_service(
+        &self,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+            Transport,
+            [u8],
+            DemoModelHeader,
+        >,
+    > {
+        let name = self.service_name("demo-model")?;
+        self.node
+            .service_builder(&name)
+            .publish_subscribe::<[u8]>()
+            .user_header::<DemoModelHeader>()
+            .max_publishers(4)
+            .max_subscribers(2 * MAX_ACTORS + 4)
+            .max_nodes(MAX_NODES)
+            .history_size(1)
+            .subscriber_max_buffer_size(2)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(transport("open", name.to_string()))
+    }
+
+    fn query_service(
+        &self,
+    ) -> Result<
+        iceoryx2::service::port_factory::request_response::PortFactory<
+            Transport,
+            QueryRequest,
+            (),
+            QueryResponse,
+            (),
+        >,
+    > {
+        let name = self.service_name("query")?;
+        self.node
+            .service_builder(&name)
+            .request_response::<QueryRequest, QueryResponse>()
+            .max_servers(4)
+            .max_clients(2 * MAX_ACTORS + 4)
+            .max_nodes(MAX_NODES)
+            .max_active_requests_per_client(2)
+            .max_response_buffer_size(2)
+            .enable_safe_overflow_for_requests(true)
+            .enable_safe_overflow_for_responses(true)
+            .open_or_create()
+            .map_err(transport("open", name.to_string()))
+    }
+
+    fn progress_service(
+        &self,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, Progress, ()>,
+    > {
+        let name = self.service_name("progress")?;
+        self.node
+            .service_builder(&name)
+            .publish_subscribe::<Progress>()
+            .max_publishers(MAX_NODES)
+            .max_subscribers(4)
+            .max_nodes(MAX_NODES)
+            .history_size(0)
+            .subscriber_max_buffer_size(256)
+            .enable_safe_overflow(false)
+            .open_or_create()
+            .map_err(transport("open", name.to_string()))
+    }
+
+    fn control_service(
+        &self,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, Control, ()>,
+    > {
+        let name = self.service_name("control")?;
+        self.node
+            .service_builder(&name)
+            .publish_subscribe::<Control>()
+            .max_publishers(2)
+            .max_subscribers(MAX_NODES)
+            .max_nodes(MAX_NODES)
+            .history_size(1)
+            .subscriber_max_buffer_size(4)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(transport("open", name.to_string()))
+    }
+
+    fn doorbell_service(
+        &self,
+        bell: Doorbell,
+    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Transport>> {
+        let name = self.service_name(&bell.topic())?;
+        self.node
+            .service_builder(&name)
+            .event()
+            .max_listeners(MAX_NODES)
+            .max_notifiers(MAX_NODES)
+            .max_nodes(MAX_NODES)
+            .event_id_max_value(255)
+            .open_or_create()
+            .map_err(transport("open", name.to_string()))
+    }
+
+    // --- ports ------------------------------------------------------------------------------
+
+    fn sender<T: Message>(&self, port: Publisher<Transport, T, ()>) -> Sender<'_, T> {
+        Sender {
+            wire: self,
+            port,
+            seq: 0,
+        }
+    }
+
+    fn receiver<T: Message>(&self, port: Subscriber<Transport, T, ()>) -> Receiver<'_, T> {
+        Receiver { wire: self, port }
+    }
+
+    /// Actor side of `transitions`.
+    pub fn transitions_sender(&self) -> Result<Sender<'_, TransitionBatch>> {
+        let port = self
+            .transitions_service()?
+            .publisher_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .create()
+            .map_err(transport("create a publisher on", "transitions"))?;
+        Ok(self.sender(port))
+    }
+
+    /// Learner side of `transitions`.
+    pub fn transitions_receiver(&self) -> Result<Receiver<'_, TransitionBatch>> {
+        let port = self
+            .transitions_service()?
+            .subscriber_builder()
+            .buffer_size(TRANSITIONS_BUFFER)
+            .create()
+            .map_err(transport("create a subscriber on", "transitions"))?;
+        Ok(self.receiver(port))
+    }
+
+    /// Learner side of `credits`.
+    pub fn credits_sender(&self) -> Result<Sender<'_, Credits>> {
+        let port = self
+            .credits_service()?
+            .publisher_builder()
+            .create()
+            .map_err(transport("create a publisher on", "credits"))?;
+        Ok(self.sender(port))
+    }
+
+    /// Actor side of `credits`.
+    pub fn credits_receiver(&self) -> Result<Receiver<'_, Credits>> {
+        let port = self
+            .credits_service()?
+            .subscriber_builder()
+            .buffer_size(2)
+            .create()
+            .map_err(transport("create a subscriber on", "credits"))?;
+        Ok(self.receiver(port))
+    }
+
+    /// Learner side of `weights`, for a network of `len` parameters.
+    pub fn weights_sender(&self, len: usize) -> Result<WeightsSender<'_>> {
+        let port = self
+            .weights_service()?
+            .publisher_builder()
+            .initial_max_slice_len(len.max(1))
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(transport("create a publisher on", "weights"))?;
+        Ok(WeightsSender {
+            wire: self,
+            port,
+            seq: 0,
+        })
+    }
+
+    /// Actor side of `weights`.
+    pub fn weights_receiver(&self) -> Result<WeightsReceiver<'_>> {
+        let port = self
+            .weights_service()?
+            .subscriber_builder()
+            .buffer_size(2)
+            .create()
+            .map_err(transport("create a subscriber on", "weights"))?;
+        Ok(WeightsReceiver { wire: self, port })
+    }
+
+    /// Expert side of `demo-model`.
+    pub fn demo_model_sender(&self) -> Result<DemoModelSender<'_>> {
+        let port = self
+            .demo_model_service()?
+            .publisher_builder()
+            .initial_max_slice_len(4096)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(transport("create a publisher on", "demo-model"))?;
+        Ok(DemoModelSender {
+            wire: self,
+            port,
+            seq: 0,
+        })
+    }
+
+    /// Actor side of `demo-model`.
+    pub fn demo_model_receiver(&self) -> Result<DemoModelReceiver<'_>> {
+        let port = self
+            .demo_model_service()?
+            .subscriber_builder()
+            .buffer_size(2)
+            .create()
+            .map_err(transport("create a subscriber on", "demo-model"))?;
+        Ok(DemoModelReceiver { wire: self, port })
+    }
+
+    /// Actor side of `query`.
+    pub fn query_client(&self) -> Result<QueryClient<'_>> {
+        let port = self
+            .query_service()?
+            .client_builder()
+            .create()
+            .map_err(transport("create a client on", "query"))?;
+        Ok(QueryClient {
+            wire: self,
+            port,
+            seq: 0,
+        })
+    }
+
+    /// Expert side of `query`.
+    pub fn query_server(&self) -> Result<QueryServer<'_>> {
+        let port = self
+            .query_service()?
+            .server_builder()
+            .create()
+            .map_err(transport("create a server on", "query"))?;
+        Ok(QueryServer { wire: self, port })
+    }
+
+    /// Every process's side of `progress`.
+    pub fn progress_sender(&self) -> Result<Sender<'_, Progress>> {
+        let port = self
+            .progress_service()?
+            .publisher_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .create()
+            .map_err(transport("create a publisher on", "progress"))?;
+        Ok(self.sender(port))
+    }
+
+    /// The launcher's side of `progress`.
+    pub fn progress_receiver(&self) -> Result<Receiver<'_, Progress>> {
+        let port = self
+            .progress_service()?
+            .subscriber_builder()
+            .buffer_size(256)
+            .create()
+            .map_err(transport("create a subscriber on", "progress"))?;
+        Ok(self.receiver(port))
+    }
+
+    /// The launcher's side of `control`.
+    pub fn control_sender(&self) -> Result<Sender<'_, Control>> {
+        let port = self
+            .control_service()?
+            .publisher_builder()
+            .create()
+            .map_err(transport("create a publisher on", "control"))?;
+        Ok(self.sender(port))
+    }
+
+    /// Every process's side of `control`.
+    pub fn control_receiver(&self) -> Result<Receiver<'_, Control>> {
+        let port = self
+            .control_service()?
+            .subscriber_builder()
+            .buffer_size(4)
+            .create()
+            .map_err(transport("create a subscriber on", "control"))?;
+        Ok(self.receiver(port))
+    }
+
+    /// Rings `bell` to wake whoever waits on it.
+    pub fn bell(&self, bell: Doorbell) -> Result<Bell> {
+        let port = self
+            .doorbell_service(bell)?
+            .notifier_builder()
+            .create()
+            .map_err(transport("create a notifier on", bell.topic()))?;
+        Ok(Bell { port, bell })
+    }
+
+    /// Waits on `bell` (the process's own doorbell).
+    pub fn waiter(&self, bell: Doorbell) -> Result<Waiter> {
+        let listener = self
+            .doorbell_service(bell)?
+            .listener_builder()
+            .create()
+            .map_err(transport("create a listener on", bell.topic()))?;
+        let waitset = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<Transport>()
+            .map_err(transport("create a waitset for", bell.topic()))?;
+        Ok(Waiter {
+            listener,
+            waitset,
+            bell,
+        })
+    }
+
+    /// How many expert servers are connected to `query` right now.
+    pub fn query_servers(&self) -> Result<usize> {
+        Ok(self.query_service()?.dynamic_config().number_of_servers())
+    }
+}

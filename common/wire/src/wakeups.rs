@@ -1,0 +1,220 @@
+//! Wake-ups: doorbells (one iceoryx2 event service per process), the [`Bell`] that rings one,
+//! and the [`Waiter`] a process blocks on, in a WaitSet, when it has nothing to do.
+
+use std::fmt;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+
+use crate::error::{transport, Result};
+use crate::messages::MAX_ACTORS;
+use crate::services::{Transport, Wire, TERMINATION_REQUESTED};
+
+/// Whom a doorbell wakes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Doorbell {
+    Learner,
+    Expert,
+    /// One actor (by id): the learner rings it when credits it waits for arrive, the expert when
+    /// its answer is there.
+    Actor(u16),
+    Launcher,
+}
+
+impl Doorbell {
+    pub(crate) fn topic(self) -> String {
+        match self {
+            Doorbell::Learner => "doorbell/learner".to_owned(),
+            Doorbell::Expert => "doorbell/expert".to_owned(),
+            Doorbell::Actor(id) => format!("doorbell/actor-{id}"),
+            Doorbell::Launcher => "doorbell/launcher".to_owned(),
+        }
+    }
+}
+
+/// Rings a doorbell.
+pub struct Bell {
+    pub(crate) port: Notifier<Transport>,
+    pub(crate) bell: Doorbell,
+}
+
+impl fmt::Debug for Bell {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Bell({:?})", self.bell)
+    }
+}
+
+impl Bell {
+    /// Wakes every process waiting on this doorbell; returns how many listeners were notified.
+    pub fn ring(&self) -> Result<usize> {
+        self.port
+            .notify()
+            .map_err(transport("notify", self.bell.topic()))
+    }
+}
+
+/// The doorbells of the actors, opened as needed.
+pub struct ActorBells<'w> {
+    wire: &'w Wire,
+    bells: Vec<Option<Bell>>,
+}
+
+impl fmt::Debug for ActorBells<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "ActorBells({})", self.bells.iter().flatten().count())
+    }
+}
+
+impl<'w> ActorBells<'w> {
+    pub fn new(wire: &'w Wire) -> Self {
+        Self {
+            wire,
+            bells: (0..MAX_ACTORS).map(|_| None).collect(),
+        }
+    }
+
+    /// Wakes actor `id` if it waits on its doorbell.
+    pub fn ring(&mut self, id: u16) -> Result<()> {
+        let Some(slot) = self.bells.get_mut(id as usize) else {
+            return Ok(());
+        };
+        if slot.is_none() {
+            *slot = Some(self.wire.bell(Doorbell::Actor(id))?);
+        }
+        if let Some(bell) = slot {
+            bell.ring()?;
+        }
+        Ok(())
+    }
+
+    /// Wakes actors `0..n`.
+    pub fn ring_all(&mut self, n: usize) -> Result<()> {
+        for id in 0..n.min(MAX_ACTORS) {
+            self.ring(id as u16)?;
+        }
+        Ok(())
+    }
+}
+
+/// Why [`Waiter::wait`] returned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// The doorbell rang.
+    Rang,
+    /// The timeout passed.
+    Timeout,
+    /// SIGINT or SIGTERM arrived.
+    Signal,
+}
+
+/// A process's own doorbell, and a WaitSet to block on it.
+pub struct Waiter {
+    pub(crate) listener: Listener<Transport>,
+    pub(crate) waitset: WaitSet<Transport>,
+    pub(crate) bell: Doorbell,
+}
+
+impl fmt::Debug for Waiter {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Waiter({:?})", self.bell)
+    }
+}
+
+impl Waiter {
+    /// Blocks until the doorbell rings, `timeout` passes or a termination signal arrives. Rings
+    /// that arrived before the call return at once; all pending rings are consumed.
+    pub fn wait(&self, timeout: Duration) -> Result<Wake> {
+        if TERMINATION_REQUESTED.load(Ordering::Relaxed) {
+            return Ok(Wake::Signal);
+        }
+        let mut rang = false;
+        {
+            let _guard = self
+                .waitset
+                .attach_notification(&self.listener)
+                .map_err(transport("attach to a waitset", self.bell.topic()))?;
+            let result = self
+                .waitset
+                .wait_and_process_once_with_timeout(
+                    |_| {
+                        rang = true;
+                        CallbackProgression::Continue
+                    },
+                    timeout,
+                )
+                .map_err(transport("wait on", self.bell.topic()))?;
+            if matches!(
+                result,
+                WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt
+            ) {
+                TERMINATION_REQUESTED.store(true, Ordering::Relaxed);
+                return Ok(Wake::Signal);
+            }
+        }
+        let n = self.drain()?;
+        Ok(if rang || n > 0 {
+            Wake::Rang
+        } else {
+            Wake::Timeout
+        })
+    }
+
+    /// Consumes pending rings without blocking; returns how many there were.
+    pub fn drain(&self) -> Result<u64> {
+        self.listener
+            .try_wait(|_| {})
+            .map_err(transport("drain", self.bell.topic()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use crate::test_support::{wire, with_run};
+    use crate::*;
+
+    #[test]
+    fn a_doorbell_wakes_its_waiter_and_times_out_otherwise() {
+        with_run("doorbell", |run| {
+            let learner = wire(run, Role::Learner, 0);
+            let actor = wire(run, Role::Actor, 0);
+            let waiter = learner.waiter(Doorbell::Learner).unwrap();
+            let bell = actor.bell(Doorbell::Learner).unwrap();
+            let other = actor.bell(Doorbell::Expert).unwrap();
+            assert_eq!(
+                waiter.wait(Duration::from_millis(20)).unwrap(),
+                Wake::Timeout
+            );
+            other.ring().unwrap();
+            assert_eq!(
+                waiter.wait(Duration::from_millis(20)).unwrap(),
+                Wake::Timeout,
+                "another role's bell does not wake the learner"
+            );
+            assert_eq!(bell.ring().unwrap(), 1);
+            bell.ring().unwrap();
+            assert_eq!(waiter.wait(Duration::from_secs(5)).unwrap(), Wake::Rang);
+            // Both rings were consumed by the one wake-up.
+            assert_eq!(
+                waiter.wait(Duration::from_millis(20)).unwrap(),
+                Wake::Timeout
+            );
+
+            // A ring from another thread wakes a blocked waiter.
+            let run2 = run.to_owned();
+            let t = std::thread::spawn(move || {
+                let w = wire(&run2, Role::Tool, 1);
+                let b = w.bell(Doorbell::Learner).unwrap();
+                std::thread::sleep(Duration::from_millis(50));
+                b.ring().unwrap();
+            });
+            assert_eq!(waiter.wait(Duration::from_secs(10)).unwrap(), Wake::Rang);
+            t.join().unwrap();
+        });
+    }
+}
