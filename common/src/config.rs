@@ -408,13 +408,14 @@ impl ExperimentConfig {
         Self::from_toml_with_overrides(text, &[])
     }
 
-    /// Parses a config for the multi-process runtime, which runs the neural agents on CartPole.
+    /// Parses a config for the multi-process runtime, which runs the neural agents (on any
+    /// environment with vector observations, see [`crate::env::vector_env`]).
     pub fn for_multi_process(text: &str) -> Result<Self> {
         let cfg = Self::from_toml(text)?;
-        if cfg.env.name != EnvName::Cartpole || cfg.agent.kind.is_tabular() {
+        if cfg.agent.kind.is_tabular() {
             return Err(invalid(
                 "agent.kind",
-                "the multi-process runtime runs neural agents (dqn, bdqn) on cartpole; run tabular configs with `alfd local`",
+                "the multi-process runtime runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
             ));
         }
         Ok(cfg)

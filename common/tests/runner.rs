@@ -6,7 +6,8 @@ use std::ops::ControlFlow;
 use alfd_common::agent::{BalancingController, TablePolicy};
 use alfd_common::config::ExperimentConfig;
 use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration, CliffMap, CliffWalk};
-use alfd_common::runner::{episodes_csv, run_neural, run_tabular};
+use alfd_common::record::episodes_csv;
+use alfd_common::runner::{run_neural, run_tabular};
 
 fn config(name: &str) -> String {
     std::fs::read_to_string(format!(

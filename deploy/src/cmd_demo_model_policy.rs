@@ -24,8 +24,9 @@ use alfd_common::config::{EnvName, ExperimentConfig};
 use alfd_common::demo_model::{DemoModel, DemoModelKind};
 use alfd_common::env::{CartPole, Env};
 use alfd_common::policy::argmax;
+use alfd_common::record::ReturnStats;
 use alfd_common::rng::derive_seed;
-use alfd_common::runner::{run_neural, ReturnStats};
+use alfd_common::runner::run_neural;
 use anyhow::Context as _;
 
 use crate::cmd_demo_model::KindArg;

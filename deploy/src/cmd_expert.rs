@@ -5,9 +5,8 @@ use std::path::{Path, PathBuf};
 
 use alfd_common::agent::{NetworkDemonstrator, TablePolicy};
 use alfd_common::config::ExperimentConfig;
-use alfd_common::runner::{
-    evaluate_cartpole, evaluate_cliffwalk, run_neural, run_tabular, ReturnStats,
-};
+use alfd_common::record::ReturnStats;
+use alfd_common::runner::{evaluate_cartpole, evaluate_cliffwalk, run_neural, run_tabular};
 use alfd_expert::registry::{self, ExpertEntry};
 use anyhow::Context as _;
 

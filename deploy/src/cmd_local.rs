@@ -9,7 +9,8 @@ use std::time::Instant;
 
 use alfd_common::config::{EnvName, ExperimentConfig};
 use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration};
-use alfd_common::runner::{episodes_csv, run_neural, run_tabular, EpisodeRecord};
+use alfd_common::record::{episodes_csv, EpisodeRecord};
+use alfd_common::runner::{run_neural, run_tabular};
 use anyhow::Context as _;
 
 use crate::setup;

@@ -4,7 +4,8 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use alfd_common::config::{EnvName, ExperimentConfig};
+use alfd_common::config::ExperimentConfig;
+use alfd_harness::RuntimeConfig;
 use alfd_wire::MAX_ACTORS;
 use anyhow::Context as _;
 
@@ -56,26 +57,40 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         None => ExperimentConfig::from_toml_with_overrides(DEFAULT_CONFIG, &args.set)
             .context("in the default config")?,
     };
-    if cfg.env.name != EnvName::Cartpole || cfg.agent.kind.is_tabular() {
+    if cfg.agent.kind.is_tabular() {
         return Err(usage(
-            "`alfd run` runs neural agents (dqn, bdqn) on cartpole; run tabular configs with `alfd local`",
+            "`alfd run` runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
         ));
     }
+    let env = alfd_common::env::vector_env(&cfg.env).ok_or_else(|| {
+        usage(format!(
+            "`alfd run` needs an environment with vector observations, not {:?}",
+            cfg.env.name
+        ))
+    })?;
+    alfd_harness::check_wire_limits(env.observation_dim(), cfg.agent.heads())
+        .map_err(|e| usage(e.to_string()))?;
     if !(1..=MAX_ACTORS).contains(&args.actors) {
         return Err(usage(format!(
             "--actors must be in 1..={MAX_ACTORS}, got {}",
             args.actors
         )));
     }
-    if !(1..=alfd_wire::MAX_CREDIT_WINDOW).contains(&args.window) {
-        return Err(usage(format!(
-            "--window must be in 1..=64, got {}",
-            args.window
-        )));
-    }
-    if args.weights_every == 0 {
-        return Err(usage("--weights-every must be at least 1"));
-    }
+    let runtime = RuntimeConfig {
+        window: args.window,
+        query_timeout_ms: args.query_timeout_ms,
+        weights_every: args.weights_every,
+        ..RuntimeConfig::default()
+    };
+    runtime.validate().map_err(|e| {
+        usage(format!(
+            "{e} (flag --{})",
+            match e {
+                alfd_harness::RuntimeConfigError::Invalid { field, .. } => field.replace('_', "-"),
+                _ => String::new(),
+            }
+        ))
+    })?;
     // Fail before starting anything if the expert is unknown.
     alfd_expert::registry::cartpole(&cfg.expert.name)?;
     let run_id = launcher::new_run_id();
@@ -88,9 +103,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         actors: args.actors,
         run_dir: run_dir.clone(),
         run_id,
-        window: args.window,
-        query_timeout_ms: args.query_timeout_ms,
-        weights_every: args.weights_every,
+        runtime,
         max_restarts: args.max_restarts,
         progress: !args.quiet,
         pin: args.pin,

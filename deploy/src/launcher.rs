@@ -24,7 +24,8 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use alfd_common::config::ExperimentConfig;
-use alfd_common::runner::{EpisodeRecord, CSV_HEADER};
+use alfd_common::record::{EpisodeRecord, CSV_HEADER};
+use alfd_harness::{RuntimeConfig, RUNTIME_FILE};
 use alfd_wire::{
     self as wire, command, process_state, progress_kind, ActorBells, Bell, Control, Doorbell,
     Process, Progress, Role, Wake, Wire, WireError, CONTROL_PERIOD,
@@ -40,10 +41,8 @@ pub struct Plan {
     pub actors: usize,
     pub run_dir: PathBuf,
     pub run_id: String,
-    /// Credit window of the actors, in steps.
-    pub window: u64,
-    pub query_timeout_ms: u64,
-    pub weights_every: u64,
+    /// The runtime settings every process reads (`runtime.toml`).
+    pub runtime: RuntimeConfig,
     /// Restarts allowed per actor before the run fails.
     pub max_restarts: u32,
     pub progress: bool,
@@ -202,6 +201,11 @@ pub fn launch(plan: &Plan) -> anyhow::Result<RunSummary> {
     std::fs::create_dir_all(&plan.run_dir)
         .with_context(|| format!("cannot create run directory {}", plan.run_dir.display()))?;
     crate::cmd_local::write(&plan.run_dir, "config.toml", plan.cfg.to_toml().as_bytes())?;
+    crate::cmd_local::write(
+        &plan.run_dir,
+        RUNTIME_FILE,
+        plan.runtime.to_toml().as_bytes(),
+    )?;
     let info = RunInfo {
         run_id: plan.run_id.clone(),
         prefix: wire::run_prefix(&plan.run_id),
@@ -256,7 +260,7 @@ struct Launcher<'a, 'w> {
     returns: VecDeque<f64>,
     all_returns: Vec<f64>,
     /// Demonstrations used, as the actors reported them with their episodes (monotone).
-    demos_used: u64,
+    demos_used: u32,
     /// Demonstrations answered, as the active expert reports them (for the progress bar only:
     /// its reports arrive in no fixed order with the actors' episodes).
     demos_answered: u64,
@@ -285,7 +289,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         control_tx.send(control)?;
         let mut csv = File::create(plan.run_dir.join("episodes.csv"))
             .context("cannot create episodes.csv")?;
-        writeln!(csv, "{CSV_HEADER},actor")?;
+        writeln!(csv, "{CSV_HEADER}")?;
         let bar = if plan.progress {
             let bar = indicatif::ProgressBar::new(u64::from(plan.cfg.episodes));
             bar.set_style(
@@ -439,24 +443,20 @@ impl<'a, 'w> Launcher<'a, 'w> {
         if self.recorded >= u64::from(self.plan.cfg.episodes) {
             return Ok(());
         }
-        self.demos_used = self.demos_used.max(p.demos_used);
+        // Episodes are numbered in order of arrival; demonstrations used never go down.
         let r = EpisodeRecord {
             episode: self.recorded as u32,
-            ret: p.episode_return,
-            length: p.length as u32,
-            demos_used: self.demos_used as u32,
-            mean_js: p.mean_js,
-            queries: p.queries as u32,
-            shaped_steps: p.shaped_steps as u32,
-            total_steps: p.total_steps,
+            demos_used: self.demos_used.max(p.episode.0.demos_used),
+            ..p.episode.0
         };
-        writeln!(self.csv, "{},{}", r.csv_row(), p.header.id)?;
+        self.demos_used = r.demos_used;
+        writeln!(self.csv, "{}", r.csv_row())?;
         self.recorded += 1;
-        self.returns.push_back(p.episode_return);
+        self.returns.push_back(r.ret);
         if self.returns.len() > 20 {
             self.returns.pop_front();
         }
-        self.all_returns.push(p.episode_return);
+        self.all_returns.push(r.ret);
         self.bar.inc(1);
         Ok(())
     }
@@ -470,7 +470,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         let (sps, ups) = self.rate.rates();
         self.bar.set_message(format!(
             "return {mean:.1} (last 20)  demos {}/{}  {sps:.0} steps/s  {ups:.0} updates/s",
-            self.demos_used.max(self.demos_answered),
+            u64::from(self.demos_used).max(self.demos_answered),
             self.plan.cfg.budget()
         ));
     }
@@ -478,14 +478,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
     fn spawn(&mut self, kind: Kind) -> anyhow::Result<()> {
         let plan = self.plan;
         let (bin, name, mut args) = match &kind {
-            Kind::Learner => (
-                "alfd-learner",
-                "learner".to_owned(),
-                vec![
-                    format!("--window={}", plan.window),
-                    format!("--weights-every={}", plan.weights_every),
-                ],
-            ),
+            Kind::Learner => ("alfd-learner", "learner".to_owned(), vec![]),
             Kind::Expert { generation, name } => (
                 "alfd-expert",
                 format!("expert-{generation}"),
@@ -500,8 +493,6 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 vec![
                     format!("--actor-id={id}"),
                     format!("--incarnation={incarnation}"),
-                    format!("--window={}", plan.window),
-                    format!("--query-timeout-ms={}", plan.query_timeout_ms),
                 ],
             ),
         };

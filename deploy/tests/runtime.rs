@@ -236,7 +236,7 @@ fn a_small_run_with_two_actors_fills_its_run_directory() {
     let header = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
     assert_eq!(
         header.lines().next().unwrap(),
-        format!("{},actor", alfd_common::runner::CSV_HEADER)
+        alfd_common::record::CSV_HEADER
     );
     for (i, r) in rows.iter().enumerate() {
         assert_eq!(
@@ -297,12 +297,9 @@ fn one_actor_in_lockstep_reproduces_the_single_process_run() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", text(&o));
+    // The same file, byte for byte (the actor column included: actor 0 in both).
     let single = std::fs::read_to_string(local.join("episodes.csv")).unwrap();
-    let many: String = std::fs::read_to_string(multi.join("episodes.csv"))
-        .unwrap()
-        .lines()
-        .map(|l| format!("{}\n", l.rsplit_once(',').unwrap().0))
-        .collect();
+    let many = std::fs::read_to_string(multi.join("episodes.csv")).unwrap();
     assert_eq!(single.lines().count(), 61);
     assert_eq!(many, single);
     // The demonstrations too (the multi-process run may have a few more, asked in the episode
@@ -510,8 +507,8 @@ fn a_failing_process_is_named_and_the_run_stops_cleanly() {
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(
-        err.contains("alfd-expert (expert-1) exited with status 1"),
-        "{err}"
+        err.contains("alfd-expert (expert-1) exited with status 2"),
+        "bad input: exit code 2; {err}"
     );
     let log = std::fs::read_to_string(out.join("expert-1.log")).unwrap();
     assert!(log.contains("line 2"), "{log}");

@@ -8,14 +8,14 @@
 //! one has exited, reading `demos.jsonl` back at that moment. So at most one expert ever spends
 //! budget, and none spends it twice.
 
-use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use alfd_common::agent::ExpertCore;
-use alfd_common::config::ExperimentConfig;
+use alfd_common::runner::expert_core;
+use alfd_harness::{BadInput, ProcessArgs, Session};
 use alfd_wire::{
-    name_to_bytes, outcome, process_state, progress_kind, ActorBells, ControlWatch,
-    DemoModelHeader, Doorbell, Process, Progress, QueryResponse, Role, Wake, Wire, WireError,
+    name_to_bytes, outcome, process_state, progress_kind, ActorBells, DemoModelHeader, Doorbell,
+    Process, Progress, QueryResponse, Role, WireError,
 };
 use anyhow::Context as _;
 use tracing::{debug, info};
@@ -23,44 +23,23 @@ use tracing::{debug, info};
 use crate::demo_log::{self, DemoLog};
 use crate::registry;
 
-const ACTIONS: usize = 2;
-/// How long the launcher may stay silent before the expert gives up on the run.
-const LAUNCHER_SILENCE: Duration = Duration::from_secs(10);
-
 /// `alfd-expert`: the expert process of a run (started by `alfd run` and `alfd swap-expert`).
 #[derive(Debug, Clone, clap::Parser)]
 #[command(name = "alfd-expert", version)]
 pub struct Args {
-    /// The run directory (config, logs, `demos.jsonl`).
-    #[arg(long)]
-    pub run_dir: PathBuf,
-    /// The run id (names the run's iceoryx2 services).
-    #[arg(long)]
-    pub run_id: String,
-    /// The experiment config; default `RUN_DIR/config.toml`.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
+    #[command(flatten)]
+    pub process: ProcessArgs,
     /// The demonstrator, by name (`alfd expert list`); default the config's `expert.name`.
     #[arg(long)]
     pub expert: Option<String>,
     /// This expert's generation in the run (1 for the first, +1 per swap).
     #[arg(long, default_value_t = 1)]
     pub generation: u16,
-    /// Seconds to wait for the launcher's first word.
-    #[arg(long, default_value_t = 20)]
-    pub handshake_timeout: u64,
 }
 
 /// The name of the process's log file (without `.log`).
 pub fn log_name(args: &Args) -> String {
     format!("expert-{}", args.generation)
-}
-
-fn load_config(path: &Path) -> anyhow::Result<ExperimentConfig> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read config {}", path.display()))?;
-    ExperimentConfig::for_multi_process(&text)
-        .with_context(|| format!("in config {}", path.display()))
 }
 
 /// Whether this expert may answer.
@@ -73,41 +52,30 @@ enum Mode {
 /// Runs the expert until the launcher says stop, a newer expert replaces it, or a termination
 /// signal arrives.
 pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
-    let config_path = args
-        .config
-        .clone()
-        .unwrap_or_else(|| args.run_dir.join("config.toml"));
-    let cfg = load_config(&config_path)?;
+    let setup = args.process.load()?;
+    let (cfg, runtime) = (&setup.config, &setup.runtime);
+    let actions = setup.vector_env()?.num_actions();
     let name = args
         .expert
         .clone()
         .unwrap_or_else(|| cfg.expert.name.clone());
-    let mut demonstrator = registry::cartpole(&name)?;
-    let demos_path = args.run_dir.join("demos.jsonl");
+    let mut demonstrator = registry::cartpole(&name).map_err(|e| BadInput(e.to_string()))?;
+    let demos_path = args.process.run_dir.join("demos.jsonl");
     // Read the demonstrations now, to refuse a bad file before the run depends on us; they are
     // read again when this expert becomes active (its predecessor may have added some).
-    let earlier = demo_log::read(&demos_path)?;
+    let earlier = demo_log::read(&demos_path).map_err(|e| BadInput(format!("{e:#}")))?;
     info!(expert = %name, generation = args.generation, demos = earlier.len(), "expert starting");
 
     let me = Process::new(Role::Expert, args.generation);
-    let wire = Wire::connect(&args.run_id, me, schema).context("cannot join the run")?;
-    let waiter = wire.waiter(Doorbell::Expert)?;
-    let mut control = ControlWatch::new(&wire)?;
-    control
-        .handshake(&waiter, Duration::from_secs(args.handshake_timeout))
-        .context("no handshake with the launcher")?;
+    let wire = args.process.connect(me, schema)?;
+    let session = Session::join(&wire, Doorbell::Expert, runtime.handshake_timeout())?;
     let server = wire.query_server()?;
     let mut model_tx = wire.demo_model_sender()?;
     let mut actors = ActorBells::new(&wire);
     let launcher = wire.bell(Doorbell::Launcher)?;
     let mut progress = wire.progress_sender()?;
 
-    let mut core = ExpertCore::new(
-        cfg.budget(),
-        cfg.expert.model,
-        ACTIONS,
-        cfg.shaping.schedule(),
-    );
+    let mut core = expert_core(cfg, actions);
     let mut log: Option<DemoLog> = None;
     let mut mode = Mode::Standby;
     let pid = std::process::id();
@@ -131,22 +99,13 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let (mut answered, mut refused, mut abandoned) = (0u64, 0u64, 0u64);
 
     let stop_reason = loop {
-        control.poll()?;
-        let c = control.current();
-        if control.shutdown_requested() {
-            break "the launcher said stop";
+        if let Some(stop) = session.should_stop()? {
+            break stop.0;
         }
+        let c = session.control();
         if u32::from(args.generation) < c.newest_expert {
             break "replaced by a newer expert";
         }
-        if wire.termination_requested() {
-            break "termination signal";
-        }
-        anyhow::ensure!(
-            control.silence() < LAUNCHER_SILENCE,
-            "no word from the launcher for {:?}: giving up",
-            control.silence()
-        );
         let should_be_active = c.active_expert == u32::from(args.generation);
         if should_be_active && mode == Mode::Standby {
             // Make-before-break: the previous expert has exited; its demonstrations are final.
@@ -245,8 +204,8 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         }
         // An actor that subscribed since the last publication gets the history sample now.
         model_tx.update_connections()?;
-        if waiter.wait(Duration::from_millis(100))? == Wake::Signal {
-            break "termination signal";
+        if let Some(stop) = session.wait(Duration::from_millis(100))? {
+            break stop.0;
         }
     };
     info!(

@@ -1,21 +1,16 @@
-//! `alfd-learner`: the learner process (started by `alfd run`). Logs to `RUN_DIR/learner.log`.
+//! `alfd-learner`: the learner process (started by `alfd run`). Logs to `RUN_DIR/learner.log`; exits 2 on
+//! bad input (a run directory's config), 1 on any other failure.
 
 use clap::Parser as _;
 
 fn main() {
     let args = alfd_learner::Args::parse();
-    alfd_harness::init_process_logging(
+    let log = alfd_learner::log_name(&args);
+    alfd_harness::main(
         "alfd-learner",
-        &args.run_dir,
-        &alfd_learner::log_name(&args),
-    );
-    let schema = alfd_harness::schema_version_from_env().unwrap_or_else(|e| {
-        eprintln!("alfd-learner: {e}");
-        std::process::exit(2)
-    });
-    if let Err(err) = alfd_learner::run(&args, schema) {
-        tracing::error!("{err:#}");
-        eprintln!("alfd-learner: error: {err:#}");
-        std::process::exit(1);
-    }
+        &args,
+        &args.process,
+        &log,
+        alfd_learner::run,
+    )
 }

@@ -1,6 +1,17 @@
 //! The harness of the alfd process binaries (`alfd-actor`, `alfd-learner`, `alfd-expert`): what
-//! every one of them does before it joins a run (logging, the schema version it speaks).
+//! all three share, in one place. Their common arguments and reading the run directory
+//! (`process`), the runtime settings every process reads from `runtime.toml` (`runtime`),
+//! joining the run and the one `should_stop` (`session`), start-up (logging, the schema-version
+//! hook: `startup`), and durable file writes (`fs`).
 
+mod fs;
+mod process;
+mod runtime;
+mod session;
 mod startup;
 
+pub use fs::write_atomically;
+pub use process::{check_wire_limits, exit_code, main, BadInput, ProcessArgs, Setup};
+pub use runtime::{RuntimeConfig, RuntimeConfigError, RUNTIME_FILE};
+pub use session::{Session, SessionError, LAUNCHER_SILENCE, STOP_REQUESTED, TERMINATION_SIGNAL};
 pub use startup::{init_process_logging, schema_version_from_env};

@@ -11,7 +11,7 @@ pub mod tabular;
 pub use expert::{
     BalancingController, DemoRecord, Demonstrator, ExpertCore, NetworkDemonstrator, TablePolicy,
 };
-pub use neural::{Decision, NeuralActor, NeuralLearner};
+pub use neural::{NeuralActor, NeuralLearner};
 pub use tabular::TabularAgent;
 
 use rand::Rng as _;
@@ -20,6 +20,17 @@ use crate::config::{AgentConfig, Exploration, QueryMode};
 use crate::policy::{argmax, softmax_into};
 use crate::query::QueryRule;
 use crate::rng::Rng;
+
+/// What an agent decided at one state (Algorithm 1 lines 3-16, before any answer of the expert).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decision {
+    /// The agent's own action (used when no query is made, or when the query goes unanswered).
+    pub action: usize,
+    /// The Jensen-Shannon divergence of the K heads at the state (0 with one head).
+    pub js: f64,
+    /// The query rule fired: ask the expert.
+    pub query: bool,
+}
 
 /// Algorithm 1 lines 3-8 for one state: given the divergence `u`, whether to query the expert.
 /// The divergence is pushed to the queue only while budget remains, as in the paper.

@@ -4,7 +4,7 @@
 
 use rand::Rng as _;
 
-use crate::agent::{query_decision, Explorer};
+use crate::agent::{query_decision, Decision, Explorer};
 use crate::config::{AgentConfig, QueryConfig, QueryMode};
 use crate::demo_model::DemoModel;
 use crate::nn::{Adam, AdamConfig, Mlp, NnError, TrainScratch};
@@ -13,17 +13,6 @@ use crate::query::QueryRule;
 use crate::replay::{Batch, ReplayBuffer, Transition};
 use crate::rng::Rng;
 use crate::shaping::shaped_reward;
-
-/// What the actor decided at one state.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Decision {
-    /// The agent's own action (used when no query is made, or when the query goes unanswered).
-    pub action: usize,
-    /// The Jensen-Shannon divergence of the K heads at the state (0 with one head).
-    pub js: f64,
-    /// The query rule fired: ask the expert.
-    pub query: bool,
-}
 
 /// The acting side: the latest weights, exploration, the divergence queue and shaping.
 #[derive(Debug, Clone)]
@@ -202,6 +191,7 @@ pub struct NeuralLearner {
     gamma: f32,
     batch_size: usize,
     target_update_every: u64,
+    updates_per_step: u32,
     updates: u64,
 }
 
@@ -229,6 +219,7 @@ impl NeuralLearner {
             gamma: agent.gamma as f32,
             batch_size: agent.batch_size,
             target_update_every: agent.target_update_every,
+            updates_per_step: agent.updates_per_step,
             updates: 0,
         }
     }
@@ -236,6 +227,19 @@ impl NeuralLearner {
     /// Algorithm 1 line 19.
     pub fn insert(&mut self, t: &Transition) {
         self.replay.push(t);
+    }
+
+    /// Algorithm 1 lines 19-20 for one environment step: stores `t`, then makes `U` updates
+    /// (`agent.updates_per_step`). Returns the loss of the last update, `None` if none was made.
+    pub fn learn(&mut self, t: &Transition) -> Option<f32> {
+        self.insert(t);
+        let mut loss = None;
+        for _ in 0..self.updates_per_step {
+            if let Some(l) = self.update() {
+                loss = Some(l);
+            }
+        }
+        loss
     }
 
     /// One update of the K heads on a batch from the replay buffer, and the target copy every

@@ -1,12 +1,17 @@
 //! The tabular agents of section 5.1.1: Q-learning and SARSA with softmax exploration, and
 //! bootstrapped Q-learning (K Q-tables, randomized masked updates, one greedy head per episode).
+//! A tabular agent learns where it acts: it is an [`Actor`] of the environment loop by itself.
 
 use rand::Rng as _;
 
-use crate::agent::Explorer;
-use crate::config::{AgentConfig, AgentKind};
+use crate::agent::{query_decision, Decision, Explorer};
+use crate::config::{AgentConfig, AgentKind, QueryConfig, QueryMode};
+use crate::demo_model::DemoModel;
+use crate::env::Step;
+use crate::environment_loop::{Actor, Result};
 use crate::policy::argmax;
 use crate::qfunction::{QFunction, TabularQ};
+use crate::query::QueryRule;
 use crate::rng::Rng;
 
 /// A tabular agent over `states` states and `actions` actions.
@@ -25,10 +30,20 @@ pub struct TabularAgent {
     rng: Rng,
     /// The head followed this episode (Algorithm 1 line 1).
     arm: usize,
+    mode: QueryMode,
+    rule: QueryRule,
+    /// SARSA's last transition `(s, a, r, s')`, learned from once the action at `s'` is known.
+    pending: Option<(usize, usize, f64, usize)>,
 }
 
 impl TabularAgent {
-    pub fn new(cfg: &AgentConfig, states: usize, actions: usize, rng: Rng) -> Self {
+    pub fn new(
+        cfg: &AgentConfig,
+        query: &QueryConfig,
+        states: usize,
+        actions: usize,
+        rng: Rng,
+    ) -> Self {
         let heads = cfg.heads();
         Self {
             kind: cfg.kind,
@@ -42,6 +57,9 @@ impl TabularAgent {
             bootstrap_probability: cfg.bootstrap_probability,
             rng,
             arm: 0,
+            mode: query.mode,
+            rule: QueryRule::new(query.queue_len, query.percentile),
+            pending: None,
         }
     }
 
@@ -70,6 +88,15 @@ impl TabularAgent {
     pub fn act(&mut self, s: usize) -> usize {
         self.explorer
             .act(self.q.head_values(s, self.arm), &mut self.rng)
+    }
+
+    /// Algorithm 1 lines 3-16 at `s`: the divergence, the query decision (the same
+    /// [`query_decision`] as the neural agents), and the agent's own action.
+    pub fn decide(&mut self, s: usize, budget_left: bool) -> Decision {
+        let js = self.js_divergence(s);
+        let action = self.act(s);
+        let query = query_decision(self.mode, &mut self.rule, js, budget_left);
+        Decision { action, js, query }
     }
 
     /// Learns from one transition. `next_action` is the action taken at `s_next` (SARSA's target;
@@ -125,6 +152,47 @@ impl TabularAgent {
     }
 }
 
+/// The tabular agents learn from each step as they take it. SARSA's target needs the action
+/// taken at `s'`, so SARSA learns from a step when the next one is observed (or at once when the
+/// episode ends there). The tabular study does not shape the reward (section 5.1.1).
+impl Actor<usize> for TabularAgent {
+    fn begin_episode(&mut self) {
+        TabularAgent::begin_episode(self);
+    }
+
+    fn select(&mut self, obs: &usize, budget_left: bool) -> Decision {
+        self.decide(*obs, budget_left)
+    }
+
+    fn observe(
+        &mut self,
+        obs: &usize,
+        action: usize,
+        step: &Step<usize>,
+        _demo: bool,
+        _shaping: Option<(&DemoModel, f64)>,
+    ) -> Result<bool> {
+        if let Some((s, a, r, s_next)) = self.pending.take() {
+            self.learn(s, a, r, s_next, false, Some(action));
+        }
+        if step.done() {
+            self.learn(
+                *obs,
+                action,
+                step.reward,
+                step.observation,
+                step.terminated,
+                None,
+            );
+        } else if self.kind == AgentKind::Sarsa {
+            self.pending = Some((*obs, action, step.reward, step.observation));
+        } else {
+            self.learn(*obs, action, step.reward, step.observation, false, None);
+        }
+        Ok(false)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -139,12 +207,14 @@ mod tests {
     fn qlearning_and_sarsa_targets_differ_as_they_should() {
         let mut ql = TabularAgent::new(
             &cfg("qlearning", "learning_rate = 1.0\ngamma = 0.5"),
+            &QueryConfig::default(),
             2,
             2,
             crate::rng::seeded(0),
         );
         let mut sa = TabularAgent::new(
             &cfg("sarsa", "learning_rate = 1.0\ngamma = 0.5"),
+            &QueryConfig::default(),
             2,
             2,
             crate::rng::seeded(0),
@@ -176,6 +246,7 @@ mod tests {
     fn masked_updates_train_each_head_about_half_the_time() {
         let mut agent = TabularAgent::new(
             &cfg("bootstrapped-q", "heads = 4\nlearning_rate = 1.0"),
+            &QueryConfig::default(),
             1000,
             2,
             crate::rng::seeded(1),
@@ -201,6 +272,7 @@ mod tests {
     fn softmax_exploration_follows_the_policy() {
         let mut agent = TabularAgent::new(
             &cfg("qlearning", "temperature = 1.0"),
+            &QueryConfig::default(),
             1,
             2,
             crate::rng::seeded(2),

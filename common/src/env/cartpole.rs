@@ -130,6 +130,10 @@ impl Env for CartPole {
         2
     }
 
+    fn observation_dim(&self) -> usize {
+        4
+    }
+
     fn max_episode_steps(&self) -> usize {
         self.max_episode_steps
     }

@@ -479,6 +479,10 @@ impl Env for CliffWalk {
         NUM_ACTIONS
     }
 
+    fn observation_dim(&self) -> usize {
+        1
+    }
+
     fn max_episode_steps(&self) -> usize {
         self.max_episode_steps
     }

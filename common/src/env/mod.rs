@@ -47,8 +47,60 @@ pub trait Env {
 
     /// Number of discrete actions; actions are `0..num_actions()`.
     fn num_actions(&self) -> usize;
+    /// Number of values in an observation (1 for a discrete state id).
+    fn observation_dim(&self) -> usize;
     /// The step limit after which an episode is `truncated`.
     fn max_episode_steps(&self) -> usize;
     fn reset(&mut self, seed: Option<u64>) -> Self::Observation;
     fn step(&mut self, action: usize) -> Result<Step<Self::Observation>, EnvError>;
+}
+
+/// An environment for the neural agents: observations as vectors of `f32`.
+pub type VectorEnv = dyn Env<Observation = Vec<f32>>;
+
+/// Adapts an environment with fixed-size array observations to [`VectorEnv`].
+#[derive(Debug, Clone)]
+pub struct Vectorized<E>(pub E);
+
+impl<E, const N: usize> Env for Vectorized<E>
+where
+    E: Env<Observation = [f32; N]>,
+{
+    type Observation = Vec<f32>;
+
+    fn num_actions(&self) -> usize {
+        self.0.num_actions()
+    }
+
+    fn observation_dim(&self) -> usize {
+        N
+    }
+
+    fn max_episode_steps(&self) -> usize {
+        self.0.max_episode_steps()
+    }
+
+    fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
+        self.0.reset(seed).to_vec()
+    }
+
+    fn step(&mut self, action: usize) -> Result<Step<Vec<f32>>, EnvError> {
+        let s = self.0.step(action)?;
+        Ok(Step {
+            observation: s.observation.to_vec(),
+            reward: s.reward,
+            terminated: s.terminated,
+            truncated: s.truncated,
+        })
+    }
+}
+
+/// The environment of a config for the neural agents (the names `EnvName` lists with vector
+/// observations); `None` for an environment whose states are ids (CliffWalk: tabular agents).
+pub fn vector_env(cfg: &crate::config::EnvConfig) -> Option<Box<VectorEnv>> {
+    use crate::config::EnvName;
+    match cfg.name {
+        EnvName::Cartpole => Some(Box::new(Vectorized(CartPole::new(cfg.max_episode_steps())))),
+        EnvName::Cliffwalk => None,
+    }
 }

@@ -3,13 +3,14 @@
 
 use std::fmt;
 
+use alfd_common::record::EpisodeRecord;
 use alfd_common::replay::Transition;
 use iceoryx2::prelude::ZeroCopySend;
 
 use crate::error::{Result, WireError};
 
 /// The version of the messages below. Bump it whenever a message changes.
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
 /// Actors per run (the credit table has one slot per actor id).
 pub const MAX_ACTORS: usize = 16;
 /// Largest observation a transition or a query can carry.
@@ -23,8 +24,6 @@ pub const TRANSITIONS_PER_BATCH: usize = 32;
 pub const TRANSITIONS_BUFFER: usize = 64;
 /// Largest credit window, in environment steps.
 pub const MAX_CREDIT_WINDOW: u64 = TRANSITIONS_BUFFER as u64;
-/// Nodes a service may have: launcher, learner, two experts during a swap, the actors, actors
-/// killed but not yet cleaned up, and a few tools (benchmarks, monitors).
 /// Nodes a service may have: launcher, learner, two experts during a swap, the actors, actors
 /// killed but not yet cleaned up, and a few tools (benchmarks, monitors).
 pub(crate) const MAX_NODES: usize = 2 * MAX_ACTORS + 16;
@@ -143,11 +142,10 @@ macro_rules! message {
 
 /// `flags` of a [`TransitionRecord`].
 pub mod flags {
+    /// The step ended in a terminal state (no bootstrapping from `next_state`).
     pub const TERMINATED: u32 = 1;
-    pub const TRUNCATED: u32 = 2;
+    /// The action came from the expert.
     pub const DEMO: u32 = 4;
-    /// Last step of its episode (terminated or truncated).
-    pub const EPISODE_END: u32 = 8;
 }
 
 /// One environment step as it travels from an actor to the learner.
@@ -162,8 +160,6 @@ pub struct TransitionRecord {
     pub action: u32,
     /// The reward learned from (shaped when shaping was on).
     pub reward: f32,
-    /// The actor's episode number.
-    pub episode: u32,
     /// See [`flags`].
     pub flags: u32,
 }
@@ -239,8 +235,8 @@ impl TransitionBatch {
         self.first_seq + u64::from(self.len)
     }
 
-    /// Appends a step; `truncated` marks the end of an episode cut by the step limit.
-    pub fn push(&mut self, t: &Transition, episode: u32, truncated: bool) -> Result<()> {
+    /// Appends a step.
+    pub fn push(&mut self, t: &Transition) -> Result<()> {
         if self.is_full() {
             return Err(WireError::TooLarge {
                 what: "transition batch",
@@ -271,15 +267,8 @@ impl TransitionBatch {
         r.mask[..h].copy_from_slice(&t.mask);
         r.action = t.action;
         r.reward = t.reward;
-        r.episode = episode;
         r.flags = (if t.terminated { flags::TERMINATED } else { 0 })
-            | (if truncated { flags::TRUNCATED } else { 0 })
-            | (if t.demo { flags::DEMO } else { 0 })
-            | (if t.terminated || truncated {
-                flags::EPISODE_END
-            } else {
-                0
-            });
+            | (if t.demo { flags::DEMO } else { 0 });
         self.len += 1;
         Ok(())
     }
@@ -478,8 +467,26 @@ pub mod process_state {
     pub const EXITING: u32 = 4;
 }
 
+/// An [`EpisodeRecord`] as a payload: the core's record, byte for byte.
+#[repr(transparent)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Episode(pub EpisodeRecord);
+
+// SAFETY: `EpisodeRecord` is `repr(C)` and holds only `f64`, `u64`, `u32` and `u16` fields: no
+// pointers, no references, nothing owned elsewhere, valid for any bit pattern its writer put there,
+// so a copy in shared memory means the same in every process of this build. `Episode` is
+// `repr(transparent)` over it. The type name carries the layout's version: the schema version
+// of every message (`Header`) is bumped whenever the record changes, and
+// `an_episode_record_has_the_layout_the_wire_expects` pins its size and alignment.
+#[allow(unsafe_code)]
+unsafe impl ZeroCopySend for Episode {
+    unsafe fn type_name() -> &'static str {
+        "alfd.EpisodeRecord"
+    }
+}
+
 /// Progress and metrics, from every process to the launcher. An episode message carries the
-/// fields of the single-process runner's `EpisodeRecord`; the sender is `header.id`.
+/// core's [`EpisodeRecord`] as the actor recorded it; the sender is `header.id`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("alfd.Progress")]
@@ -492,24 +499,10 @@ pub struct Progress {
     pub pid: u32,
     pub _pad: u32,
     pub incarnation: u64,
-    // --- an episode (kind EPISODE) ---
-    /// The actor's own episode number.
-    pub episode: u64,
-    /// The environment's return (never the shaped one).
-    pub episode_return: f64,
-    pub length: u64,
-    /// Demonstrations used so far in the run, as far as the actor knows.
-    pub demos_used: u64,
-    /// Mean JS divergence over the episode's steps.
-    pub mean_js: f64,
-    /// Queries answered during the episode.
-    pub queries: u64,
-    /// Steps whose reward was shaped during the episode.
-    pub shaped_steps: u64,
-    /// The global step at the end of the episode, as far as the actor knows.
-    pub total_steps: u64,
+    /// An episode (kind EPISODE), numbered by its actor.
+    pub episode: Episode,
     // --- counters (status) ---
-    /// Environment steps: sent (actor), received (learner).
+    /// Environment steps received (learner).
     pub env_steps: u64,
     pub updates: u64,
     /// Demonstrations answered in the whole run (expert).
@@ -520,6 +513,18 @@ pub struct Progress {
     pub loss: f64,
 }
 message!(Progress, "progress");
+
+impl Progress {
+    /// An actor's finished episode.
+    pub fn episode(incarnation: u64, record: EpisodeRecord) -> Self {
+        Self {
+            kind: progress_kind::EPISODE,
+            incarnation,
+            episode: Episode(record),
+            ..Self::default()
+        }
+    }
+}
 
 /// `command` of a [`Control`] message.
 pub mod command {
@@ -582,21 +587,42 @@ mod tests {
         let mut b = TransitionBatch::new(0, 1, 4, 2, 0).unwrap();
         let mut wrong = transition(1.0, false, false);
         wrong.state.push(9.0);
-        assert!(b.push(&wrong, 0, false).is_err());
+        assert!(b.push(&wrong).is_err());
         assert!(b.is_empty(), "a refused step is not stored");
         for i in 0..TRANSITIONS_PER_BATCH {
-            b.push(&transition(i as f32, false, false), 0, false)
-                .unwrap();
+            b.push(&transition(i as f32, false, false)).unwrap();
         }
         assert!(b.is_full());
-        assert!(b.push(&transition(0.0, false, false), 0, false).is_err());
-        let truncated = {
+        assert!(b.push(&transition(0.0, false, false)).is_err());
+        let flagged = {
             let mut b = TransitionBatch::new(0, 1, 4, 2, 0).unwrap();
-            b.push(&transition(1.0, false, false), 0, true).unwrap();
+            b.push(&transition(1.0, true, true)).unwrap();
             b.records[0].flags
         };
-        assert_eq!(truncated, flags::TRUNCATED | flags::EPISODE_END);
+        assert_eq!(flagged, flags::TERMINATED | flags::DEMO);
         assert!(QueryRequest::new(0, 1, 0, &[0.0; MAX_OBS_DIM + 1]).is_err());
+    }
+
+    #[test]
+    fn an_episode_record_has_the_layout_the_wire_expects() {
+        use crate::messages::Episode;
+        use alfd_common::record::EpisodeRecord;
+        // Changing this layout changes the message: bump SCHEMA_VERSION with it.
+        assert_eq!(std::mem::size_of::<Episode>(), 48);
+        assert_eq!(std::mem::align_of::<Episode>(), 8);
+        assert_eq!(std::mem::offset_of!(EpisodeRecord, actor), 44);
+        let r = EpisodeRecord {
+            ret: 21.0,
+            mean_js: 0.25,
+            total_steps: 99,
+            episode: 3,
+            length: 21,
+            demos_used: 5,
+            queries: 2,
+            shaped_steps: 7,
+            actor: 11,
+        };
+        assert_eq!(Progress::episode(4, r).episode.0, r);
     }
 
     #[test]

@@ -428,7 +428,7 @@ mod tests {
             ];
             let mut batch = TransitionBatch::new(3, 77, 4, 2, 10).unwrap();
             for (i, t) in sent.iter().enumerate() {
-                batch.push(t, 5, false).unwrap();
+                batch.push(t).unwrap();
                 assert_eq!(batch.len(), i + 1);
             }
             assert_eq!(batch.end_seq(), 13);
@@ -447,7 +447,7 @@ mod tests {
             let back: Vec<Transition> = got.transitions().collect();
             assert_eq!(back, sent);
             assert_eq!(got.records[1].flags, flags::DEMO);
-            assert_eq!(got.records[2].flags, flags::TERMINATED | flags::EPISODE_END);
+            assert_eq!(got.records[2].flags, flags::TERMINATED);
             let second = rx.receive().unwrap().expect("the empty batch");
             assert_eq!(second.header.seq, 1);
             assert!(second.is_empty());
@@ -681,19 +681,22 @@ mod tests {
 
             let prx = launcher.progress_receiver().unwrap();
             let mut ptx = actor.progress_sender().unwrap();
-            for e in 0..3u64 {
-                ptx.send(Progress {
-                    kind: progress_kind::EPISODE,
+            for e in 0..3u32 {
+                let record = alfd_common::record::EpisodeRecord {
                     episode: e,
-                    episode_return: 10.0 + e as f64,
+                    ret: 10.0 + f64::from(e),
                     length: 10 + e,
-                    ..Progress::default()
-                })
-                .unwrap();
+                    actor: 3,
+                    ..Default::default()
+                };
+                ptx.send(Progress::episode(1, record)).unwrap();
             }
             let mut seen = Vec::new();
             while let Some(p) = prx.receive().unwrap() {
-                seen.push((p.header.seq, p.episode, p.episode_return, p.length));
+                assert_eq!(p.kind, progress_kind::EPISODE);
+                let r = p.episode.0;
+                assert_eq!(r.actor, 3, "the record arrives whole");
+                seen.push((p.header.seq, r.episode, r.ret, r.length));
             }
             assert_eq!(
                 seen,

@@ -320,7 +320,7 @@ fn peer(bench: Bench, run_id: &str, n: usize) -> anyhow::Result<()> {
                 if sent + TRANSITIONS_PER_BATCH as u64 <= granted {
                     let mut b = TransitionBatch::new(0, 1, 4, 2, sent)?;
                     for _ in 0..TRANSITIONS_PER_BATCH {
-                        b.push(&t, 0, false)?;
+                        b.push(&t)?;
                     }
                     tx.send(b)?;
                     sent += TRANSITIONS_PER_BATCH as u64;

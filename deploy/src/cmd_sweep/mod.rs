@@ -25,7 +25,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use alfd_common::config::ExperimentConfig;
-use alfd_common::runner::ReturnStats;
+use alfd_common::record::ReturnStats;
 use anyhow::Context as _;
 
 use crate::cmd_demo_model_policy::{self, PolicyRun};

@@ -1,0 +1,422 @@
+//! The actor's transports over the wire, as the environment loop wants them: the learner process
+//! as an [`Adder`] (transitions in batches, under credits) and a [`VariableSource`] (the newest
+//! published weights), and the expert process as an [`ExpertClient`] (a query with a timeout, the
+//! published demonstration model). The step of Algorithm 1 itself is the core's
+//! [`alfd_common::environment_loop`].
+
+use std::ops::ControlFlow;
+use std::time::{Duration, Instant};
+
+use alfd_common::agent::NeuralActor;
+use alfd_common::demo_model::DemoModel;
+use alfd_common::environment_loop::{Adder, ExpertClient, LoopError, Result, Stop, VariableSource};
+use alfd_common::replay::Transition;
+use alfd_common::shaping::ShapingSchedule;
+use alfd_harness::Session;
+use alfd_wire::{
+    outcome, Bell, Credits, DemoModelReceiver, QueryClient, QueryRequest, QueryResponse, Receiver,
+    Sender, TransitionBatch, WeightsReceiver,
+};
+use tracing::{debug, warn};
+
+/// Who this actor is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Identity {
+    pub id: u16,
+    pub incarnation: u64,
+}
+
+/// Control is looked at every this many steps (and during every wait).
+const CHECK_EVERY: u32 = 64;
+
+/// The learner as the actor's adder: transitions go out in batches, never beyond the credits the
+/// learner granted (see `alfd_wire`'s crate doc on credits).
+pub struct WireAdder<'s, 'w> {
+    session: &'s Session<'w>,
+    me: Identity,
+    window: u64,
+    tx: Sender<'w, TransitionBatch>,
+    learner: Bell,
+    credits_rx: Receiver<'w, Credits>,
+    credits: Option<Credits>,
+    batch: TransitionBatch,
+    obs_dim: usize,
+    heads: usize,
+    /// Sequence number of the next transition (= transitions this incarnation produced).
+    next_seq: u64,
+    since_check: u32,
+    pub credit_waits: u64,
+    pub credit_wait: Duration,
+}
+
+impl<'s, 'w> WireAdder<'s, 'w> {
+    pub fn new(
+        session: &'s Session<'w>,
+        me: Identity,
+        window: u64,
+        obs_dim: usize,
+        heads: usize,
+    ) -> anyhow::Result<Self> {
+        let wire = session.wire();
+        Ok(Self {
+            session,
+            me,
+            window,
+            tx: wire.transitions_sender()?,
+            learner: wire.bell(alfd_wire::Doorbell::Learner)?,
+            credits_rx: wire.credits_receiver()?,
+            credits: None,
+            batch: TransitionBatch::new(me.id, me.incarnation, obs_dim, heads, 0)?,
+            obs_dim,
+            heads,
+            next_seq: 0,
+            since_check: 0,
+            credit_waits: 0,
+            credit_wait: Duration::ZERO,
+        })
+    }
+
+    /// Transitions produced by this incarnation.
+    pub fn produced(&self) -> u64 {
+        self.next_seq
+    }
+
+    /// Steps this actor may send: its grant, or the implicit window before any grant.
+    fn granted(&self) -> u64 {
+        self.credits
+            .as_ref()
+            .and_then(|c| c.granted_for(self.me.id, self.me.incarnation))
+            .unwrap_or(0)
+            .max(self.window)
+    }
+
+    fn take_credits(&mut self) -> Result<()> {
+        if let Some(c) = self.credits_rx.latest().map_err(LoopError::link)? {
+            self.credits = Some(c);
+        }
+        Ok(())
+    }
+
+    /// Sends the batch (flagged `blocked` if asked, even empty) and starts the next one.
+    fn flush(&mut self, blocked: bool) -> Result<()> {
+        if blocked || !self.batch.is_empty() {
+            self.batch.blocked = u32::from(blocked);
+            self.tx.send(self.batch).map_err(LoopError::link)?;
+            self.learner.ring().map_err(LoopError::link)?;
+        }
+        self.batch = TransitionBatch::new(
+            self.me.id,
+            self.me.incarnation,
+            self.obs_dim,
+            self.heads,
+            self.next_seq,
+        )
+        .map_err(LoopError::link)?;
+        Ok(())
+    }
+}
+
+impl Adder for WireAdder<'_, '_> {
+    fn reserve(&mut self) -> Result<ControlFlow<Stop>> {
+        if self.next_seq >= self.granted() {
+            self.take_credits()?;
+        }
+        if self.next_seq >= self.granted() {
+            // Out of credits: send what is batched, flagged so that the learner rings when new
+            // credits are there, and wait.
+            self.flush(true)?;
+            let blocked = Instant::now();
+            self.credit_waits += 1;
+            loop {
+                self.take_credits()?;
+                if self.next_seq < self.granted() {
+                    break;
+                }
+                if let Some(stop) = self
+                    .session
+                    .wait(Duration::from_millis(100))
+                    .map_err(LoopError::link)?
+                {
+                    return Ok(ControlFlow::Break(stop));
+                }
+                if let Some(stop) = self.session.should_stop().map_err(LoopError::link)? {
+                    return Ok(ControlFlow::Break(stop));
+                }
+            }
+            self.credit_wait += blocked.elapsed();
+            if blocked.elapsed() > Duration::from_millis(5) {
+                debug!(
+                    waited_ms = blocked.elapsed().as_millis() as u64,
+                    next_seq = self.next_seq,
+                    granted = self.granted(),
+                    "long credit wait"
+                );
+            }
+        }
+        self.take_credits()?;
+        self.since_check += 1;
+        if self.since_check >= CHECK_EVERY {
+            self.since_check = 0;
+            if let Some(stop) = self.session.should_stop().map_err(LoopError::link)? {
+                return Ok(ControlFlow::Break(stop));
+            }
+        }
+        Ok(ControlFlow::Continue(()))
+    }
+
+    fn add(&mut self, transition: Transition, _truncated: bool) -> Result<()> {
+        self.batch.push(&transition).map_err(LoopError::link)?;
+        self.next_seq += 1;
+        if self.batch.is_full() {
+            self.flush(false)?;
+        }
+        Ok(())
+    }
+
+    fn end_episode(&mut self) -> Result<()> {
+        self.flush(false)
+    }
+
+    fn global_step(&self, own_steps: u64) -> u64 {
+        self.credits.as_ref().map_or(own_steps, |c| {
+            c.global_step_for(self.me.id, self.me.incarnation, own_steps)
+        })
+    }
+}
+
+/// The learner's published weights as the actor's variable source.
+pub struct WireVariables<'w> {
+    rx: WeightsReceiver<'w>,
+    params: Vec<f32>,
+}
+
+impl<'w> WireVariables<'w> {
+    pub fn new(session: &Session<'w>) -> anyhow::Result<Self> {
+        Ok(Self {
+            rx: session.wire().weights_receiver()?,
+            params: Vec::new(),
+        })
+    }
+
+    /// Waits for the learner's first weights (the learner's initial network, as the
+    /// single-process run starts from it) and puts them into `actor`.
+    pub fn first(
+        &mut self,
+        session: &Session<'_>,
+        actor: &mut NeuralActor,
+        timeout: Duration,
+    ) -> anyhow::Result<()> {
+        let start = Instant::now();
+        loop {
+            if let Some(h) = self.rx.latest_into(&mut self.params)? {
+                actor.set_weights(&self.params, h.version)?;
+                return Ok(());
+            }
+            if let Some(stop) = session.should_stop()? {
+                anyhow::bail!(
+                    "stopped ({}) before the learner's first weights arrived",
+                    stop.0
+                );
+            }
+            anyhow::ensure!(
+                start.elapsed() < timeout,
+                "no weights from the learner within {timeout:?}"
+            );
+            if let Some(stop) = session.wait(Duration::from_millis(50))? {
+                anyhow::bail!(
+                    "stopped ({}) before the learner's first weights arrived",
+                    stop.0
+                );
+            }
+        }
+    }
+}
+
+impl VariableSource for WireVariables<'_> {
+    fn update(&mut self, actor: &mut NeuralActor) -> Result<()> {
+        if let Some(h) = self
+            .rx
+            .latest_into(&mut self.params)
+            .map_err(LoopError::link)?
+        {
+            actor
+                .set_weights(&self.params, h.version)
+                .map_err(LoopError::link)?;
+        }
+        Ok(())
+    }
+}
+
+/// What the actor knows of the expert's side: the budget, the demonstrations, the model.
+#[derive(Debug)]
+struct ExpertView {
+    budget_left: u32,
+    /// Demonstrations in the run, as far as known.
+    demos: u64,
+    model: Option<DemoModel>,
+    model_demos: usize,
+    last_demo_step: u64,
+}
+
+/// The expert process as the actor's expert client: a query with a client-side timeout (no
+/// expert, or none in time: the actor acts on its own), and the published demonstration model.
+pub struct WireExpert<'s, 'w> {
+    session: &'s Session<'w>,
+    me: Identity,
+    client: QueryClient<'w>,
+    expert: Bell,
+    model_rx: DemoModelReceiver<'w>,
+    model_bytes: Vec<u8>,
+    view: ExpertView,
+    timeout: Duration,
+    /// `Some` when the config shapes the reward.
+    schedule: Option<ShapingSchedule>,
+    pub timeouts: u64,
+}
+
+/// What came of a query.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Answer {
+    Demo(QueryResponse),
+    BudgetExhausted,
+    /// No expert is active or connected: the actor acts on its own at once.
+    NoExpert,
+    /// The expert did not answer in time: the actor acted on its own.
+    Timeout,
+}
+
+impl<'s, 'w> WireExpert<'s, 'w> {
+    pub fn new(
+        session: &'s Session<'w>,
+        me: Identity,
+        budget: u32,
+        schedule: Option<ShapingSchedule>,
+        timeout: Duration,
+    ) -> anyhow::Result<Self> {
+        let wire = session.wire();
+        Ok(Self {
+            session,
+            me,
+            client: wire.query_client()?,
+            expert: wire.bell(alfd_wire::Doorbell::Expert)?,
+            model_rx: wire.demo_model_receiver()?,
+            model_bytes: Vec::new(),
+            view: ExpertView {
+                budget_left: budget,
+                demos: 0,
+                model: None,
+                model_demos: 0,
+                last_demo_step: 0,
+            },
+            timeout,
+            schedule,
+            timeouts: 0,
+        })
+    }
+
+    /// Takes in the newest demonstration model, if one arrived.
+    fn take_model(&mut self) -> Result<()> {
+        if let Some(h) = self
+            .model_rx
+            .latest_into(&mut self.model_bytes)
+            .map_err(LoopError::link)?
+        {
+            let v = &mut self.view;
+            v.model =
+                if h.len == 0 {
+                    None
+                } else {
+                    Some(postcard::from_bytes(&self.model_bytes).map_err(|e| {
+                        LoopError::link(format!("malformed demonstration model: {e}"))
+                    })?)
+                };
+            v.model_demos = h.demos as usize;
+            v.last_demo_step = h.last_demo_step;
+            v.budget_left = h.budget_left;
+            v.demos = v.demos.max(u64::from(h.demos));
+            debug!(version = h.version, demos = h.demos, "demonstration model");
+        }
+        Ok(())
+    }
+
+    /// One query (Algorithm 1 line 9), waiting at most the timeout for the answer.
+    fn query(&mut self, request: QueryRequest) -> Result<Answer> {
+        if self.session.control().active_expert == 0 {
+            return Ok(Answer::NoExpert);
+        }
+        let mut pending = self.client.ask(request).map_err(LoopError::link)?;
+        if pending.servers() == 0 {
+            return Ok(Answer::NoExpert);
+        }
+        self.expert.ring().map_err(LoopError::link)?;
+        let deadline = Instant::now() + self.timeout;
+        loop {
+            if let Some(r) = pending.poll().map_err(LoopError::link)? {
+                return Ok(match r.outcome {
+                    outcome::ANSWERED => Answer::Demo(r),
+                    _ => Answer::BudgetExhausted,
+                });
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(Answer::Timeout);
+            }
+            if self
+                .session
+                .wait((deadline - now).min(Duration::from_millis(50)))
+                .map_err(LoopError::link)?
+                .is_some()
+            {
+                return Ok(Answer::Timeout);
+            }
+        }
+    }
+}
+
+impl<O: AsRef<[f32]>> ExpertClient<O> for WireExpert<'_, '_> {
+    fn update(&mut self) -> Result<()> {
+        self.take_model()
+    }
+
+    fn budget_left(&self) -> bool {
+        self.view.budget_left > 0
+    }
+
+    fn ask(&mut self, obs: &O, step: u64) -> Result<Option<usize>> {
+        let request = QueryRequest::new(self.me.id, self.me.incarnation, step, obs.as_ref())
+            .map_err(LoopError::link)?;
+        match self.query(request)? {
+            Answer::Demo(r) => {
+                // The expert published the model refitted with this demonstration before
+                // answering: shape this very step with it, as Algorithm 1 does.
+                self.take_model()?;
+                self.view.budget_left = r.budget_left;
+                self.view.demos = self.view.demos.max(u64::from(r.demo_index) + 1);
+                Ok(Some(r.action as usize))
+            }
+            Answer::BudgetExhausted => {
+                self.view.budget_left = 0;
+                Ok(None)
+            }
+            Answer::NoExpert => Ok(None),
+            Answer::Timeout => {
+                self.timeouts += 1;
+                warn!(
+                    timeouts = self.timeouts,
+                    "the expert did not answer in time; acting alone"
+                );
+                Ok(None)
+            }
+        }
+    }
+
+    fn shaping(&self, step: u64) -> Option<(&DemoModel, f64)> {
+        let v = &self.view;
+        self.schedule?
+            .model_for(step, v.model_demos, v.last_demo_step, v.model.as_ref())
+    }
+
+    fn demos_used(&self) -> u32 {
+        self.view.demos as u32
+    }
+}

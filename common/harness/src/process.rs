@@ -1,0 +1,175 @@
+//! What the three process binaries share: their common arguments, reading the run directory
+//! (`config.toml`, `runtime.toml`), the wire's limits, joining the run, and `main` with its exit
+//! codes (2 for bad input, 1 for anything else).
+
+use std::path::{Path, PathBuf};
+
+use alfd_common::config::ExperimentConfig;
+use alfd_common::env::{vector_env, VectorEnv};
+use alfd_wire::{Process, Wire, MAX_HEADS, MAX_OBS_DIM};
+use anyhow::Context as _;
+
+use crate::runtime::{RuntimeConfig, RUNTIME_FILE};
+
+/// Bad input (a config, a file of the run directory, a flag): the process exits with code 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct BadInput(pub String);
+
+/// The arguments every process takes.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ProcessArgs {
+    /// The run directory (`config.toml`, `runtime.toml`, logs).
+    #[arg(long)]
+    pub run_dir: PathBuf,
+    /// The run id (names the run's iceoryx2 services).
+    #[arg(long)]
+    pub run_id: String,
+}
+
+/// A run directory's settings, validated.
+#[derive(Debug, Clone)]
+pub struct Setup {
+    pub config: ExperimentConfig,
+    pub runtime: RuntimeConfig,
+}
+
+impl ProcessArgs {
+    /// Reads `RUN_DIR/config.toml` and `RUN_DIR/runtime.toml`; a bad file is [`BadInput`].
+    pub fn load(&self) -> anyhow::Result<Setup> {
+        let config = read(&self.run_dir.join("config.toml"), |t| {
+            ExperimentConfig::for_multi_process(t).map_err(|e| e.to_string())
+        })?;
+        let runtime = read(&self.run_dir.join(RUNTIME_FILE), |t| {
+            RuntimeConfig::from_toml(t).map_err(|e| e.to_string())
+        })?;
+        let setup = Setup { config, runtime };
+        setup.vector_env()?;
+        Ok(setup)
+    }
+
+    /// Joins the run as `me`, speaking schema version `schema`.
+    pub fn connect(&self, me: Process, schema: u32) -> anyhow::Result<Wire> {
+        Wire::connect(&self.run_id, me, schema).context("cannot join the run")
+    }
+}
+
+fn read<T>(path: &Path, parse: impl FnOnce(&str) -> Result<T, String>) -> anyhow::Result<T> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| BadInput(format!("cannot read {}: {e}", path.display())))?;
+    Ok(parse(&text).map_err(|e| BadInput(format!("in {}: {e}", path.display())))?)
+}
+
+impl Setup {
+    /// The config's environment, checked against what the wire carries.
+    pub fn vector_env(&self) -> anyhow::Result<Box<VectorEnv>> {
+        let env = vector_env(&self.config.env).ok_or_else(|| {
+            BadInput(format!(
+                "{:?} has no vector observations; the multi-process runtime runs neural agents",
+                self.config.env.name
+            ))
+        })?;
+        check_wire_limits(env.observation_dim(), self.config.agent.heads())?;
+        Ok(env)
+    }
+}
+
+/// Refuses an environment or an agent larger than the wire's fixed-size messages carry.
+pub fn check_wire_limits(obs_dim: usize, heads: usize) -> Result<(), BadInput> {
+    if obs_dim > MAX_OBS_DIM {
+        return Err(BadInput(format!(
+            "the environment's observations have {obs_dim} values; the wire carries at most \
+             MAX_OBS_DIM = {MAX_OBS_DIM}"
+        )));
+    }
+    if heads > MAX_HEADS {
+        return Err(BadInput(format!(
+            "the agent has {heads} heads; the wire carries at most MAX_HEADS = {MAX_HEADS}"
+        )));
+    }
+    Ok(())
+}
+
+/// The exit code for an error: 2 when bad input caused it, 1 otherwise.
+pub fn exit_code(err: &anyhow::Error) -> i32 {
+    if err.chain().any(|e| e.is::<BadInput>()) {
+        2
+    } else {
+        1
+    }
+}
+
+/// The `main` of a process binary: logs to `RUN_DIR/LOG.log`, learns the schema version it
+/// speaks, runs `run`, and exits 0, 1 or 2 (bad input).
+pub fn main<A>(
+    binary: &str,
+    args: &A,
+    process: &ProcessArgs,
+    log: &str,
+    run: impl FnOnce(&A, u32) -> anyhow::Result<()>,
+) -> ! {
+    crate::startup::init_process_logging(binary, &process.run_dir, log);
+    let schema = crate::startup::schema_version_from_env().unwrap_or_else(|e| {
+        eprintln!("{binary}: {e}");
+        std::process::exit(2)
+    });
+    match run(args, schema) {
+        Ok(()) => std::process::exit(0),
+        Err(err) => {
+            tracing::error!("{err:#}");
+            eprintln!("{binary}: error: {err:#}");
+            std::process::exit(exit_code(&err))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn limits_name_both_numbers_and_bad_input_exits_2() {
+        assert!(check_wire_limits(MAX_OBS_DIM, MAX_HEADS).is_ok());
+        let e = check_wire_limits(MAX_OBS_DIM + 2, 1)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("have 10 values") && e.contains("MAX_OBS_DIM = 8"),
+            "{e}"
+        );
+        let e = check_wire_limits(4, MAX_HEADS + 1).unwrap_err().to_string();
+        assert!(e.contains("9 heads") && e.contains("MAX_HEADS = 8"), "{e}");
+        let bad = anyhow::Error::new(BadInput("x".into())).context("while starting");
+        assert_eq!(exit_code(&bad), 2);
+        assert_eq!(exit_code(&anyhow::anyhow!("broken pipe")), 1);
+    }
+
+    #[test]
+    fn a_run_directory_is_read_and_its_faults_are_bad_input() {
+        let dir = std::env::temp_dir().join(format!("alfd-harness-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let args = ProcessArgs {
+            run_dir: dir.clone(),
+            run_id: "r1".into(),
+        };
+        let e = args.load().unwrap_err();
+        assert_eq!(exit_code(&e), 2);
+        assert!(format!("{e:#}").contains("config.toml"), "{e:#}");
+        let cfg = "seed = 1\nepisodes = 2\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"bdqn\"\n";
+        std::fs::write(dir.join("config.toml"), cfg).unwrap();
+        let e = args.load().unwrap_err();
+        assert!(format!("{e:#}").contains("runtime.toml"), "{e:#}");
+        std::fs::write(dir.join(RUNTIME_FILE), "window = 0\n").unwrap();
+        let e = args.load().unwrap_err();
+        assert_eq!(exit_code(&e), 2);
+        std::fs::write(dir.join(RUNTIME_FILE), RuntimeConfig::default().to_toml()).unwrap();
+        let setup = args.load().unwrap();
+        assert_eq!(setup.runtime, RuntimeConfig::default());
+        assert_eq!(setup.vector_env().unwrap().observation_dim(), 4);
+        let tabular =
+            "seed = 1\nepisodes = 2\n[env]\nname = \"cliffwalk\"\n[agent]\nkind = \"qlearning\"\n";
+        std::fs::write(dir.join("config.toml"), tabular).unwrap();
+        assert_eq!(exit_code(&args.load().unwrap_err()), 2);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

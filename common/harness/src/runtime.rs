@@ -1,0 +1,136 @@
+//! The runtime settings of a multi-process run ([`RuntimeConfig`]): one validated file,
+//! `RUN_DIR/runtime.toml`, that the launcher writes and every process reads, so that actors and
+//! learner can never disagree on the credit window.
+
+use std::time::Duration;
+
+use alfd_wire::MAX_CREDIT_WINDOW;
+use serde::{Deserialize, Serialize};
+
+/// The file in a run directory.
+pub const RUNTIME_FILE: &str = "runtime.toml";
+
+/// Settings of the runtime (not of the experiment: they change speed and robustness, never what
+/// an experiment means).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RuntimeConfig {
+    /// Credit window: how many steps an actor may run ahead of the learner's updates
+    /// (1 = lockstep: the actor always acts on the newest weights), `1..=64`.
+    pub window: u64,
+    /// Milliseconds an actor waits for the expert's answer before acting on its own.
+    pub query_timeout_ms: u64,
+    /// Seconds a process waits for the launcher's first word and for the learner's first weights.
+    pub handshake_timeout_s: u64,
+    /// The learner publishes its weights every this many updates.
+    pub weights_every: u64,
+}
+
+impl Default for RuntimeConfig {
+    fn default() -> Self {
+        Self {
+            window: 32,
+            query_timeout_ms: 1000,
+            handshake_timeout_s: 20,
+            weights_every: 1,
+        }
+    }
+}
+
+/// A runtime config that cannot be used, naming the field at fault.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RuntimeConfigError {
+    #[error("invalid runtime config: {0}")]
+    Parse(String),
+    #[error("invalid runtime config: `{field}` {message}")]
+    Invalid {
+        field: &'static str,
+        message: String,
+    },
+}
+
+impl RuntimeConfig {
+    /// Parses and validates `runtime.toml`.
+    pub fn from_toml(text: &str) -> Result<Self, RuntimeConfigError> {
+        let cfg: Self = toml::from_str(text)
+            .map_err(|e| RuntimeConfigError::Parse(e.message().trim().to_owned()))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).expect("a RuntimeConfig always serialises")
+    }
+
+    /// Checks every value; the error names the field.
+    pub fn validate(&self) -> Result<(), RuntimeConfigError> {
+        let invalid = |field, message: String| Err(RuntimeConfigError::Invalid { field, message });
+        if !(1..=MAX_CREDIT_WINDOW).contains(&self.window) {
+            return invalid(
+                "window",
+                format!("must be in 1..={MAX_CREDIT_WINDOW}, got {}", self.window),
+            );
+        }
+        if self.query_timeout_ms == 0 {
+            return invalid("query_timeout_ms", "must be at least 1".to_owned());
+        }
+        if self.handshake_timeout_s == 0 {
+            return invalid("handshake_timeout_s", "must be at least 1".to_owned());
+        }
+        if self.weights_every == 0 {
+            return invalid("weights_every", "must be at least 1".to_owned());
+        }
+        Ok(())
+    }
+
+    pub fn query_timeout(&self) -> Duration {
+        Duration::from_millis(self.query_timeout_ms)
+    }
+
+    pub fn handshake_timeout(&self) -> Duration {
+        Duration::from_secs(self.handshake_timeout_s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_round_trips_and_bad_values_name_their_field() {
+        let d = RuntimeConfig::default();
+        assert_eq!(RuntimeConfig::from_toml(&d.to_toml()).unwrap(), d);
+        let with = |field: &str, value: &str| {
+            let text = d
+                .to_toml()
+                .lines()
+                .map(|l| {
+                    if l.starts_with(&format!("{field} ")) {
+                        format!("{field} = {value}")
+                    } else {
+                        l.to_owned()
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join("\n");
+            RuntimeConfig::from_toml(&text)
+        };
+        assert_eq!(with("window", "1").unwrap().window, 1);
+        assert_eq!(
+            with("window", "0").unwrap_err().to_string(),
+            "invalid runtime config: `window` must be in 1..=64, got 0"
+        );
+        assert!(with("window", "65")
+            .unwrap_err()
+            .to_string()
+            .contains("`window`"));
+        for field in ["query_timeout_ms", "handshake_timeout_s", "weights_every"] {
+            let e = with(field, "0").unwrap_err().to_string();
+            assert!(e.contains(&format!("`{field}` must be at least 1")), "{e}");
+        }
+        let e = RuntimeConfig::from_toml("window = 4\nwindows = 3").unwrap_err();
+        assert!(e.to_string().contains("windows"), "{e}");
+        let e = RuntimeConfig::from_toml("window = \"big\"").unwrap_err();
+        assert!(matches!(e, RuntimeConfigError::Parse(_)), "{e}");
+    }
+}

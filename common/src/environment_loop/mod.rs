@@ -1,0 +1,323 @@
+//! The step of Algorithm 1, written once: [`run`] plays episodes of an environment with an
+//! [`Actor`] and an [`ExpertClient`], whatever connects them to the learner and to the expert.
+//!
+//! This is Acme's `EnvironmentLoop` driving a `GenericActor(actor_core, variable_client, adder)`,
+//! in the paper's words. What differs between one process and many is only what is passed in:
+//! - the [`ExpertClient`] (ask for a demonstration, the budget left, the shaping model): an
+//!   in-memory [`ExpertCore`](crate::agent::ExpertCore) in one process
+//!   ([`in_process::LocalExpert`]), a query over the wire in the actor process;
+//! - for the neural agents, the [`Adder`] (where transitions go: Acme's adder) and the
+//!   [`VariableSource`] (where the newest weights come from: Acme's variable client), combined
+//!   with the pure [`NeuralActor`] by [`GenericActor`]: the learner in the same process
+//!   ([`in_process::LearnerHandle`]) or the learner process over the wire.
+//!
+//! The tabular agents learn where they act: [`TabularAgent`](crate::agent::TabularAgent) is an
+//! [`Actor`] by itself.
+//!
+//! Nothing here does I/O; a transport's errors reach the caller as [`LoopError::Link`].
+
+pub mod in_process;
+
+use std::ops::ControlFlow;
+
+use crate::agent::{Decision, NeuralActor};
+use crate::demo_model::DemoModel;
+use crate::env::{Env, EnvError, Step};
+use crate::record::EpisodeRecord;
+use crate::replay::Transition;
+
+/// Why a run stopped before its last episode (the launcher said so, a signal arrived, ...).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stop(pub &'static str);
+
+/// What can go wrong in the loop: the environment refused a step, or a transport failed.
+#[derive(Debug, thiserror::Error)]
+pub enum LoopError {
+    #[error("environment: {0}")]
+    Env(#[from] EnvError),
+    #[error(transparent)]
+    Link(Box<dyn std::error::Error + Send + Sync>),
+}
+
+impl LoopError {
+    /// Wraps a transport's error.
+    pub fn link(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> Self {
+        Self::Link(e.into())
+    }
+}
+
+pub type Result<T, E = LoopError> = std::result::Result<T, E>;
+
+/// The acting agent's side of the expert (Algorithm 1 lines 8-10 and 18).
+pub trait ExpertClient<O: ?Sized> {
+    /// Takes in what changed on the expert's side since the last step (a refitted model, the
+    /// budget); called once before every step.
+    fn update(&mut self) -> Result<()> {
+        Ok(())
+    }
+    /// Whether budget B has demonstrations left, as far as this actor knows.
+    fn budget_left(&self) -> bool;
+    /// Asks for a demonstration at `obs`, the run's global step `step`: `Some(action)` if the
+    /// expert gave one (and spent one unit of budget on it), `None` if it did not (budget
+    /// exhausted, no expert, no answer in time): the agent then acts on its own.
+    fn ask(&mut self, obs: &O, step: u64) -> Result<Option<usize>>;
+    /// The demonstration model and λ to shape the reward of global step `step` with (eq. 4),
+    /// or `None` when shaping is off then.
+    fn shaping(&self, step: u64) -> Option<(&DemoModel, f64)>;
+    /// Demonstrations used in the run so far, as far as this actor knows.
+    fn demos_used(&self) -> u32;
+}
+
+/// An agent that acts in an environment (Acme's `Actor`: `select_action` / `observe` / `update`).
+pub trait Actor<O> {
+    /// Before every step: take in the newest weights, wait for flow control. `Break` stops the
+    /// run (in the middle of an episode if need be).
+    fn update(&mut self) -> Result<ControlFlow<Stop>> {
+        Ok(ControlFlow::Continue(()))
+    }
+    /// The run's global step of this actor's next step, given the steps it took itself (the same
+    /// number when it is the only actor).
+    fn global_step(&self, own_steps: u64) -> u64 {
+        own_steps
+    }
+    /// Algorithm 1 line 1: sample the head to follow this episode.
+    fn begin_episode(&mut self);
+    /// Algorithm 1 lines 3-16 but the asking: the divergence of the heads at `obs`, whether the
+    /// query rule fires (only while budget is left), and the agent's own action.
+    fn select(&mut self, obs: &O, budget_left: bool) -> Decision;
+    /// Algorithm 1 lines 17-20: learn from (or hand on) the step taken with `action` from `obs`,
+    /// with the reward shaped when `shaping` is given. Returns whether the reward was shaped.
+    fn observe(
+        &mut self,
+        obs: &O,
+        action: usize,
+        step: &Step<O>,
+        demo: bool,
+        shaping: Option<(&DemoModel, f64)>,
+    ) -> Result<bool>;
+    /// The episode is over (a transport flushes what it batched).
+    fn end_episode(&mut self) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// Where an actor's transitions go (Acme's adder).
+pub trait Adder {
+    /// Before every step: wait, if the learner is too far behind, until one more transition may
+    /// be added. `Break` stops the run.
+    fn reserve(&mut self) -> Result<ControlFlow<Stop>> {
+        Ok(ControlFlow::Continue(()))
+    }
+    /// Hands one transition on (`truncated`: the step limit ended the episode there).
+    fn add(&mut self, transition: Transition, truncated: bool) -> Result<()>;
+    /// The episode is over.
+    fn end_episode(&mut self) -> Result<()> {
+        Ok(())
+    }
+    /// The run's global step of the next transition, given the transitions this actor added.
+    fn global_step(&self, own_steps: u64) -> u64 {
+        own_steps
+    }
+}
+
+/// Where an actor's weights come from (Acme's variable client).
+pub trait VariableSource {
+    /// Puts the newest weights into `actor` if there are newer ones than it has.
+    fn update(&mut self, actor: &mut NeuralActor) -> Result<()>;
+}
+
+/// The neural agent of Algorithm 1 as an [`Actor`]: the pure [`NeuralActor`] (divergence, query
+/// rule, exploration, shaping, masks), an [`Adder`] and a [`VariableSource`].
+#[derive(Debug)]
+pub struct GenericActor<A, V> {
+    pub core: NeuralActor,
+    pub adder: A,
+    pub variables: V,
+}
+
+impl<A: Adder, V: VariableSource> GenericActor<A, V> {
+    pub fn new(core: NeuralActor, adder: A, variables: V) -> Self {
+        Self {
+            core,
+            adder,
+            variables,
+        }
+    }
+}
+
+impl<O: AsRef<[f32]>, A: Adder, V: VariableSource> Actor<O> for GenericActor<A, V> {
+    fn update(&mut self) -> Result<ControlFlow<Stop>> {
+        if let ControlFlow::Break(stop) = self.adder.reserve()? {
+            return Ok(ControlFlow::Break(stop));
+        }
+        self.variables.update(&mut self.core)?;
+        Ok(ControlFlow::Continue(()))
+    }
+
+    fn global_step(&self, own_steps: u64) -> u64 {
+        self.adder.global_step(own_steps)
+    }
+
+    fn begin_episode(&mut self) {
+        self.core.begin_episode();
+    }
+
+    fn select(&mut self, obs: &O, budget_left: bool) -> Decision {
+        self.core.decide(obs.as_ref(), budget_left)
+    }
+
+    fn observe(
+        &mut self,
+        obs: &O,
+        action: usize,
+        step: &Step<O>,
+        demo: bool,
+        shaping: Option<(&DemoModel, f64)>,
+    ) -> Result<bool> {
+        let shaped = shaping.is_some();
+        let t = self.core.transition(
+            obs.as_ref(),
+            action,
+            step.reward,
+            step.observation.as_ref(),
+            step.terminated,
+            demo,
+            shaping,
+        );
+        self.adder.add(t, step.truncated)?;
+        Ok(shaped)
+    }
+
+    fn end_episode(&mut self) -> Result<()> {
+        self.adder.end_episode()
+    }
+}
+
+/// Which episodes [`run`] plays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Schedule {
+    /// The seed of the first reset (later resets continue the environment's generator).
+    pub env_seed: u64,
+    /// Stop after this many episodes (`None`: until the actor or `on_episode` says stop).
+    pub episodes: Option<u32>,
+    /// The actor's id, recorded in every [`EpisodeRecord`].
+    pub actor_id: u16,
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RunEnd {
+    /// Episodes played to their end.
+    pub episodes: u32,
+    /// Environment steps this actor took (including those of an unfinished last episode).
+    pub steps: u64,
+    /// Why the run stopped early, if it did (`None`: all episodes played, or `on_episode` said
+    /// stop).
+    pub stopped: Option<Stop>,
+}
+
+/// Plays episodes of `env` with `actor`, asking `expert` where the query rule fires: Algorithm 1,
+/// one step at a time. `on_episode` sees every finished episode's record and the actor, and may
+/// stop the run with `Break`.
+pub fn run<E, Ac, X>(
+    env: &mut E,
+    actor: &mut Ac,
+    expert: &mut X,
+    schedule: Schedule,
+    mut on_episode: impl FnMut(&EpisodeRecord, &Ac) -> Result<ControlFlow<()>>,
+) -> Result<RunEnd>
+where
+    E: Env + ?Sized,
+    Ac: Actor<E::Observation>,
+    X: ExpertClient<E::Observation>,
+{
+    let mut steps = 0u64;
+    let mut episode = 0u32;
+    while schedule.episodes.is_none_or(|n| episode < n) {
+        let seed = (episode == 0).then_some(schedule.env_seed);
+        let record = match run_episode(env, actor, expert, seed, &mut steps)? {
+            ControlFlow::Continue(mut record) => {
+                record.episode = episode;
+                record.actor = schedule.actor_id;
+                record
+            }
+            ControlFlow::Break(stop) => {
+                return Ok(RunEnd {
+                    episodes: episode,
+                    steps,
+                    stopped: Some(stop),
+                })
+            }
+        };
+        episode += 1;
+        if on_episode(&record, actor)?.is_break() {
+            break;
+        }
+    }
+    Ok(RunEnd {
+        episodes: episode,
+        steps,
+        stopped: None,
+    })
+}
+
+/// One episode of Algorithm 1. `steps` counts this actor's steps across episodes. The record's
+/// `episode` and `actor` are left for the caller.
+pub fn run_episode<E, Ac, X>(
+    env: &mut E,
+    actor: &mut Ac,
+    expert: &mut X,
+    seed: Option<u64>,
+    steps: &mut u64,
+) -> Result<ControlFlow<Stop, EpisodeRecord>>
+where
+    E: Env + ?Sized,
+    Ac: Actor<E::Observation>,
+    X: ExpertClient<E::Observation>,
+{
+    let mut obs = env.reset(seed);
+    actor.begin_episode();
+    let (mut ret, mut length, mut js_sum) = (0.0, 0u32, 0.0);
+    let (mut queries, mut shaped_steps) = (0u32, 0u32);
+    loop {
+        if let ControlFlow::Break(stop) = actor.update()? {
+            return Ok(ControlFlow::Break(stop));
+        }
+        expert.update()?;
+        let global_step = actor.global_step(*steps);
+        // Lines 3-16: the divergence, the query rule, the action.
+        let decision = actor.select(&obs, expert.budget_left());
+        js_sum += decision.js;
+        let (action, demo) = match decision.query {
+            true => match expert.ask(&obs, global_step)? {
+                Some(a) => (a, true),
+                None => (decision.action, false),
+            },
+            false => (decision.action, false),
+        };
+        queries += u32::from(demo);
+        // Lines 17-20: act, shape, store, learn.
+        let step = env.step(action)?;
+        let shaped = actor.observe(&obs, action, &step, demo, expert.shaping(global_step))?;
+        shaped_steps += u32::from(shaped);
+        ret += step.reward;
+        length += 1;
+        *steps += 1;
+        let done = step.done();
+        obs = step.observation;
+        if done {
+            break;
+        }
+    }
+    actor.end_episode()?;
+    Ok(ControlFlow::Continue(EpisodeRecord {
+        ret,
+        length,
+        demos_used: expert.demos_used(),
+        mean_js: js_sum / f64::from(length),
+        queries,
+        shaped_steps,
+        total_steps: actor.global_step(*steps),
+        ..EpisodeRecord::default()
+    }))
+}

@@ -1,0 +1,298 @@
+//! The credit protocol as a pure state machine: what each actor sent, what the learner has
+//! learned from, and the grants that keep every actor within a window of the learner (see
+//! `alfd_wire`'s crate doc on credits). The learner's I/O loop only moves its messages.
+
+use std::collections::VecDeque;
+
+use alfd_common::replay::Transition;
+use alfd_wire::{Credits, TransitionBatch, MAX_ACTORS, TRANSITIONS_PER_BATCH};
+use tracing::{info, warn};
+
+/// Where the credits of each actor stand.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct ActorBook {
+    incarnation: u64,
+    /// One past the highest sequence number received (lost steps count as received).
+    received: u64,
+    /// Steps received and not yet learned from.
+    queued: u64,
+    lost: u64,
+    /// The actor is blocked until its grant exceeds this sequence number.
+    blocked_until: Option<u64>,
+}
+
+/// The learner's accounts: what each actor sent, what is learned from, and the grants.
+#[derive(Debug, Clone)]
+pub struct CreditBook {
+    window: u64,
+    actors: [ActorBook; MAX_ACTORS],
+    env_steps: u64,
+}
+
+/// One step waiting in the learner's queue.
+#[derive(Debug, Clone)]
+pub struct Queued {
+    pub actor: u16,
+    pub incarnation: u64,
+    /// The last step of its batch: its processing frees a batch worth of credit.
+    pub last_of_batch: bool,
+    pub transition: Transition,
+}
+
+impl CreditBook {
+    pub fn new(window: u64) -> Self {
+        Self {
+            window,
+            actors: [ActorBook::default(); MAX_ACTORS],
+            env_steps: 0,
+        }
+    }
+
+    /// Environment steps received from all actors: the run's global step.
+    pub fn env_steps(&self) -> u64 {
+        self.env_steps
+    }
+
+    /// Steps of `actor` lost on the way (never expected; logged).
+    pub fn lost(&self, actor: u16) -> u64 {
+        self.actors.get(actor as usize).map_or(0, |a| a.lost)
+    }
+
+    /// Takes in a batch, appending its steps to `queue`; returns how many it appended.
+    pub fn accept(&mut self, b: &TransitionBatch, queue: &mut VecDeque<Queued>) -> usize {
+        let a = b.actor as usize;
+        if a >= MAX_ACTORS {
+            warn!(
+                actor = a,
+                "transitions from an actor id beyond the credit table; dropped"
+            );
+            return 0;
+        }
+        let book = &mut self.actors[a];
+        let current = b.incarnation >= book.incarnation;
+        if b.incarnation > book.incarnation {
+            if book.incarnation != 0 {
+                info!(
+                    actor = a,
+                    old = book.incarnation,
+                    new = b.incarnation,
+                    "actor restarted"
+                );
+            }
+            *book = ActorBook {
+                incarnation: b.incarnation,
+                ..ActorBook::default()
+            };
+        }
+        if current {
+            if b.first_seq > book.received {
+                let gap = b.first_seq - book.received;
+                warn!(
+                    actor = a,
+                    gap, "transitions lost on the way; counted as received"
+                );
+                book.lost += gap;
+            }
+            book.received = book.received.max(b.end_seq());
+            book.queued += b.len() as u64;
+            if b.blocked != 0 {
+                book.blocked_until = Some(b.end_seq());
+            }
+        }
+        let n = b.len().min(TRANSITIONS_PER_BATCH);
+        for (i, transition) in b.transitions().enumerate() {
+            queue.push_back(Queued {
+                actor: b.actor as u16,
+                incarnation: b.incarnation,
+                last_of_batch: i + 1 == n,
+                transition,
+            });
+        }
+        self.env_steps += n as u64;
+        n
+    }
+
+    /// Records that a queued step of `actor` has been learned from.
+    pub fn learned(&mut self, actor: u16, incarnation: u64) {
+        if let Some(book) = self.actors.get_mut(actor as usize) {
+            if book.incarnation == incarnation {
+                book.queued = book.queued.saturating_sub(1);
+            }
+        }
+    }
+
+    /// Whether an actor waits for credits.
+    pub fn any_blocked(&self) -> bool {
+        self.actors.iter().any(|a| a.blocked_until.is_some())
+    }
+
+    /// The grants to publish now, and the actors to wake: those blocked for want of credits
+    /// that the new grants let go on.
+    pub fn grant(&mut self, updates: u64) -> (Credits, Vec<u16>) {
+        let c = self.credits(updates);
+        let mut wake = Vec::new();
+        for (i, b) in self.actors.iter_mut().enumerate() {
+            if let Some(until) = b.blocked_until {
+                if c.granted[i] > until {
+                    wake.push(i as u16);
+                    b.blocked_until = None;
+                }
+            }
+        }
+        (c, wake)
+    }
+
+    /// The grants: each actor may send up to `window` steps beyond those learned from.
+    pub fn credits(&self, updates: u64) -> Credits {
+        let mut c = Credits {
+            env_steps: self.env_steps,
+            updates,
+            ..Credits::default()
+        };
+        for (i, b) in self.actors.iter().enumerate() {
+            c.incarnation[i] = b.incarnation;
+            c.received[i] = b.received;
+            c.granted[i] = b.received - b.queued + self.window;
+        }
+        c
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn batch(actor: u16, incarnation: u64, first_seq: u64, len: usize) -> TransitionBatch {
+        let mut b = TransitionBatch::new(actor, incarnation, 4, 2, first_seq).unwrap();
+        for i in 0..len {
+            let t = Transition {
+                state: vec![i as f32; 4],
+                action: 0,
+                reward: 1.0,
+                next_state: vec![i as f32 + 1.0; 4],
+                terminated: false,
+                mask: vec![1.0, 1.0],
+                demo: false,
+            };
+            b.push(&t).unwrap();
+        }
+        b
+    }
+
+    #[test]
+    fn grants_follow_what_is_learned_from() {
+        let mut book = CreditBook::new(64);
+        let mut q = VecDeque::new();
+        // Before anything: nobody has a grant (actors start with an implicit one of `window`).
+        assert_eq!(book.credits(0).granted_for(0, 1), None);
+
+        assert_eq!(book.accept(&batch(0, 1, 0, 32), &mut q), 32);
+        assert_eq!(book.accept(&batch(1, 1, 0, 10), &mut q), 10);
+        assert_eq!(book.env_steps(), 42);
+        let c = book.credits(0);
+        assert_eq!(
+            c.granted_for(0, 1),
+            Some(64),
+            "nothing learned yet: window only"
+        );
+        assert_eq!(c.received[0], 32);
+        assert_eq!(c.global_step_for(0, 1, 40), 42 + 8);
+
+        for _ in 0..20 {
+            let s = q.pop_front().unwrap();
+            book.learned(s.actor, s.incarnation);
+        }
+        assert_eq!(book.credits(0).granted_for(0, 1), Some(20 + 64));
+        // The 32nd step of actor 0 ends its batch.
+        let mut last = None;
+        for _ in 0..12 {
+            let s = q.pop_front().unwrap();
+            book.learned(s.actor, s.incarnation);
+            last = Some(s);
+        }
+        let last = last.unwrap();
+        assert!(last.last_of_batch && last.actor == 0);
+        assert_eq!(book.credits(0).granted_for(0, 1), Some(96));
+        assert_eq!(book.credits(0).granted_for(1, 1), Some(64));
+    }
+
+    #[test]
+    fn a_blocked_actor_is_woken_once_its_grant_lets_it_go_on() {
+        let mut book = CreditBook::new(4);
+        let mut q = VecDeque::new();
+        let mut b = batch(1, 1, 0, 4);
+        b.blocked = 1; // sent steps 0..4 with a grant of 4: blocked
+        book.accept(&b, &mut q);
+        book.accept(&batch(0, 1, 0, 2), &mut q);
+        assert!(book.any_blocked());
+        let (c, wake) = book.grant(0);
+        assert_eq!(
+            (c.granted_for(1, 1), wake),
+            (Some(4), vec![]),
+            "nothing learned yet"
+        );
+        let s = q.pop_front().unwrap();
+        book.learned(s.actor, s.incarnation);
+        let (c, wake) = book.grant(1);
+        assert_eq!((c.granted_for(1, 1), wake), (Some(5), vec![1]));
+        assert!(!book.any_blocked(), "woken once");
+        let s = q.pop_front().unwrap();
+        book.learned(s.actor, s.incarnation);
+        assert_eq!(book.grant(2).1, Vec::<u16>::new());
+        // Actor 0 uses its grant of 4, then blocks with nothing batched: an empty flagged batch.
+        book.accept(&batch(0, 1, 2, 2), &mut q);
+        let mut empty = batch(0, 1, 4, 0);
+        empty.blocked = 1;
+        book.accept(&empty, &mut q);
+        assert_eq!(
+            book.grant(2).1,
+            Vec::<u16>::new(),
+            "granted 4, blocked at 4: not yet"
+        );
+        while let Some(s) = q.pop_front() {
+            book.learned(s.actor, s.incarnation);
+        }
+        assert_eq!(book.grant(8).1, vec![0]);
+        // One that blocked on stale news (its grant is already beyond) is woken at once.
+        let mut stale = batch(0, 1, 4, 1);
+        stale.blocked = 1;
+        book.accept(&stale, &mut q);
+        assert_eq!(book.grant(8).1, vec![0]);
+    }
+
+    #[test]
+    fn a_restarted_actor_starts_a_new_account_and_old_steps_still_count() {
+        let mut book = CreditBook::new(8);
+        let mut q = VecDeque::new();
+        book.accept(&batch(2, 1, 0, 5), &mut q);
+        book.accept(&batch(2, 2, 0, 3), &mut q);
+        let c = book.credits(0);
+        assert_eq!(c.granted_for(2, 1), None);
+        assert_eq!(c.granted_for(2, 2), Some(8));
+        // A late batch of the dead incarnation is learned from but does not touch the account.
+        book.accept(&batch(2, 1, 5, 4), &mut q);
+        assert_eq!(q.len(), 12);
+        assert_eq!(book.env_steps(), 12);
+        while let Some(s) = q.pop_front() {
+            book.learned(s.actor, s.incarnation);
+        }
+        assert_eq!(book.credits(0).granted_for(2, 2), Some(3 + 8));
+    }
+
+    #[test]
+    fn lost_steps_count_as_received_so_credits_keep_flowing() {
+        let mut book = CreditBook::new(4);
+        let mut q = VecDeque::new();
+        book.accept(&batch(0, 1, 0, 2), &mut q);
+        book.accept(&batch(0, 1, 5, 2), &mut q); // steps 2..5 lost
+        assert_eq!(book.lost(0), 3);
+        while let Some(s) = q.pop_front() {
+            book.learned(s.actor, s.incarnation);
+        }
+        assert_eq!(book.credits(0).granted_for(0, 1), Some(7 + 4));
+        let mut q2 = VecDeque::new();
+        let mut out_of_range = batch(0, 1, 0, 1);
+        out_of_range.actor = MAX_ACTORS as u32;
+        assert_eq!(book.accept(&out_of_range, &mut q2), 0);
+    }
+}
