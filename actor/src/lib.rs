@@ -11,6 +11,7 @@ use std::ops::ControlFlow;
 use alfd_common::agent::NeuralActor;
 use alfd_common::environment_loop::{self, GenericActor, LoopError, Schedule};
 use alfd_common::rng::{derive_seed, seeded};
+use alfd_common::runner::evaluate_greedy;
 use alfd_harness::{ProcessArgs, Session};
 use alfd_wire::{Doorbell, Process, Progress, Role, MAX_ACTORS};
 use tracing::info;
@@ -71,6 +72,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let mut core = NeuralActor::new(
         &cfg.agent,
         &cfg.query,
+        cfg.shaping.kind,
         obs_dim,
         actions,
         seeded(derive_seed(cfg.seed, &actor_stream)),
@@ -94,6 +96,8 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     )?;
     let mut progress = wire.progress_sender()?;
     let mut actor = GenericActor::new(core, adder, variables);
+    let mut eval_env = setup.vector_env()?;
+    let eval_seed = derive_seed(cfg.seed, "eval");
 
     let end = environment_loop::run(
         env.as_mut(),
@@ -102,9 +106,19 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         Schedule {
             env_seed: derive_seed(cfg.seed, &env_stream),
             episodes: None,
+            steps: None,
             actor_id: me.id,
         },
-        |record, _| {
+        |record, actor| {
+            // Actor 0 evaluates, with the weights it acts on (as the single-process run does).
+            if me.id == 0 && cfg.evaluation.due(record.episode) {
+                record.eval_return = evaluate_greedy(
+                    actor.core.network(),
+                    eval_env.as_mut(),
+                    cfg.evaluation.episodes,
+                    eval_seed,
+                );
+            }
             progress
                 .send(Progress::episode(me.incarnation, *record))
                 .map_err(LoopError::link)?;

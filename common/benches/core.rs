@@ -102,7 +102,14 @@ fn bench_act_step(c: &mut Criterion) {
             "seed = 0\nepisodes = 1\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"bdqn\"\n[query]\nmode = \"active\"\nqueue_len = 1000\npercentile = 99.0\n",
         )
         .expect("valid config");
-        let mut actor = alfd_common::agent::NeuralActor::new(&cfg.agent, &cfg.query, OBS, ACTIONS, seeded(3));
+        let mut actor = alfd_common::agent::NeuralActor::new(
+            &cfg.agent,
+            &cfg.query,
+            cfg.shaping.kind,
+            OBS,
+            ACTIONS,
+            seeded(3),
+        );
         actor.copy_weights_from(&net, 0);
         actor.begin_episode();
         b.iter(|| {

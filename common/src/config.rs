@@ -35,8 +35,16 @@ fn invalid(field: &'static str, message: impl Into<String>) -> ConfigError {
 pub struct ExperimentConfig {
     /// Seed of everything random in the run (environment, initialisation, exploration, masks).
     pub seed: u64,
-    /// Number of training episodes.
+    /// Number of training episodes (0 or absent: no limit; then `steps` must be set).
+    #[serde(default, skip_serializing_if = "is_zero_u32")]
     pub episodes: u32,
+    /// Number of environment steps to train for, as Stable-Baselines3's `total_timesteps`; the
+    /// episode running when the limit is reached is not recorded (0 or absent: no limit).
+    #[serde(default, skip_serializing_if = "is_zero_u64")]
+    pub steps: u64,
+    /// Periodic evaluation of the greedy policy (off by default).
+    #[serde(default, skip_serializing_if = "EvalConfig::is_off")]
+    pub evaluation: EvalConfig,
     pub env: EnvConfig,
     pub agent: AgentConfig,
     #[serde(default)]
@@ -49,20 +57,138 @@ pub struct ExperimentConfig {
     pub shaping: ShapingConfig,
 }
 
+fn is_zero_u32(v: &u32) -> bool {
+    *v == 0
+}
+fn is_zero_u64(v: &u64) -> bool {
+    *v == 0
+}
+
+/// Evaluation: every `every` training episodes, `episodes` episodes of the greedy policy of the
+/// learned network (the mean of the heads' Q-values; no queries, no learning, no exploration) on
+/// a separate copy of the environment, the same seed every time. Their mean return is the
+/// `eval_return` of that training episode's record.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EvalConfig {
+    /// Evaluate after every this many training episodes (0: never).
+    #[serde(default)]
+    pub every: u32,
+    /// Greedy episodes per evaluation.
+    #[serde(default = "default_eval_episodes")]
+    pub episodes: u32,
+}
+
+fn default_eval_episodes() -> u32 {
+    10
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        Self {
+            every: 0,
+            episodes: default_eval_episodes(),
+        }
+    }
+}
+
+impl EvalConfig {
+    pub fn is_off(&self) -> bool {
+        self.every == 0
+    }
+
+    /// Whether training episode `episode` (0-based) is followed by an evaluation.
+    pub fn due(&self, episode: u32) -> bool {
+        self.every > 0 && (episode + 1).is_multiple_of(self.every)
+    }
+}
+
+impl ExperimentConfig {
+    /// The episode limit, if any.
+    pub fn episode_limit(&self) -> Option<u32> {
+        (self.episodes > 0).then_some(self.episodes)
+    }
+
+    /// The step limit, if any.
+    pub fn step_limit(&self) -> Option<u64> {
+        (self.steps > 0).then_some(self.steps)
+    }
+}
+
 /// Which environment.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum EnvName {
     Cartpole,
     Cliffwalk,
+    Mountaincar,
+    Acrobot,
+}
+
+impl EnvName {
+    /// Every environment, in the order a message lists them.
+    pub const ALL: [EnvName; 4] = [
+        EnvName::Cartpole,
+        EnvName::Cliffwalk,
+        EnvName::Mountaincar,
+        EnvName::Acrobot,
+    ];
+
+    /// The name a config uses (`cartpole`, `cliffwalk`, `mountaincar`, `acrobot`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            EnvName::Cartpole => "cartpole",
+            EnvName::Cliffwalk => "cliffwalk",
+            EnvName::Mountaincar => "mountaincar",
+            EnvName::Acrobot => "acrobot",
+        }
+    }
+
+    /// The step limit of a config that sets none: the paper's 1000 for CartPole, CliffWalk's
+    /// 500, and `gym.make`'s for MountainCar-v0 (200) and Acrobot-v1 (500).
+    pub fn default_max_episode_steps(self) -> usize {
+        match self {
+            EnvName::Cartpole => 1000,
+            EnvName::Cliffwalk => 500,
+            EnvName::Mountaincar => 200,
+            EnvName::Acrobot => 500,
+        }
+    }
+
+    /// Whether the states are ids (the tabular agents' environments) rather than vectors.
+    pub fn is_tabular(self) -> bool {
+        self == EnvName::Cliffwalk
+    }
+}
+
+impl std::fmt::Display for EnvName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for EnvName {
+    type Err = String;
+
+    /// A config name; the error lists the known ones.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|e| e.as_str() == s)
+            .ok_or_else(|| {
+                let known: Vec<&str> = Self::ALL.iter().map(|e| e.as_str()).collect();
+                format!("unknown environment `{s}` (known: {})", known.join(", "))
+            })
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EnvConfig {
-    /// `cartpole` or `cliffwalk`.
+    /// `cartpole`, `cliffwalk`, `mountaincar` or `acrobot`.
     pub name: EnvName,
-    /// Step limit after which an episode is truncated (CartPole 1000, CliffWalk 500 by default).
+    /// Step limit after which an episode is truncated (by default CartPole 1000, CliffWalk 500,
+    /// MountainCar 200, Acrobot 500).
     #[serde(default)]
     pub max_episode_steps: Option<usize>,
     /// CliffWalk: probability that the chosen move happens, in (0, 1].
@@ -79,10 +205,8 @@ fn default_p_success() -> f64 {
 
 impl EnvConfig {
     pub fn max_episode_steps(&self) -> usize {
-        self.max_episode_steps.unwrap_or(match self.name {
-            EnvName::Cartpole => 1000,
-            EnvName::Cliffwalk => 500,
-        })
+        self.max_episode_steps
+            .unwrap_or(self.name.default_max_episode_steps())
     }
 }
 
@@ -173,6 +297,48 @@ pub struct AgentConfig {
     /// Neural: width of the two hidden layers.
     #[serde(default = "default_hidden")]
     pub hidden: usize,
+    /// Neural: the loss on TD errors, `huber` (SmoothL1, the paper's) or `mse`.
+    #[serde(default)]
+    pub loss: LossKind,
+    /// Neural: Double DQN targets (the online head picks the next action, the target evaluates).
+    #[serde(default)]
+    pub double_dqn: bool,
+    /// Neural: every `target_update_every` updates, `target <- tau * online + (1 - tau) *
+    /// target` (Polyak); 1 copies (the paper's hard update).
+    #[serde(default = "default_tau")]
+    pub tau: f64,
+    /// Neural: the gradient is scaled to at most this global L2 norm (absent: no clipping).
+    #[serde(default)]
+    pub max_grad_norm: Option<f64>,
+    /// Neural: no update before this many transitions were stored (nor before a full batch).
+    #[serde(default)]
+    pub learning_starts: u64,
+    /// Neural: the fraction of every batch drawn from the demonstrations in the replay buffer
+    /// (0: uniform, the paper's).
+    #[serde(default)]
+    pub demo_fraction: f64,
+    /// Neural: λ_E of DQfD's large-margin loss on demonstrated transitions (0: off).
+    #[serde(default)]
+    pub margin_loss_weight: f64,
+    /// Neural: the margin `l` of that loss (Hester et al. use 0.8).
+    #[serde(default = "default_margin")]
+    pub margin: f64,
+}
+
+/// The loss on TD errors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LossKind {
+    #[default]
+    Huber,
+    Mse,
+}
+
+fn default_tau() -> f64 {
+    1.0
+}
+fn default_margin() -> f64 {
+    0.8
 }
 
 fn default_gamma() -> f64 {
@@ -352,9 +518,25 @@ pub struct ShapingConfig {
     /// Shaping starts once this many demonstrations exist.
     #[serde(default = "default_min_demos")]
     pub min_demos: usize,
-    /// Shaping stops at this multiple of the global step of the last demonstration.
+    /// Shaping stops at this multiple of the global step of the last demonstration (`paper`
+    /// shaping only).
     #[serde(default = "default_stop_multiple")]
     pub stop_multiple: f64,
+    /// `paper`: eq. 4, `r + λ[1 − (p(a|s) − π(a|s))²]`, for a while. `potential`: the
+    /// demonstration model as a potential over state-action pairs, `F = γΦ(s',a') − Φ(s,a)` with
+    /// `Φ(s,a) = λ p(a|s)` (look-ahead advice, Wiewiora et al. 2003), which does not change the
+    /// optimal policy and stays on for the whole run.
+    #[serde(default)]
+    pub kind: ShapingKind,
+}
+
+/// Which shaping.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ShapingKind {
+    #[default]
+    Paper,
+    Potential,
 }
 
 fn default_lambda() -> f64 {
@@ -373,6 +555,7 @@ impl Default for ShapingConfig {
             lambda: default_lambda(),
             min_demos: default_min_demos(),
             stop_multiple: default_stop_multiple(),
+            kind: ShapingKind::Paper,
         }
     }
 }
@@ -383,6 +566,7 @@ impl ShapingConfig {
             lambda: self.lambda,
             min_demos: self.min_demos,
             stop_multiple: self.stop_multiple,
+            kind: self.kind,
         }
     }
 }
@@ -438,8 +622,14 @@ impl ExperimentConfig {
 
     /// Checks every value; the error names the field.
     pub fn validate(&self) -> Result<()> {
-        if self.episodes == 0 {
-            return Err(invalid("episodes", "must be at least 1"));
+        if self.episodes == 0 && self.steps == 0 {
+            return Err(invalid(
+                "episodes",
+                "set `episodes` or `steps` (or both) to at least 1",
+            ));
+        }
+        if self.evaluation.every > 0 && self.evaluation.episodes == 0 {
+            return Err(invalid("evaluation.episodes", "must be at least 1"));
         }
         let e = &self.env;
         if !(e.p_success > 0.0 && e.p_success <= 1.0) {
@@ -451,7 +641,7 @@ impl ExperimentConfig {
         if e.max_episode_steps() == 0 {
             return Err(invalid("env.max_episode_steps", "must be at least 1"));
         }
-        if e.name == EnvName::Cartpole && e.map.is_some() {
+        if e.name != EnvName::Cliffwalk && e.map.is_some() {
             return Err(invalid("env.map", "applies to cliffwalk only"));
         }
         let a = &self.agent;
@@ -477,10 +667,10 @@ impl ExperimentConfig {
                 ),
             ));
         }
-        if a.kind.is_tabular() != (e.name == EnvName::Cliffwalk) {
+        if a.kind.is_tabular() != e.name.is_tabular() {
             return Err(invalid(
                 "agent.kind",
-                format!("{:?} does not run on {:?}: tabular agents run on cliffwalk, neural ones on cartpole", a.kind, e.name),
+                format!("{:?} does not run on {}: tabular agents run on cliffwalk, neural ones on cartpole, mountaincar and acrobot", a.kind, e.name),
             ));
         }
         if !(a.gamma >= 0.0 && a.gamma <= 1.0) {
@@ -530,6 +720,54 @@ impl ExperimentConfig {
         if a.hidden == 0 {
             return Err(invalid("agent.hidden", "must be at least 1"));
         }
+        if !a.epsilon_decay_steps.is_finite() {
+            return Err(invalid("agent.epsilon_decay_steps", "must be finite"));
+        }
+        if !a.kind.is_tabular() {
+            if a.replay_capacity < a.batch_size {
+                return Err(invalid(
+                    "agent.replay_capacity",
+                    format!(
+                        "must hold at least one batch (batch_size = {}), got {}",
+                        a.batch_size, a.replay_capacity
+                    ),
+                ));
+            }
+            if a.updates_per_step == 0 {
+                return Err(invalid(
+                    "agent.updates_per_step",
+                    "must be at least 1 (with 0 the agent never learns)",
+                ));
+            }
+        }
+        if !(a.tau > 0.0 && a.tau <= 1.0) {
+            return Err(invalid(
+                "agent.tau",
+                format!("must be in (0, 1], got {}", a.tau),
+            ));
+        }
+        if let Some(g) = a.max_grad_norm {
+            if !(g > 0.0 && g.is_finite()) {
+                return Err(invalid(
+                    "agent.max_grad_norm",
+                    format!("must be > 0, got {g}"),
+                ));
+            }
+        }
+        if !(0.0..=1.0).contains(&a.demo_fraction) {
+            return Err(invalid(
+                "agent.demo_fraction",
+                format!("must be in [0, 1], got {}", a.demo_fraction),
+            ));
+        }
+        for (field, v) in [
+            ("agent.margin_loss_weight", a.margin_loss_weight),
+            ("agent.margin", a.margin),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(invalid(field, format!("must be >= 0, got {v}")));
+            }
+        }
         let q = &self.query;
         if q.queue_len == 0 {
             return Err(invalid("query.queue_len", "L_q must be at least 1"));
@@ -565,7 +803,7 @@ impl ExperimentConfig {
         if self.shaping_enabled() && a.kind.is_tabular() {
             return Err(invalid(
                 "expert.model",
-                "reward shaping with a kernel model applies to the neural agents (cartpole)",
+                "reward shaping with a kernel model applies to the neural agents (cartpole, mountaincar, acrobot)",
             ));
         }
         if self.expert.name.trim().is_empty() {
@@ -677,8 +915,8 @@ model = "krr"
         assert!(err(&["episodes=0"]).contains("episodes"));
         let unknown = err(&["agent.hedas=2"]);
         assert!(unknown.contains("hedas"), "{unknown}");
-        let unknown_env = err(&["env.name=mountaincar"]);
-        assert!(unknown_env.contains("mountaincar"), "{unknown_env}");
+        let unknown_env = err(&["env.name=pendulum"]);
+        assert!(unknown_env.contains("pendulum"), "{unknown_env}");
         assert!(err(&["nonsense"]).contains("expected key=value"));
     }
 
@@ -688,5 +926,30 @@ model = "krr"
         let c = ExperimentConfig::from_toml(text).unwrap();
         assert_eq!(c.env.max_episode_steps(), 500);
         assert_eq!(c.agent.learning_rate(), 0.1);
+    }
+
+    #[test]
+    fn sparse_reward_envs_take_neural_agents_and_their_own_limits() {
+        for (name, limit) in [("mountaincar", 200), ("acrobot", 500)] {
+            let c = ExperimentConfig::from_toml_with_overrides(BASE, &[format!("env.name={name}")])
+                .unwrap();
+            assert_eq!(c.env.max_episode_steps(), limit, "{name}");
+            assert_eq!(c.env.name.to_string(), name);
+            assert_eq!(name.parse::<EnvName>(), Ok(c.env.name));
+            let tabular = err(&[&format!("env.name={name}"), "agent.kind=qlearning"]);
+            assert!(
+                tabular.contains("agent.kind")
+                    && tabular.contains(&format!("does not run on {name}"))
+                    && tabular.contains("neural ones on cartpole, mountaincar and acrobot"),
+                "{tabular}"
+            );
+            let map = err(&[&format!("env.name={name}"), "env.map=m.txt"]);
+            assert!(map.contains("env.map"), "{map}");
+        }
+        let e = "pendulum".parse::<EnvName>().unwrap_err();
+        assert_eq!(
+            e,
+            "unknown environment `pendulum` (known: cartpole, cliffwalk, mountaincar, acrobot)"
+        );
     }
 }

@@ -4,7 +4,7 @@
 /// One training episode, as `episodes.csv` records it. Plain numbers in a fixed layout
 /// (`repr(C)`), so the actor processes send it to the launcher as it is.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EpisodeRecord {
     /// The environment's undiscounted return (never the shaped one).
     pub ret: f64,
@@ -12,6 +12,8 @@ pub struct EpisodeRecord {
     pub mean_js: f64,
     /// The run's global environment steps at the end of the episode.
     pub total_steps: u64,
+    /// Mean return of the greedy evaluation after this episode (NaN: no evaluation then).
+    pub eval_return: f64,
     /// 0-based episode index in the run.
     pub episode: u32,
     pub length: u32,
@@ -27,14 +29,31 @@ pub struct EpisodeRecord {
 
 /// The header of `episodes.csv`.
 pub const CSV_HEADER: &str =
-    "episode,return,length,demos_used,mean_js,queries,shaped_steps,total_steps,actor";
+    "episode,return,length,demos_used,mean_js,queries,shaped_steps,total_steps,actor,eval_return";
+
+impl Default for EpisodeRecord {
+    fn default() -> Self {
+        Self {
+            ret: 0.0,
+            mean_js: 0.0,
+            total_steps: 0,
+            eval_return: f64::NAN,
+            episode: 0,
+            length: 0,
+            demos_used: 0,
+            queries: 0,
+            shaped_steps: 0,
+            actor: 0,
+        }
+    }
+}
 
 impl EpisodeRecord {
     /// One CSV row (no newline); floats in Rust's shortest round-trip form, so rows are
     /// byte-identical for identical runs.
     pub fn csv_row(&self) -> String {
         format!(
-            "{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{}",
             self.episode,
             self.ret,
             self.length,
@@ -43,7 +62,12 @@ impl EpisodeRecord {
             self.queries,
             self.shaped_steps,
             self.total_steps,
-            self.actor
+            self.actor,
+            if self.eval_return.is_nan() {
+                String::new()
+            } else {
+                self.eval_return.to_string()
+            }
         )
     }
 }
@@ -64,6 +88,59 @@ pub fn episodes_csv(records: &[EpisodeRecord]) -> String {
 pub fn mean_return_last_50(returns: &[f64]) -> f64 {
     let tail = &returns[returns.len().saturating_sub(50)..];
     tail.iter().sum::<f64>() / tail.len().max(1) as f64
+}
+
+/// What a finished run reports, in one process or many (`summary.json`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RunSummary {
+    /// Episodes recorded in `episodes.csv`.
+    pub episodes: usize,
+    pub mean_return_last_50: f64,
+    /// Demonstrations used by the run (`demos_used` of the last episode recorded).
+    pub demos_used: u32,
+    pub wall_clock_s: f64,
+    /// CliffWalk: value at S of the learned greedy policy, and of the optimal one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub greedy_value_at_start: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub optimal_value_at_start: Option<f64>,
+    /// A multi-process run's own numbers.
+    #[serde(default, flatten, skip_serializing_if = "Option::is_none")]
+    pub runtime: Option<RuntimeSummary>,
+}
+
+/// What a multi-process run adds to its [`RunSummary`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RuntimeSummary {
+    pub run_id: String,
+    /// Lines of `demos.jsonl`: every demonstration the expert gave, including those asked in
+    /// episodes still running when the run stopped.
+    pub demos: usize,
+    pub env_steps: u64,
+    pub updates: u64,
+    /// Rates over the time the actors ran (from their start to the end of the run).
+    pub env_steps_per_s: f64,
+    pub updates_per_s: f64,
+    pub actor_restarts: u32,
+    pub expert_swaps: u32,
+    /// The run was stopped by Ctrl-C (or SIGTERM) before its last episode.
+    pub interrupted: bool,
+}
+
+impl RunSummary {
+    /// The summary of `records` (in order), `wall_clock_s` long.
+    pub fn of(records: &[EpisodeRecord], wall_clock_s: f64) -> Self {
+        let returns: Vec<f64> = records.iter().map(|r| r.ret).collect();
+        Self {
+            episodes: records.len(),
+            mean_return_last_50: mean_return_last_50(&returns),
+            demos_used: records.last().map_or(0, |r| r.demos_used),
+            wall_clock_s,
+            greedy_value_at_start: None,
+            optimal_value_at_start: None,
+            runtime: None,
+        }
+    }
 }
 
 /// Mean, median and (population) standard deviation of returns, as `alfd expert eval` prints them.
@@ -101,16 +178,60 @@ mod tests {
             shaped_steps: 7,
             total_steps: 99,
             actor: 5,
+            eval_return: f64::NAN,
         };
-        assert_eq!(r.csv_row(), "3,12.5,12,4,0.1,2,7,99,5");
+        assert_eq!(r.csv_row(), "3,12.5,12,4,0.1,2,7,99,5,");
+        let evaluated = EpisodeRecord {
+            eval_return: 950.5,
+            ..r
+        };
+        assert_eq!(evaluated.csv_row(), "3,12.5,12,4,0.1,2,7,99,5,950.5");
         assert_eq!(
             r.csv_row().split(',').count(),
             CSV_HEADER.split(',').count()
         );
         assert_eq!(
             episodes_csv(&[r, r]),
-            format!("{CSV_HEADER}\n3,12.5,12,4,0.1,2,7,99,5\n3,12.5,12,4,0.1,2,7,99,5\n")
+            format!("{CSV_HEADER}\n3,12.5,12,4,0.1,2,7,99,5,\n3,12.5,12,4,0.1,2,7,99,5,\n")
         );
+    }
+
+    #[test]
+    fn a_summary_reads_back_with_or_without_the_runtime_part() {
+        let r = |ret, demos_used| EpisodeRecord {
+            ret,
+            demos_used,
+            ..EpisodeRecord::default()
+        };
+        let mut s = RunSummary::of(&[r(1.0, 0), r(3.0, 2)], 1.5);
+        assert_eq!(
+            (s.episodes, s.mean_return_last_50, s.demos_used),
+            (2, 2.0, 2)
+        );
+        let json = serde_json::to_string(&s).unwrap();
+        assert!(
+            !json.contains("run_id") && !json.contains("greedy"),
+            "{json}"
+        );
+        assert_eq!(serde_json::from_str::<RunSummary>(&json).unwrap(), s);
+        s.runtime = Some(RuntimeSummary {
+            run_id: "r1".into(),
+            demos: 3,
+            env_steps: 40,
+            updates: 39,
+            env_steps_per_s: 1.0,
+            updates_per_s: 1.0,
+            actor_restarts: 0,
+            expert_swaps: 1,
+            interrupted: false,
+        });
+        let json = serde_json::to_string(&s).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        assert_eq!(
+            (v["demos"].as_u64(), v["expert_swaps"].as_u64()),
+            (Some(3), Some(1))
+        );
+        assert_eq!(serde_json::from_str::<RunSummary>(&json).unwrap(), s);
     }
 
     #[test]

@@ -35,6 +35,8 @@ pub struct Batch {
     pub terminated: Vec<f32>,
     /// `size * heads` values.
     pub masks: Vec<f32>,
+    /// 1.0 where the transition is a demonstration (empty: none known).
+    pub demos: Vec<f32>,
 }
 
 /// Fixed-capacity ring buffer in structure-of-arrays layout.
@@ -52,6 +54,8 @@ pub struct ReplayBuffer {
     terminated: Vec<f32>,
     masks: Vec<f32>,
     demo: Vec<bool>,
+    /// The slots holding demonstrations, in no particular order.
+    demo_slots: Vec<usize>,
 }
 
 impl ReplayBuffer {
@@ -70,6 +74,7 @@ impl ReplayBuffer {
             terminated: vec![0.0; capacity],
             masks: vec![0.0; capacity * heads],
             demo: vec![false; capacity],
+            demo_slots: Vec::new(),
         }
     }
 
@@ -94,6 +99,18 @@ impl ReplayBuffer {
         self.rewards[i] = t.reward;
         self.terminated[i] = if t.terminated { 1.0 } else { 0.0 };
         self.masks[i * self.heads..(i + 1) * self.heads].copy_from_slice(&t.mask);
+        if self.demo[i] && i < self.len {
+            // A demonstration leaves the buffer.
+            let at = self
+                .demo_slots
+                .iter()
+                .position(|&slot| slot == i)
+                .expect("every demonstration slot is listed");
+            self.demo_slots.swap_remove(at);
+        }
+        if t.demo {
+            self.demo_slots.push(i);
+        }
         self.demo[i] = t.demo;
         self.next = (self.next + 1) % self.capacity;
         self.len = (self.len + 1).min(self.capacity);
@@ -113,11 +130,25 @@ impl ReplayBuffer {
 
     /// How many stored transitions are demonstrations.
     pub fn demos(&self) -> usize {
-        self.demo[..self.len].iter().filter(|&&d| d).count()
+        self.demo_slots.len()
     }
 
     /// Samples `size` transitions uniformly with replacement into `batch` (reusing its storage).
     pub fn sample_into(&self, size: usize, rng: &mut Rng, batch: &mut Batch) {
+        self.sample_with_demos_into(size, 0.0, rng, batch);
+    }
+
+    /// Samples `size` transitions: `round(demo_fraction * size)` of them uniformly among the
+    /// stored demonstrations (none if there are none), the rest uniformly among all, each with
+    /// replacement, into `batch` (reusing its storage). With `demo_fraction = 0` this is
+    /// [`ReplayBuffer::sample_into`], draw for draw.
+    pub fn sample_with_demos_into(
+        &self,
+        size: usize,
+        demo_fraction: f64,
+        rng: &mut Rng,
+        batch: &mut Batch,
+    ) {
         assert!(self.len > 0, "cannot sample from an empty replay buffer");
         let d = self.obs_dim;
         let h = self.heads;
@@ -130,8 +161,18 @@ impl ReplayBuffer {
         batch.next_states.clear();
         batch.terminated.clear();
         batch.masks.clear();
-        for _ in 0..size {
-            let i = rng.random_range(0..self.len);
+        batch.demos.clear();
+        let from_demos = if self.demo_slots.is_empty() {
+            0
+        } else {
+            ((demo_fraction * size as f64).round() as usize).min(size)
+        };
+        for j in 0..size {
+            let i = if j < from_demos {
+                self.demo_slots[rng.random_range(0..self.demo_slots.len())]
+            } else {
+                rng.random_range(0..self.len)
+            };
             batch
                 .states
                 .extend_from_slice(&self.states[i * d..(i + 1) * d]);
@@ -144,6 +185,7 @@ impl ReplayBuffer {
             batch
                 .masks
                 .extend_from_slice(&self.masks[i * h..(i + 1) * h]);
+            batch.demos.push(if self.demo[i] { 1.0 } else { 0.0 });
         }
     }
 }
@@ -189,5 +231,41 @@ mod tests {
         seen.sort();
         seen.dedup();
         assert_eq!(seen, vec![2, 3, 4, 5]);
+        assert_eq!(
+            batch.demos.iter().sum::<f32>() as usize,
+            batch.rewards.iter().filter(|&&r| r == 5.0).count()
+        );
+    }
+
+    #[test]
+    fn a_fixed_fraction_of_each_batch_comes_from_the_demonstrations() {
+        let mut rb = ReplayBuffer::new(100, 2, 2);
+        for i in 0..100 {
+            rb.push(&t(i as f32, i % 25 == 0)); // demonstrations at 0, 25, 50, 75
+        }
+        assert_eq!(rb.demos(), 4);
+        let mut rng = crate::rng::seeded(4);
+        let mut batch = Batch::default();
+        rb.sample_with_demos_into(64, 0.25, &mut rng, &mut batch);
+        // round(0.25 * 64) = 16 demonstrations first, then uniform draws (about 4% demos).
+        assert!(batch.demos[..16].iter().all(|&d| d == 1.0));
+        assert!(batch.rewards[..16].iter().all(|&r| r as i32 % 25 == 0));
+        let rest = batch.demos[16..].iter().filter(|&&d| d == 1.0).count();
+        assert!(rest <= 8, "{rest} demonstrations among 48 uniform draws");
+        // Overwritten demonstrations leave the list: after 100 more plain steps none is left.
+        for i in 0..100 {
+            rb.push(&t(i as f32, false));
+        }
+        assert_eq!(rb.demos(), 0);
+        rb.sample_with_demos_into(8, 0.5, &mut rng, &mut batch);
+        assert!(
+            batch.demos.iter().all(|&d| d == 0.0),
+            "no demonstrations to draw from"
+        );
+        // Fraction 0 is plain uniform sampling, draw for draw.
+        let (mut a, mut b) = (Batch::default(), Batch::default());
+        rb.sample_into(32, &mut crate::rng::seeded(9), &mut a);
+        rb.sample_with_demos_into(32, 0.0, &mut crate::rng::seeded(9), &mut b);
+        assert_eq!(a.states, b.states);
     }
 }

@@ -5,9 +5,11 @@
 
 use std::ops::ControlFlow;
 
-use crate::agent::{Demonstrator, ExpertCore, NeuralActor, NeuralLearner, TabularAgent};
+use crate::agent::{
+    Demonstrator, ExpertCore, NetworkDemonstrator, NeuralActor, NeuralLearner, TabularAgent,
+};
 use crate::config::ExperimentConfig;
-use crate::env::{vector_env, CartPole, CliffWalk, Env};
+use crate::env::{vector_env, CartPole, CliffWalk, Env, VectorEnv};
 use crate::environment_loop::in_process::{LearnerHandle, LocalExpert};
 use crate::environment_loop::{self, GenericActor, Schedule};
 use crate::nn::Mlp;
@@ -45,7 +47,8 @@ pub fn expert_core(cfg: &ExperimentConfig, num_actions: usize) -> ExpertCore {
 fn schedule(cfg: &ExperimentConfig) -> Schedule {
     Schedule {
         env_seed: derive_seed(cfg.seed, "env"),
-        episodes: Some(cfg.episodes),
+        episodes: cfg.episode_limit(),
+        steps: cfg.step_limit(),
         actor_id: 0,
     }
 }
@@ -68,7 +71,7 @@ pub fn run_tabular(
     );
     let core = expert_core(cfg, env.num_actions());
     let mut expert = LocalExpert::new(core, demonstrator, &cfg.expert.name, false);
-    let mut records = Vec::with_capacity(cfg.episodes as usize);
+    let mut records = Vec::new();
     environment_loop::run(
         &mut env,
         &mut agent,
@@ -112,6 +115,7 @@ pub fn run_neural(
     let core = NeuralActor::new(
         &cfg.agent,
         &cfg.query,
+        cfg.shaping.kind,
         obs_dim,
         actions,
         seeded(derive_seed(cfg.seed, "actor-0")),
@@ -124,13 +128,23 @@ pub fn run_neural(
         &cfg.expert.name,
         cfg.shaping_enabled(),
     );
-    let mut records = Vec::with_capacity(cfg.episodes as usize);
+    let mut records = Vec::new();
+    let mut eval_env = vector_env(&cfg.env).expect("the same environment");
+    let eval_seed = derive_seed(cfg.seed, "eval");
     environment_loop::run(
         env.as_mut(),
         &mut actor,
         &mut expert,
         schedule(cfg),
-        |r, _| {
+        |r, actor| {
+            if cfg.evaluation.due(r.episode) {
+                r.eval_return = evaluate_greedy(
+                    actor.core.network(),
+                    eval_env.as_mut(),
+                    cfg.evaluation.episodes,
+                    eval_seed,
+                );
+            }
             records.push(*r);
             Ok(on_episode(r, handle.learner().network()))
         },
@@ -144,8 +158,16 @@ pub fn run_neural(
     }
 }
 
+/// Mean return of `episodes` episodes of `env` played greedily by `net` (on the mean of its
+/// heads' Q-values), the first reset seeded with `seed`: the `eval_return` of a record.
+pub fn evaluate_greedy(net: &Mlp, env: &mut VectorEnv, episodes: u32, seed: u64) -> f64 {
+    let mut policy = NetworkDemonstrator::new(net.clone());
+    let returns = evaluate(env, episodes as usize, seed, |obs| policy.act(obs));
+    returns.iter().sum::<f64>() / returns.len().max(1) as f64
+}
+
 /// Returns of `episodes` episodes of `env` played by `act`, the first reset seeded with `seed`.
-pub fn evaluate<E: Env>(
+pub fn evaluate<E: Env + ?Sized>(
     env: &mut E,
     episodes: usize,
     seed: u64,

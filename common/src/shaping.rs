@@ -1,13 +1,21 @@
 //! Reward shaping with the demonstration model (paper section 3.5, eq. 4), and when it is on.
 
+pub use crate::config::ShapingKind;
+
 /// Eq. 4: `r̂ = r + λ [1 − (p(a|s, demo model) − π(a|s))²]`.
 pub fn shaped_reward(reward: f64, lambda: f64, p_demo: f64, pi: f64) -> f64 {
     let d = p_demo - pi;
     reward + lambda * (1.0 - d * d)
 }
 
+/// Potential-based shaping (look-ahead advice): `F = γΦ(s',a') − Φ(s,a)`, given `Φ(s',a')`
+/// (`phi_next`, 0 after a terminal step) and `Φ(s,a)` (`phi`).
+pub fn potential_bonus(gamma: f64, phi_next: f64, phi: f64) -> f64 {
+    gamma * phi_next - phi
+}
+
 /// When shaping applies: from the moment `min_demos` demonstrations exist until `stop_multiple`
-/// times the (global) step of the last demonstration.
+/// times the (global) step of the last demonstration (potential-based shaping: to the end).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ShapingSchedule {
     /// λ of eq. 4.
@@ -16,6 +24,7 @@ pub struct ShapingSchedule {
     pub min_demos: usize,
     /// Shaping stops at `stop_multiple × (step of the last demonstration)`.
     pub stop_multiple: f64,
+    pub kind: ShapingKind,
 }
 
 impl ShapingSchedule {
@@ -24,7 +33,8 @@ impl ShapingSchedule {
     pub fn active(&self, step: u64, demos: usize, last_demo_step: u64) -> bool {
         demos > 0
             && demos >= self.min_demos
-            && (step as f64) < self.stop_multiple * (last_demo_step as f64)
+            && (self.kind == ShapingKind::Potential
+                || (step as f64) < self.stop_multiple * (last_demo_step as f64))
     }
 
     /// The model and λ to shape the reward of global step `step` with (Algorithm 1 line 18), or
@@ -60,6 +70,7 @@ mod tests {
             lambda: 0.75,
             min_demos: 10,
             stop_multiple: 2.0,
+            kind: ShapingKind::Paper,
         };
         assert!(!s.active(50, 9, 40), "not enough demos yet");
         assert!(s.active(50, 10, 40));
@@ -74,5 +85,21 @@ mod tests {
         );
         assert_eq!(s.model_for::<&str>(50, 10, 40, None), None);
         assert_eq!(s.model_for(80, 10, 40, Some(&"model")), None);
+        let p = ShapingSchedule {
+            kind: ShapingKind::Potential,
+            ..s
+        };
+        assert!(p.active(1_000_000, 10, 40), "potential shaping never stops");
+        assert!(!p.active(50, 9, 40), "but starts at min_demos");
+    }
+
+    #[test]
+    fn potential_shaping_telescopes_over_an_episode() {
+        // F_t = γΦ_{t+1} − Φ_t with Φ = 0 after the end: Σ γ^t F_t = −Φ_0.
+        let (gamma, phi): (f64, [f64; 4]) = (0.9, [0.3, 0.6, 0.1, 0.75]);
+        let f = |t: usize| gamma * phi.get(t + 1).copied().unwrap_or(0.0) - phi[t];
+        let total: f64 = (0..4).map(|t| gamma.powi(t as i32) * f(t)).sum();
+        assert!((total + phi[0]).abs() < 1e-12, "{total}");
+        assert!((potential_bonus(gamma, 0.6, 0.3) - (0.9 * 0.6 - 0.3)).abs() < 1e-15);
     }
 }

@@ -7,11 +7,11 @@ use alfd_common::replay::Batch;
 use alfd_common::rng::{seeded, Rng};
 use rand::Rng as _;
 
-const OBS: usize = 4;
+pub(crate) const OBS: usize = 4;
 
 /// A random batch: states in [-2, 2], rewards in [-3, 3] (so that some TD errors fall in
 /// Huber's linear part), a third of transitions terminal, masks Bernoulli(0.6).
-fn random_batch(size: usize, heads: usize, actions: usize, rng: &mut Rng) -> Batch {
+pub(crate) fn random_batch(size: usize, heads: usize, actions: usize, rng: &mut Rng) -> Batch {
     let mut uniform = |lo: f32, hi: f32, n: usize| -> Vec<f32> {
         (0..n).map(|_| rng.random_range(lo..hi)).collect()
     };
@@ -39,11 +39,12 @@ fn random_batch(size: usize, heads: usize, actions: usize, rng: &mut Rng) -> Bat
         next_states,
         terminated,
         masks,
+        demos: vec![],
     }
 }
 
 /// A separate forward pass in f64 over the flat parameters (PyTorch layout).
-fn forward64(p: &[f64], hidden: usize, outputs: usize, x: &[f64]) -> Vec<f64> {
+pub(crate) fn forward64(p: &[f64], hidden: usize, outputs: usize, x: &[f64]) -> Vec<f64> {
     let layer = |p: &[f64], n_in: usize, n_out: usize, x: &[f64], relu: bool| -> Vec<f64> {
         let (w, b) = p.split_at(n_in * n_out);
         (0..n_out)

@@ -2,14 +2,13 @@
 //! `demos.jsonl`, and the learned policy (weights as safetensors, or a CliffWalk policy table
 //! with its value) to the output directory.
 
-use std::io::Write as _;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use alfd_common::config::{EnvName, ExperimentConfig};
 use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration};
-use alfd_common::record::{episodes_csv, EpisodeRecord};
+use alfd_common::record::{episodes_csv, EpisodeRecord, RunSummary};
 use alfd_common::runner::{run_neural, run_tabular};
 use anyhow::Context as _;
 
@@ -36,20 +35,6 @@ pub fn run(args: LocalArgs) -> anyhow::Result<()> {
     let summary = run_config(&cfg, &args.out, !args.quiet)?;
     println!("{}", serde_json::to_string(&summary)?);
     Ok(())
-}
-
-/// What a finished run reports (also written as `summary.json`).
-#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub struct RunSummary {
-    pub episodes: usize,
-    pub mean_return_last_50: f64,
-    pub demos_used: u32,
-    pub wall_clock_s: f64,
-    /// CliffWalk: value at S of the learned greedy policy, and of the optimal one.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub greedy_value_at_start: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub optimal_value_at_start: Option<f64>,
 }
 
 /// Runs `cfg` in this process and writes its outputs to `out`.
@@ -85,8 +70,8 @@ pub fn run_config(
                 Some(vi.values[s0]),
             )
         }
-        EnvName::Cartpole => {
-            let mut demonstrator = alfd_expert::registry::cartpole(&cfg.expert.name)?;
+        _ => {
+            let mut demonstrator = setup::neural_demonstrator(cfg)?;
             let run = run_neural(cfg, demonstrator.as_mut(), |r, _| show(r));
             write(
                 out,
@@ -105,14 +90,10 @@ pub fn run_config(
         jsonl.push(b'\n');
     }
     write(out, "demos.jsonl", &jsonl)?;
-    let tail = &records[records.len().saturating_sub(50)..];
     let summary = RunSummary {
-        episodes: records.len(),
-        mean_return_last_50: tail.iter().map(|r| r.ret).sum::<f64>() / tail.len().max(1) as f64,
-        demos_used: records.last().map_or(0, |r| r.demos_used),
-        wall_clock_s: wall,
         greedy_value_at_start: greedy,
         optimal_value_at_start: optimal,
+        ..RunSummary::of(&records, wall)
     };
     write(
         out,
@@ -137,15 +118,7 @@ fn progress_bar(len: u64, show: bool) -> indicatif::ProgressBar {
     bar
 }
 
-/// Writes a file whole, via a temporary file and a rename, so a crash never leaves half a file.
+/// Writes `dir/name` whole (see [`alfd_harness::write_atomically`]).
 pub fn write(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
-    let path = dir.join(name);
-    let tmp = dir.join(format!(".{name}.tmp"));
-    let mut f =
-        std::fs::File::create(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
-    f.write_all(bytes)
-        .with_context(|| format!("cannot write {}", tmp.display()))?;
-    f.sync_all().ok();
-    std::fs::rename(&tmp, &path).with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(())
+    alfd_harness::write_atomically(&dir.join(name), bytes)
 }

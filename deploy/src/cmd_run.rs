@@ -92,7 +92,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         ))
     })?;
     // Fail before starting anything if the expert is unknown.
-    alfd_expert::registry::cartpole(&cfg.expert.name)?;
+    setup::neural_demonstrator(&cfg)?;
     let run_id = launcher::new_run_id();
     let run_dir = args
         .out
@@ -116,7 +116,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
     println!("{}", serde_json::to_string(&summary)?);
-    if summary.interrupted {
+    if summary.runtime.as_ref().is_some_and(|r| r.interrupted) {
         eprintln!(
             "interrupted: the run was stopped cleanly; its directory is {}",
             run_dir.display()
@@ -141,8 +141,11 @@ pub struct SwapArgs {
 
 /// Asks the launcher of a live run to replace its expert, and waits for the outcome.
 pub fn swap(args: SwapArgs) -> anyhow::Result<()> {
-    alfd_expert::registry::cartpole(&args.expert)?;
     let info = launcher::read_run_info(&args.run).map_err(|e| usage(format!("{e:#}")))?;
+    // The new expert must exist for the run's environment.
+    let mut cfg = setup::load_config(&args.run.join("config.toml"), &[])?;
+    cfg.expert.name = args.expert.clone();
+    setup::neural_demonstrator(&cfg)?;
     if !PathBuf::from(format!("/proc/{}", info.launcher_pid)).exists() {
         return Err(usage(format!(
             "run {} is not live (its launcher, pid {}, has exited)",

@@ -24,7 +24,9 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use alfd_common::config::ExperimentConfig;
-use alfd_common::record::{EpisodeRecord, CSV_HEADER};
+use alfd_common::record::{
+    mean_return_last_50, EpisodeRecord, RunSummary, RuntimeSummary, CSV_HEADER,
+};
 use alfd_harness::{RuntimeConfig, RUNTIME_FILE};
 use alfd_wire::{
     self as wire, command, process_state, progress_kind, ActorBells, Bell, Control, Doorbell,
@@ -84,26 +86,6 @@ pub struct SwapResponse {
 
 pub const SWAP_REQUEST: &str = "swap-expert.request.json";
 pub const SWAP_RESPONSE: &str = "swap-expert.response.json";
-
-/// What a finished run reports (also written as `summary.json`).
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct RunSummary {
-    pub run_id: String,
-    pub episodes: usize,
-    pub mean_return_last_50: f64,
-    /// Lines of `demos.jsonl`.
-    pub demos: usize,
-    pub env_steps: u64,
-    pub updates: u64,
-    pub wall_clock_s: f64,
-    /// Rates over the time the actors ran (from their start to the end of the run).
-    pub env_steps_per_s: f64,
-    pub updates_per_s: f64,
-    pub actor_restarts: u32,
-    pub expert_swaps: u32,
-    /// The run was stopped by Ctrl-C (or SIGTERM) before its last episode.
-    pub interrupted: bool,
-}
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 enum Kind {
@@ -264,6 +246,8 @@ struct Launcher<'a, 'w> {
     /// Demonstrations answered, as the active expert reports them (for the progress bar only:
     /// its reports arrive in no fixed order with the actors' episodes).
     demos_answered: u64,
+    /// The newest incarnation of each actor id that recorded an episode (0: none yet).
+    incarnations: [u64; alfd_wire::MAX_ACTORS],
     restarts: u32,
     swaps: u32,
     swap: Option<Swap>,
@@ -319,6 +303,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             all_returns: Vec::new(),
             demos_used: 0,
             demos_answered: 0,
+            incarnations: [0; alfd_wire::MAX_ACTORS],
             restarts: 0,
             swaps: 0,
             swap: None,
@@ -442,6 +427,20 @@ impl<'a, 'w> Launcher<'a, 'w> {
     fn record_episode(&mut self, p: &Progress) -> anyhow::Result<()> {
         if self.recorded >= u64::from(self.plan.cfg.episodes) {
             return Ok(());
+        }
+        let actor = p.header.id as usize;
+        if let Some(seen) = self.incarnations.get_mut(actor) {
+            if p.incarnation > *seen {
+                if *seen != 0 {
+                    // Part of a recovery, reported beside the death that caused it.
+                    warn!(
+                        actor,
+                        incarnation = p.incarnation,
+                        "first episode of a restarted actor"
+                    );
+                }
+                *seen = p.incarnation;
+            }
         }
         // Episodes are numbered in order of arrival; demonstrations used never go down.
         let r = EpisodeRecord {
@@ -770,25 +769,29 @@ impl<'a, 'w> Launcher<'a, 'w> {
     }
 
     fn summary(&self, interrupted: bool) -> RunSummary {
-        let tail = &self.all_returns[self.all_returns.len().saturating_sub(50)..];
         let wall = self.started.elapsed().as_secs_f64();
         let running = self.running_since.elapsed().as_secs_f64().max(1e-9);
         let demos = std::fs::read_to_string(self.plan.run_dir.join("demos.jsonl"))
             .map(|t| t.lines().count())
             .unwrap_or(0);
         RunSummary {
-            run_id: self.plan.run_id.clone(),
             episodes: self.all_returns.len(),
-            mean_return_last_50: tail.iter().sum::<f64>() / tail.len().max(1) as f64,
-            demos,
-            env_steps: self.seen.learner_env_steps,
-            updates: self.seen.learner_updates,
+            mean_return_last_50: mean_return_last_50(&self.all_returns),
+            demos_used: self.demos_used,
             wall_clock_s: wall,
-            env_steps_per_s: self.seen.learner_env_steps as f64 / running,
-            updates_per_s: self.seen.learner_updates as f64 / running,
-            actor_restarts: self.restarts,
-            expert_swaps: self.swaps,
-            interrupted,
+            greedy_value_at_start: None,
+            optimal_value_at_start: None,
+            runtime: Some(RuntimeSummary {
+                run_id: self.plan.run_id.clone(),
+                demos,
+                env_steps: self.seen.learner_env_steps,
+                updates: self.seen.learner_updates,
+                env_steps_per_s: self.seen.learner_env_steps as f64 / running,
+                updates_per_s: self.seen.learner_updates as f64 / running,
+                actor_restarts: self.restarts,
+                expert_swaps: self.swaps,
+                interrupted,
+            }),
         }
     }
 }

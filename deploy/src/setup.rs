@@ -16,6 +16,7 @@ pub fn init_logging() {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
 }
 
@@ -48,4 +49,14 @@ pub fn cliffwalk(cfg: &ExperimentConfig) -> anyhow::Result<CliffWalk> {
         cfg.env.p_success,
         cfg.env.max_episode_steps(),
     )?)
+}
+
+/// The demonstrator named by a neural config, for its environment.
+pub fn neural_demonstrator(
+    cfg: &ExperimentConfig,
+) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>> {
+    match cfg.env.name {
+        EnvName::Cartpole => Ok(alfd_expert::registry::cartpole(&cfg.expert.name)?),
+        other => Err(usage(format!("no demonstrators for {other:?} yet"))),
+    }
 }

@@ -5,14 +5,15 @@
 use rand::Rng as _;
 
 use crate::agent::{query_decision, Decision, Explorer};
+use crate::config::LossKind;
 use crate::config::{AgentConfig, QueryConfig, QueryMode};
 use crate::demo_model::DemoModel;
-use crate::nn::{Adam, AdamConfig, Mlp, NnError, TrainScratch};
+use crate::nn::{Adam, AdamConfig, Mlp, NnError, TdConfig, TdLoss, TrainScratch};
 use crate::policy::{js_divergence, softmax_into};
 use crate::query::QueryRule;
 use crate::replay::{Batch, ReplayBuffer, Transition};
 use crate::rng::Rng;
-use crate::shaping::shaped_reward;
+use crate::shaping::{shaped_reward, ShapingKind};
 
 /// The acting side: the latest weights, exploration, the divergence queue and shaping.
 #[derive(Debug, Clone)]
@@ -32,6 +33,8 @@ pub struct NeuralActor {
     q: Vec<f64>,
     probs: Vec<f64>,
     weights_version: u64,
+    gamma: f64,
+    shaping_kind: ShapingKind,
 }
 
 impl NeuralActor {
@@ -40,6 +43,7 @@ impl NeuralActor {
     pub fn new(
         agent: &AgentConfig,
         query: &QueryConfig,
+        shaping_kind: ShapingKind,
         obs_dim: usize,
         actions: usize,
         mut rng: Rng,
@@ -61,6 +65,8 @@ impl NeuralActor {
             q: vec![0.0; heads * actions],
             probs: vec![0.0; actions],
             weights_version: 0,
+            gamma: agent.gamma,
+            shaping_kind,
         }
     }
 
@@ -133,6 +139,21 @@ impl NeuralActor {
         self.probs[action]
     }
 
+    /// Which shaping this actor applies.
+    pub fn shaping_kind(&self) -> ShapingKind {
+        self.shaping_kind
+    }
+
+    pub fn gamma(&self) -> f64 {
+        self.gamma
+    }
+
+    /// The potential `Φ(s, a) = λ p(a|s)` of potential-based shaping.
+    pub fn potential(obs: &[f32], action: usize, model: &DemoModel, lambda: f64) -> f64 {
+        let s: Vec<f64> = obs.iter().map(|&x| f64::from(x)).collect();
+        lambda * model.prob(&s, action)
+    }
+
     /// Algorithm 1 lines 17-19: the transition to store, with the reward shaped by eq. 4 when a
     /// demonstration model is given (`shaping = Some((model, λ))`), and its bootstrap mask.
     /// Demonstrations train every head; other transitions train head k with probability p.
@@ -188,10 +209,15 @@ pub struct NeuralLearner {
     rng: Rng,
     batch: Batch,
     scratch: TrainScratch,
-    gamma: f32,
+    td: TdConfig,
     batch_size: usize,
     target_update_every: u64,
+    tau: f32,
+    learning_starts: u64,
+    demo_fraction: f64,
     updates_per_step: u32,
+    /// Transitions stored so far.
+    inserted: u64,
     updates: u64,
 }
 
@@ -216,10 +242,24 @@ impl NeuralLearner {
             rng,
             batch: Batch::default(),
             scratch,
-            gamma: agent.gamma as f32,
+            td: TdConfig {
+                gamma: agent.gamma as f32,
+                loss: match agent.loss {
+                    LossKind::Huber => TdLoss::Huber,
+                    LossKind::Mse => TdLoss::Mse,
+                },
+                double: agent.double_dqn,
+                margin_weight: agent.margin_loss_weight as f32,
+                margin: agent.margin as f32,
+                max_grad_norm: agent.max_grad_norm.map(|g| g as f32),
+            },
             batch_size: agent.batch_size,
             target_update_every: agent.target_update_every,
+            tau: agent.tau as f32,
+            learning_starts: agent.learning_starts,
+            demo_fraction: agent.demo_fraction,
             updates_per_step: agent.updates_per_step,
+            inserted: 0,
             updates: 0,
         }
     }
@@ -227,6 +267,7 @@ impl NeuralLearner {
     /// Algorithm 1 line 19.
     pub fn insert(&mut self, t: &Transition) {
         self.replay.push(t);
+        self.inserted += 1;
     }
 
     /// Algorithm 1 lines 19-20 for one environment step: stores `t`, then makes `U` updates
@@ -242,26 +283,31 @@ impl NeuralLearner {
         loss
     }
 
-    /// One update of the K heads on a batch from the replay buffer, and the target copy every
-    /// `target_update_every` updates. `None` (no update) until the buffer holds a full batch.
+    /// One update of the K heads on a batch from the replay buffer, and the target update every
+    /// `target_update_every` updates (a copy, or Polyak averaging with `tau < 1`). `None` (no
+    /// update) until the buffer holds a full batch and `learning_starts` transitions.
     pub fn update(&mut self) -> Option<f32> {
-        if self.replay.len() < self.batch_size {
+        if self.replay.len() < self.batch_size || self.inserted < self.learning_starts {
             return None;
         }
-        self.replay
-            .sample_into(self.batch_size, &mut self.rng, &mut self.batch);
-        let loss = crate::nn::train_step(
+        self.replay.sample_with_demos_into(
+            self.batch_size,
+            self.demo_fraction,
+            &mut self.rng,
+            &mut self.batch,
+        );
+        let loss = crate::nn::train_step_with(
             &mut self.online,
             &self.target,
             &mut self.adam,
             &self.batch,
-            self.gamma,
+            &self.td,
             &mut self.scratch,
         );
         self.updates += 1;
         if self.updates.is_multiple_of(self.target_update_every) {
             self.target
-                .copy_params_from(&self.online)
+                .polyak_from(&self.online, self.tau)
                 .expect("online and target networks share one architecture");
         }
         Some(loss)

@@ -25,6 +25,7 @@ use crate::demo_model::DemoModel;
 use crate::env::{Env, EnvError, Step};
 use crate::record::EpisodeRecord;
 use crate::replay::Transition;
+use crate::shaping::{potential_bonus, ShapingKind};
 
 /// Why a run stopped before its last episode (the launcher said so, a signal arrived, ...).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -128,11 +129,17 @@ pub trait VariableSource {
 
 /// The neural agent of Algorithm 1 as an [`Actor`]: the pure [`NeuralActor`] (divergence, query
 /// rule, exploration, shaping, masks), an [`Adder`] and a [`VariableSource`].
+///
+/// With potential-based shaping a transition's bonus `γΦ(s',a') − Φ(s,a)` needs the next action
+/// `a'`, so each transition waits for the next step before it goes to the adder (the last one of
+/// an episode goes at once, with `Φ = 0` after it).
 #[derive(Debug)]
 pub struct GenericActor<A, V> {
     pub core: NeuralActor,
     pub adder: A,
     pub variables: V,
+    /// Potential shaping: the last transition and its potential `Φ(s,a)`.
+    pending: Option<(Transition, f64)>,
 }
 
 impl<A: Adder, V: VariableSource> GenericActor<A, V> {
@@ -141,11 +148,47 @@ impl<A: Adder, V: VariableSource> GenericActor<A, V> {
             core,
             adder,
             variables,
+            pending: None,
         }
+    }
+
+    /// Potential-based shaping of the step from `obs` with `action` (see the type's docs).
+    fn observe_with_potential(
+        &mut self,
+        obs: &[f32],
+        action: usize,
+        step: &Step<Vec<f32>>,
+        demo: bool,
+        shaping: Option<(&DemoModel, f64)>,
+    ) -> Result<()> {
+        let phi = shaping.map_or(0.0, |(m, lambda)| {
+            NeuralActor::potential(obs, action, m, lambda)
+        });
+        if let Some((mut t, phi_prev)) = self.pending.take() {
+            let bonus = potential_bonus(self.core.gamma(), phi, phi_prev);
+            t.reward = (f64::from(t.reward) + bonus) as f32;
+            self.adder.add(t, false)?;
+        }
+        let mut t = self.core.transition(
+            obs,
+            action,
+            step.reward,
+            &step.observation,
+            step.terminated,
+            demo,
+            None,
+        );
+        if step.done() {
+            t.reward = (f64::from(t.reward) + potential_bonus(self.core.gamma(), 0.0, phi)) as f32;
+            self.adder.add(t, step.truncated)?;
+        } else {
+            self.pending = Some((t, phi));
+        }
+        Ok(())
     }
 }
 
-impl<O: AsRef<[f32]>, A: Adder, V: VariableSource> Actor<O> for GenericActor<A, V> {
+impl<A: Adder, V: VariableSource> Actor<Vec<f32>> for GenericActor<A, V> {
     fn update(&mut self) -> Result<ControlFlow<Stop>> {
         if let ControlFlow::Break(stop) = self.adder.reserve()? {
             return Ok(ControlFlow::Break(stop));
@@ -162,24 +205,28 @@ impl<O: AsRef<[f32]>, A: Adder, V: VariableSource> Actor<O> for GenericActor<A, 
         self.core.begin_episode();
     }
 
-    fn select(&mut self, obs: &O, budget_left: bool) -> Decision {
-        self.core.decide(obs.as_ref(), budget_left)
+    fn select(&mut self, obs: &Vec<f32>, budget_left: bool) -> Decision {
+        self.core.decide(obs, budget_left)
     }
 
     fn observe(
         &mut self,
-        obs: &O,
+        obs: &Vec<f32>,
         action: usize,
-        step: &Step<O>,
+        step: &Step<Vec<f32>>,
         demo: bool,
         shaping: Option<(&DemoModel, f64)>,
     ) -> Result<bool> {
         let shaped = shaping.is_some();
+        if self.core.shaping_kind() == ShapingKind::Potential {
+            self.observe_with_potential(obs, action, step, demo, shaping)?;
+            return Ok(shaped);
+        }
         let t = self.core.transition(
-            obs.as_ref(),
+            obs,
             action,
             step.reward,
-            step.observation.as_ref(),
+            &step.observation,
             step.terminated,
             demo,
             shaping,
@@ -200,6 +247,9 @@ pub struct Schedule {
     pub env_seed: u64,
     /// Stop after this many episodes (`None`: until the actor or `on_episode` says stop).
     pub episodes: Option<u32>,
+    /// Stop when this actor has taken this many steps; the episode running then is not recorded
+    /// (`None`: no limit).
+    pub steps: Option<u64>,
     /// The actor's id, recorded in every [`EpisodeRecord`].
     pub actor_id: u16,
 }
@@ -211,20 +261,20 @@ pub struct RunEnd {
     pub episodes: u32,
     /// Environment steps this actor took (including those of an unfinished last episode).
     pub steps: u64,
-    /// Why the run stopped early, if it did (`None`: all episodes played, or `on_episode` said
-    /// stop).
+    /// Why the run stopped before its episode limit, if it did (the step limit, the transport;
+    /// `None`: all episodes played, or `on_episode` said stop).
     pub stopped: Option<Stop>,
 }
 
 /// Plays episodes of `env` with `actor`, asking `expert` where the query rule fires: Algorithm 1,
-/// one step at a time. `on_episode` sees every finished episode's record and the actor, and may
-/// stop the run with `Break`.
+/// one step at a time. `on_episode` sees every finished episode's record (and may fill in its
+/// `eval_return`) and the actor, and may stop the run with `Break`.
 pub fn run<E, Ac, X>(
     env: &mut E,
     actor: &mut Ac,
     expert: &mut X,
     schedule: Schedule,
-    mut on_episode: impl FnMut(&EpisodeRecord, &Ac) -> Result<ControlFlow<()>>,
+    mut on_episode: impl FnMut(&mut EpisodeRecord, &Ac) -> Result<ControlFlow<()>>,
 ) -> Result<RunEnd>
 where
     E: Env + ?Sized,
@@ -235,7 +285,8 @@ where
     let mut episode = 0u32;
     while schedule.episodes.is_none_or(|n| episode < n) {
         let seed = (episode == 0).then_some(schedule.env_seed);
-        let record = match run_episode(env, actor, expert, seed, &mut steps)? {
+        let limit = schedule.steps;
+        let mut record = match run_episode(env, actor, expert, seed, &mut steps, limit)? {
             ControlFlow::Continue(mut record) => {
                 record.episode = episode;
                 record.actor = schedule.actor_id;
@@ -250,7 +301,7 @@ where
             }
         };
         episode += 1;
-        if on_episode(&record, actor)?.is_break() {
+        if on_episode(&mut record, actor)?.is_break() {
             break;
         }
     }
@@ -261,14 +312,19 @@ where
     })
 }
 
-/// One episode of Algorithm 1. `steps` counts this actor's steps across episodes. The record's
-/// `episode` and `actor` are left for the caller.
+/// Why [`run`] stops when the step limit is reached.
+pub const STEP_LIMIT: Stop = Stop("the step limit was reached");
+
+/// One episode of Algorithm 1. `steps` counts this actor's steps across episodes; the episode is
+/// abandoned (`Break(STEP_LIMIT)`) when it reaches `limit`. The record's `episode` and `actor`
+/// are left for the caller.
 pub fn run_episode<E, Ac, X>(
     env: &mut E,
     actor: &mut Ac,
     expert: &mut X,
     seed: Option<u64>,
     steps: &mut u64,
+    limit: Option<u64>,
 ) -> Result<ControlFlow<Stop, EpisodeRecord>>
 where
     E: Env + ?Sized,
@@ -280,6 +336,9 @@ where
     let (mut ret, mut length, mut js_sum) = (0.0, 0u32, 0.0);
     let (mut queries, mut shaped_steps) = (0u32, 0u32);
     loop {
+        if limit.is_some_and(|n| *steps >= n) {
+            return Ok(ControlFlow::Break(STEP_LIMIT));
+        }
         if let ControlFlow::Break(stop) = actor.update()? {
             return Ok(ControlFlow::Break(stop));
         }
@@ -320,4 +379,73 @@ where
         total_steps: actor.global_step(*steps),
         ..EpisodeRecord::default()
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::ExperimentConfig;
+    use crate::demo_model::DemoModelKind;
+
+    #[derive(Default)]
+    struct Recorder(Vec<(Transition, bool)>);
+
+    impl Adder for &mut Recorder {
+        fn add(&mut self, t: Transition, truncated: bool) -> Result<()> {
+            self.0.push((t, truncated));
+            Ok(())
+        }
+    }
+
+    struct Fixed;
+
+    impl VariableSource for Fixed {
+        fn update(&mut self, _: &mut NeuralActor) -> Result<()> {
+            Ok(())
+        }
+    }
+
+    fn actor(kind: &str) -> NeuralActor {
+        let text = format!(
+            "seed = 0\nepisodes = 1\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"dqn\"\ngamma = 0.9\n[shaping]\nkind = \"{kind}\"\n"
+        );
+        let cfg = ExperimentConfig::from_toml(&text).unwrap();
+        NeuralActor::new(&cfg.agent, &cfg.query, cfg.shaping.kind, 4, 2, crate::rng::seeded(1))
+    }
+
+    fn step(x: f32, terminated: bool) -> Step<Vec<f32>> {
+        Step {
+            observation: vec![x; 4],
+            reward: 1.0,
+            terminated,
+            truncated: false,
+        }
+    }
+
+    #[test]
+    fn potential_shaping_adds_gamma_phi_next_minus_phi_once_the_next_action_is_known() {
+        let states = [vec![0.0; 4], vec![1.0; 4]];
+        let model = DemoModel::fit(DemoModelKind::Krr, &states, &[0, 1], 2).unwrap();
+        let shaping = Some((&model, 0.5));
+        let mut out = Recorder::default();
+        let mut a = GenericActor::new(actor("potential"), &mut out, Fixed);
+        let (s0, s1) = (vec![0.2f32; 4], vec![0.7f32; 4]);
+        assert!(a.observe(&s0, 0, &step(0.7, false), false, shaping).unwrap());
+        assert!(a.adder.0.is_empty(), "waits for the next action");
+        a.observe(&s1, 1, &step(1.3, true), false, shaping).unwrap();
+        let phi0 = NeuralActor::potential(&s0, 0, &model, 0.5);
+        let phi1 = NeuralActor::potential(&s1, 1, &model, 0.5);
+        assert!(phi0 > 0.0 && phi1 > 0.0);
+        let got: Vec<f32> = a.adder.0.iter().map(|(t, _)| t.reward).collect();
+        let want = [(1.0 + 0.9 * phi1 - phi0) as f32, (1.0 - phi1) as f32];
+        assert_eq!(got, want, "F = γΦ(s',a') − Φ(s,a), Φ = 0 after the terminal step");
+        assert_eq!(a.adder.0[0].0.state, s0);
+
+        // The paper's shaping goes to the adder at once, with eq. 4.
+        let mut out = Recorder::default();
+        let mut p = GenericActor::new(actor("paper"), &mut out, Fixed);
+        p.observe(&s0, 0, &step(0.7, false), false, shaping).unwrap();
+        assert_eq!(p.adder.0.len(), 1);
+        assert!(p.adder.0[0].0.reward > 1.0, "eq. 4 adds a positive bonus");
+    }
 }

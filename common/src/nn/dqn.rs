@@ -14,17 +14,66 @@
 //! With one head and all-ones masks this is plain DQN with `SmoothL1Loss(reduction = "mean")`.
 //! Gradients flow only through `Q_k(s_i, a_i)` of the online network: the target is a constant.
 //! Each head bootstraps from its own target head.
+//!
+//! [`TdConfig`] adds, each off by default ([`TdConfig::dqn`] is the loss above):
+//! - `loss = Mse`: `td^2` instead of `huber(td)` (CleanRL's `F.mse_loss`);
+//! - `double`: Double DQN targets, `y = r + gamma * Q_target_k(s', argmax_a Q_k(s', a))`
+//!   (van Hasselt et al. 2016), the action chosen by the online head;
+//! - `margin_weight > 0`: DQfD's large-margin loss on demonstrated transitions (Hester et al.
+//!   2018; the paper's ref. [5] adds it to the TD loss),
+//!   `lambda_E * (max_a [Q_k(s, a) + l(a_E, a)] - Q_k(s, a_E)) / B` with `l = margin` for
+//!   `a != a_E`, 0 otherwise;
+//! - `max_grad_norm`: the gradient scaled to at most this global L2 norm (PyTorch's
+//!   `clip_grad_norm_`) before Adam's step.
 
 use nalgebra::DMatrix;
 
 use super::{Adam, ForwardCache, Mlp, Params};
 use crate::replay::Batch;
 
+/// The regression loss on TD errors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TdLoss {
+    /// SmoothL1 with `beta = 1`.
+    Huber,
+    /// Squared error.
+    Mse,
+}
+
+/// How the loss is made (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TdConfig {
+    pub gamma: f32,
+    pub loss: TdLoss,
+    pub double: bool,
+    /// `lambda_E` of the large-margin loss (0: off).
+    pub margin_weight: f32,
+    /// `l(a_E, a)` for `a != a_E`.
+    pub margin: f32,
+    pub max_grad_norm: Option<f32>,
+}
+
+impl TdConfig {
+    /// The loss of the paper (and of the module docs' first formula).
+    pub fn dqn(gamma: f32) -> Self {
+        Self {
+            gamma,
+            loss: TdLoss::Huber,
+            double: false,
+            margin_weight: 0.0,
+            margin: 0.8,
+            max_grad_norm: None,
+        }
+    }
+}
+
 /// Buffers of the train step, reused from step to step so that the loop does not allocate.
 #[derive(Debug, Clone, Default)]
 pub struct TrainScratch {
     online: ForwardCache,
     target: ForwardCache,
+    /// The online network on the next states (Double DQN).
+    online_next: ForwardCache,
     /// dL/dQ of the online network, `(batch, K*A)`.
     dq: DMatrix<f32>,
     grads: Option<Params>,
@@ -34,11 +83,6 @@ impl TrainScratch {
     /// The gradients of the last [`loss_and_grads`] (or [`train_step`]), if any.
     pub fn grads(&self) -> Option<&Params> {
         self.grads.as_ref()
-    }
-
-    /// The online network's Q-values on the states of the last batch, `(batch, K*A)`.
-    pub fn online_q(&self) -> &DMatrix<f32> {
-        self.online.q()
     }
 }
 
@@ -66,7 +110,7 @@ pub fn dqn_loss(
     gamma: f32,
     scratch: &mut TrainScratch,
 ) -> f32 {
-    td_loss(online, target, batch, gamma, scratch, false)
+    td_loss(online, target, batch, &TdConfig::dqn(gamma), scratch, false)
 }
 
 /// The loss of the module docs, with its gradient with respect to the online network's
@@ -78,7 +122,18 @@ pub fn loss_and_grads(
     gamma: f32,
     scratch: &mut TrainScratch,
 ) -> f32 {
-    let loss = td_loss(online, target, batch, gamma, scratch, true);
+    loss_and_grads_with(online, target, batch, &TdConfig::dqn(gamma), scratch)
+}
+
+/// [`loss_and_grads`] with the options of `cfg` (gradient clipping is the train step's).
+pub fn loss_and_grads_with(
+    online: &Mlp,
+    target: &Mlp,
+    batch: &Batch,
+    cfg: &TdConfig,
+    scratch: &mut TrainScratch,
+) -> f32 {
+    let loss = td_loss(online, target, batch, cfg, scratch, true);
     let grads = scratch
         .grads
         .get_or_insert_with(|| online.params().zeros_like());
@@ -99,11 +154,45 @@ pub fn train_step(
     gamma: f32,
     scratch: &mut TrainScratch,
 ) -> f32 {
-    let loss = loss_and_grads(online, target, batch, gamma, scratch);
-    if let Some(grads) = scratch.grads.as_ref() {
+    train_step_with(online, target, adam, batch, &TdConfig::dqn(gamma), scratch)
+}
+
+/// [`train_step`] with the options of `cfg`.
+pub fn train_step_with(
+    online: &mut Mlp,
+    target: &Mlp,
+    adam: &mut Adam,
+    batch: &Batch,
+    cfg: &TdConfig,
+    scratch: &mut TrainScratch,
+) -> f32 {
+    let loss = loss_and_grads_with(online, target, batch, cfg, scratch);
+    if let Some(grads) = scratch.grads.as_mut() {
+        if let Some(max) = cfg.max_grad_norm {
+            clip_grad_norm(grads, max);
+        }
         adam.step(online, grads);
     }
     loss
+}
+
+/// Scales `grads` so that their global L2 norm is at most `max` (PyTorch's `clip_grad_norm_`:
+/// factor `max / (norm + 1e-6)` when below 1); returns the norm before clipping.
+pub fn clip_grad_norm(grads: &mut Params, max: f32) -> f32 {
+    let norm = grads
+        .tensors()
+        .iter()
+        .flat_map(|t| t.iter())
+        .map(|&g| f64::from(g) * f64::from(g))
+        .sum::<f64>()
+        .sqrt() as f32;
+    let coef = max / (norm + 1e-6);
+    if coef < 1.0 {
+        for t in grads.tensors_mut() {
+            t.iter_mut().for_each(|g| *g *= coef);
+        }
+    }
+    norm
 }
 
 fn check_batch(online: &Mlp, target: &Mlp, batch: &Batch) {
@@ -166,13 +255,16 @@ fn td_loss(
     online: &Mlp,
     target: &Mlp,
     batch: &Batch,
-    gamma: f32,
+    cfg: &TdConfig,
     scratch: &mut TrainScratch,
     with_grad: bool,
 ) -> f32 {
     check_batch(online, target, batch);
     online.forward_batch(&batch.states, &mut scratch.online);
     target.forward_batch(&batch.next_states, &mut scratch.target);
+    if cfg.double {
+        online.forward_batch(&batch.next_states, &mut scratch.online_next);
+    }
     let (n, heads, actions) = (batch.size, online.heads(), online.actions());
     if with_grad {
         if scratch.dq.shape() != (n, heads * actions) {
@@ -183,29 +275,66 @@ fn td_loss(
     }
     let q = scratch.online.q();
     let q_next = scratch.target.q();
+    let q_online_next = cfg.double.then(|| scratch.online_next.q());
+    let margin_on = cfg.margin_weight > 0.0 && batch.demos.len() == n;
     let inv_n = 1.0 / n as f32;
     let mut loss = 0.0f64;
     for i in 0..n {
         let a = batch.actions[i] as usize;
-        let bootstrap = gamma * (1.0 - batch.terminated[i]);
+        let bootstrap = gamma_bootstrap(cfg.gamma, batch.terminated[i]);
+        let demo = margin_on && batch.demos[i] != 0.0;
         for k in 0..heads {
             let mask = batch.masks[i * heads + k];
             if mask == 0.0 {
                 continue;
             }
-            let mut max_next = f32::NEG_INFINITY;
-            for b in 0..actions {
-                max_next = max_next.max(q_next[(i, k * actions + b)]);
-            }
-            let y = batch.rewards[i] + bootstrap * max_next;
-            let td = q[(i, k * actions + a)] - y;
-            loss += f64::from(mask * huber(td));
+            let col = |b: usize| k * actions + b;
+            let next = match q_online_next {
+                // Double DQN: the online head picks, the target head evaluates.
+                Some(qo) => {
+                    let best = (0..actions).fold(0, |m, b| {
+                        if qo[(i, col(b))] > qo[(i, col(m))] {
+                            b
+                        } else {
+                            m
+                        }
+                    });
+                    q_next[(i, col(best))]
+                }
+                None => (0..actions).fold(f32::NEG_INFINITY, |m, b| m.max(q_next[(i, col(b))])),
+            };
+            let y = batch.rewards[i] + bootstrap * next;
+            let td = q[(i, col(a))] - y;
+            let (l, g) = match cfg.loss {
+                TdLoss::Huber => (huber(td), huber_grad(td)),
+                TdLoss::Mse => (td * td, 2.0 * td),
+            };
+            loss += f64::from(mask * l);
             if with_grad {
-                scratch.dq[(i, k * actions + a)] = mask * huber_grad(td) * inv_n;
+                scratch.dq[(i, col(a))] += mask * g * inv_n;
+            }
+            if demo {
+                // Large margin: the demonstrated action must beat every other by `margin`.
+                let (best, value) = (0..actions)
+                    .map(|b| (b, q[(i, col(b))] + if b == a { 0.0 } else { cfg.margin }))
+                    .fold((a, f32::NEG_INFINITY), |m, c| if c.1 > m.1 { c } else { m });
+                let j = value - q[(i, col(a))];
+                loss += f64::from(mask * cfg.margin_weight * j);
+                if with_grad && best != a {
+                    let w = mask * cfg.margin_weight * inv_n;
+                    scratch.dq[(i, col(best))] += w;
+                    scratch.dq[(i, col(a))] -= w;
+                }
             }
         }
     }
     (loss / n as f64) as f32
+}
+
+/// `gamma * (1 - terminated)`.
+#[inline]
+fn gamma_bootstrap(gamma: f32, terminated: f32) -> f32 {
+    gamma * (1.0 - terminated)
 }
 
 #[cfg(test)]

@@ -227,6 +227,30 @@ impl Mlp {
         Ok(())
     }
 
+    /// Polyak averaging towards `other` (same dimensions): `p <- tau * p_other + (1 - tau) * p`,
+    /// the soft target update; `tau = 1` is [`Mlp::copy_params_from`].
+    pub fn polyak_from(&mut self, other: &Mlp, tau: f32) -> Result<()> {
+        if tau >= 1.0 {
+            return self.copy_params_from(other);
+        }
+        if self.params.shapes() != other.params.shapes() || self.heads != other.heads {
+            return Err(NnError::Dims(
+                "cannot average networks of different shapes".to_owned(),
+            ));
+        }
+        for (dst, src) in self
+            .params
+            .tensors_mut()
+            .into_iter()
+            .zip(other.params.tensors())
+        {
+            for (d, &s) in dst.iter_mut().zip(src) {
+                *d = tau * s + (1.0 - tau) * *d;
+            }
+        }
+        Ok(())
+    }
+
     fn check_flat_len(&self, found: usize) -> Result<()> {
         let expected = self.num_params();
         if found != expected {

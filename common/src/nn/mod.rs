@@ -20,7 +20,10 @@ mod io;
 mod mlp;
 
 pub use adam::{Adam, AdamConfig};
-pub use dqn::{dqn_loss, loss_and_grads, train_step, TrainScratch};
+pub use dqn::{
+    clip_grad_norm, dqn_loss, loss_and_grads, loss_and_grads_with, train_step, train_step_with,
+    TdConfig, TdLoss, TrainScratch,
+};
 pub use io::FORMAT_VERSION;
 pub use mlp::{ForwardCache, Mlp};
 

@@ -10,7 +10,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use crate::error::{Result, WireError};
 
 /// The version of the messages below. Bump it whenever a message changes.
-pub const SCHEMA_VERSION: u32 = 2;
+pub const SCHEMA_VERSION: u32 = 3;
 /// Actors per run (the credit table has one slot per actor id).
 pub const MAX_ACTORS: usize = 16;
 /// Largest observation a transition or a query can carry.
@@ -472,7 +472,7 @@ pub mod process_state {
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Episode(pub EpisodeRecord);
 
-// SAFETY: `EpisodeRecord` is `repr(C)` and holds only `f64`, `u64`, `u32` and `u16` fields: no
+// SAFETY: `EpisodeRecord` is `repr(C)` and holds only `f64`, `u64`, `u32` and `u16` fields (any bit pattern, NaN included, is a value): no
 // pointers, no references, nothing owned elsewhere, valid for any bit pattern its writer put there,
 // so a copy in shared memory means the same in every process of this build. `Episode` is
 // `repr(transparent)` over it. The type name carries the layout's version: the schema version
@@ -608,13 +608,14 @@ mod tests {
         use crate::messages::Episode;
         use alfd_common::record::EpisodeRecord;
         // Changing this layout changes the message: bump SCHEMA_VERSION with it.
-        assert_eq!(std::mem::size_of::<Episode>(), 48);
+        assert_eq!(std::mem::size_of::<Episode>(), 56);
         assert_eq!(std::mem::align_of::<Episode>(), 8);
-        assert_eq!(std::mem::offset_of!(EpisodeRecord, actor), 44);
+        assert_eq!(std::mem::offset_of!(EpisodeRecord, actor), 52);
         let r = EpisodeRecord {
             ret: 21.0,
             mean_js: 0.25,
             total_steps: 99,
+            eval_return: 500.0,
             episode: 3,
             length: 21,
             demos_used: 5,

@@ -332,7 +332,8 @@ impl PendingQuery<'_> {
         Ok(None)
     }
 
-    pub fn duplicates(&self) -> u32 {
+    #[cfg(test)]
+    pub(crate) fn duplicates(&self) -> u32 {
         self.duplicates
     }
 }

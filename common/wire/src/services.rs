@@ -75,18 +75,6 @@ impl Wire {
         Ok(wire)
     }
 
-    pub fn run_id(&self) -> &str {
-        &self.run_id
-    }
-
-    pub fn me(&self) -> Process {
-        self.me
-    }
-
-    pub fn schema(&self) -> u32 {
-        self.schema
-    }
-
     /// Whether SIGINT or SIGTERM arrived (sticky).
     pub fn termination_requested(&self) -> bool {
         if TERMINATION_REQUESTED.load(Ordering::Relaxed) {
@@ -99,7 +87,8 @@ impl Wire {
     }
 
     /// Removes what crashed processes of this run left behind; returns how many nodes it removed.
-    pub fn cleanup_dead_nodes(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn cleanup_dead_nodes(&self) -> usize {
         let state = self.node.try_cleanup_dead_nodes();
         state.cleanups as usize
     }
@@ -510,7 +499,8 @@ impl Wire {
     }
 
     /// How many expert servers are connected to `query` right now.
-    pub fn query_servers(&self) -> Result<usize> {
+    #[cfg(test)]
+    pub(crate) fn query_servers(&self) -> Result<usize> {
         Ok(self.query_service()?.dynamic_config().number_of_servers())
     }
 }

@@ -164,7 +164,7 @@ impl Waiter {
     }
 
     /// Consumes pending rings without blocking; returns how many there were.
-    pub fn drain(&self) -> Result<u64> {
+    fn drain(&self) -> Result<u64> {
         self.listener
             .try_wait(|_| {})
             .map_err(transport("drain", self.bell.topic()))
