@@ -8,9 +8,11 @@
 //! log_y = true               # plot the return on a log scale (as the paper does)
 //! thresholds = [100, 200, 500]
 //! last = 50                  # the summary's "mean over the last episodes"
-//! smooth = 1                 # the plot's moving average, in episodes (tables are never smoothed)
+//! smooth = 1                 # the plot's moving average, in episodes or step-grid points
+//!                            # (tables are never smoothed)
 //! y_range = [5, 1500]        # optional: the plot's y range
 //! legend = "upper-left"      # or upper-right, lower-left, lower-right
+//! x = "episodes"             # or "steps": the x axis of the plot, the curves and the crossings
 //!
 //! [[method]]
 //! name = "bdqn-krr"                           # the run directory name: letters, digits, - _ .
@@ -59,6 +61,17 @@ pub enum LegendPosition {
     LowerRight,
 }
 
+/// The x axis of a training experiment's curves, plot and crossings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum XAxis {
+    /// Training episodes (0-based).
+    #[default]
+    Episodes,
+    /// Environment steps (`total_steps` of `episodes.csv`), on a grid common to the seeds.
+    Steps,
+}
+
 /// The experiment file as written.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -91,6 +104,9 @@ struct ExperimentFile {
     /// Where the plot's legend goes.
     #[serde(default)]
     legend: LegendPosition,
+    /// Training: the x axis of the curves, the plot and the crossings (default: episodes).
+    #[serde(default)]
+    x: Option<XAxis>,
     #[serde(rename = "method")]
     methods: Vec<MethodFile>,
 }
@@ -144,6 +160,7 @@ pub struct Experiment {
     pub smooth: usize,
     pub y_range: Option<(f64, f64)>,
     pub legend: LegendPosition,
+    pub x: XAxis,
     pub methods: Vec<Method>,
 }
 
@@ -257,6 +274,9 @@ impl Experiment {
             }
             Some([lo, hi]) => return Err(bad(format!("`y_range` [{lo}, {hi}] is not a range"))),
         };
+        if file.x.is_some() && file.kind != ExperimentKind::Training {
+            return Err(bad("`x` belongs to training experiments".into()));
+        }
         let dir = path.parent().unwrap_or(Path::new("."));
         let mut names = BTreeSet::new();
         let mut methods = Vec::with_capacity(file.methods.len());
@@ -300,6 +320,7 @@ impl Experiment {
             smooth: file.smooth,
             y_range,
             legend: file.legend,
+            x: file.x.unwrap_or_default(),
             methods,
         })
     }
@@ -374,12 +395,12 @@ fn policy_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {
 /// The config's demonstrator exists for its environment (and a CliffWalk map loads).
 fn check_expert(cfg: &ExperimentConfig) -> anyhow::Result<()> {
     match cfg.env.name {
-        EnvName::Cartpole => {
-            alfd_expert::registry::cartpole(&cfg.expert.name)?;
-        }
         EnvName::Cliffwalk => {
             let env = setup::cliffwalk(cfg)?;
             alfd_expert::registry::cliffwalk(&cfg.expert.name, &env)?;
+        }
+        _ => {
+            setup::neural_demonstrator(cfg)?;
         }
     }
     Ok(())

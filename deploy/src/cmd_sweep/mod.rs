@@ -5,10 +5,17 @@
 //! Layout of the output directory `DIR`:
 //! - `DIR/runs/METHOD/SEED/`: each run's outputs, as `alfd local` writes them (`config.toml`,
 //!   `episodes.csv`, `demos.jsonl`, weights or policy, and `summary.json`, written last);
-//! - `DIR/curves.csv`: `method,episode,mean,std,median,count` of the return across seeds;
-//! - `DIR/EXPERIMENT.svg`, `DIR/EXPERIMENT.png`: mean ± 1 standard deviation per method;
-//! - `DIR/summary.md`: per method, the first episode at which the mean return reaches each
-//!   threshold, the mean over the last episodes, the demonstrations used and the wall-clock time.
+//! - `DIR/curves.csv`: `method,X,mean,std,median,count,ci_low,ci_high` of the return across
+//!   seeds, X being `episode` or `steps` (the experiment's `x`), `ci_*` the 95% bootstrap
+//!   interval of the mean;
+//! - `DIR/EXPERIMENT.svg`, `DIR/EXPERIMENT.png`: the mean and its 95% interval per method;
+//! - `DIR/summary.md`: per method, with 95% bootstrap intervals over the seeds: the final return
+//!   (mean and interquartile mean), the area under the curve, the first x at which the mean
+//!   return reaches each threshold, the final greedy-evaluation return when the runs record one;
+//!   then the mean over the last episodes, the demonstrations used and the wall-clock time.
+//!
+//! The statistics are in `stats.rs` (point estimates), `stats/bootstrap.rs` (intervals) and
+//! `summary.rs` (from runs to tables).
 //!
 //! Runs are deterministic, so a sweep re-run gives the same numbers. A run whose `summary.json`
 //! exists is complete and is not redone: an interrupted sweep resumes where it stopped. A complete
@@ -17,6 +24,7 @@
 mod experiment;
 mod plot;
 mod stats;
+mod summary;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -29,10 +37,10 @@ use alfd_common::record::ReturnStats;
 use anyhow::Context as _;
 
 use crate::cmd_demo_model_policy::{self, PolicyRun};
-use crate::cmd_local::{self, write, RunSummary};
+use crate::cmd_local::{self, write};
 use crate::usage::usage;
+use alfd_common::record::RunSummary;
 use experiment::{Experiment, ExperimentKind, Method, MethodSpec};
-use stats::CurvePoint;
 
 #[derive(Debug, clap::Args)]
 pub struct SweepArgs {
@@ -133,12 +141,18 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
 
     let mut results = Vec::with_capacity(exp.methods.len());
     for method in &exp.methods {
-        results.push(method_result(ctx.out, method, exp.seeds)?);
+        let runs = read_runs(ctx.out, method, exp.seeds)?;
+        results.push(summary::analyse(method, &runs, exp)?);
     }
-    write(ctx.out, "curves.csv", curves_csv(&results).as_bytes())?;
-    let plotted = write_plot(ctx, &training_series(exp, &results), "episode")?;
+    write(
+        ctx.out,
+        "curves.csv",
+        summary::curves_csv(exp, &results).as_bytes(),
+    )?;
+    let series = summary::training_series(exp, &results);
+    let plotted = write_plot(ctx, &series, summary::x_name(exp.x).1)?;
     let wall = ctx.start.elapsed().as_secs_f64();
-    let md = training_summary(ctx, &results, pending.len(), resumed, wall, &plotted);
+    let md = summary::training_summary(ctx, &results, pending.len(), resumed, wall, &plotted);
     write(ctx.out, "summary.md", md.as_bytes())?;
     println!(
         "sweep {}: {} runs, {} run now, {} resumed (complete already), {:.1} s; see {}",
@@ -269,115 +283,28 @@ fn parallel_map<T: Sync, R: Send>(
         .collect()
 }
 
-/// What a method's runs gave, read back from their directories.
-struct MethodResult<'a> {
-    method: &'a Method,
-    curve: Vec<CurvePoint>,
-    /// Demonstrations used by the end of each run.
-    demos_used: Vec<f64>,
-    /// Each run's wall-clock time, from its `summary.json`.
-    wall_clock_s: Vec<f64>,
-    /// CliffWalk: each run's value at S of its learned greedy policy, and the optimal value.
-    greedy_value: Vec<f64>,
-    optimal_value: Option<f64>,
-}
-
-fn method_result<'a>(
-    out: &Path,
-    method: &'a Method,
-    seeds: u64,
-) -> anyhow::Result<MethodResult<'a>> {
-    let mut returns = Vec::with_capacity(seeds as usize);
-    let mut demos_used = Vec::with_capacity(seeds as usize);
-    let mut wall_clock_s = Vec::with_capacity(seeds as usize);
-    let mut greedy_value = Vec::new();
-    let mut optimal_value = None;
-    for seed in 0..seeds {
-        let dir = run_dir(out, &method.name, seed);
-        let path = dir.join("episodes.csv");
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("cannot read {}", path.display()))?;
-        let (rets, demos) =
-            parse_episodes(&text).with_context(|| format!("in {}", path.display()))?;
-        returns.push(rets);
-        demos_used.push(demos);
-        let path = dir.join("summary.json");
-        let summary: RunSummary = serde_json::from_str(
-            &std::fs::read_to_string(&path)
-                .with_context(|| format!("cannot read {}", path.display()))?,
-        )
-        .with_context(|| format!("in {}", path.display()))?;
-        wall_clock_s.push(summary.wall_clock_s);
-        greedy_value.extend(summary.greedy_value_at_start);
-        optimal_value = optimal_value.or(summary.optimal_value_at_start);
-    }
-    Ok(MethodResult {
-        method,
-        curve: stats::curve(&returns),
-        demos_used,
-        wall_clock_s,
-        greedy_value,
-        optimal_value,
-    })
-}
-
-/// The returns of `episodes.csv`, and the demonstrations used by its last episode.
-fn parse_episodes(text: &str) -> anyhow::Result<(Vec<f64>, f64)> {
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
-    let col = |name: &str| {
-        header
-            .iter()
-            .position(|h| *h == name)
-            .with_context(|| format!("no `{name}` column"))
-    };
-    let (ret_col, demos_col) = (col("return")?, col("demos_used")?);
-    let mut returns = Vec::new();
-    let mut demos = 0.0;
-    for (i, line) in lines.enumerate().filter(|(_, l)| !l.is_empty()) {
-        let fields: Vec<&str> = line.split(',').collect();
-        let field = |c: usize| -> anyhow::Result<f64> {
-            fields
-                .get(c)
-                .and_then(|v| v.parse().ok())
-                .with_context(|| format!("line {}: no number in column {}", i + 2, c + 1))
-        };
-        returns.push(field(ret_col)?);
-        demos = field(demos_col)?;
-    }
-    anyhow::ensure!(!returns.is_empty(), "no episodes");
-    Ok((returns, demos))
-}
-
-fn curves_csv(results: &[MethodResult]) -> String {
-    let mut out = String::from("method,episode,mean,std,median,count\n");
-    for r in results {
-        for p in &r.curve {
-            let _ = writeln!(
-                out,
-                "{},{},{},{},{},{}",
-                r.method.name, p.episode, p.mean, p.std, p.median, p.count
-            );
-        }
-    }
-    out
-}
-
-fn training_series(exp: &Experiment, results: &[MethodResult]) -> Vec<plot::Series> {
-    results
-        .iter()
-        .map(|r| {
-            let mean: Vec<f64> = r.curve.iter().map(|p| p.mean).collect();
-            let std: Vec<f64> = r.curve.iter().map(|p| p.std).collect();
-            let mean = stats::smooth(&mean, exp.smooth);
-            let std = stats::smooth(&std, exp.smooth);
-            plot::Series {
-                label: r.method.label.clone(),
-                x: r.curve.iter().map(|p| f64::from(p.episode)).collect(),
-                lo: mean.iter().zip(&std).map(|(m, s)| m - s).collect(),
-                hi: mean.iter().zip(&std).map(|(m, s)| m + s).collect(),
-                y: mean,
-            }
+/// Each seed's run of `method`, read back from its directory.
+fn read_runs(out: &Path, method: &Method, seeds: u64) -> anyhow::Result<Vec<summary::Run>> {
+    (0..seeds)
+        .map(|seed| {
+            let dir = run_dir(out, &method.name, seed);
+            let path = dir.join("episodes.csv");
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("cannot read {}", path.display()))?;
+            let episodes =
+                summary::parse_episodes(&text).with_context(|| format!("in {}", path.display()))?;
+            let path = dir.join("summary.json");
+            let s: RunSummary = serde_json::from_str(
+                &std::fs::read_to_string(&path)
+                    .with_context(|| format!("cannot read {}", path.display()))?,
+            )
+            .with_context(|| format!("in {}", path.display()))?;
+            Ok(summary::Run {
+                episodes,
+                wall_clock_s: s.wall_clock_s,
+                greedy_value: s.greedy_value_at_start,
+                optimal_value: s.optimal_value_at_start,
+            })
         })
         .collect()
 }
@@ -385,21 +312,35 @@ fn training_series(exp: &Experiment, results: &[MethodResult]) -> Vec<plot::Seri
 /// Writes `EXPERIMENT.svg` and, when a font is found, `EXPERIMENT.png`; returns the files written.
 fn write_plot(ctx: &Ctx, series: &[plot::Series], x_desc: &str) -> anyhow::Result<Vec<String>> {
     let exp = ctx.exp;
-    let y_desc = match exp.kind {
-        ExperimentKind::Training if exp.smooth > 1 => format!(
-            "return: mean of {} seeds ± 1 std ({}-episode moving average)",
-            exp.seeds, exp.smooth
+    let seeds = summary::count(exp.seeds, "seed");
+    let (title, y_desc, band) = match exp.kind {
+        ExperimentKind::Training => (
+            summary::title_with_count(&exp.title, exp.seeds, "seed"),
+            if exp.smooth > 1 {
+                format!(
+                    "return: mean of {seeds} ({}-{} moving average)",
+                    exp.smooth,
+                    summary::smooth_unit(exp.x)
+                )
+            } else {
+                format!("return: mean of {seeds}")
+            },
+            Some("band: 95% bootstrap CI of the mean"),
         ),
-        ExperimentKind::Training => format!("return: mean of {} seeds ± 1 std", exp.seeds),
-        ExperimentKind::DemoModelPolicy => "return of the model's greedy episode".to_owned(),
+        ExperimentKind::DemoModelPolicy => (
+            summary::title_with_count(&exp.title, exp.seeds, "run"),
+            "return of the model's greedy episode".to_owned(),
+            None,
+        ),
     };
     let svg = plot::svg(&plot::Plot {
-        title: &exp.title,
+        title: &title,
         x_desc,
         y_desc: &y_desc,
         log_y: exp.log_y,
         y_range: exp.y_range,
         legend: exp.legend,
+        band_desc: band,
         series,
     })?;
     let mut files = vec![format!("{}.svg", exp.name)];
@@ -419,111 +360,6 @@ fn write_plot(ctx: &Ctx, series: &[plot::Series], x_desc: &str) -> anyhow::Resul
         },
     }
     Ok(files)
-}
-
-fn mean(v: &[f64]) -> f64 {
-    v.iter().sum::<f64>() / v.len().max(1) as f64
-}
-
-fn training_summary(
-    ctx: &Ctx,
-    results: &[MethodResult],
-    ran: usize,
-    resumed: u64,
-    wall: f64,
-    plotted: &[String],
-) -> String {
-    let exp = ctx.exp;
-    let episodes = results
-        .iter()
-        .map(|r| r.curve.len())
-        .max()
-        .unwrap_or_default();
-    let mut md = String::new();
-    let _ = writeln!(md, "# {}\n", exp.title);
-    let _ = writeln!(
-        md,
-        "Experiment `{}`: {} methods × {} seeds (0..{}), {} episodes.\n",
-        exp.name,
-        results.len(),
-        exp.seeds,
-        exp.seeds - 1,
-        episodes
-    );
-    let _ = writeln!(md, "Command: `{}`\n", ctx.command);
-    let _ = writeln!(
-        md,
-        "\"crosses T\": the first episode (0-based, as in `curves.csv`) at which the mean return \
-         over the seeds is ≥ T; \"never\" if it never is. \"last {last}\": the mean return over the \
-         last {last} episodes and the seeds. \"demos\": demonstrations used by the end of a run, \
-         mean over the seeds. \"s/run\": mean wall-clock time of one run; \"run-s\": their sum. \
-         CliffWalk: \"greedy V(S)\": the value at S (γ = 0.99) of each run's final greedy policy, \
-         mean over the seeds, next to the optimal one (value iteration).\n",
-        last = exp.last
-    );
-    let mut header = String::from("| method |");
-    let mut rule = String::from("|---|");
-    for t in &exp.thresholds {
-        let _ = write!(header, " crosses {t} |");
-        rule.push_str("---:|");
-    }
-    let _ = write!(header, " last {} | demos | s/run | run-s |", exp.last);
-    rule.push_str("---:|---:|---:|---:|");
-    // CliffWalk runs also report the value at S of their greedy policy.
-    let greedy = results
-        .iter()
-        .all(|r| r.greedy_value.len() == r.wall_clock_s.len() && r.optimal_value.is_some());
-    if greedy {
-        header.push_str(" greedy V(S) | optimal V(S) |");
-        rule.push_str("---:|---:|");
-    }
-    let _ = writeln!(md, "{header}\n{rule}");
-    for r in results {
-        let mut row = format!("| {} |", r.method.name);
-        for &t in &exp.thresholds {
-            match stats::crossing(&r.curve, t) {
-                Some(e) => write!(row, " {e} |"),
-                None => write!(row, " never |"),
-            }
-            .expect("writing to a String");
-        }
-        let _ = write!(
-            row,
-            " {:.2} | {:.2} | {:.2} | {:.1} |",
-            stats::tail_mean(&r.curve, exp.last as usize),
-            mean(&r.demos_used),
-            mean(&r.wall_clock_s),
-            r.wall_clock_s.iter().sum::<f64>()
-        );
-        if greedy {
-            let _ = write!(
-                row,
-                " {:.3} | {:.3} |",
-                mean(&r.greedy_value),
-                r.optimal_value.unwrap_or(f64::NAN)
-            );
-        }
-        let _ = writeln!(md, "{row}");
-    }
-    let _ = writeln!(
-        md,
-        "\nSweep: {} runs ({ran} run now, {resumed} resumed), {} jobs, {wall:.1} s wall-clock.\n",
-        results.len() as u64 * exp.seeds,
-        ctx.jobs
-    );
-    let _ =
-        writeln!(
-        md,
-        "Plot: {} — the line is the mean return over the seeds, the band ± 1 standard deviation \
-         (what the paper calls \"variance\"){}.",
-        plotted.join(", "),
-        if exp.smooth > 1 {
-            format!(", both smoothed by a centred {}-episode moving average", exp.smooth)
-        } else {
-            String::new()
-        }
-    );
-    md
 }
 
 fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
@@ -579,7 +415,11 @@ fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
     let plotted = write_plot(ctx, &series, "run, sorted by return")?;
     let wall = ctx.start.elapsed().as_secs_f64();
     let mut md = String::new();
-    let _ = writeln!(md, "# {}\n", exp.title);
+    let _ = writeln!(
+        md,
+        "# {}\n",
+        summary::title_with_count(&exp.title, exp.seeds, "run")
+    );
     let _ = writeln!(
         md,
         "Experiment `{}`: each run fits a demonstration model on demonstrations (\"demos\": how \
@@ -607,7 +447,7 @@ fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
         else {
             continue;
         };
-        let demos = mean(&runs.iter().map(|r| r.demos as f64).collect::<Vec<_>>());
+        let demos = stats::mean(&runs.iter().map(|r| r.demos as f64).collect::<Vec<_>>());
         let returns: Vec<f64> = runs.iter().map(|r| r.ret).collect();
         let s = ReturnStats::of(&returns);
         let min = returns.iter().copied().fold(f64::INFINITY, f64::min);
@@ -634,20 +474,4 @@ fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
         ctx.out.join("summary.md").display()
     );
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn episodes_csv_is_read_by_column_name() {
-        let text = "episode,return,length,demos_used,mean_js\n0,12.5,12,3,0\n1,-4,9,7,0.1\n";
-        let (rets, demos) = parse_episodes(text).unwrap();
-        assert_eq!(rets, vec![12.5, -4.0]);
-        assert_eq!(demos, 7.0);
-        assert!(parse_episodes("episode,length\n0,1\n").is_err());
-        assert!(parse_episodes("episode,return,demos_used\n0,x,1\n").is_err());
-        assert!(parse_episodes("episode,return,demos_used\n").is_err());
-    }
 }

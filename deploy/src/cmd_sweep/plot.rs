@@ -21,7 +21,8 @@ pub struct Series {
     pub label: String,
     pub x: Vec<f64>,
     pub y: Vec<f64>,
-    /// The band's lower and upper edges (empty: no band).
+    /// The band's lower and upper edges (empty: no band; points where they are not finite are
+    /// left out of it).
     pub lo: Vec<f64>,
     pub hi: Vec<f64>,
 }
@@ -36,6 +37,8 @@ pub struct Plot<'a> {
     /// The y range; fitted to the data when `None`.
     pub y_range: Option<(f64, f64)>,
     pub legend: LegendPosition,
+    /// What the bands are, as the legend's last entry (say, "band: 95% bootstrap CI").
+    pub band_desc: Option<&'a str>,
     pub series: &'a [Series],
 }
 
@@ -142,13 +145,19 @@ where
     let clamp = |v: f64| v.clamp(y_lo, y_hi);
     for (i, s) in plot.series.iter().enumerate() {
         let color = PALETTE[i % PALETTE.len()];
-        if !s.lo.is_empty() {
-            let band: Vec<(f64, f64)> =
-                s.x.iter()
-                    .zip(&s.hi)
-                    .map(|(&x, &h)| (x, clamp(h)))
-                    .chain(s.x.iter().zip(&s.lo).rev().map(|(&x, &l)| (x, clamp(l))))
-                    .collect();
+        let edges: Vec<(f64, f64, f64)> =
+            s.x.iter()
+                .zip(&s.lo)
+                .zip(&s.hi)
+                .filter(|((_, l), h)| l.is_finite() && h.is_finite())
+                .map(|((&x, &l), &h)| (x, clamp(l), clamp(h)))
+                .collect();
+        if !edges.is_empty() {
+            let band: Vec<(f64, f64)> = edges
+                .iter()
+                .map(|&(x, _, h)| (x, h))
+                .chain(edges.iter().rev().map(|&(x, l, _)| (x, l)))
+                .collect();
             chart
                 .draw_series(std::iter::once(Polygon::new(
                     band,
@@ -168,6 +177,16 @@ where
             .label(format!("{}{}", s.label, " ".repeat(2 + s.label.len() / 5)))
             .legend(move |(x, y)| {
                 PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
+            });
+    }
+    if let Some(desc) = plot.band_desc {
+        let grey = RGBColor(90, 90, 90);
+        chart
+            .draw_series(std::iter::empty::<Polygon<(f64, f64)>>())
+            .map_err(err)?
+            .label(format!("{desc}{}", " ".repeat(2 + desc.len() / 5)))
+            .legend(move |(x, y)| {
+                Rectangle::new([(x, y - 5), (x + 24, y + 5)], grey.mix(0.25).filled())
             });
     }
     chart
@@ -286,11 +305,12 @@ mod tests {
                 log_y,
                 y_range: None,
                 legend: LegendPosition::UpperLeft,
+                band_desc: Some("band: 95% CI"),
                 series: &s,
             };
             let svg = svg(&plot).unwrap();
             assert!(svg.starts_with("<svg"), "{}", &svg[..40]);
-            for text in ["A title", "episode", "return", "method-a"] {
+            for text in ["A title", "episode", "return", "method-a", "band: 95% CI"] {
                 assert!(svg.contains(text), "{text} missing");
             }
             assert!(svg.contains("<polygon") || svg.contains("<path"));
@@ -307,6 +327,7 @@ mod tests {
             log_y: true,
             y_range: None,
             legend: LegendPosition::UpperLeft,
+            band_desc: None,
             series: &s,
         };
         let (lo, hi) = fit_range(&plot);
