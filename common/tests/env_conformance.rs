@@ -1,9 +1,10 @@
 //! The conformance suite of the `Env` trait, written once and run on every environment: seeding
 //! determinism, `reset(None)` continuing the generator, the action space, truncation at the step
-//! limit, no step after the end and no step before the first reset.
+//! limit, termination (always exercised, by a policy that reaches a terminal state), no step
+//! after the end and no step before the first reset.
 
-use alfd_common::env::cliffwalk::{CliffMap, CliffWalk};
-use alfd_common::env::{CartPole, Env, EnvError, Step};
+use alfd_common::env::cliffwalk::{value_iteration, CliffMap, CliffWalk};
+use alfd_common::env::{Acrobot, CartPole, Env, EnvError, MountainCar, Step};
 
 /// The initial observation, then every step until the episode ends or `max_steps` steps.
 type Trajectory<O> = (O, Vec<Step<O>>);
@@ -32,12 +33,14 @@ fn run_episode<E: Env>(
 /// Runs the whole suite on the environment built by `make(max_episode_steps)`.
 ///
 /// `action_at(i)` is the action at step `i` of an episode; with a step limit of 5 it must not
-/// reach a terminal state, so that the limit is what ends the episode.
+/// reach a terminal state, so that the limit is what ends the episode. `reach` is a policy that
+/// does reach a terminal state within 200 steps from the initial state of some seed in `0..20`.
 fn conformance<E: Env>(
     name: &str,
     make: impl Fn(usize) -> E,
     num_actions: usize,
     action_at: impl Fn(usize) -> usize,
+    reach: impl Fn(&E::Observation) -> usize,
 ) where
     E::Observation: PartialEq,
 {
@@ -128,13 +131,35 @@ fn conformance<E: Env>(
         }
         assert_eq!(env.step(num_actions), Err(EnvError::EpisodeOver), "{name}");
     }
-    // A terminated episode refuses steps too.
-    let terminated = a.1.last().expect("steps");
-    if terminated.terminated {
-        let mut env = make(long);
-        run_episode(&mut env, Some(7), &action_at, long);
-        assert_eq!(env.step(0), Err(EnvError::EpisodeOver), "{name}");
+    // Termination, found deterministically: the first seed from which `reach` ends an episode
+    // with `terminated` before the limit. The same seed terminates at the same step again, the
+    // environment refuses steps after it, and a reset starts a new episode.
+    let terminating = |env: &mut E, seed: u64| -> Option<(usize, Step<E::Observation>)> {
+        let mut obs = env.reset(Some(seed));
+        for i in 0..long {
+            let step = env.step(reach(&obs)).expect("running");
+            if step.done() {
+                return step.terminated.then_some((i, step));
+            }
+            obs = step.observation;
+        }
+        unreachable!("{name}: the limit ends every episode")
+    };
+    let mut env = make(long);
+    let (seed, (at, step)) = (0..20)
+        .find_map(|seed| terminating(&mut env, seed).map(|found| (seed, found)))
+        .unwrap_or_else(|| panic!("{name}: `reach` terminated no episode of seeds 0..20"));
+    assert!(!step.truncated && at + 1 < long, "{name}: seed {seed}");
+    for action in 0..num_actions {
+        assert_eq!(env.step(action), Err(EnvError::EpisodeOver), "{name}");
     }
+    assert_eq!(
+        terminating(&mut make(long), seed),
+        Some((at, step)),
+        "{name}: seed {seed}"
+    );
+    env.reset(None);
+    assert!(env.step(action_at(0)).is_ok(), "{name}");
 
     // A limit of 1 truncates the first step.
     let mut env = make(1);
@@ -149,8 +174,43 @@ fn conformance<E: Env>(
 
 #[test]
 fn cartpole_conforms() {
-    // Alternating pushes keep the pole up for far more than 5 steps.
-    conformance("cartpole", CartPole::new, 2, |i| i % 2);
+    // Alternating pushes keep the pole up for far more than 5 steps; always pushing left drops
+    // it.
+    conformance("cartpole", CartPole::new, 2, |i| i % 2, |_| 0);
+}
+
+#[test]
+fn mountaincar_conforms() {
+    // No sequence of 5 actions reaches the flag; pushing along the velocity does (energy pumping).
+    conformance(
+        "mountaincar",
+        MountainCar::new,
+        3,
+        |i| i % 3,
+        |obs| if obs[1] >= 0.0 { 2 } else { 0 },
+    );
+}
+
+#[test]
+fn acrobot_conforms() {
+    // 5 steps cannot lift the tip from hanging; torque against the first link's swing pumps
+    // energy into it until the tip clears the bar.
+    conformance(
+        "acrobot",
+        Acrobot::new,
+        3,
+        |i| i % 3,
+        |obs| if obs[4] > 0.0 { 0 } else { 2 },
+    );
+}
+
+/// The optimal policy of a CliffWalk (it reaches the goal, the only terminal state).
+fn optimal(map: &CliffMap) -> impl Fn(&usize) -> usize {
+    let env = CliffWalk::new(map.clone(), 0.9, 200).expect("valid parameters");
+    let policy = value_iteration(&env, 0.99, 1e-10)
+        .expect("valid gamma")
+        .policy;
+    move |&s| policy[s]
 }
 
 #[test]
@@ -162,6 +222,7 @@ fn cliffwalk_conforms() {
         |limit| CliffWalk::new(map.clone(), 0.9, limit).expect("valid parameters"),
         4,
         |i| if i % 3 == 2 { 0 } else { 1 },
+        optimal(&map),
     );
 }
 
@@ -173,5 +234,6 @@ fn cliffwalk_conforms_on_the_default_map() {
         |limit| CliffWalk::new(CliffMap::default_map(), 0.9, limit).expect("valid parameters"),
         4,
         |i| if i < 2 { 0 } else { 1 },
+        optimal(&CliffMap::default_map()),
     );
 }

@@ -1,8 +1,8 @@
 //! Integration tests of the core against the reference fixtures (one test binary).
 
-mod cartpole_reference;
 mod dqn_loss;
 mod env_conformance;
+mod gymnasium_reference;
 mod js_reference;
 mod kernel_reference;
 mod mlp_reference;

@@ -1,5 +1,6 @@
-//! `alfd env`: look at the environments from the command line — roll CartPole out from a given
-//! state (to check our dynamics against another implementation) and show a CliffWalk map.
+//! `alfd env`: look at the environments from the command line — roll CartPole, MountainCar or
+//! Acrobot out from a given state (to check our dynamics against another implementation) and
+//! show a CliffWalk map.
 //!
 //! Bad input (a malformed state or action list, an unknown env name, an unreadable or malformed
 //! map, an out-of-range parameter) is returned as a [`UsageError`], which `main` maps to exit
@@ -8,10 +9,11 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use alfd_common::config::EnvName;
 use alfd_common::env::cliffwalk::{
     self, CliffMap, CliffWalk, DEFAULT_GAMMA, DEFAULT_MAX_EPISODE_STEPS, DEFAULT_P_SUCCESS,
 };
-use alfd_common::env::{cartpole, CartPole, Env};
+use alfd_common::env::{Acrobot, CartPole, Env, MountainCar};
 use anyhow::Context;
 
 #[cfg(test)]
@@ -29,8 +31,9 @@ pub struct EnvArgs {
 /// The subcommands of `alfd env`.
 #[derive(Debug, clap::Subcommand)]
 pub enum EnvCommand {
-    /// Step CartPole from a given state through a list of actions, printing one JSON object per
-    /// step: {"state":[x,x_dot,theta,theta_dot],"reward":1.0,"terminated":false,"truncated":false}.
+    /// Step CartPole, MountainCar or Acrobot from a given state through a list of actions,
+    /// printing one JSON object per step with the float64 state after it, e.g. for CartPole
+    /// {"state":[x,x_dot,theta,theta_dot],"reward":1.0,"terminated":false,"truncated":false}.
     Rollout(RolloutArgs),
     /// Print a CliffWalk map as text, then its size and the optimal value of S.
     Show(ShowArgs),
@@ -39,19 +42,22 @@ pub enum EnvCommand {
 /// Arguments of `alfd env rollout`.
 #[derive(Debug, clap::Args)]
 pub struct RolloutArgs {
-    /// Environment name; only `cartpole` can be rolled out from a given state.
+    /// Environment name: `cartpole`, `mountaincar` or `acrobot`.
     #[arg(long)]
     pub env: String,
-    /// The float64 state the episode begins from: 4 comma-separated numbers.
-    #[arg(long, value_name = "X,XDOT,THETA,THETADOT", allow_hyphen_values = true)]
+    /// The float64 state the episode begins from, comma-separated: X,XDOT,THETA,THETADOT
+    /// (cartpole), POSITION,VELOCITY (mountaincar) or THETA1,THETA2,DTHETA1,DTHETA2 (acrobot).
+    #[arg(long, value_name = "V,V,...", allow_hyphen_values = true)]
     pub initial_state: String,
-    /// Comma-separated actions, each 0 (push left) or 1 (push right). Actions left over when the
-    /// episode ends are ignored, with a warning.
+    /// Comma-separated actions: 0 (push left) or 1 (push right) for cartpole; 0 (left), 1 (none)
+    /// or 2 (right) for mountaincar; 0, 1 or 2 (torque -1, 0, +1) for acrobot. Actions left over
+    /// when the episode ends are ignored, with a warning.
     #[arg(long, value_name = "A,A,...")]
     pub actions: String,
-    /// Step limit of the episode (reported as `truncated`).
-    #[arg(long, default_value_t = cartpole::DEFAULT_MAX_EPISODE_STEPS)]
-    pub max_steps: usize,
+    /// Step limit of the episode (reported as `truncated`); by default the environment's
+    /// (cartpole 1000, mountaincar 200, acrobot 500).
+    #[arg(long)]
+    pub max_steps: Option<usize>,
 }
 
 /// Arguments of `alfd env show`.
@@ -85,33 +91,32 @@ pub fn run(args: EnvArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-const KNOWN_ENVS: &str = "cartpole, cliffwalk";
-
-/// Refuses names that are not environments, and environments the subcommand does not support.
-fn check_env(name: &str, supported: &str, subcommand: &str) -> anyhow::Result<()> {
-    if name == supported {
-        Ok(())
-    } else if KNOWN_ENVS.split(", ").any(|known| known == name) {
-        Err(usage(format!(
-            "--env {name}: `alfd env {subcommand}` supports only `{supported}`"
-        )))
+/// The environment `name`, refused (as a usage error) if it is not one or if the subcommand does
+/// not support it.
+fn check_env(name: &str, supported: &[EnvName], subcommand: &str) -> anyhow::Result<EnvName> {
+    let env: EnvName = name.parse().map_err(|e| usage(format!("--env: {e}")))?;
+    if supported.contains(&env) {
+        Ok(env)
     } else {
+        let names: Vec<String> = supported.iter().map(|e| format!("`{e}`")).collect();
         Err(usage(format!(
-            "--env: unknown environment `{name}` (known: {KNOWN_ENVS})"
+            "--env {name}: `alfd env {subcommand}` supports only {}",
+            names.join(", ")
         )))
     }
 }
 
-/// Parses `--initial-state`: exactly 4 finite comma-separated numbers.
-pub fn parse_state(text: &str) -> Result<[f64; 4], UsageError> {
+/// Parses `--initial-state`: exactly `N` finite comma-separated numbers, named `names`
+/// (`X,XDOT,THETA,THETADOT`) in the error.
+pub fn parse_state<const N: usize>(text: &str, names: &str) -> Result<[f64; N], UsageError> {
     let fields: Vec<&str> = text.split(',').map(str::trim).collect();
-    if fields.len() != 4 {
+    if fields.len() != N {
         return Err(UsageError(format!(
-            "--initial-state: expected 4 comma-separated numbers X,XDOT,THETA,THETADOT, got {} value(s) in {text:?}",
+            "--initial-state: expected {N} comma-separated numbers {names}, got {} value(s) in {text:?}",
             fields.len()
         )));
     }
-    let mut state = [0.0; 4];
+    let mut state = [0.0; N];
     for (i, (slot, field)) in state.iter_mut().zip(&fields).enumerate() {
         let value: f64 = field.parse().map_err(|_| {
             UsageError(format!(
@@ -153,26 +158,85 @@ pub fn parse_actions(text: &str, num_actions: usize) -> Result<Vec<usize>, Usage
 
 /// One line of `alfd env rollout`'s output.
 #[derive(Debug, serde::Serialize)]
-struct RolloutLine {
-    state: [f64; 4],
+struct RolloutLine<'a> {
+    state: &'a [f64],
     reward: f64,
     terminated: bool,
     truncated: bool,
 }
 
+/// An environment that `alfd env rollout` starts from a given float64 state.
+struct Rollable<E, const N: usize> {
+    env: E,
+    /// The state's values, as `--initial-state` takes them.
+    names: &'static str,
+    set_state: fn(&mut E, [f64; N]),
+    state: fn(&E) -> [f64; N],
+}
+
 /// `alfd env rollout`: one JSON line per step on `out`, warnings on `err`.
 fn rollout(args: &RolloutArgs, out: &mut impl Write, err: &mut impl Write) -> anyhow::Result<()> {
-    check_env(&args.env, "cartpole", "rollout")?;
-    let state = parse_state(&args.initial_state)?;
-    let mut env = CartPole::new(args.max_steps);
-    let actions = parse_actions(&args.actions, env.num_actions())?;
-    env.set_state(state);
+    let name = check_env(
+        &args.env,
+        &[EnvName::Cartpole, EnvName::Mountaincar, EnvName::Acrobot],
+        "rollout",
+    )?;
+    let limit = args.max_steps.unwrap_or(name.default_max_episode_steps());
+    match name {
+        EnvName::Cartpole => roll(
+            Rollable {
+                env: CartPole::new(limit),
+                names: "X,XDOT,THETA,THETADOT",
+                set_state: CartPole::set_state,
+                state: CartPole::state,
+            },
+            args,
+            out,
+            err,
+        ),
+        EnvName::Mountaincar => roll(
+            Rollable {
+                env: MountainCar::new(limit),
+                names: "POSITION,VELOCITY",
+                set_state: MountainCar::set_state,
+                state: MountainCar::state,
+            },
+            args,
+            out,
+            err,
+        ),
+        EnvName::Acrobot => roll(
+            Rollable {
+                env: Acrobot::new(limit),
+                names: "THETA1,THETA2,DTHETA1,DTHETA2",
+                set_state: Acrobot::set_state,
+                state: Acrobot::state,
+            },
+            args,
+            out,
+            err,
+        ),
+        EnvName::Cliffwalk => unreachable!("refused by check_env"),
+    }
+}
+
+/// Steps `r.env` from `--initial-state` through `--actions`.
+fn roll<E: Env, const N: usize>(
+    mut r: Rollable<E, N>,
+    args: &RolloutArgs,
+    out: &mut impl Write,
+    err: &mut impl Write,
+) -> anyhow::Result<()> {
+    let state = parse_state::<N>(&args.initial_state, r.names)?;
+    let actions = parse_actions(&args.actions, r.env.num_actions())?;
+    (r.set_state)(&mut r.env, state);
     for (i, &action) in actions.iter().enumerate() {
-        let step = env
+        let step = r
+            .env
             .step(action)
             .with_context(|| format!("step {} (action {action})", i + 1))?;
         let line = RolloutLine {
-            state: env.state(),
+            state: &(r.state)(&r.env),
             reward: step.reward,
             terminated: step.terminated,
             truncated: step.truncated,
@@ -203,7 +267,7 @@ fn load_map(path: &Path) -> anyhow::Result<CliffMap> {
 
 /// `alfd env show`: the map, then `WIDTHxHEIGHT, N pits; V*(S) = ...`.
 fn show(args: &ShowArgs, out: &mut impl Write) -> anyhow::Result<()> {
-    check_env(&args.env, "cliffwalk", "show")?;
+    check_env(&args.env, &[EnvName::Cliffwalk], "show")?;
     let map = match &args.map {
         Some(path) => load_map(path)?,
         None => CliffMap::default_map(),
@@ -239,8 +303,26 @@ mod tests {
             env: env.to_string(),
             initial_state: state.to_string(),
             actions: actions.to_string(),
-            max_steps,
+            max_steps: Some(max_steps),
         }
+    }
+
+    /// The states printed by a rollout, parsed with `str::parse` (correctly rounded; serde_json's
+    /// default parser may be 1 ulp off), and each line as JSON.
+    fn printed_states(out: &str) -> Vec<(Vec<f64>, serde_json::Value)> {
+        out.lines()
+            .map(|line| {
+                let printed = line
+                    .strip_prefix("{\"state\":[")
+                    .and_then(|rest| rest.split(']').next())
+                    .expect("state first");
+                let state = printed
+                    .split(',')
+                    .map(|x| x.parse().expect("number"))
+                    .collect();
+                (state, serde_json::from_str(line).expect("json"))
+            })
+            .collect()
     }
 
     fn run_rollout(args: &RolloutArgs) -> anyhow::Result<(String, String)> {
@@ -261,21 +343,11 @@ mod tests {
         assert_eq!(err, "");
         let mut env = CartPole::new(1000);
         env.set_state([0.01, -0.02, 0.03, -0.04]);
-        let lines: Vec<&str> = out.lines().collect();
+        let lines = printed_states(&out);
         assert_eq!(lines.len(), 3);
-        for (line, action) in lines.iter().zip([1, 0, 1]) {
+        for ((state, v), action) in lines.into_iter().zip([1, 0, 1]) {
             env.step(action).expect("running");
-            let v: serde_json::Value = serde_json::from_str(line).expect("json");
-            // Bit-exact: the printed numbers round-trip. (Parsed with `str::parse`, which is
-            // correctly rounded; serde_json's default parser may be 1 ulp off.)
-            let printed = line
-                .strip_prefix("{\"state\":[")
-                .and_then(|rest| rest.split(']').next())
-                .expect("state first");
-            let state: Vec<f64> = printed
-                .split(',')
-                .map(|x| x.parse().expect("number"))
-                .collect();
+            // Bit-exact: the printed numbers round-trip.
             assert_eq!(state, env.state().to_vec());
             assert_eq!(v["reward"], 1.0);
             assert_eq!(v["terminated"], false);
@@ -320,10 +392,50 @@ mod tests {
             panic!("rollout expected")
         };
         assert_eq!(
-            parse_state(&args.initial_state),
+            parse_state::<4>(&args.initial_state, "X,XDOT,THETA,THETADOT"),
             Ok([-0.02, 0.01, -0.03, 0.04])
         );
-        assert_eq!(args.max_steps, 1000);
+        assert_eq!(args.max_steps, None);
+    }
+
+    #[test]
+    fn mountaincar_and_acrobot_roll_out_like_the_library_with_their_own_limits() {
+        let mut args = rollout_args("mountaincar", "-0.5,0.01", "2,1,0", 0);
+        args.max_steps = None;
+        let (out, err) = run_rollout(&args).expect("valid input");
+        assert_eq!(err, "");
+        let mut env = MountainCar::new(200);
+        env.set_state([-0.5, 0.01]);
+        for ((state, v), action) in printed_states(&out).into_iter().zip([2, 1, 0]) {
+            let step = env.step(action).expect("running");
+            assert_eq!(state, env.state().to_vec());
+            assert_eq!(
+                (v["reward"].as_f64(), v["truncated"].as_bool()),
+                (Some(-1.0), Some(false))
+            );
+            assert!(!step.done());
+        }
+
+        let mut args = rollout_args("acrobot", "0.1,-0.05,0,0.2", "0,2", 0);
+        args.max_steps = None;
+        let (out, _) = run_rollout(&args).expect("valid input");
+        let mut env = Acrobot::new(500);
+        env.set_state([0.1, -0.05, 0.0, 0.2]);
+        let lines = printed_states(&out);
+        assert_eq!(lines.len(), 2);
+        for ((state, _), action) in lines.into_iter().zip([0, 2]) {
+            env.step(action).expect("running");
+            assert_eq!(state, env.state().to_vec());
+        }
+
+        // The default limits are the environments' own: MountainCar truncates at 200.
+        let actions = vec!["1"; 201].join(",");
+        let mut args = rollout_args("mountaincar", "-0.5,0", &actions, 0);
+        args.max_steps = None;
+        let (out, err) = run_rollout(&args).expect("valid input");
+        assert_eq!(out.lines().count(), 200);
+        assert!(out.lines().last().unwrap().ends_with("\"truncated\":true}"));
+        assert!(err.contains("1 remaining action(s) were ignored"), "{err}");
     }
 
     #[test]
@@ -359,11 +471,23 @@ mod tests {
             ),
             (
                 rollout_args("pendulum", "0,0,0,0", "1", 10),
-                "unknown environment `pendulum`",
+                "unknown environment `pendulum` (known: cartpole, cliffwalk, mountaincar, acrobot)",
             ),
             (
                 rollout_args("cliffwalk", "0,0,0,0", "1", 10),
-                "supports only `cartpole`",
+                "supports only `cartpole`, `mountaincar`, `acrobot`",
+            ),
+            (
+                rollout_args("mountaincar", "0,0,0,0", "1", 10),
+                "expected 2 comma-separated numbers POSITION,VELOCITY, got 4",
+            ),
+            (
+                rollout_args("mountaincar", "-0.5,0", "3", 10),
+                "--actions: action 1 (\"3\") must be an integer from 0 to 2",
+            ),
+            (
+                rollout_args("acrobot", "0,0", "1", 10),
+                "expected 4 comma-separated numbers THETA1,THETA2,DTHETA1,DTHETA2",
             ),
         ];
         for (args, expected) in cases {

@@ -4,9 +4,12 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use alfd_common::agent::{NetworkDemonstrator, TablePolicy};
-use alfd_common::config::ExperimentConfig;
+use alfd_common::config::{EnvName, ExperimentConfig};
+use alfd_common::env::vector_env_named;
 use alfd_common::record::ReturnStats;
-use alfd_common::runner::{evaluate_cartpole, evaluate_cliffwalk, run_neural, run_tabular};
+use alfd_common::runner::{
+    evaluate, evaluate_cartpole, evaluate_cliffwalk, run_neural, run_tabular,
+};
 use alfd_expert::registry::{self, ExpertEntry};
 use anyhow::Context as _;
 
@@ -40,13 +43,13 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
     match args.command {
         ExpertCommand::List => {
             println!(
-                "{:<28} {:<10} {:<16} {:>9} {:>9}",
+                "{:<28} {:<12} {:<16} {:>9} {:>9}",
                 "name", "env", "kind", "mean", "median"
             );
             for e in registry::list() {
                 let f = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.1}"));
                 println!(
-                    "{:<28} {:<10} {:<16} {:>9} {:>9}",
+                    "{:<28} {:<12} {:<16} {:>9} {:>9}",
                     e.name,
                     e.env,
                     e.kind,
@@ -71,18 +74,26 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
     }
 }
 
-/// Evaluates a demonstrator by name on its environment (CartPole-1000 or the default CliffWalk).
+/// Evaluates a demonstrator by name on its environment with the default step limit
+/// (CartPole-1000, the default CliffWalk, MountainCar-v0, Acrobot-v1).
 pub fn evaluate_named(name: &str, episodes: usize, seed: u64) -> anyhow::Result<ReturnStats> {
     let entry = registry::list().into_iter().find(|e| e.name == name);
-    let returns = match entry.as_ref().map(|e| e.env.as_str()) {
-        Some("cliffwalk") => {
+    let env = match entry {
+        Some(e) => e.env.parse().map_err(anyhow::Error::msg)?,
+        // Not listed: the registry's error names the CartPole experts.
+        None => EnvName::Cartpole,
+    };
+    let returns = match env {
+        EnvName::Cliffwalk => {
             let env = crate::setup::cliffwalk(&cliffwalk_config())?;
             let mut d = registry::cliffwalk(name, &env)?;
             evaluate_cliffwalk(d.as_mut(), &env, episodes, seed)
         }
         _ => {
-            let mut d = registry::cartpole(name)?;
-            evaluate_cartpole(d.as_mut(), episodes, seed, 1000)
+            let mut d = registry::for_env(env, name)?;
+            let mut env = vector_env_named(env, env.default_max_episode_steps())
+                .expect("every env but cliffwalk has vector observations");
+            evaluate(env.as_mut(), episodes, seed, |obs| d.act(obs))
         }
     };
     Ok(ReturnStats::of(&returns))

@@ -257,6 +257,63 @@ fn env_rollout_prints_one_json_object_per_step() {
 }
 
 #[test]
+fn env_rollout_steps_mountaincar_and_acrobot_from_a_given_state() {
+    // MountainCar pushed right from just below the flag reaches it on the first step.
+    let o = alfd(&[
+        "env",
+        "rollout",
+        "--env",
+        "mountaincar",
+        "--initial-state",
+        "0.49,0.03",
+        "--actions",
+        "2,2",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("1 remaining action(s) were ignored"));
+    let out = String::from_utf8(o.stdout).unwrap();
+    let line: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert!(line["state"][0].as_f64().unwrap() >= 0.5, "{out}");
+    assert_eq!(line["reward"], -1.0);
+    assert_eq!(line["terminated"], true);
+
+    let o = alfd(&[
+        "env",
+        "rollout",
+        "--env",
+        "acrobot",
+        "--initial-state",
+        "-0.05,0.02,0,0",
+        "--actions",
+        "2,2,2",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let lines: Vec<serde_json::Value> = String::from_utf8(o.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 3);
+    assert_eq!(lines[2]["state"].as_array().unwrap().len(), 4);
+    // Torque +1 bends the second link forward.
+    assert!(lines[2]["state"][3].as_f64().unwrap() > 0.0);
+    assert_eq!(lines[2]["reward"], -1.0);
+    assert_usage_error(
+        &[
+            "env",
+            "rollout",
+            "--env",
+            "acrobot",
+            "--initial-state",
+            "0,0",
+            "--actions",
+            "1",
+        ],
+        "expected 4 comma-separated numbers THETA1,THETA2,DTHETA1,DTHETA2",
+    );
+}
+
+#[test]
 fn expert_eval_prints_mean_median_std() {
     let o = alfd(&["expert", "eval", "cartpole-perfect", "--episodes", "5"]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -274,7 +331,21 @@ fn expert_eval_prints_mean_median_std() {
         "cartpole-1000",
         "cartpole-perfect",
         "cliffwalk-optimal",
+        "mountaincar-energy",
+        "mountaincar-poor",
+        "acrobot-energy",
+        "acrobot-poor",
     ] {
         assert!(text.contains(name), "{name} not listed");
     }
+    // The scripted experts score in `expert eval` what `expert list` says they do.
+    let o = alfd(&["expert", "eval", "mountaincar-energy", "--episodes", "100"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let mean = v["mean"].as_f64().unwrap();
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("mountaincar-energy "))
+        .expect("listed");
+    assert!(row.contains(&format!("{mean:.1}")), "{row} vs {mean}");
 }

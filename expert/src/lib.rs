@@ -5,5 +5,6 @@
 pub mod demo_log;
 mod process;
 pub mod registry;
+pub mod scripted;
 
 pub use process::{log_name, run, Args};

@@ -1,19 +1,22 @@
 //! Demonstrators by name. Trained ones ship in `expert/demonstrators/` and are compiled into the
-//! binaries (no file to find at run time); `manifest.json` there records how each was made and
-//! its measured quality.
+//! binaries (no file to find at run time), scripted ones are built from [`crate::scripted`];
+//! `manifest.json` there records how each was made and its measured quality.
 
 use alfd_common::agent::{BalancingController, Demonstrator, NetworkDemonstrator, TablePolicy};
+use alfd_common::config::EnvName;
 use alfd_common::env::cliffwalk::{value_iteration, CliffWalk};
 use alfd_common::nn::Mlp;
 use serde::{Deserialize, Serialize};
+
+use crate::scripted::Scripted;
 
 /// A shipped demonstrator, as `manifest.json` lists it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ExpertEntry {
     pub name: String,
-    /// `cartpole` or `cliffwalk`.
+    /// `cartpole`, `cliffwalk`, `mountaincar` or `acrobot`.
     pub env: String,
-    /// `analytic`, `value-iteration`, `dqn-checkpoint` or `policy-table`.
+    /// `analytic`, `value-iteration`, `dqn-checkpoint`, `policy-table` or `scripted`.
     pub kind: String,
     /// File in `expert/demonstrators/`, if any.
     #[serde(default)]
@@ -42,6 +45,15 @@ pub enum RegistryError {
         env: String,
         known: String,
     },
+    #[error("expert `{name}` demonstrates {its_env}, not {env}; experts for {env}: {known}")]
+    WrongEnv {
+        name: String,
+        its_env: String,
+        env: String,
+        known: String,
+    },
+    #[error("expert `{name}`: {env} demonstrators act on state ids and need the map; they are loaded with `registry::cliffwalk`")]
+    NotVector { name: String, env: String },
     #[error("expert `{name}` is corrupt: {reason}")]
     Corrupt { name: String, reason: String },
 }
@@ -114,29 +126,62 @@ pub fn list() -> Vec<ExpertEntry> {
     serde_json::from_str(MANIFEST).expect("expert/demonstrators/manifest.json is valid (tested)")
 }
 
+/// The manifest's entry `name` for `env`; the error names the experts of `env` (and the
+/// environment `name` demonstrates, if it is another one).
 fn entry(name: &str, env: &str) -> Result<ExpertEntry, RegistryError> {
     let all = list();
-    all.iter()
-        .find(|e| e.name == name && e.env == env)
-        .cloned()
-        .ok_or_else(|| RegistryError::Unknown {
+    let known = || {
+        all.iter()
+            .filter(|e| e.env == env)
+            .map(|e| e.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    match all.iter().find(|e| e.name == name) {
+        Some(e) if e.env == env => Ok(e.clone()),
+        Some(e) => Err(RegistryError::WrongEnv {
+            name: name.to_owned(),
+            its_env: e.env.clone(),
+            env: env.to_owned(),
+            known: known(),
+        }),
+        None => Err(RegistryError::Unknown {
             name: name.to_owned(),
             env: env.to_owned(),
-            known: all
-                .iter()
-                .filter(|e| e.env == env)
-                .map(|e| e.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", "),
-        })
+            known: known(),
+        }),
+    }
 }
 
-/// A CartPole demonstrator by name.
+/// A CartPole demonstrator by name (the same as `for_env(EnvName::Cartpole, name)`).
 pub fn cartpole(name: &str) -> Result<Box<dyn Demonstrator<[f32]> + Send>, RegistryError> {
-    let e = entry(name, "cartpole")?;
-    match e.kind.as_str() {
-        "analytic" => Ok(Box::new(BalancingController)),
-        "dqn-checkpoint" => {
+    for_env(EnvName::Cartpole, name)
+}
+
+/// The demonstrator `name` for an environment with vector observations (CartPole, MountainCar,
+/// Acrobot). A name that is not one of `env`'s experts is refused with the list of those that
+/// are; CliffWalk's demonstrators come from [`cliffwalk`] (they need the map).
+pub fn for_env(
+    env: EnvName,
+    name: &str,
+) -> Result<Box<dyn Demonstrator<[f32]> + Send>, RegistryError> {
+    if env.is_tabular() {
+        return Err(RegistryError::NotVector {
+            name: name.to_owned(),
+            env: env.to_string(),
+        });
+    }
+    let e = entry(name, env.as_str())?;
+    match (env, e.kind.as_str()) {
+        (_, "scripted") => match Scripted::named(name) {
+            Some(s) if s.env == env => Ok(s.build()),
+            _ => Err(RegistryError::Corrupt {
+                name: name.to_owned(),
+                reason: format!("no scripted {env} expert has this name"),
+            }),
+        },
+        (EnvName::Cartpole, "analytic") => Ok(Box::new(BalancingController)),
+        (EnvName::Cartpole, "dqn-checkpoint") => {
             let file = e.file.as_deref().unwrap_or_default();
             let bytes = shipped_file(file).ok_or_else(|| RegistryError::Corrupt {
                 name: name.to_owned(),
@@ -148,9 +193,9 @@ pub fn cartpole(name: &str) -> Result<Box<dyn Demonstrator<[f32]> + Send>, Regis
             })?;
             Ok(Box::new(NetworkDemonstrator::new(net)))
         }
-        other => Err(RegistryError::Corrupt {
+        (_, other) => Err(RegistryError::Corrupt {
             name: name.to_owned(),
-            reason: format!("kind `{other}` is not a cartpole kind"),
+            reason: format!("kind `{other}` is not a {env} kind"),
         }),
     }
 }
@@ -227,5 +272,56 @@ mod tests {
             err.contains("cartpole-9000") && err.contains("cartpole-perfect"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn every_scripted_expert_is_listed_and_loads_for_its_env_only() {
+        let all = list();
+        for s in crate::scripted::SCRIPTED {
+            let e = all.iter().find(|e| e.name == s.name).expect(s.name);
+            assert_eq!(
+                (e.env.as_str(), e.kind.as_str()),
+                (s.env.as_str(), "scripted")
+            );
+            assert!(e.mean.is_some() && e.evaluation.is_some(), "{}", s.name);
+            assert!(for_env(s.env, s.name).is_ok(), "{}", s.name);
+        }
+        for e in all.iter().filter(|e| e.kind == "scripted") {
+            assert!(
+                crate::scripted::Scripted::named(&e.name).is_some(),
+                "{} is in the manifest but not scripted",
+                e.name
+            );
+        }
+        assert!(for_env(EnvName::Cartpole, "cartpole-perfect").is_ok());
+    }
+
+    #[test]
+    fn a_name_for_another_env_is_refused_with_that_envs_experts() {
+        let err = for_env(EnvName::Mountaincar, "cartpole-1000")
+            .err()
+            .unwrap()
+            .to_string();
+        assert_eq!(
+            err,
+            "expert `cartpole-1000` demonstrates cartpole, not mountaincar; experts for \
+             mountaincar: mountaincar-energy, mountaincar-good, mountaincar-fair, mountaincar-poor"
+        );
+        let err = for_env(EnvName::Acrobot, "acrobot-best")
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            err.contains("unknown expert `acrobot-best` for acrobot")
+                && err.contains("acrobot-energy, acrobot-good"),
+            "{err}"
+        );
+        let err = cartpole("acrobot-energy").err().unwrap().to_string();
+        assert!(err.contains("demonstrates acrobot, not cartpole"), "{err}");
+        let err = for_env(EnvName::Cliffwalk, "cliffwalk-optimal")
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(err.contains("registry::cliffwalk"), "{err}");
     }
 }

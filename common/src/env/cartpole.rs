@@ -2,13 +2,13 @@
 //! same order of operations, float64 internal state, float32 observations.
 //!
 //! The dynamics are checked against trajectories recorded from Gymnasium 1.4.0 to 1e-9
-//! (`common/tests/cartpole_reference.rs`). The one deliberate difference from `gym.make`: the
+//! (`common/tests/gymnasium_reference.rs`). The one deliberate difference from `gym.make`: the
 //! episode limit defaults to 1000 steps (the paper's) instead of 500.
 
-use rand::{Rng as _, SeedableRng};
+use rand::Rng as _;
 
+use super::episode::Episode;
 use super::{Env, EnvError, Step};
-use crate::rng::Rng;
 
 /// Acceleration of gravity (m/s²).
 pub const GRAVITY: f64 = 9.8;
@@ -45,19 +45,8 @@ pub const RESET_BOUND: f64 = 0.05;
 /// so that nothing in the core depends on entropy from the operating system.
 #[derive(Debug, Clone)]
 pub struct CartPole {
-    max_episode_steps: usize,
-    rng: Rng,
+    episode: Episode,
     state: [f64; 4],
-    phase: Phase,
-    elapsed_steps: usize,
-}
-
-/// Where the environment is in its episode life cycle.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Phase {
-    NotReset,
-    Running,
-    Over,
 }
 
 impl Default for CartPole {
@@ -71,11 +60,8 @@ impl CartPole {
     /// `TimeLimit` semantics (a limit of 0 truncates at the first step, as a limit of 1 does).
     pub fn new(max_episode_steps: usize) -> Self {
         Self {
-            max_episode_steps,
-            rng: crate::rng::seeded(0),
+            episode: Episode::new(max_episode_steps),
             state: [0.0; 4],
-            phase: Phase::NotReset,
-            elapsed_steps: 0,
         }
     }
 
@@ -88,8 +74,7 @@ impl CartPole {
     /// after a reset): the step counter restarts at 0 and the generator is left untouched.
     pub fn set_state(&mut self, s: [f64; 4]) {
         self.state = s;
-        self.phase = Phase::Running;
-        self.elapsed_steps = 0;
+        self.episode.start_at_given_state();
     }
 
     fn observation(&self) -> [f32; 4] {
@@ -135,41 +120,23 @@ impl Env for CartPole {
     }
 
     fn max_episode_steps(&self) -> usize {
-        self.max_episode_steps
+        self.episode.max_steps()
     }
 
     fn reset(&mut self, seed: Option<u64>) -> [f32; 4] {
-        if let Some(seed) = seed {
-            self.rng = Rng::seed_from_u64(seed);
-        }
+        let rng = self.episode.begin(seed);
         for v in &mut self.state {
-            *v = self.rng.random_range(-RESET_BOUND..RESET_BOUND);
+            *v = rng.random_range(-RESET_BOUND..RESET_BOUND);
         }
-        self.phase = Phase::Running;
-        self.elapsed_steps = 0;
         tracing::trace!(state = ?self.state, "cartpole reset");
         self.observation()
     }
 
     fn step(&mut self, action: usize) -> Result<Step<[f32; 4]>, EnvError> {
-        match self.phase {
-            Phase::NotReset => return Err(EnvError::NotReset),
-            Phase::Over => return Err(EnvError::EpisodeOver),
-            Phase::Running => {}
-        }
-        if action >= self.num_actions() {
-            return Err(EnvError::InvalidAction {
-                action,
-                num_actions: self.num_actions(),
-            });
-        }
+        self.episode.check_step(action, self.num_actions())?;
         self.state = Self::integrate(self.state, action);
-        self.elapsed_steps += 1;
         let terminated = Self::is_terminal(&self.state);
-        let truncated = self.elapsed_steps >= self.max_episode_steps;
-        if terminated || truncated {
-            self.phase = Phase::Over;
-        }
+        let truncated = self.episode.count_step(terminated);
         Ok(Step {
             observation: self.observation(),
             reward: 1.0,

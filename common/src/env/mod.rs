@@ -1,11 +1,16 @@
 //! Environments with Gymnasium's semantics: `reset(seed)` gives an observation, `step(action)`
 //! gives the next observation, the reward, `terminated` and `truncated`.
 
+pub mod acrobot;
 pub mod cartpole;
 pub mod cliffwalk;
+mod episode;
+pub mod mountaincar;
 
+pub use acrobot::Acrobot;
 pub use cartpole::CartPole;
 pub use cliffwalk::CliffWalk;
+pub use mountaincar::MountainCar;
 
 /// What one call to [`Env::step`] returns, as Gymnasium's `step` does.
 #[derive(Debug, Clone, PartialEq)]
@@ -98,9 +103,21 @@ where
 /// The environment of a config for the neural agents (the names `EnvName` lists with vector
 /// observations); `None` for an environment whose states are ids (CliffWalk: tabular agents).
 pub fn vector_env(cfg: &crate::config::EnvConfig) -> Option<Box<VectorEnv>> {
+    vector_env_named(cfg.name, cfg.max_episode_steps())
+}
+
+/// The environment `name` with vector observations, truncated after `max_episode_steps` steps;
+/// `None` for CliffWalk.
+pub fn vector_env_named(
+    name: crate::config::EnvName,
+    max_episode_steps: usize,
+) -> Option<Box<VectorEnv>> {
     use crate::config::EnvName;
-    match cfg.name {
-        EnvName::Cartpole => Some(Box::new(Vectorized(CartPole::new(cfg.max_episode_steps())))),
+    let limit = max_episode_steps;
+    match name {
+        EnvName::Cartpole => Some(Box::new(Vectorized(CartPole::new(limit)))),
+        EnvName::Mountaincar => Some(Box::new(Vectorized(MountainCar::new(limit)))),
+        EnvName::Acrobot => Some(Box::new(Vectorized(Acrobot::new(limit)))),
         EnvName::Cliffwalk => None,
     }
 }
