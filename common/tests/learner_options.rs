@@ -96,7 +96,8 @@ fn check_against_f64(cfg: TdConfig) {
         let (mut plus, mut minus) = (p.clone(), p.clone());
         plus[j] += eps;
         minus[j] -= eps;
-        let fd = (loss64(&plus, &p, &t, dims, &batch, &cfg) - loss64(&minus, &p, &t, dims, &batch, &cfg))
+        let fd = (loss64(&plus, &p, &t, dims, &batch, &cfg)
+            - loss64(&minus, &p, &t, dims, &batch, &cfg))
             / (2.0 * eps);
         let g = f64::from(grads[j]);
         assert!(

@@ -5,6 +5,7 @@ mod env_conformance;
 mod gymnasium_reference;
 mod js_reference;
 mod kernel_reference;
+mod learner_options;
 mod mlp_reference;
 mod nn_checkpoint;
 mod runner;

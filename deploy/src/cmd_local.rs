@@ -46,10 +46,18 @@ pub fn run_config(
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create output directory {}", out.display()))?;
     write(out, "config.toml", cfg.to_toml().as_bytes())?;
-    let bar = progress_bar(cfg.episodes as u64, progress);
+    let bar = progress_bar(cfg, progress);
     let show = |r: &EpisodeRecord| {
-        bar.set_message(format!("return {:.1}  demos {}", r.ret, r.demos_used));
-        bar.inc(1);
+        let eval = if r.eval_return.is_nan() {
+            String::new()
+        } else {
+            format!("  eval {:.1}", r.eval_return)
+        };
+        bar.set_message(format!("return {:.1}{eval}  demos {}", r.ret, r.demos_used));
+        match cfg.episode_limit() {
+            Some(_) => bar.inc(1),
+            None => bar.set_position(r.total_steps),
+        }
         ControlFlow::Continue(())
     };
     let start = Instant::now();
@@ -103,15 +111,19 @@ pub fn run_config(
     Ok(summary)
 }
 
-fn progress_bar(len: u64, show: bool) -> indicatif::ProgressBar {
+fn progress_bar(cfg: &ExperimentConfig, show: bool) -> indicatif::ProgressBar {
     if !show {
         return indicatif::ProgressBar::hidden();
     }
+    let (len, unit) = match cfg.episode_limit() {
+        Some(n) => (u64::from(n), "episodes"),
+        None => (cfg.steps, "steps"),
+    };
     let bar = indicatif::ProgressBar::new(len);
     bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:30}] {pos}/{len} episodes  {msg}  (eta {eta})",
-        )
+        indicatif::ProgressStyle::with_template(&format!(
+            "{{elapsed_precise}} [{{bar:30}}] {{pos}}/{{len}} {unit}  {{msg}}  (eta {{eta}})"
+        ))
         .expect("valid template")
         .progress_chars("=> "),
     );

@@ -275,7 +275,11 @@ impl<'a, 'w> Launcher<'a, 'w> {
             .context("cannot create episodes.csv")?;
         writeln!(csv, "{CSV_HEADER}")?;
         let bar = if plan.progress {
-            let bar = indicatif::ProgressBar::new(u64::from(plan.cfg.episodes));
+            // Episodes when the run has an episode limit, else environment steps.
+            let bar = indicatif::ProgressBar::new(match plan.cfg.episode_limit() {
+                Some(n) => u64::from(n),
+                None => plan.cfg.steps,
+            });
             bar.set_style(
                 indicatif::ProgressStyle::with_template(
                     "{elapsed_precise} [{bar:25}] {pos}/{len} episodes  {msg}",
@@ -357,7 +361,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             }
             self.check_children()?;
             self.check_swap()?;
-            if self.recorded >= u64::from(self.plan.cfg.episodes) {
+            if self.done() {
                 break false;
             }
         };
@@ -425,7 +429,14 @@ impl<'a, 'w> Launcher<'a, 'w> {
     }
 
     fn record_episode(&mut self, p: &Progress) -> anyhow::Result<()> {
-        if self.recorded >= u64::from(self.plan.cfg.episodes) {
+        if self.done()
+            || self
+                .plan
+                .cfg
+                .step_limit()
+                .is_some_and(|n| p.episode.0.total_steps > n)
+        {
+            // Past the run's end: not recorded (an episode running at the step limit is not).
             return Ok(());
         }
         let actor = p.header.id as usize;
@@ -456,8 +467,21 @@ impl<'a, 'w> Launcher<'a, 'w> {
             self.returns.pop_front();
         }
         self.all_returns.push(r.ret);
-        self.bar.inc(1);
+        match self.plan.cfg.episode_limit() {
+            Some(_) => self.bar.inc(1),
+            None => self.bar.set_position(r.total_steps),
+        }
         Ok(())
+    }
+
+    /// Whether the run has reached its episode or step limit.
+    fn done(&self) -> bool {
+        let cfg = &self.plan.cfg;
+        cfg.episode_limit()
+            .is_some_and(|n| self.recorded >= u64::from(n))
+            || cfg
+                .step_limit()
+                .is_some_and(|n| self.seen.learner_env_steps >= n)
     }
 
     fn show(&self) {

@@ -55,8 +55,5 @@ pub fn cliffwalk(cfg: &ExperimentConfig) -> anyhow::Result<CliffWalk> {
 pub fn neural_demonstrator(
     cfg: &ExperimentConfig,
 ) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>> {
-    match cfg.env.name {
-        EnvName::Cartpole => Ok(alfd_expert::registry::cartpole(&cfg.expert.name)?),
-        other => Err(usage(format!("no demonstrators for {other:?} yet"))),
-    }
+    alfd_expert::registry::for_env(cfg.env.name, &cfg.expert.name).map_err(|e| usage(e.to_string()))
 }

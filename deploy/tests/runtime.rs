@@ -21,8 +21,8 @@ fn repo() -> PathBuf {
 }
 
 /// The directory holding `alfd` and the process binaries. `cargo test` builds only this
-/// package's binary, so the three process binaries are built here once (same profile, same
-/// target directory), unless `ALFD_BIN_DIR` points at them.
+/// package's binary, so the process binaries are built here once (same profile, same target
+/// directory, the workspace's features), unless `ALFD_BIN_DIR` points at them.
 fn bin_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
@@ -35,16 +35,10 @@ fn bin_dir() -> &'static Path {
             .to_path_buf();
         let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
         let mut cmd = Command::new(cargo);
-        cmd.args([
-            "build",
-            "-p",
-            "alfd-actor",
-            "-p",
-            "alfd-learner",
-            "-p",
-            "alfd-expert",
-        ])
-        .current_dir(repo());
+        // The whole workspace, as `deploy/test.sh` builds it: the same features, so nothing
+        // is compiled twice.
+        cmd.args(["build", "--workspace", "--bins"])
+            .current_dir(repo());
         if dir.ends_with("release") {
             cmd.arg("--release");
         }
@@ -150,7 +144,8 @@ fn rows(dir: &Path) -> Vec<Vec<String>> {
         .unwrap_or_default()
         .lines()
         .skip(1)
-        .filter(|l| l.split(',').count() == 9)
+        // Whole rows only (the file may be read while a row is being written).
+        .filter(|l| l.split(',').count() == alfd_common::record::CSV_HEADER.split(',').count())
         .map(|l| l.split(',').map(str::to_owned).collect())
         .collect()
 }
@@ -221,18 +216,19 @@ fn check_run_dir(dir: &Path, budget: usize) -> Vec<alfd_common::agent::DemoRecor
 #[test]
 fn a_small_run_with_two_actors_fills_its_run_directory() {
     let out = tmp("small");
-    // `first`: the budget goes on the first steps, so exactly B demonstrations are made.
+    // `first`: the budget goes on the first steps, so exactly B demonstrations are made. Enough
+    // episodes (about a second of play) that an actor starting a little later still gets some.
     let o = run(
         &out,
         2,
-        &["episodes=40", "budget.total=10", "query.mode=first"],
+        &["episodes=300", "budget.total=10", "query.mode=first"],
     );
     assert!(o.status.success(), "{}", text(&o));
     let s = summary(&out);
-    assert_eq!(s["episodes"], 40);
+    assert_eq!(s["episodes"], 300);
     assert_eq!(s["interrupted"], false);
     let rows = rows(&out);
-    assert_eq!(rows.len(), 40);
+    assert_eq!(rows.len(), 300);
     let header = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
     assert_eq!(
         header.lines().next().unwrap(),
@@ -266,37 +262,38 @@ fn a_small_run_with_two_actors_fills_its_run_directory() {
     );
 }
 
+/// `alfd local` and `alfd run --actors=1 --window=1` on the KRR config with `sets`: the
+/// directories of both runs.
+fn local_and_lockstep(name: &str, sets: &[&str]) -> (PathBuf, PathBuf) {
+    let (local, multi) = (tmp(&format!("{name}-local")), tmp(&format!("{name}-multi")));
+    let expert = format!("expert.name={EXPERT}");
+    for (dir, how) in [
+        (&local, &["local"][..]),
+        (&multi, &["run", "--actors=1", "--window=1"][..]),
+    ] {
+        let mut c = alfd();
+        c.args(how)
+            .args([
+                "--config",
+                "deploy/configs/cartpole-bdqn-krr.toml",
+                "--quiet",
+            ])
+            .arg(format!("--out={}", dir.display()))
+            .args(["--set", &expert]);
+        for s in sets {
+            c.args(["--set", s]);
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", text(&o));
+    }
+    (local, multi)
+}
+
 #[test]
 fn one_actor_in_lockstep_reproduces_the_single_process_run() {
     // With one actor and a credit window of 1 the actor always acts on the newest weights, as in
-    // one process: the same seeds give the same episodes, to the byte.
-    let (local, multi) = (tmp("equiv-local"), tmp("equiv-multi"));
-    let sets = ["episodes=60", &format!("expert.name={EXPERT}")];
-    let o = alfd()
-        .args([
-            "local",
-            "--config",
-            "deploy/configs/cartpole-bdqn-krr.toml",
-            "--quiet",
-        ])
-        .arg(format!("--out={}", local.display()))
-        .args(["--set", sets[0], "--set", sets[1]])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", text(&o));
-    let o = alfd()
-        .args([
-            "run",
-            "--config",
-            "deploy/configs/cartpole-bdqn-krr.toml",
-            "--quiet",
-        ])
-        .args(["--actors=1", "--window=1"])
-        .arg(format!("--out={}", multi.display()))
-        .args(["--set", sets[0], "--set", sets[1]])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", text(&o));
+    // one process: one loop, the same seeds, the same episodes, to the byte.
+    let (local, multi) = local_and_lockstep("equiv", &["episodes=60"]);
     // The same file, byte for byte (the actor column included: actor 0 in both).
     let single = std::fs::read_to_string(local.join("episodes.csv")).unwrap();
     let many = std::fs::read_to_string(multi.join("episodes.csv")).unwrap();
@@ -308,6 +305,41 @@ fn one_actor_in_lockstep_reproduces_the_single_process_run() {
     let d2 = check_run_dir(&multi, 100);
     assert!(!d1.is_empty());
     assert_eq!(d2[..d1.len()], d1[..]);
+}
+
+#[test]
+fn lockstep_equivalence_holds_with_every_learner_option_evaluation_and_a_step_budget() {
+    let (local, multi) = local_and_lockstep(
+        "equiv-options",
+        &[
+            "episodes=0",
+            "steps=2500",
+            "evaluation.every=5",
+            "evaluation.episodes=2",
+            "shaping.kind=potential",
+            "agent.demo_fraction=0.1",
+            "agent.margin_loss_weight=1.0",
+            "agent.double_dqn=true",
+            "agent.loss=mse",
+            "agent.tau=0.05",
+            "agent.target_update_every=1",
+            "agent.max_grad_norm=10",
+        ],
+    );
+    let single = std::fs::read_to_string(local.join("episodes.csv")).unwrap();
+    let many = std::fs::read_to_string(multi.join("episodes.csv")).unwrap();
+    assert_eq!(many, single);
+    let rows: Vec<Vec<&str>> = single
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert!(rows.len() > 20, "{} episodes", rows.len());
+    // Every 5th episode carries an evaluation, the others none; no episode ends past the budget.
+    for (i, r) in rows.iter().enumerate() {
+        assert_eq!(r[9].is_empty(), (i + 1) % 5 != 0, "row {i}: {r:?}");
+        assert!(r[7].parse::<u64>().unwrap() <= 2500);
+    }
 }
 
 #[test]

@@ -59,7 +59,8 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         .expert
         .clone()
         .unwrap_or_else(|| cfg.expert.name.clone());
-    let mut demonstrator = registry::cartpole(&name).map_err(|e| BadInput(e.to_string()))?;
+    let mut demonstrator =
+        registry::for_env(cfg.env.name, &name).map_err(|e| BadInput(e.to_string()))?;
     let demos_path = args.process.run_dir.join("demos.jsonl");
     // Read the demonstrations now, to refuse a bad file before the run depends on us; they are
     // read again when this expert becomes active (its predecessor may have added some).

@@ -410,7 +410,14 @@ mod tests {
             "seed = 0\nepisodes = 1\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"dqn\"\ngamma = 0.9\n[shaping]\nkind = \"{kind}\"\n"
         );
         let cfg = ExperimentConfig::from_toml(&text).unwrap();
-        NeuralActor::new(&cfg.agent, &cfg.query, cfg.shaping.kind, 4, 2, crate::rng::seeded(1))
+        NeuralActor::new(
+            &cfg.agent,
+            &cfg.query,
+            cfg.shaping.kind,
+            4,
+            2,
+            crate::rng::seeded(1),
+        )
     }
 
     fn step(x: f32, terminated: bool) -> Step<Vec<f32>> {
@@ -430,7 +437,9 @@ mod tests {
         let mut out = Recorder::default();
         let mut a = GenericActor::new(actor("potential"), &mut out, Fixed);
         let (s0, s1) = (vec![0.2f32; 4], vec![0.7f32; 4]);
-        assert!(a.observe(&s0, 0, &step(0.7, false), false, shaping).unwrap());
+        assert!(a
+            .observe(&s0, 0, &step(0.7, false), false, shaping)
+            .unwrap());
         assert!(a.adder.0.is_empty(), "waits for the next action");
         a.observe(&s1, 1, &step(1.3, true), false, shaping).unwrap();
         let phi0 = NeuralActor::potential(&s0, 0, &model, 0.5);
@@ -438,13 +447,17 @@ mod tests {
         assert!(phi0 > 0.0 && phi1 > 0.0);
         let got: Vec<f32> = a.adder.0.iter().map(|(t, _)| t.reward).collect();
         let want = [(1.0 + 0.9 * phi1 - phi0) as f32, (1.0 - phi1) as f32];
-        assert_eq!(got, want, "F = γΦ(s',a') − Φ(s,a), Φ = 0 after the terminal step");
+        assert_eq!(
+            got, want,
+            "F = γΦ(s',a') − Φ(s,a), Φ = 0 after the terminal step"
+        );
         assert_eq!(a.adder.0[0].0.state, s0);
 
         // The paper's shaping goes to the adder at once, with eq. 4.
         let mut out = Recorder::default();
         let mut p = GenericActor::new(actor("paper"), &mut out, Fixed);
-        p.observe(&s0, 0, &step(0.7, false), false, shaping).unwrap();
+        p.observe(&s0, 0, &step(0.7, false), false, shaping)
+            .unwrap();
         assert_eq!(p.adder.0.len(), 1);
         assert!(p.adder.0[0].0.reward > 1.0, "eq. 4 adds a positive bonus");
     }
