@@ -123,6 +123,9 @@ pub struct RuntimeSummary {
     pub updates_per_s: f64,
     pub actor_restarts: u32,
     pub expert_swaps: u32,
+    /// Times the expert was restarted after its process died.
+    #[serde(default)]
+    pub expert_restarts: u32,
     /// The run was stopped by Ctrl-C (or SIGTERM) before its last episode.
     pub interrupted: bool,
 }
@@ -223,6 +226,7 @@ mod tests {
             updates_per_s: 1.0,
             actor_restarts: 0,
             expert_swaps: 1,
+            expert_restarts: 2,
             interrupted: false,
         });
         let json = serde_json::to_string(&s).unwrap();

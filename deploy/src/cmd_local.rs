@@ -12,7 +12,7 @@ use alfd_common::record::{episodes_csv, EpisodeRecord, RunSummary};
 use alfd_common::runner::{run_neural, run_tabular};
 use anyhow::Context as _;
 
-use crate::setup;
+use crate::{run_dir, setup};
 
 #[derive(Debug, clap::Args)]
 pub struct LocalArgs {
@@ -22,7 +22,7 @@ pub struct LocalArgs {
     /// Override a config value, e.g. `--set agent.heads=3` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
-    /// Output directory (created if missing).
+    /// Output directory (created if missing); it must not hold a run already.
     #[arg(long)]
     pub out: PathBuf,
     /// Print no progress.
@@ -32,14 +32,55 @@ pub struct LocalArgs {
 
 pub fn run(args: LocalArgs) -> anyhow::Result<()> {
     let cfg = setup::load_config(&args.config, &args.set)?;
-    let summary = run_config(&cfg, &args.out, !args.quiet)?;
+    // Every input is checked before the directory is claimed.
+    let pieces = Pieces::of(&cfg)?;
+    let _lock = run_dir::claim_new(&args.out)?;
+    let summary = run_pieces(&cfg, pieces, &args.out, !args.quiet)?;
     println!("{}", serde_json::to_string(&summary)?);
     Ok(())
 }
 
-/// Runs `cfg` in this process and writes its outputs to `out`.
+/// What a run is built from, beyond its config: everything that reads the user's files or names.
+enum Pieces {
+    Tabular {
+        env: Box<alfd_common::env::cliffwalk::CliffWalk>,
+        demonstrator: Box<dyn alfd_common::agent::Demonstrator<usize> + Send>,
+    },
+    Neural {
+        demonstrator: Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>,
+    },
+}
+
+impl Pieces {
+    fn of(cfg: &ExperimentConfig) -> anyhow::Result<Self> {
+        Ok(match cfg.env.name {
+            EnvName::Cliffwalk => {
+                let env = setup::cliffwalk(cfg)?;
+                let demonstrator = alfd_expert::registry::cliffwalk(&cfg.expert.name, &env)?;
+                Self::Tabular {
+                    env: Box::new(env),
+                    demonstrator,
+                }
+            }
+            _ => Self::Neural {
+                demonstrator: setup::neural_demonstrator(cfg)?,
+            },
+        })
+    }
+}
+
+/// Runs `cfg` in this process and writes its outputs to `out` (`alfd sweep`, which owns `out`).
 pub fn run_config(
     cfg: &ExperimentConfig,
+    out: &Path,
+    progress: bool,
+) -> anyhow::Result<RunSummary> {
+    run_pieces(cfg, Pieces::of(cfg)?, out, progress)
+}
+
+fn run_pieces(
+    cfg: &ExperimentConfig,
+    pieces: Pieces,
     out: &Path,
     progress: bool,
 ) -> anyhow::Result<RunSummary> {
@@ -61,11 +102,12 @@ pub fn run_config(
         ControlFlow::Continue(())
     };
     let start = Instant::now();
-    let (records, demos, greedy, optimal) = match cfg.env.name {
-        EnvName::Cliffwalk => {
-            let env = setup::cliffwalk(cfg)?;
-            let mut demonstrator = alfd_expert::registry::cliffwalk(&cfg.expert.name, &env)?;
-            let run = run_tabular(cfg, env.clone(), demonstrator.as_mut(), |r, _| show(r));
+    let (records, demos, greedy, optimal) = match pieces {
+        Pieces::Tabular {
+            env,
+            mut demonstrator,
+        } => {
+            let run = run_tabular(cfg, (*env).clone(), demonstrator.as_mut(), |r, _| show(r));
             let vi = value_iteration(&env, cfg.agent.gamma, 1e-10)?;
             let greedy = policy_evaluation(&env, &run.greedy_policy, cfg.agent.gamma)?;
             let s0 = env.map().start();
@@ -78,8 +120,7 @@ pub fn run_config(
                 Some(vi.values[s0]),
             )
         }
-        _ => {
-            let mut demonstrator = setup::neural_demonstrator(cfg)?;
+        Pieces::Neural { mut demonstrator } => {
             let run = run_neural(cfg, demonstrator.as_mut(), |r, _| show(r));
             write(
                 out,

@@ -4,14 +4,12 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use alfd_common::config::ExperimentConfig;
 use alfd_harness::RuntimeConfig;
 use alfd_wire::MAX_ACTORS;
-use anyhow::Context as _;
 
 use crate::launcher::{self, Plan, SwapRequest, SwapResponse, SWAP_REQUEST, SWAP_RESPONSE};
-use crate::setup;
 use crate::usage::usage;
+use crate::{run_dir, setup};
 
 /// The default experiment: CartPole, Bootstrapped DQN with KRR shaping, the 1000 expert.
 pub const DEFAULT_CONFIG: &str = include_str!("../configs/cartpole-bdqn-krr.toml");
@@ -27,7 +25,7 @@ pub struct RunArgs {
     /// Override a config value, e.g. `--set budget.total=20` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
-    /// The run directory; default `runs/<run id>`.
+    /// The run directory; default `runs/<run id>`. It must not hold a run already.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Print no progress bar.
@@ -42,7 +40,7 @@ pub struct RunArgs {
     /// The learner publishes its weights every this many updates.
     #[arg(long, default_value_t = 1)]
     pub weights_every: u64,
-    /// Restarts allowed per actor before the run fails.
+    /// Restarts allowed per actor, and of the expert, before the run fails.
     #[arg(long, default_value_t = 5)]
     pub max_restarts: u32,
     /// Pin the learner to CPU 0 and the other processes to the other CPUs (`taskset`); helps on
@@ -54,8 +52,7 @@ pub struct RunArgs {
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let cfg = match &args.config {
         Some(path) => setup::load_config(path, &args.set)?,
-        None => ExperimentConfig::from_toml_with_overrides(DEFAULT_CONFIG, &args.set)
-            .context("in the default config")?,
+        None => setup::parse_config(DEFAULT_CONFIG, &args.set, "the default config")?,
     };
     if cfg.agent.kind.is_tabular() {
         return Err(usage(
@@ -98,6 +95,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(&run_id));
+    // A run directory belongs to one run: refused if it holds one, locked while this one runs.
+    let _lock = run_dir::claim_new(&run_dir)?;
     let plan = Plan {
         cfg,
         actors: args.actors,
@@ -142,6 +141,8 @@ pub struct SwapArgs {
 /// Asks the launcher of a live run to replace its expert, and waits for the outcome.
 pub fn swap(args: SwapArgs) -> anyhow::Result<()> {
     let info = launcher::read_run_info(&args.run).map_err(|e| usage(format!("{e:#}")))?;
+    // One swap at a time: a second one is refused at once, not queued.
+    let _swap_lock = run_dir::lock_swaps(&args.run)?;
     // The new expert must exist for the run's environment.
     let mut cfg = setup::load_config(&args.run.join("config.toml"), &[])?;
     cfg.expert.name = args.expert.clone();

@@ -14,6 +14,18 @@
 //! Only the active expert answers, and it is made active only after its predecessor exited, so
 //! no demonstration is counted twice and the budget is never exceeded. Queries asked in the short
 //! gap go unanswered and the actors act on their own.
+//!
+//! # Faults
+//! - An actor that dies is restarted as a new incarnation (up to `--max-restarts` per actor).
+//! - An expert that dies is restarted as a new generation, like a swap without the old one: it
+//!   reads `demos.jsonl` back, so the budget and the demonstrations carry over; meanwhile the
+//!   actors act on their own (up to `--max-restarts` expert restarts). The decisions are in
+//!   [`ExpertLifecycle`](crate::expert_lifecycle::ExpertLifecycle).
+//! - The learner's death ends the run (a learner cannot be restarted without a checkpoint).
+//! - Stray signals (SIGCONT, SIGTSTP, ...) stop no process: the launcher and its children are
+//!   caught by iceoryx2's handler, and only SIGINT/SIGTERM count. Ctrl-Z (SIGTSTP) is therefore
+//!   ignored by the launcher (the children, in process groups of their own, never see it): the
+//!   run goes on; Ctrl-C stops it cleanly.
 
 use std::collections::VecDeque;
 use std::fs::File;
@@ -36,6 +48,8 @@ use anyhow::{bail, Context as _};
 use serde::{Deserialize, Serialize};
 use tracing::{debug, info, warn};
 
+use crate::expert_lifecycle::{Action, Exit, ExpertLifecycle};
+
 /// Everything a launch needs.
 #[derive(Debug, Clone)]
 pub struct Plan {
@@ -45,7 +59,7 @@ pub struct Plan {
     pub run_id: String,
     /// The runtime settings every process reads (`runtime.toml`).
     pub runtime: RuntimeConfig,
-    /// Restarts allowed per actor before the run fails.
+    /// Restarts allowed per actor, and of the expert, before the run fails.
     pub max_restarts: u32,
     pub progress: bool,
     /// Pin the learner to CPU 0 and the other processes to the other CPUs (with `taskset`).
@@ -65,7 +79,7 @@ pub struct RunInfo {
 }
 
 /// `swap-expert.request.json`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SwapRequest {
     pub id: String,
     pub expert: String,
@@ -102,52 +116,12 @@ struct Proc {
     child: Child,
 }
 
-/// A swap in progress.
-#[derive(Debug)]
-struct Swap {
-    request: SwapRequest,
-    /// The expert being replaced.
-    from_name: String,
-    from: u16,
-    to: u16,
-    phase: SwapPhase,
-    started: Instant,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum SwapPhase {
-    /// The new expert is starting.
-    Starting,
-    /// The new one is up; the old one was told to go.
-    OldLeaving,
-    /// The old one has gone; the new one was made active.
-    Activating,
-}
-
 /// The latest status of each process, as reported on `progress`.
 #[derive(Debug, Default)]
 struct Seen {
     learner_state: u32,
     learner_env_steps: u64,
     learner_updates: u64,
-    /// (generation, state, demos).
-    experts: Vec<(u16, u32, u64)>,
-}
-
-impl Seen {
-    fn expert(&self, generation: u16) -> Option<(u32, u64)> {
-        self.experts
-            .iter()
-            .find(|e| e.0 == generation)
-            .map(|e| (e.1, e.2))
-    }
-
-    fn set_expert(&mut self, generation: u16, state: u32, demos: u64) {
-        match self.experts.iter_mut().find(|e| e.0 == generation) {
-            Some(e) => *e = (generation, state, demos),
-            None => self.experts.push((generation, state, demos)),
-        }
-    }
 }
 
 /// A run id: the time and the launcher's pid, `r<unix seconds>-<pid>`.
@@ -248,11 +222,10 @@ struct Launcher<'a, 'w> {
     demos_answered: u64,
     /// The newest incarnation of each actor id that recorded an episode (0: none yet).
     incarnations: [u64; alfd_wire::MAX_ACTORS],
+    /// Actor restarts.
     restarts: u32,
-    swaps: u32,
-    swap: Option<Swap>,
-    generation: u16,
-    expert_name: String,
+    /// The expert generations: swaps and restarts.
+    experts: ExpertLifecycle,
     started: Instant,
     /// When the actors were started (rates are measured from here).
     running_since: Instant,
@@ -309,10 +282,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             demos_answered: 0,
             incarnations: [0; alfd_wire::MAX_ACTORS],
             restarts: 0,
-            swaps: 0,
-            swap: None,
-            generation: 1,
-            expert_name: plan.cfg.expert.name.clone(),
+            experts: ExpertLifecycle::new(plan.max_restarts),
             started: Instant::now(),
             running_since: Instant::now(),
             last_control: Instant::now(),
@@ -324,24 +294,20 @@ impl<'a, 'w> Launcher<'a, 'w> {
     fn run(&mut self) -> anyhow::Result<RunSummary> {
         info!(run_id = %self.plan.run_id, actors = self.plan.actors, "run starting");
         self.spawn(Kind::Learner)?;
-        let name = self.expert_name.clone();
-        self.spawn(Kind::Expert {
-            generation: 1,
-            name,
-        })?;
-        // The learner and the expert are up before the first actor asks anything.
+        let first = self
+            .experts
+            .start(&self.plan.cfg.expert.name, Instant::now());
+        self.apply(first)?;
+        // The learner and the expert are up (the expert active) before the first actor asks
+        // anything.
         let deadline = Instant::now() + Duration::from_secs(60);
         loop {
             if self.tick()? == Wake::Signal {
                 return Ok(self.summary(true));
             }
             self.check_children()?;
-            if self.seen.learner_state == process_state::RUNNING
-                && self
-                    .seen
-                    .expert(1)
-                    .is_some_and(|(s, _)| s == process_state::STANDBY)
-            {
+            self.check_swap()?;
+            if self.seen.learner_state == process_state::RUNNING && self.experts.settled() {
                 break;
             }
             anyhow::ensure!(
@@ -349,8 +315,6 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 "the learner and the expert did not come up within 60 s (see learner.log, expert-1.log)"
             );
         }
-        self.control.active_expert = 1;
-        self.publish_control()?;
         self.running_since = Instant::now();
         for id in 0..self.plan.actors as u16 {
             self.spawn(Kind::Actor { id, incarnation: 1 })?;
@@ -418,10 +382,16 @@ impl<'a, 'w> Launcher<'a, 'w> {
                         demos = p.demos,
                         "expert status"
                     );
-                    self.seen.set_expert(p.header.id, p.state, p.demos);
                     if p.header.id == self.control.active_expert as u16 {
                         self.demos_answered = self.demos_answered.max(p.demos);
                     }
+                    let now = Instant::now();
+                    let actions = match p.state {
+                        process_state::STANDBY => self.experts.standby(p.header.id, now),
+                        process_state::RUNNING => self.experts.running(p.header.id, now),
+                        _ => Vec::new(),
+                    };
+                    self.apply(actions)?;
                 }
                 _ => {}
             }
@@ -544,7 +514,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         Ok(())
     }
 
-    /// Reaps exited children: restarts actors, fails the run for anything else unexpected.
+    /// Reaps exited children: restarts actors and the expert, fails the run for the learner.
     fn check_children(&mut self) -> anyhow::Result<()> {
         let mut i = 0;
         while i < self.procs.len() {
@@ -554,6 +524,8 @@ impl<'a, 'w> Launcher<'a, 'w> {
             };
             let proc = self.procs.remove(i);
             let how = describe(status);
+            // The dead process's iceoryx2 node goes before its successor comes.
+            self.cleanup_dead_nodes();
             match proc.kind {
                 Kind::Actor { id, incarnation } => {
                     warn!(process = %proc.name, "{how}");
@@ -565,53 +537,99 @@ impl<'a, 'w> Launcher<'a, 'w> {
                             self.log_of(&proc.name)
                         );
                     }
-                    // The dead process's iceoryx2 node goes before its successor comes.
-                    match wire::cleanup_dead_nodes(&self.plan.run_id) {
-                        Ok(removed) if !removed.is_empty() => {
-                            info!(?removed, "dead nodes cleaned up")
-                        }
-                        Ok(_) => {}
-                        Err(e) => warn!("cannot clean up dead nodes: {e}"),
-                    }
                     self.restarts += 1;
                     self.spawn(Kind::Actor {
                         id,
                         incarnation: incarnation + 1,
                     })?;
                 }
-                Kind::Expert { generation, .. }
-                    if self.swap.as_ref().is_some_and(|s| {
-                        s.from == generation && s.phase == SwapPhase::OldLeaving
-                    }) =>
-                {
-                    info!(process = %proc.name, "{how} (replaced)");
-                    let _ = wire::cleanup_dead_nodes(&self.plan.run_id);
-                    let to = self.swap.as_ref().map(|s| s.to).unwrap_or_default();
-                    self.control.active_expert = u32::from(to);
-                    self.publish_control()?;
-                    if let Some(s) = self.swap.as_mut() {
-                        s.phase = SwapPhase::Activating;
+                Kind::Expert { generation, .. } => {
+                    let reason = last_error(&self.plan.run_dir.join(format!("{}.log", proc.name)));
+                    let exit = Exit {
+                        how: how.clone(),
+                        code: status.code(),
+                        reason,
+                    };
+                    let who = proc_binary(&proc.kind, &proc.name);
+                    if generation == self.experts.active() {
+                        warn!("{who} {}", exit.how);
+                    } else {
+                        info!("{who} {}", exit.how);
+                    }
+                    let actions = self.experts.exited(generation, &exit, Instant::now());
+                    self.apply(actions)?;
+                }
+                Kind::Learner => bail!(
+                    "alfd-learner {how}: the run cannot go on without its learner (a learner \
+                     cannot be restarted: there are no checkpoints), so it was stopped; the \
+                     episodes so far are in {}, and no weights were saved; see {}",
+                    self.plan.run_dir.join("episodes.csv").display(),
+                    self.log_of(&proc.name)
+                ),
+            }
+        }
+        Ok(())
+    }
+
+    fn cleanup_dead_nodes(&self) {
+        match wire::cleanup_dead_nodes(&self.plan.run_id) {
+            Ok(removed) if !removed.is_empty() => info!(?removed, "dead nodes cleaned up"),
+            Ok(_) => {}
+            Err(e) => warn!("cannot clean up dead nodes: {e}"),
+        }
+    }
+
+    /// Carries out what the expert lifecycle decided.
+    fn apply(&mut self, actions: Vec<Action>) -> anyhow::Result<()> {
+        for action in actions {
+            debug!(?action, "expert lifecycle");
+            match action {
+                Action::Spawn { generation, name } => {
+                    if generation > 1 {
+                        info!(generation, expert = %name, "starting a new expert generation");
+                    }
+                    self.spawn(Kind::Expert { generation, name })?;
+                }
+                Action::Kill { generation } => {
+                    for p in &mut self.procs {
+                        if matches!(&p.kind, Kind::Expert { generation: g, .. } if *g == generation)
+                        {
+                            warn!(process = %p.name, "killing");
+                            let _ = p.child.kill();
+                        }
                     }
                 }
-                Kind::Expert { generation, .. }
-                    if self
-                        .swap
-                        .as_ref()
-                        .is_some_and(|s| s.to == generation && s.phase == SwapPhase::Starting) =>
-                {
-                    warn!(process = %proc.name, "{how} before it was ready; swap abandoned");
-                    let swap = self.swap.take().expect("checked above");
-                    self.respond(
-                        &swap,
-                        false,
-                        format!("the new expert {how}; see {}", self.log_of(&proc.name)),
-                    )?;
-                    self.control.newest_expert = u32::from(swap.from);
+                Action::Control { newest, active } => {
+                    self.control.newest_expert = u32::from(newest);
+                    self.control.active_expert = u32::from(active);
+                    self.publish_control()?;
                 }
-                _ => bail!(
-                    "{} {how}; see {}",
-                    proc_binary(&proc.kind, &proc.name),
-                    self.log_of(&proc.name)
+                Action::Respond {
+                    request,
+                    ok,
+                    message,
+                    from,
+                    generation,
+                } => {
+                    if ok {
+                        info!(generation, expert = %request.expert, "expert swapped");
+                    }
+                    self.respond(request, ok, message, from, generation)?;
+                }
+                Action::Recovered {
+                    generation,
+                    died,
+                    took,
+                } => warn!(
+                    "expert-{generation} answers again, {} ms after expert-{died} died",
+                    took.as_millis()
+                ),
+                Action::Fail {
+                    generation,
+                    message,
+                } => bail!(
+                    "{message}; see {}",
+                    self.log_of(&format!("expert-{generation}"))
                 ),
             }
         }
@@ -626,7 +644,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             .to_string()
     }
 
-    /// Takes a swap request, and moves a swap in progress along.
+    /// Takes a swap request, and lets the expert lifecycle's timeouts run.
     fn check_swap(&mut self) -> anyhow::Result<()> {
         let request_path = self.plan.run_dir.join(SWAP_REQUEST);
         if request_path.exists() {
@@ -634,88 +652,32 @@ impl<'a, 'w> Launcher<'a, 'w> {
             let _ = std::fs::remove_file(&request_path);
             match serde_json::from_str::<SwapRequest>(&text) {
                 Err(e) => warn!("ignoring a malformed swap request: {e}"),
-                Ok(request) if self.swap.is_some() => {
-                    let fake = Swap {
-                        request,
-                        from_name: self.expert_name.clone(),
-                        from: self.generation,
-                        to: self.generation,
-                        phase: SwapPhase::Starting,
-                        started: Instant::now(),
-                    };
-                    self.respond(&fake, false, "another swap is in progress".to_owned())?;
-                }
                 Ok(request) => {
-                    let from = self.generation;
-                    let to = from + 1;
-                    info!(from, to, expert = %request.expert, "expert swap requested");
-                    self.spawn(Kind::Expert {
-                        generation: to,
-                        name: request.expert.clone(),
-                    })?;
-                    self.swap = Some(Swap {
-                        request,
-                        from_name: self.expert_name.clone(),
-                        from,
-                        to,
-                        phase: SwapPhase::Starting,
-                        started: Instant::now(),
-                    });
+                    info!(expert = %request.expert, "expert swap requested");
+                    let actions = self.experts.swap(request, Instant::now());
+                    self.apply(actions)?;
                 }
             }
         }
-        let Some(swap) = self.swap.as_mut() else {
-            return Ok(());
-        };
-        let new_state = self.seen.expert(swap.to).map(|(s, _)| s);
-        match swap.phase {
-            SwapPhase::Starting if new_state == Some(process_state::STANDBY) => {
-                // Make before break: the new expert is up; now the old one goes.
-                swap.phase = SwapPhase::OldLeaving;
-                self.control.newest_expert = u32::from(swap.to);
-                self.control.active_expert = 0;
-                self.publish_control()?;
-            }
-            SwapPhase::Activating if new_state == Some(process_state::RUNNING) => {
-                let swap = self.swap.take().expect("in progress");
-                self.generation = swap.to;
-                self.expert_name = swap.request.expert.clone();
-                self.swaps += 1;
-                info!(generation = swap.to, expert = %swap.request.expert, "expert swapped");
-                self.respond(&swap, true, "swapped".to_owned())?;
-            }
-            SwapPhase::Starting if swap.started.elapsed() > Duration::from_secs(60) => {
-                let swap = self.swap.take().expect("in progress");
-                if let Some(i) = self.procs.iter().position(|p| {
-                    p.kind
-                        == Kind::Expert {
-                            generation: swap.to,
-                            name: swap.request.expert.clone(),
-                        }
-                }) {
-                    let mut p = self.procs.remove(i);
-                    let _ = p.child.kill();
-                    let _ = p.child.wait();
-                }
-                self.respond(
-                    &swap,
-                    false,
-                    "the new expert did not come up within 60 s".to_owned(),
-                )?;
-            }
-            _ => {}
-        }
-        Ok(())
+        let actions = self.experts.tick(Instant::now());
+        self.apply(actions)
     }
 
-    fn respond(&self, swap: &Swap, ok: bool, message: String) -> anyhow::Result<()> {
+    fn respond(
+        &self,
+        request: SwapRequest,
+        ok: bool,
+        message: String,
+        from: String,
+        generation: u16,
+    ) -> anyhow::Result<()> {
         let r = SwapResponse {
-            id: swap.request.id.clone(),
+            id: request.id,
             ok,
             message,
-            from: swap.from_name.clone(),
-            to: swap.request.expert.clone(),
-            generation: u32::from(swap.to),
+            from,
+            to: request.expert,
+            generation: u32::from(generation),
             at_episode: self.recorded,
         };
         if !ok {
@@ -813,7 +775,8 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 env_steps_per_s: self.seen.learner_env_steps as f64 / running,
                 updates_per_s: self.seen.learner_updates as f64 / running,
                 actor_restarts: self.restarts,
-                expert_swaps: self.swaps,
+                expert_swaps: self.experts.swaps(),
+                expert_restarts: self.experts.restarts(),
                 interrupted,
             }),
         }
@@ -892,10 +855,59 @@ impl RateMeter {
     }
 }
 
+/// The error a process printed last in its log (`alfd-expert: error: ...`), if any; only the
+/// end of the log is read.
+fn last_error(log: &Path) -> Option<String> {
+    use std::io::{Read as _, Seek as _, SeekFrom};
+    const TAIL: u64 = 64 * 1024;
+    let mut file = File::open(log).ok()?;
+    let len = file.metadata().ok()?.len();
+    file.seek(SeekFrom::Start(len.saturating_sub(TAIL))).ok()?;
+    let mut bytes = Vec::new();
+    file.read_to_end(&mut bytes).ok()?;
+    error_line(&String::from_utf8_lossy(&bytes))
+}
+
+/// The message of the last `<binary>: error: <message>` line of a log.
+fn error_line(log: &str) -> Option<String> {
+    log.lines().rev().find_map(|l| {
+        let (binary, message) = l.split_once(": error: ")?;
+        binary
+            .starts_with("alfd-")
+            .then(|| message.trim().to_owned())
+    })
+}
+
 /// Reads `run.json` of a run directory.
 pub fn read_run_info(run_dir: &Path) -> anyhow::Result<RunInfo> {
     let path = run_dir.join("run.json");
     let text = std::fs::read_to_string(&path)
         .with_context(|| format!("{} is not a run directory (no run.json)", run_dir.display()))?;
     serde_json::from_str(&text).with_context(|| format!("malformed {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_last_error_of_a_log_is_its_reason() {
+        let log = "2026-01-01T00:00:00Z  INFO alfd_expert: expert starting\n\
+                   alfd-expert: error: old trouble\n\
+                   2026-01-01T00:00:01Z  INFO alfd_expert: expert starting\n\
+                   alfd-expert: error: /r/demos.jsonl line 79: not a demonstration record: EOF\n\
+                   2026-01-01T00:00:02Z  WARN some: other line\n";
+        assert_eq!(
+            error_line(log).as_deref(),
+            Some("/r/demos.jsonl line 79: not a demonstration record: EOF")
+        );
+        assert_eq!(error_line("INFO nothing wrong\n"), None);
+        let dir = std::env::temp_dir().join(format!("alfd-last-error-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("expert-2.log");
+        std::fs::write(&path, log).unwrap();
+        assert!(last_error(&path).unwrap().contains("line 79"));
+        assert_eq!(last_error(&dir.join("missing.log")), None);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

@@ -8,7 +8,9 @@ mod cmd_expert;
 mod cmd_local;
 mod cmd_run;
 mod cmd_sweep;
+mod expert_lifecycle;
 mod launcher;
+mod run_dir;
 mod setup;
 mod usage;
 

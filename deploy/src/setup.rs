@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use alfd_common::config::{EnvName, ExperimentConfig};
+use alfd_common::config::{ConfigError, EnvName, ExperimentConfig};
 use alfd_common::env::cliffwalk::{CliffMap, CliffWalk};
 use anyhow::Context as _;
 
@@ -24,8 +24,69 @@ pub fn init_logging() {
 pub fn load_config(path: &Path, overrides: &[String]) -> anyhow::Result<ExperimentConfig> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| usage(format!("cannot read config {}: {e}", path.display())))?;
-    ExperimentConfig::from_toml_with_overrides(&text, overrides)
-        .with_context(|| format!("in config {}", path.display()))
+    parse_config(&text, overrides, &format!("config {}", path.display()))
+}
+
+/// Validates the config `text` (called `source` in messages) with `--set` overrides. An error
+/// says where the bad value came from: the file, or the command line (naming the `--set`).
+pub fn parse_config(
+    text: &str,
+    overrides: &[String],
+    source: &str,
+) -> anyhow::Result<ExperimentConfig> {
+    ExperimentConfig::from_toml_with_overrides(text, overrides).map_err(|e| {
+        let file_alone = if overrides.is_empty() {
+            None
+        } else {
+            ExperimentConfig::from_toml(text).err()
+        };
+        let context = match blame(&e, overrides, file_alone.as_ref()) {
+            Culprit::File => format!("in {source}"),
+            Culprit::Override(item) => format!("in `--set {item}` (on the command line)"),
+            Culprit::CommandLine => format!(
+                "in the --set values given on the command line ({})",
+                overrides.join(" ")
+            ),
+        };
+        anyhow::Error::new(e).context(context)
+    })
+}
+
+/// Where a bad config value came from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Culprit {
+    /// The config file (or the default config).
+    File,
+    /// This `--set KEY=VALUE`.
+    Override(String),
+    /// Some `--set`, which one is not known.
+    CommandLine,
+}
+
+/// Blames the error `err` of a config read with `overrides` on the file or on the command line:
+/// the file is at fault if it fails alone (`file_alone`) with the same error.
+fn blame(err: &ConfigError, overrides: &[String], file_alone: Option<&ConfigError>) -> Culprit {
+    if overrides.is_empty() {
+        return Culprit::File;
+    }
+    let key = |item: &String| item.split_once('=').map_or("", |kv| kv.0).trim().to_owned();
+    let the_one = |found: Option<&String>| match (found, overrides) {
+        (Some(item), _) => Culprit::Override(item.clone()),
+        (None, [only]) => Culprit::Override(only.clone()),
+        (None, _) => Culprit::CommandLine,
+    };
+    match err {
+        ConfigError::BadOverride(_) => Culprit::CommandLine,
+        _ if file_alone.is_some_and(|f| f.to_string() == err.to_string()) => Culprit::File,
+        ConfigError::Invalid { field, .. } => {
+            the_one(overrides.iter().rev().find(|o| key(o) == *field))
+        }
+        ConfigError::Parse(message) => the_one(overrides.iter().rev().find(|o| {
+            let k = key(o);
+            let last = k.rsplit('.').next().unwrap_or_default();
+            message.contains(&format!("`{k}`")) || message.contains(&format!("`{last}`"))
+        })),
+    }
 }
 
 /// Reads a CliffWalk map file, or the built-in map.
@@ -56,4 +117,48 @@ pub fn neural_demonstrator(
     cfg: &ExperimentConfig,
 ) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>> {
     alfd_expert::registry::for_env(cfg.env.name, &cfg.expert.name).map_err(|e| usage(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FILE: &str =
+        "seed = 1\nepisodes = 10\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"bdqn\"\n";
+
+    fn error(text: &str, sets: &[&str]) -> String {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        format!(
+            "{:#}",
+            parse_config(text, &sets, "config c.toml").unwrap_err()
+        )
+    }
+
+    #[test]
+    fn a_bad_value_is_blamed_on_where_it_came_from() {
+        // From the command line: the `--set` is named, not the file.
+        let e = error(FILE, &["episodes=20", "agent.heads=0"]);
+        assert!(
+            e.starts_with("in `--set agent.heads=0` (on the command line): ")
+                && e.contains("agent.heads"),
+            "{e}"
+        );
+        let e = error(FILE, &["agent.colour=3"]);
+        assert!(e.starts_with("in `--set agent.colour=3`"), "{e}");
+        let e = error(FILE, &["agent.heads=-x"]);
+        assert!(e.starts_with("in `--set agent.heads=-x`"), "{e}");
+        let e = error(FILE, &["nonsense"]);
+        assert!(
+            e.starts_with("in the --set values given on the command line (nonsense)"),
+            "{e}"
+        );
+        // From the file: the file is named, even with unrelated overrides.
+        let bad_file = FILE.replace("seed = 1", "seed = 1\nbudget.total = -4");
+        let e = error(&bad_file, &["episodes=20"]);
+        assert!(e.starts_with("in config c.toml: "), "{e}");
+        assert!(error(&bad_file, &[]).starts_with("in config c.toml: "));
+        // The command line overriding a bad file value is the command line's fault if still bad.
+        let e = error(&bad_file, &["budget.total=-5"]);
+        assert!(e.starts_with("in `--set budget.total=-5`"), "{e}");
+    }
 }

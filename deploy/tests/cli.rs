@@ -232,6 +232,100 @@ fn bad_configs_are_refused_with_exit_code_2_naming_the_field() {
 }
 
 #[test]
+fn a_bad_value_is_refused_with_exit_code_2_saying_where_it_came_from() {
+    let out = tmp("bad-source");
+    let o = out.to_str().unwrap();
+    let cfg = "deploy/configs/cartpole-bdqn-krr.toml";
+    // From the command line: `alfd run` (with a config file or the default one) and `alfd local`
+    // name the field and the `--set`, not the file.
+    let from_file = ["--config", cfg];
+    for (cmd, config) in [("run", &from_file[..]), ("run", &[]), ("local", &from_file)] {
+        for (set, field) in [
+            ("agent.heads=0", "agent.heads"),
+            ("agent.gamma=1.5", "agent.gamma"),
+        ] {
+            let mut args = vec![cmd];
+            args.extend_from_slice(config);
+            args.extend(["--set", set, "--out", o]);
+            let e = stderr(&alfd(&args));
+            assert_usage_error(&args, &format!("in `--set {set}` (on the command line)"));
+            assert!(
+                e.contains(&format!("`{field}`")) && !e.contains("in config"),
+                "{e}"
+            );
+        }
+    }
+    // From the file: the file is named.
+    let text = std::fs::read_to_string(repo().join(cfg))
+        .unwrap()
+        .replace("gamma = 0.99", "gamma = 1.5");
+    let bad = out.join("bad.toml");
+    std::fs::write(&bad, text).unwrap();
+    let bad = bad.to_str().unwrap();
+    for cmd in ["run", "local"] {
+        let args = [cmd, "--config", bad, "--set", "episodes=5", "--out", o];
+        assert_usage_error(&args, &format!("in config {bad}"));
+        assert_usage_error(&args, "agent.gamma");
+    }
+    // Nothing ran: the output directory holds only the bad config.
+    let names: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(names, vec![std::ffi::OsString::from("bad.toml")]);
+}
+
+#[test]
+fn local_refuses_an_output_directory_holding_a_run_and_leaves_it_untouched() {
+    let out = tmp("local-reused");
+    let o = out.to_str().unwrap();
+    let args = [
+        "local",
+        "--config",
+        "deploy/configs/cliffwalk-bootstrapped.toml",
+        "--set",
+        "episodes=10",
+        "--out",
+        o,
+        "--quiet",
+    ];
+    let first = alfd(&args);
+    assert!(first.status.success(), "{}", stderr(&first));
+    let snapshot = || {
+        let mut files: Vec<_> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| {
+                let e = e.unwrap();
+                (
+                    e.file_name(),
+                    std::fs::read(e.path()).unwrap(),
+                    e.metadata().unwrap().modified().unwrap(),
+                )
+            })
+            .collect();
+        files.sort();
+        files
+    };
+    let before = snapshot();
+    assert_usage_error(&args, "already holds a run");
+    assert_usage_error(&args, &format!("--out {o}-2"));
+    assert_eq!(snapshot(), before);
+    // Any one of a run's files is enough.
+    let partial = tmp("local-partial");
+    std::fs::write(partial.join("demos.jsonl"), "").unwrap();
+    let p = partial.to_str().unwrap();
+    let args = [
+        "local",
+        "--config",
+        "deploy/configs/cliffwalk-bootstrapped.toml",
+        "--out",
+        p,
+    ];
+    assert_usage_error(&args, "demos.jsonl");
+    assert!(!partial.join("config.toml").exists());
+}
+
+#[test]
 fn env_rollout_prints_one_json_object_per_step() {
     let o = alfd(&[
         "env",

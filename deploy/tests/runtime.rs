@@ -1,7 +1,7 @@
 //! The multi-process runtime with real processes (`alfd run`: learner, expert and actors over
 //! iceoryx2), asserting on the run directory: a small run, equivalence with the single-process
-//! runner, an expert swap, kill -9 of an actor, two concurrent runs, a refused schema version, and
-//! a failing process named by the launcher.
+//! runner, an expert swap, kill -9 of an actor, of the expert and of the learner, stray signals,
+//! two concurrent runs, a run directory reused, concurrent swaps, and a refused schema version.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -69,6 +69,16 @@ fn text(o: &Output) -> String {
         String::from_utf8_lossy(&o.stderr)
     )
 }
+
+/// An endless run with the 200 expert asked on every step (a budget that lasts the whole test) and
+/// no model to refit: demonstrations flow whenever a test looks.
+const ASKING_ALL_ALONG: [&str; 5] = [
+    "episodes=1000000",
+    "expert.name=cartpole-200",
+    "expert.model=none",
+    "query.mode=first",
+    "budget.total=100000",
+];
 
 /// `alfd run` on the shipped BDQN + KRR config with the perfect expert, to the end.
 fn run(out: &Path, actors: usize, sets: &[&str]) -> Output {
@@ -345,16 +355,8 @@ fn lockstep_equivalence_holds_with_every_learner_option_evaluation_and_a_step_bu
 #[test]
 fn the_expert_is_swapped_in_a_live_run_without_losing_or_repeating_a_demonstration() {
     let out = tmp("swap");
-    // Queries on every step (a budget that lasts the whole test), no model to refit: demonstrations
-    // flow before, during and after the swap from the 200 expert to the 1000 one.
-    let sets = [
-        "episodes=1000000",
-        "expert.name=cartpole-200",
-        "expert.model=none",
-        "query.mode=first",
-        "budget.total=100000",
-    ];
-    let mut child = spawn_run(&out, 2, &sets);
+    // Demonstrations flow before, during and after the swap from the 200 expert to the 1000 one.
+    let mut child = spawn_run(&out, 2, &ASKING_ALL_ALONG);
     wait_rows(&out, 10, &mut child);
     let before = alfd_expert::demo_log::read(&out.join("demos.jsonl"))
         .unwrap()
@@ -540,26 +542,362 @@ fn a_process_of_another_schema_version_is_refused() {
 }
 
 #[test]
-fn a_failing_process_is_named_and_the_run_stops_cleanly() {
-    let out = tmp("failing");
-    // A demos.jsonl with a malformed line: the expert refuses to start (and keeps the file).
-    let bad = "{\"index\":0,\"state\":[0.0,0.0,0.0,0.0],\"action\":1,\"step\":0,\"expert\":\"x\"}\nnot json\n";
-    std::fs::write(out.join("demos.jsonl"), bad).unwrap();
-    let o = run(&out, 2, &["episodes=10"]);
+fn a_killed_learner_ends_the_run_with_a_message_saying_so() {
+    let out = tmp("learner-killed");
+    let mut child = spawn_run(&out, 2, &["episodes=1000000"]);
+    wait_rows(&out, 5, &mut child);
+    let id = run_id(&out);
+    let pid = find_process("alfd-learner", &[&format!("--run-id={id}")]).expect("learner");
+    signal("KILL", pid);
+    let o = wait_output(child, Duration::from_secs(60));
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(
-        err.contains("alfd-expert (expert-1) exited with status 2"),
-        "bad input: exit code 2; {err}"
+        err.contains(
+            "alfd-learner was killed by signal 9: the run cannot go on without its learner"
+        ) && err.contains("learner.log"),
+        "{err}"
     );
-    let log = std::fs::read_to_string(out.join("expert-1.log")).unwrap();
-    assert!(log.contains("line 2"), "{log}");
-    assert_eq!(
-        std::fs::read_to_string(out.join("demos.jsonl")).unwrap(),
-        bad
-    );
-    let id = run_id(&out);
+    // Every process of the run is gone, and nothing of iceoryx2 is left.
+    for bin in ["alfd-actor", "alfd-expert", "alfd-learner"] {
+        assert_eq!(
+            find_process(bin, &[&format!("--run-id={id}")]),
+            None,
+            "{bin}"
+        );
+    }
     assert_eq!(wire::leftover_files(&id), Vec::<PathBuf>::new());
+}
+
+#[test]
+fn stray_signals_stop_no_process_and_the_run_finishes() {
+    let out = tmp("stray-signals");
+    // Many short episodes (at most 50 steps: a run of a few seconds whether or not it learns), and
+    // a budget that lasts, so that queries meet the stopped expert.
+    let episodes = 3000;
+    let mut child = spawn_run(
+        &out,
+        2,
+        &[
+            &format!("episodes={episodes}"),
+            "env.max_episode_steps=50",
+            "budget.total=1000",
+        ],
+    );
+    wait_rows(&out, 30, &mut child);
+    let id = run_id(&out);
+    let run = format!("--run-id={id}");
+    let expert = find_process("alfd-expert", &[&run]).expect("expert");
+    let learner = find_process("alfd-learner", &[&run]).expect("learner");
+    let actor = find_process("alfd-actor", &[&run, "--actor-id=0"]).expect("actor 0");
+    let launcher = child.child().id();
+    // The expert is stopped, as by a debugger or `kill -STOP`, then resumed; the others get a
+    // bare SIGCONT, the launcher and the expert Ctrl-Z's SIGTSTP.
+    signal("STOP", expert);
+    std::thread::sleep(Duration::from_millis(1500));
+    signal("CONT", expert);
+    signal("CONT", learner);
+    signal("CONT", actor);
+    signal("TSTP", launcher);
+    signal("TSTP", expert);
+    signal("URG", learner);
+    std::thread::sleep(Duration::from_millis(100));
+    signal("CONT", expert);
+    let sent_at = rows(&out).len();
+    assert!(
+        sent_at < episodes,
+        "the run ended before the signals were sent"
+    );
+    let (_, s) = finished(child, &out, episodes);
+    assert_eq!(
+        (s["actor_restarts"].as_u64(), s["expert_restarts"].as_u64()),
+        (Some(0), Some(0))
+    );
+    assert!(
+        !out.join("expert-2.log").exists(),
+        "the expert was restarted"
+    );
+    for log in ["expert-1.log", "learner.log", "actor-0.log", "actor-1.log"] {
+        let t = std::fs::read_to_string(out.join(log)).unwrap();
+        assert!(!t.contains("termination signal"), "{log}: {t}");
+        assert!(t.contains("the launcher said stop"), "{log}: {t}");
+    }
+    check_run_dir(&out, 1000);
+}
+
+#[test]
+fn an_expert_killed_with_sigkill_is_restarted_and_the_run_completes() {
+    let out = tmp("expert-killed");
+    // Every step asks until the budget is spent (no model to refit, so answers are quick): the
+    // expert dies with demonstrations flowing, and its successor spends the rest of the budget.
+    let (episodes, budget) = (300, 3000);
+    let mut child = spawn_run(
+        &out,
+        2,
+        &[
+            &format!("episodes={episodes}"),
+            "env.max_episode_steps=200",
+            "expert.model=none",
+            "query.mode=first",
+            &format!("budget.total={budget}"),
+        ],
+    );
+    let demos = || {
+        std::fs::read_to_string(out.join("demos.jsonl"))
+            .unwrap_or_default()
+            .lines()
+            .count()
+    };
+    wait_until(&mut child, "100 demonstrations", || demos() >= 100);
+    let id = run_id(&out);
+    let run = format!("--run-id={id}");
+    let pid = find_process("alfd-expert", &[&run, "--generation=1"]).expect("expert 1");
+    signal("KILL", pid);
+    let killed = Instant::now();
+    let at_kill = demos();
+    assert!(at_kill < budget, "the budget was spent before the kill");
+    // The launcher starts generation 2, which reads demos.jsonl back and answers.
+    wait_until(&mut child, "expert 2 started", || {
+        find_process("alfd-expert", &[&run, "--generation=2"]).is_some()
+    });
+    let respawned = killed.elapsed();
+    let (o, s) = finished(child, &out, episodes);
+    assert_eq!(
+        (s["expert_restarts"].as_u64(), s["actor_restarts"].as_u64()),
+        (Some(1), Some(0))
+    );
+    // demos.jsonl reads back whole (indices 0..n in order, none repeated), within the budget,
+    // and the restarted expert carried on from where its predecessor stopped.
+    let demos = check_run_dir(&out, budget);
+    assert!(demos.len() > at_kill, "{} <= {at_kill}", demos.len());
+    let new = std::fs::read_to_string(out.join("expert-2.log")).unwrap();
+    let restored = number_after(&new, "active: answering queries demos=") as usize;
+    assert!(
+        (at_kill..demos.len()).contains(&restored),
+        "restored {restored}"
+    );
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(err.contains("killed by signal 9"), "{err}");
+    let recovered_ms = number_after(&err, "expert-2 answers again, ");
+    eprintln!(
+        "expert restart: generation 2 started {} ms after the kill, answering {recovered_ms} ms \
+         after the launcher saw the death; {at_kill} demos at the kill, {restored} restored, {} at \
+         the end",
+        respawned.as_millis(),
+        demos.len()
+    );
+}
+
+#[test]
+fn a_run_directory_belongs_to_one_run() {
+    let out = tmp("one-run");
+    // A second launcher on a live run's directory is refused, as is `alfd local`.
+    let mut child = spawn_run(&out, 1, &["episodes=1000000"]);
+    wait_rows(&out, 3, &mut child);
+    let run_json = std::fs::read(out.join("run.json")).unwrap();
+    let refused = |o: &Output| {
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(o.status.code(), Some(2), "{}", text(o));
+        assert!(
+            err.contains(&out.display().to_string()) && err.contains("--out"),
+            "{err}"
+        );
+        err
+    };
+    refused(&run(&out, 1, &["episodes=5"]));
+    let local = alfd()
+        .args(["local", "--config", "deploy/configs/cartpole-bdqn-krr.toml"])
+        .arg(format!("--out={}", out.display()))
+        .output()
+        .unwrap();
+    refused(&local);
+    assert_eq!(std::fs::read(out.join("run.json")).unwrap(), run_json);
+    let o = interrupt(child);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+
+    // A finished run's directory: refused, and nothing in it changes.
+    let snapshot = |dir: &Path| {
+        let mut files: Vec<(String, Vec<u8>, std::time::SystemTime)> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| {
+                let e = e.unwrap();
+                let m = e.metadata().unwrap();
+                (
+                    e.file_name().to_string_lossy().into_owned(),
+                    std::fs::read(e.path()).unwrap(),
+                    m.modified().unwrap(),
+                )
+            })
+            .collect();
+        files.sort();
+        files
+    };
+    let before = snapshot(&out);
+    let err = refused(&run(&out, 1, &["episodes=5"]));
+    assert!(err.contains("already holds a run"), "{err}");
+    assert_eq!(snapshot(&out), before, "the run directory was touched");
+    check_run_dir(&out, 100);
+
+    // Two launchers started together on a new directory: one runs, the other is refused.
+    let fresh = tmp("one-run-race");
+    let _ = std::fs::remove_dir(&fresh);
+    let a = spawn_run(&fresh, 1, &["episodes=5"]);
+    let b = spawn_run(&fresh, 1, &["episodes=5"]);
+    let (oa, ob) = (
+        wait_output(a, Duration::from_secs(120)),
+        wait_output(b, Duration::from_secs(120)),
+    );
+    let mut codes = [oa.status.code(), ob.status.code()];
+    codes.sort();
+    assert_eq!(codes, [Some(0), Some(2)], "{}\n{}", text(&oa), text(&ob));
+    assert_eq!(rows(&fresh).len(), 5);
+    check_run_dir(&fresh, 100);
+}
+
+#[test]
+fn concurrent_swaps_are_refused_at_once_and_a_refused_swap_says_why() {
+    let out = tmp("swaps");
+    let mut child = spawn_run(&out, 1, &ASKING_ALL_ALONG);
+    wait_rows(&out, 5, &mut child);
+    let launcher = child.child().id();
+    let swap = |expert: &str| {
+        let mut c = alfd();
+        c.args(["swap-expert", "--run"])
+            .arg(&out)
+            .args(["--expert", expert]);
+        c
+    };
+    // The launcher is stopped, so the first swap waits (holding the swap lock) for its answer.
+    signal("STOP", launcher);
+    let first = swap("cartpole-1000")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lock = out.join(".swap.lock");
+    let start = Instant::now();
+    while std::fs::read_to_string(&lock).unwrap_or_default().trim() != first.id().to_string() {
+        assert!(start.elapsed() < Duration::from_secs(30), "no swap lock");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let start = Instant::now();
+    let second = swap("cartpole-500").output().unwrap();
+    let refused_in = start.elapsed();
+    signal("CONT", launcher);
+    let err = String::from_utf8_lossy(&second.stderr).into_owned();
+    assert_eq!(second.status.code(), Some(2), "{}", text(&second));
+    assert!(
+        err.contains("another `alfd swap-expert`")
+            && err.contains(&format!("(pid {})", first.id()))
+            && err.contains("one at a time"),
+        "{err}"
+    );
+    assert!(
+        refused_in < Duration::from_secs(5),
+        "refused after {refused_in:?}"
+    );
+    let first = first.wait_with_output().unwrap();
+    assert!(first.status.success(), "{}", text(&first));
+    let response: serde_json::Value = serde_json::from_slice(&first.stdout).unwrap();
+    assert_eq!(
+        (response["ok"].as_bool(), response["generation"].as_u64()),
+        (Some(true), Some(2))
+    );
+
+    // A bad line in demos.jsonl: the new expert refuses it, and the swap says so itself.
+    let mut demos = std::fs::OpenOptions::new()
+        .append(true)
+        .open(out.join("demos.jsonl"))
+        .unwrap();
+    std::io::Write::write_all(&mut demos, b"not json\n").unwrap();
+    drop(demos);
+    let bad = swap("cartpole-500").output().unwrap();
+    let err = String::from_utf8_lossy(&bad.stderr).into_owned();
+    assert_eq!(bad.status.code(), Some(1), "{}", text(&bad));
+    assert!(
+        err.contains("the new expert exited with status 2")
+            && err.contains("demos.jsonl line ")
+            && err.contains("not a demonstration record"),
+        "{err}"
+    );
+    // The run went on with the expert it had.
+    let n = rows(&out).len();
+    wait_rows(&out, n + 5, &mut child);
+    let o = interrupt(child);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    let s = summary(&out);
+    assert_eq!(
+        (s["expert_swaps"].as_u64(), s["expert_restarts"].as_u64()),
+        (Some(1), Some(0))
+    );
+}
+
+/// Waits (at most 90 s, polling) until `done` while the run goes on.
+fn wait_until(run: &mut Background, what: &str, mut done: impl FnMut() -> bool) {
+    let start = Instant::now();
+    while !done() {
+        assert!(
+            start.elapsed() < Duration::from_secs(90),
+            "not within 90 s: {what}"
+        );
+        assert!(
+            run.child().try_wait().unwrap().is_none(),
+            "the run ended before: {what}"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Waits for a background run to end by itself, and checks that it finished: exit code 0, every
+/// one of its `episodes` recorded, not interrupted. Returns its output and summary.
+fn finished(run: Background, dir: &Path, episodes: usize) -> (Output, serde_json::Value) {
+    let o = wait_output(run, Duration::from_secs(180));
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let s = summary(dir);
+    assert_eq!(
+        (s["episodes"].as_u64(), s["interrupted"].as_bool()),
+        (Some(episodes as u64), Some(false))
+    );
+    assert_eq!(rows(dir).len(), episodes);
+    (o, s)
+}
+
+/// The number that follows the first `marker` in `text`.
+fn number_after(text: &str, marker: &str) -> u64 {
+    text.split(marker)
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no number after {marker:?} in {text}"))
+}
+
+/// Sends `signal` (a name: KILL, STOP, CONT, ...) to `pid`.
+fn signal(signal: &str, pid: u32) {
+    let ok = Command::new("kill")
+        .args([&format!("-{signal}"), &pid.to_string()])
+        .status()
+        .unwrap();
+    assert!(ok.success(), "kill -{signal} {pid}");
+}
+
+/// Waits (at most `timeout`) for a background run to end by itself, and returns its output.
+fn wait_output(mut run: Background, timeout: Duration) -> Output {
+    let child = run.0.take().expect("running");
+    let pid = child.id();
+    let (tx, rx) = std::sync::mpsc::channel();
+    // Reads its output as it comes (a full pipe would stall it).
+    std::thread::spawn(move || {
+        let _ = tx.send(child.wait_with_output());
+    });
+    match rx.recv_timeout(timeout) {
+        Ok(output) => output.unwrap(),
+        Err(_) => {
+            let _ = Command::new("kill")
+                .args(["-INT", &pid.to_string()])
+                .status();
+            panic!("the run did not end within {timeout:?}");
+        }
+    }
 }
 
 /// The pid of a running `binary` whose command line holds every one of `args`.

@@ -5,6 +5,7 @@ use std::fmt;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
+use iceoryx2::node::NodeWaitFailure;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -26,6 +27,10 @@ pub(crate) type Transport = ipc::Service;
 
 /// Set once a process received SIGINT or SIGTERM (iceoryx2 reports a signal only once).
 pub(crate) static TERMINATION_REQUESTED: AtomicBool = AtomicBool::new(false);
+
+/// How many signals in a row a check for termination looks through before it gives up and
+/// reports none (a storm of stray signals must not hang a process).
+pub(crate) const MAX_INTERRUPTED_CHECKS: usize = 16;
 
 /// Routes iceoryx2's own log output: only its warnings and errors (or `IOX2_LOG_LEVEL`).
 pub fn quiet_transport_logs() {
@@ -75,13 +80,23 @@ impl Wire {
         Ok(wire)
     }
 
-    /// Whether SIGINT or SIGTERM arrived (sticky).
+    /// Whether SIGINT or SIGTERM arrived (sticky). Any other signal iceoryx2 catches (SIGCONT,
+    /// SIGTSTP, SIGUSR1, ...) is not a request to stop.
     pub fn termination_requested(&self) -> bool {
-        if TERMINATION_REQUESTED.load(Ordering::Relaxed) {
-            return true;
-        }
-        if self.node.wait(Duration::ZERO).is_err() {
-            TERMINATION_REQUESTED.store(true, Ordering::Relaxed);
+        // iceoryx2 keeps only the last signal caught, and `node.wait` takes it: a
+        // `TerminationRequest` is SIGINT or SIGTERM; an `Interrupt` says only that some signal
+        // cut the (zero-length) sleep short, so the check is made again to learn which.
+        for _ in 0..MAX_INTERRUPTED_CHECKS {
+            if TERMINATION_REQUESTED.load(Ordering::Relaxed) {
+                return true;
+            }
+            match self.node.wait(Duration::ZERO) {
+                Ok(()) => return false,
+                Err(NodeWaitFailure::TerminationRequest) => {
+                    TERMINATION_REQUESTED.store(true, Ordering::Relaxed);
+                }
+                Err(NodeWaitFailure::Interrupt) => {}
+            }
         }
         TERMINATION_REQUESTED.load(Ordering::Relaxed)
     }

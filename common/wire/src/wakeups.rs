@@ -3,7 +3,7 @@
 
 use std::fmt;
 use std::sync::atomic::Ordering;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -12,7 +12,7 @@ use iceoryx2::waitset::WaitSetRunResult;
 
 use crate::error::{transport, Result};
 use crate::messages::MAX_ACTORS;
-use crate::services::{Transport, Wire, TERMINATION_REQUESTED};
+use crate::services::{Transport, Wire, MAX_INTERRUPTED_CHECKS, TERMINATION_REQUESTED};
 
 /// Whom a doorbell wakes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -125,34 +125,45 @@ impl fmt::Debug for Waiter {
 }
 
 impl Waiter {
-    /// Blocks until the doorbell rings, `timeout` passes or a termination signal arrives. Rings
-    /// that arrived before the call return at once; all pending rings are consumed.
+    /// Blocks until the doorbell rings, `timeout` passes or a termination signal (SIGINT,
+    /// SIGTERM) arrives. Rings that arrived before the call return at once; all pending rings are
+    /// consumed. Any other signal (SIGCONT after a SIGSTOP, SIGTSTP, ...) is a spurious wake-up:
+    /// the wait goes on for the rest of `timeout`.
     pub fn wait(&self, timeout: Duration) -> Result<Wake> {
         if TERMINATION_REQUESTED.load(Ordering::Relaxed) {
             return Ok(Wake::Signal);
         }
+        let deadline = Instant::now() + timeout;
         let mut rang = false;
         {
             let _guard = self
                 .waitset
                 .attach_notification(&self.listener)
                 .map_err(transport("attach to a waitset", self.bell.topic()))?;
-            let result = self
-                .waitset
-                .wait_and_process_once_with_timeout(
-                    |_| {
-                        rang = true;
-                        CallbackProgression::Continue
-                    },
-                    timeout,
-                )
-                .map_err(transport("wait on", self.bell.topic()))?;
-            if matches!(
-                result,
-                WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt
-            ) {
-                TERMINATION_REQUESTED.store(true, Ordering::Relaxed);
-                return Ok(Wake::Signal);
+            for _ in 0..MAX_INTERRUPTED_CHECKS {
+                let left = deadline.saturating_duration_since(Instant::now());
+                let result = self
+                    .waitset
+                    .wait_and_process_once_with_timeout(
+                        |_| {
+                            rang = true;
+                            CallbackProgression::Continue
+                        },
+                        left,
+                    )
+                    .map_err(transport("wait on", self.bell.topic()))?;
+                match result {
+                    // SIGINT or SIGTERM, caught before or while waiting.
+                    WaitSetRunResult::TerminationRequest => {
+                        TERMINATION_REQUESTED.store(true, Ordering::Relaxed);
+                        return Ok(Wake::Signal);
+                    }
+                    // Some signal cut the wait short (despite its name, any signal iceoryx2
+                    // catches, not only SIGINT). The next round's first check takes that signal
+                    // and says whether it was SIGINT or SIGTERM; otherwise the wait goes on.
+                    WaitSetRunResult::Interrupt => continue,
+                    WaitSetRunResult::StopRequest | WaitSetRunResult::AllEventsHandled => break,
+                }
             }
         }
         let n = self.drain()?;
@@ -215,6 +226,46 @@ mod tests {
             });
             assert_eq!(waiter.wait(Duration::from_secs(10)).unwrap(), Wake::Rang);
             t.join().unwrap();
+        });
+    }
+
+    /// Sends `signal` to one thread of this process (`tid`), with the `kill` command.
+    fn signal_thread(signal: &str, tid: &str) {
+        let ok = std::process::Command::new("kill")
+            .args([&format!("-{signal}"), tid])
+            .status()
+            .expect("kill runs");
+        assert!(ok.success(), "kill -{signal} {tid}");
+    }
+
+    #[test]
+    fn a_stray_signal_is_a_spurious_wake_up_not_a_termination_request() {
+        with_run("stray-signal", |run| {
+            let expert = wire(run, Role::Expert, 1);
+            let waiter = expert.waiter(Doorbell::Expert).unwrap();
+            // This thread's id: a signal sent to it lands here, so it cuts this very wait short
+            // (EINTR), as SIGCONT does to a single-threaded process resumed after SIGSTOP.
+            let me = std::fs::read_link("/proc/thread-self").unwrap();
+            let tid = me.file_name().unwrap().to_string_lossy().into_owned();
+            let sender = std::thread::spawn(move || {
+                for signal in ["CONT", "URG", "CONT"] {
+                    std::thread::sleep(Duration::from_millis(60));
+                    signal_thread(signal, &tid);
+                }
+            });
+            let timeout = Duration::from_millis(400);
+            let start = std::time::Instant::now();
+            let wake = waiter.wait(timeout).unwrap();
+            let waited = start.elapsed();
+            sender.join().unwrap();
+            assert_eq!(wake, Wake::Timeout, "a stray signal is not SIGINT/SIGTERM");
+            assert!(waited >= timeout, "the wait went on to its end: {waited:?}");
+            assert!(!expert.termination_requested());
+            // The next wait is an ordinary one.
+            let bell = expert.bell(Doorbell::Expert).unwrap();
+            bell.ring().unwrap();
+            assert_eq!(waiter.wait(Duration::from_secs(5)).unwrap(), Wake::Rang);
+            assert!(!expert.termination_requested());
         });
     }
 }

@@ -18,8 +18,10 @@
 //! `summary.rs` (from runs to tables).
 //!
 //! Runs are deterministic, so a sweep re-run gives the same numbers. A run whose `summary.json`
-//! exists is complete and is not redone: an interrupted sweep resumes where it stopped. A complete
-//! run of a different config (say, other episodes) is refused rather than mixed in.
+//! exists is complete and is not redone: an interrupted sweep resumes where it stopped (an
+//! unfinished run is run again in its directory, under the directory's lock, so a second sweep of
+//! the same `--out` cannot run it at the same time). A complete run of a different config (say,
+//! other episodes) is refused rather than mixed in.
 
 mod experiment;
 mod plot;
@@ -217,7 +219,12 @@ fn run_jobs(
                 while !stop.load(Ordering::Relaxed) {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(job) = pending.get(i) else { break };
-                    match cmd_local::run_config(&job.cfg, &job.dir, false) {
+                    // The sweep's own run directory, re-run in place if unfinished; locked so
+                    // that two sweeps of one --out never run the same job at once.
+                    let run = crate::run_dir::lock(&job.dir).and_then(|_lock| {
+                        cmd_local::run_config(&job.cfg, &job.dir, false)
+                    });
+                    match run {
                         Ok(summary) => {
                             tracing::debug!(method = %job.method.name, seed = job.seed, wall = summary.wall_clock_s, "run done");
                             bar.set_message(format!(
