@@ -29,8 +29,8 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-#[test]
-fn every_rust_file_opens_with_a_doc_line() {
+/// Every `.rs` file of the workspace's crates.
+fn workspace_rust_files() -> Vec<PathBuf> {
     let mut files = Vec::new();
     for krate in [
         "common",
@@ -45,6 +45,31 @@ fn every_rust_file_opens_with_a_doc_line() {
             rust_files(&workspace().join(krate).join(sub), &mut files);
         }
     }
+    files
+}
+
+/// A file a reader can hold in their head: the crates' files stay under 1,000 lines.
+#[test]
+fn no_source_file_is_over_a_thousand_lines() {
+    let files = workspace_rust_files();
+    assert!(files.len() > 30, "found only {} files", files.len());
+    let long: Vec<_> = files
+        .iter()
+        .map(|f| (f, std::fs::read_to_string(f).unwrap().lines().count()))
+        .filter(|(_, n)| *n > 1000)
+        .map(|(f, n)| {
+            format!(
+                "{} ({n} lines)",
+                f.strip_prefix(workspace()).unwrap().display()
+            )
+        })
+        .collect();
+    assert!(long.is_empty(), "split these files: {long:?}");
+}
+
+#[test]
+fn every_rust_file_opens_with_a_doc_line() {
+    let files = workspace_rust_files();
     assert!(files.len() > 30, "found only {} files", files.len());
     let missing: Vec<_> = files
         .iter()

@@ -122,6 +122,16 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         );
         std::process::exit(130);
     }
+    if !args.quiet {
+        eprintln!(
+            "done: {} episodes, mean return of the last 50 {:.1}, {} demonstrations used; \
+             results in {} (episodes.csv, demos.jsonl, weights.safetensors, summary.json, logs)",
+            summary.episodes,
+            summary.mean_return_last_50,
+            summary.demos_used,
+            run_dir.display()
+        );
+    }
     Ok(())
 }
 
