@@ -35,7 +35,7 @@ pub trait QFunction {
 }
 
 /// K Q-tables, `Q_k(s, a)` for a finite state space, all starting at `init`.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TabularQ {
     states: usize,
     heads: usize,

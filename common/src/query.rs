@@ -27,7 +27,7 @@ fn percentile_of_sorted(sorted: &[f64], p: f64) -> Option<f64> {
 }
 
 /// The divergence queue `U_queue` and the percentile threshold of Algorithm 1.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct QueryRule {
     /// `L_q`: how many past divergences are remembered.
     queue_len: usize,

@@ -40,7 +40,7 @@ pub struct Batch {
 }
 
 /// Fixed-capacity ring buffer in structure-of-arrays layout.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ReplayBuffer {
     capacity: usize,
     obs_dim: usize,
@@ -122,6 +122,23 @@ impl ReplayBuffer {
 
     pub fn is_empty(&self) -> bool {
         self.len == 0
+    }
+
+    /// Whether `other` has this buffer's capacity and layout, and whole columns (a restored
+    /// checkpoint must).
+    pub fn same_shape(&self, other: &ReplayBuffer) -> bool {
+        let c = self.capacity;
+        (self.capacity, self.obs_dim, self.heads) == (other.capacity, other.obs_dim, other.heads)
+            && other.len <= c
+            && other.next < c.max(1)
+            && other.states.len() == self.states.len()
+            && other.next_states.len() == self.next_states.len()
+            && other.actions.len() == self.actions.len()
+            && other.rewards.len() == self.rewards.len()
+            && other.terminated.len() == self.terminated.len()
+            && other.masks.len() == self.masks.len()
+            && other.demo.len() == self.demo.len()
+            && other.demo_slots.iter().all(|&i| i < c)
     }
 
     pub fn capacity(&self) -> usize {

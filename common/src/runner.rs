@@ -5,13 +5,17 @@
 
 use std::ops::ControlFlow;
 
+use serde::{Deserialize, Serialize};
+
 use crate::agent::{
-    Demonstrator, ExpertCore, NetworkDemonstrator, NeuralActor, NeuralLearner, TabularAgent,
+    ActorSnapshot, Demonstrator, ExpertCore, ExpertSnapshot, LearnerSnapshot, NetworkDemonstrator,
+    NeuralActor, NeuralLearner, TabularAgent, TabularSnapshot,
 };
+use crate::checkpoint::StateMismatch;
 use crate::config::ExperimentConfig;
-use crate::env::{vector_env, CartPole, CliffWalk, Env, VectorEnv};
+use crate::env::{vector_env, CartPole, CliffWalk, Env, EnvState, VectorEnv};
 use crate::environment_loop::in_process::{LearnerHandle, LocalExpert};
-use crate::environment_loop::{self, GenericActor, Schedule};
+use crate::environment_loop::{self, GenericActor, Progress, Schedule};
 use crate::nn::Mlp;
 use crate::record::EpisodeRecord;
 use crate::rng::{derive_seed, seeded};
@@ -31,6 +35,108 @@ pub struct NeuralRun {
     pub records: Vec<EpisodeRecord>,
     pub network: Mlp,
     pub expert: ExpertCore,
+}
+
+/// The whole learning state of a neural single-process run between two episodes, from which
+/// it continues exactly as it would have. (The evaluation environment is reseeded at every
+/// evaluation, so it carries no state; the shaping schedule is the config's applied to the
+/// expert's demonstrations; the actor's potential-shaping transition is always flushed at the
+/// end of an episode.)
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NeuralRunState {
+    pub progress: Progress,
+    /// The records of the episodes played so far.
+    pub records: Vec<EpisodeRecord>,
+    pub learner: LearnerSnapshot,
+    pub actor: ActorSnapshot,
+    pub env: EnvState,
+    pub expert: ExpertSnapshot,
+}
+
+/// The whole learning state of a tabular single-process run between two episodes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TabularRunState {
+    pub progress: Progress,
+    pub records: Vec<EpisodeRecord>,
+    pub agent: TabularSnapshot,
+    pub env: EnvState,
+    pub expert: ExpertSnapshot,
+}
+
+/// A checkpoint's state: either kind of run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum RunState {
+    Neural(Box<NeuralRunState>),
+    Tabular(Box<TabularRunState>),
+}
+
+impl RunState {
+    pub fn progress(&self) -> Progress {
+        match self {
+            Self::Neural(s) => s.progress,
+            Self::Tabular(s) => s.progress,
+        }
+    }
+
+    pub fn records(&self) -> &[EpisodeRecord] {
+        match self {
+            Self::Neural(s) => &s.records,
+            Self::Tabular(s) => &s.records,
+        }
+    }
+
+    /// The state of a neural run, if it is one.
+    pub fn neural(&self) -> Option<&NeuralRunState> {
+        match self {
+            Self::Neural(s) => Some(s),
+            Self::Tabular(_) => None,
+        }
+    }
+
+    /// The state of a tabular run, if it is one.
+    pub fn tabular(&self) -> Option<&TabularRunState> {
+        match self {
+            Self::Tabular(s) => Some(s),
+            Self::Neural(_) => None,
+        }
+    }
+
+    pub fn demos(&self) -> &[crate::agent::DemoRecord] {
+        match self {
+            Self::Neural(s) => &s.expert.demos,
+            Self::Tabular(s) => &s.expert.demos,
+        }
+    }
+}
+
+/// How a run is checkpointed: it starts from `from` (a state saved by an earlier run of the same
+/// config) or from scratch, and hands its state to `save` after every `every` episodes (not
+/// after its last one); `save` may stop the run.
+#[derive(Debug, Clone, Copy)]
+pub struct Checkpoints<'s, S> {
+    pub from: Option<&'s S>,
+    pub every: Option<u32>,
+}
+
+impl<S> Checkpoints<'_, S> {
+    /// No checkpoints, from scratch.
+    pub fn none() -> Self {
+        Self {
+            from: None,
+            every: None,
+        }
+    }
+
+    /// The episode limit of the segment that starts after `done` episodes.
+    fn segment_end(&self, done: u32, limit: Option<u32>) -> Option<u32> {
+        match self.every {
+            None => limit,
+            Some(n) => {
+                let next = (done / n.max(1) + 1) * n.max(1);
+                Some(limit.map_or(next, |l| l.min(next)))
+            }
+        }
+    }
 }
 
 /// The expert's side of a config: budget B, demonstration model, shaping schedule.
@@ -53,15 +159,73 @@ fn schedule(cfg: &ExperimentConfig) -> Schedule {
     }
 }
 
+/// Plays `cfg`'s run in segments between checkpoints with [`environment_loop::run_from`]:
+/// `segment(schedule, progress, stopped)` plays one, `save(progress)` is called between two.
+fn in_segments<S>(
+    cfg: &ExperimentConfig,
+    checkpoints: &Checkpoints<'_, S>,
+    mut progress: Progress,
+    mut segment: impl FnMut(Schedule, Progress, &mut bool) -> environment_loop::RunEnd,
+    mut save: impl FnMut(Progress) -> ControlFlow<()>,
+) {
+    loop {
+        let schedule = Schedule {
+            episodes: checkpoints.segment_end(progress.episodes, cfg.episode_limit()),
+            ..schedule(cfg)
+        };
+        let mut stopped = false;
+        let end = segment(schedule, progress, &mut stopped);
+        progress = Progress {
+            episodes: end.episodes,
+            steps: end.steps,
+        };
+        let over = stopped
+            || end.stopped.is_some()
+            || checkpoints.every.is_none()
+            || cfg.episode_limit().is_some_and(|n| progress.episodes >= n);
+        if over || save(progress).is_break() {
+            return;
+        }
+    }
+}
+
+fn continue_unless(stop: bool) -> ControlFlow<()> {
+    if stop {
+        ControlFlow::Break(())
+    } else {
+        ControlFlow::Continue(())
+    }
+}
+
 /// Runs a tabular experiment (CliffWalk) on `env` with `demonstrator` as the expert.
 /// `on_episode` sees each record and the agent as each episode completes (progress, evaluation)
 /// and may stop the run early with `ControlFlow::Break`.
 pub fn run_tabular(
     cfg: &ExperimentConfig,
+    env: CliffWalk,
+    demonstrator: &mut dyn Demonstrator<usize>,
+    on_episode: impl FnMut(&EpisodeRecord, &TabularAgent) -> ControlFlow<()>,
+) -> TabularRun {
+    run_tabular_checkpointed(
+        cfg,
+        env,
+        demonstrator,
+        Checkpoints::none(),
+        |_| ControlFlow::Continue(()),
+        on_episode,
+    )
+    .expect("a run from scratch restores nothing")
+}
+
+/// [`run_tabular`] with checkpoints (see [`Checkpoints`]).
+pub fn run_tabular_checkpointed(
+    cfg: &ExperimentConfig,
     mut env: CliffWalk,
     demonstrator: &mut dyn Demonstrator<usize>,
+    checkpoints: Checkpoints<'_, TabularRunState>,
+    mut save: impl FnMut(&TabularRunState) -> ControlFlow<()>,
     mut on_episode: impl FnMut(&EpisodeRecord, &TabularAgent) -> ControlFlow<()>,
-) -> TabularRun {
+) -> Result<TabularRun, StateMismatch> {
     let mut agent = TabularAgent::new(
         &cfg.agent,
         &cfg.query,
@@ -72,22 +236,47 @@ pub fn run_tabular(
     let core = expert_core(cfg, env.num_actions());
     let mut expert = LocalExpert::new(core, demonstrator, &cfg.expert.name, false);
     let mut records = Vec::new();
-    environment_loop::run(
-        &mut env,
-        &mut agent,
-        &mut expert,
-        schedule(cfg),
-        |r, agent| {
-            records.push(*r);
-            Ok(on_episode(r, agent))
+    let mut progress = Progress::default();
+    if let Some(s) = checkpoints.from {
+        agent.restore(&s.agent)?;
+        env.restore(&s.env)
+            .map_err(|e| StateMismatch(e.to_string()))?;
+        expert.core.restore_snapshot(&s.expert)?;
+        records.clone_from(&s.records);
+        progress = s.progress;
+    }
+    let records = std::cell::RefCell::new(records);
+    let state = std::cell::RefCell::new((env, agent, expert));
+    in_segments(
+        cfg,
+        &checkpoints,
+        progress,
+        |schedule, progress, stopped| {
+            let (env, agent, expert) = &mut *state.borrow_mut();
+            environment_loop::run_from(env, agent, expert, schedule, progress, |r, agent| {
+                records.borrow_mut().push(*r);
+                *stopped |= on_episode(r, agent).is_break();
+                Ok(continue_unless(*stopped))
+            })
+            .expect("an in-process tabular run cannot fail")
         },
-    )
-    .expect("an in-process tabular run cannot fail");
-    TabularRun {
-        records,
+        |progress| {
+            let (env, agent, expert) = &*state.borrow();
+            save(&TabularRunState {
+                progress,
+                records: records.borrow().clone(),
+                agent: agent.snapshot(),
+                env: env.snapshot(),
+                expert: expert.core.snapshot(),
+            })
+        },
+    );
+    let (_, agent, _) = state.into_inner();
+    Ok(TabularRun {
+        records: records.into_inner(),
         greedy_policy: agent.greedy_policy(),
         agent,
-    }
+    })
 }
 
 /// Runs a neural experiment (the config's environment, e.g. CartPole): Algorithm 1 with the
@@ -101,18 +290,35 @@ pub fn run_tabular(
 pub fn run_neural(
     cfg: &ExperimentConfig,
     demonstrator: &mut dyn Demonstrator<[f32]>,
-    mut on_episode: impl FnMut(&EpisodeRecord, &Mlp) -> ControlFlow<()>,
+    on_episode: impl FnMut(&EpisodeRecord, &Mlp) -> ControlFlow<()>,
 ) -> NeuralRun {
+    run_neural_checkpointed(
+        cfg,
+        demonstrator,
+        Checkpoints::none(),
+        |_| ControlFlow::Continue(()),
+        on_episode,
+    )
+    .expect("a run from scratch restores nothing")
+}
+
+/// [`run_neural`] with checkpoints (see [`Checkpoints`]).
+pub fn run_neural_checkpointed(
+    cfg: &ExperimentConfig,
+    demonstrator: &mut dyn Demonstrator<[f32]>,
+    checkpoints: Checkpoints<'_, NeuralRunState>,
+    mut save: impl FnMut(&NeuralRunState) -> ControlFlow<()>,
+    mut on_episode: impl FnMut(&EpisodeRecord, &Mlp) -> ControlFlow<()>,
+) -> Result<NeuralRun, StateMismatch> {
     let mut env = vector_env(&cfg.env).expect("a neural agent runs on a vector environment");
     let (obs_dim, actions) = (env.observation_dim(), env.num_actions());
-    let learner = NeuralLearner::new(
+    let mut learner = NeuralLearner::new(
         &cfg.agent,
         obs_dim,
         actions,
         seeded(derive_seed(cfg.seed, "learner")),
     );
-    let handle = LearnerHandle::new(learner);
-    let core = NeuralActor::new(
+    let mut core = NeuralActor::new(
         &cfg.agent,
         &cfg.query,
         cfg.shaping.kind,
@@ -120,42 +326,77 @@ pub fn run_neural(
         actions,
         seeded(derive_seed(cfg.seed, "actor-0")),
     );
-    let mut actor = GenericActor::new(core, handle.adder(), handle.variables());
-    let expert_core = expert_core(cfg, actions);
-    let mut expert = LocalExpert::new(
+    let mut expert_core = expert_core(cfg, actions);
+    let mut records = Vec::new();
+    let mut progress = Progress::default();
+    if let Some(s) = checkpoints.from {
+        learner.restore(&s.learner)?;
+        core.restore(&s.actor)?;
+        env.restore(&s.env)
+            .map_err(|e| StateMismatch(e.to_string()))?;
+        expert_core.restore_snapshot(&s.expert)?;
+        records.clone_from(&s.records);
+        progress = s.progress;
+    }
+    let handle = LearnerHandle::new(learner);
+    let actor = GenericActor::new(core, handle.adder(), handle.variables());
+    let expert = LocalExpert::new(
         expert_core,
         demonstrator,
         &cfg.expert.name,
         cfg.shaping_enabled(),
     );
-    let mut records = Vec::new();
     let mut eval_env = vector_env(&cfg.env).expect("the same environment");
     let eval_seed = derive_seed(cfg.seed, "eval");
-    environment_loop::run(
-        env.as_mut(),
-        &mut actor,
-        &mut expert,
-        schedule(cfg),
-        |r, actor| {
-            if cfg.evaluation.due(r.episode) {
-                r.eval_return = evaluate_greedy(
-                    actor.core.network(),
-                    eval_env.as_mut(),
-                    cfg.evaluation.episodes,
-                    eval_seed,
-                );
-            }
-            records.push(*r);
-            Ok(on_episode(r, handle.learner().network()))
+    let records = std::cell::RefCell::new(records);
+    let state = std::cell::RefCell::new((env, actor, expert));
+    in_segments(
+        cfg,
+        &checkpoints,
+        progress,
+        |schedule, progress, stopped| {
+            let (env, actor, expert) = &mut *state.borrow_mut();
+            environment_loop::run_from(
+                env.as_mut(),
+                actor,
+                expert,
+                schedule,
+                progress,
+                |r, actor| {
+                    if cfg.evaluation.due(r.episode) {
+                        r.eval_return = evaluate_greedy(
+                            actor.core.network(),
+                            eval_env.as_mut(),
+                            cfg.evaluation.episodes,
+                            eval_seed,
+                        );
+                    }
+                    records.borrow_mut().push(*r);
+                    *stopped |= on_episode(r, handle.learner().network()).is_break();
+                    Ok(continue_unless(*stopped))
+                },
+            )
+            .expect("an in-process neural run cannot fail")
         },
-    )
-    .expect("an in-process neural run cannot fail");
+        |progress| {
+            let (env, actor, expert) = &*state.borrow();
+            save(&NeuralRunState {
+                progress,
+                records: records.borrow().clone(),
+                learner: handle.learner().snapshot(),
+                actor: actor.core.snapshot(),
+                env: env.snapshot(),
+                expert: expert.core.snapshot(),
+            })
+        },
+    );
+    let (_, actor, expert) = state.into_inner();
     drop(actor);
-    NeuralRun {
-        records,
+    Ok(NeuralRun {
+        records: records.into_inner(),
         network: handle.into_inner().network().clone(),
         expert: expert.core,
-    }
+    })
 }
 
 /// Mean return of `episodes` episodes of `env` played greedily by `net` (on the mean of its

@@ -8,5 +8,6 @@ mod kernel_reference;
 mod learner_options;
 mod mlp_reference;
 mod nn_checkpoint;
+mod resume;
 mod runner;
 mod tidy;

@@ -1,17 +1,24 @@
 //! `alfd local`: one experiment config in one process; writes `config.toml`, `episodes.csv`,
 //! `demos.jsonl`, and the learned policy (weights as safetensors, or a CliffWalk policy table
-//! with its value) to the output directory.
+//! with its value) to the output directory. With `--checkpoint-every N` it also writes
+//! `checkpoint.bin` every N episodes, with `episodes.csv` and `demos.jsonl` as they are then, so
+//! that `alfd resume` can continue it.
 
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use alfd_common::agent::DemoRecord;
 use alfd_common::config::{EnvName, ExperimentConfig};
 use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration};
 use alfd_common::record::{episodes_csv, EpisodeRecord, RunSummary};
-use alfd_common::runner::{run_neural, run_tabular};
+use alfd_common::runner::{
+    run_neural_checkpointed, run_tabular_checkpointed, Checkpoints, RunState,
+};
 use anyhow::Context as _;
 
+use crate::checkpoint_file::{self, CheckpointFile};
+use crate::usage::usage;
 use crate::{run_dir, setup};
 
 #[derive(Debug, clap::Args)]
@@ -28,6 +35,13 @@ pub struct LocalArgs {
     /// Print no progress.
     #[arg(long)]
     pub quiet: bool,
+    /// Write `OUT/checkpoint.bin` every N episodes, so that `alfd resume OUT` can continue the
+    /// run if it stops.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub checkpoint_every: Option<u32>,
+    /// Testing: stop (as a crash would, without the final files) after this many episodes.
+    #[arg(long, hide = true, value_name = "N")]
+    pub stop_after_episodes: Option<u32>,
 }
 
 pub fn run(args: LocalArgs) -> anyhow::Result<()> {
@@ -35,13 +49,98 @@ pub fn run(args: LocalArgs) -> anyhow::Result<()> {
     // Every input is checked before the directory is claimed.
     let pieces = Pieces::of(&cfg)?;
     let _lock = run_dir::claim_new(&args.out)?;
-    let summary = run_pieces(&cfg, pieces, &args.out, !args.quiet)?;
-    println!("{}", serde_json::to_string(&summary)?);
+    let resumable = Resumable {
+        config_toml: cfg.to_toml(),
+        every: args.checkpoint_every,
+        from: None,
+        stop_after: args.stop_after_episodes,
+    };
+    finish(run_pieces(&cfg, pieces, &args.out, !args.quiet, resumable)?)
+}
+
+/// Prints the summary of a run that ended, or says where a stopped run stopped.
+pub(crate) fn finish(summary: Option<RunSummary>) -> anyhow::Result<()> {
+    match summary {
+        Some(summary) => println!("{}", serde_json::to_string(&summary)?),
+        None => eprintln!("stopped as asked (--stop-after-episodes); continue with `alfd resume`"),
+    }
     Ok(())
 }
 
+/// How a run checkpoints, and where it starts.
+pub(crate) struct Resumable {
+    /// The text of the run's `config.toml`, which the checkpoint belongs to.
+    pub config_toml: String,
+    pub every: Option<u32>,
+    /// The checkpoint to continue from (`alfd resume`).
+    pub from: Option<CheckpointFile>,
+    pub stop_after: Option<u32>,
+}
+
+impl Resumable {
+    fn none(cfg: &ExperimentConfig) -> Self {
+        Self {
+            config_toml: cfg.to_toml(),
+            every: None,
+            from: None,
+            stop_after: None,
+        }
+    }
+
+    /// What the run of kind `run` starts from (`pick` finds its state in the checkpoint) and
+    /// how often it checkpoints.
+    fn checkpoints<'s, S>(
+        &'s self,
+        pick: impl Fn(&'s RunState) -> Option<&'s S>,
+        run: &str,
+    ) -> anyhow::Result<Checkpoints<'s, S>> {
+        let from = match &self.from {
+            None => None,
+            Some(f) => Some(pick(&f.state).ok_or_else(|| {
+                usage(format!(
+                    "the checkpoint is of another kind of run than config.toml's {run} run"
+                ))
+            })?),
+        };
+        Ok(Checkpoints {
+            from,
+            every: self.every,
+        })
+    }
+
+    /// Writes the checkpoint, then `episodes.csv` and `demos.jsonl` as they are at it.
+    fn save(&self, out: &Path, state: RunState) -> anyhow::Result<()> {
+        let demos = match &state {
+            RunState::Neural(s) => s.expert.demos.as_slice(),
+            RunState::Tabular(_) => &[],
+        };
+        let (csv, jsonl) = (episodes_csv(state.records()), demos_jsonl(demos)?);
+        let file = CheckpointFile {
+            every: self.every.expect("only a checkpointing run saves"),
+            state,
+        };
+        checkpoint_file::save(out, &file, &self.config_toml)?;
+        write(out, "episodes.csv", csv.as_bytes())?;
+        write(out, "demos.jsonl", &jsonl)?;
+        tracing::debug!(
+            episodes = file.state.progress().episodes,
+            "checkpoint written"
+        );
+        Ok(())
+    }
+}
+
+fn demos_jsonl(demos: &[DemoRecord]) -> anyhow::Result<Vec<u8>> {
+    let mut jsonl = Vec::new();
+    for d in demos {
+        serde_json::to_writer(&mut jsonl, d)?;
+        jsonl.push(b'\n');
+    }
+    Ok(jsonl)
+}
+
 /// What a run is built from, beyond its config: everything that reads the user's files or names.
-enum Pieces {
+pub(crate) enum Pieces {
     Tabular {
         env: Box<alfd_common::env::cliffwalk::CliffWalk>,
         demonstrator: Box<dyn alfd_common::agent::Demonstrator<usize> + Send>,
@@ -52,7 +151,7 @@ enum Pieces {
 }
 
 impl Pieces {
-    fn of(cfg: &ExperimentConfig) -> anyhow::Result<Self> {
+    pub(crate) fn of(cfg: &ExperimentConfig) -> anyhow::Result<Self> {
         Ok(match cfg.env.name {
             EnvName::Cliffwalk => {
                 let env = setup::cliffwalk(cfg)?;
@@ -75,20 +174,29 @@ pub fn run_config(
     out: &Path,
     progress: bool,
 ) -> anyhow::Result<RunSummary> {
-    run_pieces(cfg, Pieces::of(cfg)?, out, progress)
+    let summary = run_pieces(cfg, Pieces::of(cfg)?, out, progress, Resumable::none(cfg))?;
+    Ok(summary.expect("a run without --stop-after-episodes ends"))
 }
 
-fn run_pieces(
+/// Runs `cfg` to its end (`Some` summary) or until `resumable.stop_after` episodes (`None`).
+pub(crate) fn run_pieces(
     cfg: &ExperimentConfig,
     pieces: Pieces,
     out: &Path,
     progress: bool,
-) -> anyhow::Result<RunSummary> {
+    resumable: Resumable,
+) -> anyhow::Result<Option<RunSummary>> {
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create output directory {}", out.display()))?;
-    write(out, "config.toml", cfg.to_toml().as_bytes())?;
+    if resumable.from.is_none() {
+        write(out, "config.toml", cfg.to_toml().as_bytes())?;
+    }
     let bar = progress_bar(cfg, progress);
-    let show = |r: &EpisodeRecord| {
+    if let (Some(f), Some(_)) = (&resumable.from, cfg.episode_limit()) {
+        bar.set_position(u64::from(f.state.progress().episodes));
+    }
+    let mut stopped = false;
+    let mut show = |r: &EpisodeRecord| {
         let eval = if r.eval_return.is_nan() {
             String::new()
         } else {
@@ -99,7 +207,19 @@ fn run_pieces(
             Some(_) => bar.inc(1),
             None => bar.set_position(r.total_steps),
         }
+        if resumable.stop_after.is_some_and(|n| r.episode + 1 >= n) {
+            stopped = true;
+            return ControlFlow::Break(());
+        }
         ControlFlow::Continue(())
+    };
+    let mut save_error = None;
+    let mut save = |state: RunState| match resumable.save(out, state) {
+        Ok(()) => ControlFlow::Continue(()),
+        Err(e) => {
+            save_error = Some(e);
+            ControlFlow::Break(())
+        }
     };
     let start = Instant::now();
     let (records, demos, greedy, optimal) = match pieces {
@@ -107,7 +227,19 @@ fn run_pieces(
             env,
             mut demonstrator,
         } => {
-            let run = run_tabular(cfg, (*env).clone(), demonstrator.as_mut(), |r, _| show(r));
+            let checkpoints = resumable.checkpoints(RunState::tabular, "tabular")?;
+            let run = run_tabular_checkpointed(
+                cfg,
+                (*env).clone(),
+                demonstrator.as_mut(),
+                checkpoints,
+                |s| save(RunState::Tabular(Box::new(s.clone()))),
+                |r, _| show(r),
+            )
+            .map_err(|e| usage(format!("cannot resume from the checkpoint: {e}")))?;
+            if interrupted(save_error, stopped)? {
+                return Ok(None);
+            }
             let vi = value_iteration(&env, cfg.agent.gamma, 1e-10)?;
             let greedy = policy_evaluation(&env, &run.greedy_policy, cfg.agent.gamma)?;
             let s0 = env.map().start();
@@ -121,7 +253,18 @@ fn run_pieces(
             )
         }
         Pieces::Neural { mut demonstrator } => {
-            let run = run_neural(cfg, demonstrator.as_mut(), |r, _| show(r));
+            let checkpoints = resumable.checkpoints(RunState::neural, "neural")?;
+            let run = run_neural_checkpointed(
+                cfg,
+                demonstrator.as_mut(),
+                checkpoints,
+                |s| save(RunState::Neural(Box::new(s.clone()))),
+                |r, _| show(r),
+            )
+            .map_err(|e| usage(format!("cannot resume from the checkpoint: {e}")))?;
+            if interrupted(save_error, stopped)? {
+                return Ok(None);
+            }
             write(
                 out,
                 "weights.safetensors",
@@ -133,12 +276,7 @@ fn run_pieces(
     let wall = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
     write(out, "episodes.csv", episodes_csv(&records).as_bytes())?;
-    let mut jsonl = Vec::new();
-    for d in &demos {
-        serde_json::to_writer(&mut jsonl, d)?;
-        jsonl.push(b'\n');
-    }
-    write(out, "demos.jsonl", &jsonl)?;
+    write(out, "demos.jsonl", &demos_jsonl(&demos)?)?;
     let summary = RunSummary {
         greedy_value_at_start: greedy,
         optimal_value_at_start: optimal,
@@ -149,7 +287,16 @@ fn run_pieces(
         "summary.json",
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
-    Ok(summary)
+    Ok(Some(summary))
+}
+
+/// Whether the run stopped as asked (`--stop-after-episodes`); a checkpoint that could not be
+/// written is the run's error.
+fn interrupted(save_error: Option<anyhow::Error>, stopped: bool) -> anyhow::Result<bool> {
+    match save_error {
+        Some(e) => Err(e),
+        None => Ok(stopped),
+    }
 }
 
 fn progress_bar(cfg: &ExperimentConfig, show: bool) -> indicatif::ProgressBar {

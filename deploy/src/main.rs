@@ -1,11 +1,13 @@
 //! `alfd`: the command line of the project. Each subcommand is a small module; this file parses
 //! arguments, installs logging, and maps errors to exit codes (2 for bad input, 1 otherwise).
 
+mod checkpoint_file;
 mod cmd_demo_model;
 mod cmd_demo_model_policy;
 mod cmd_env;
 mod cmd_expert;
 mod cmd_local;
+mod cmd_resume;
 mod cmd_run;
 mod cmd_sweep;
 mod expert_lifecycle;
@@ -28,6 +30,8 @@ struct Cli {
 enum Command {
     /// Run an experiment config in one process.
     Local(cmd_local::LocalArgs),
+    /// Continue a stopped or crashed `alfd local --checkpoint-every N` run from its checkpoint.
+    Resume(cmd_resume::ResumeArgs),
     /// Run an experiment as separate processes: learner, expert and N actors over iceoryx2.
     Run(cmd_run::RunArgs),
     /// Replace the expert of a live run (make before break).
@@ -54,6 +58,7 @@ fn main() {
     setup::init_logging();
     let result = match cli.command {
         Command::Local(a) => cmd_local::run(a),
+        Command::Resume(a) => cmd_resume::run(a),
         Command::Run(a) => cmd_run::run(a),
         Command::SwapExpert(a) => cmd_run::swap(a),
         Command::Env(a) => cmd_env::run(a),

@@ -443,3 +443,125 @@ fn expert_eval_prints_mean_median_std() {
         .expect("listed");
     assert!(row.contains(&format!("{mean:.1}")), "{row} vs {mean}");
 }
+
+/// `alfd local` of `config` (40 episodes) into `out`, with `extra` arguments.
+fn local_40(config: &str, out: &Path, extra: &[&str]) -> Output {
+    let out = out.to_str().unwrap();
+    let mut args = vec![
+        "local",
+        "--config",
+        config,
+        "--set",
+        "episodes=40",
+        "--out",
+        out,
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    alfd(&args)
+}
+
+/// Stop at episode 25 (checkpoints every 10), resume: the uninterrupted run's files, to the byte.
+fn assert_stop_and_resume_is_the_uninterrupted_run(config: &str, name: &str) {
+    let dir = tmp(name);
+    let (whole, cut) = (dir.join("whole"), dir.join("cut"));
+    let o = local_40(config, &whole, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = local_40(
+        config,
+        &cut,
+        &["--checkpoint-every", "10", "--stop-after-episodes", "25"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("alfd resume"), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(cut.join("episodes.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 21, "the rows of the checkpoint at 20");
+    assert!(!cut.join("summary.json").exists());
+    // Rows written after the checkpoint (as a crash may leave) are dropped and played again.
+    std::fs::write(cut.join("episodes.csv"), format!("{csv}20,1,2,3\n")).unwrap();
+    let again = local_40(config, &cut, &[]);
+    assert_eq!(again.status.code(), Some(2), "a new run is refused");
+    let o = alfd(&["resume", cut.to_str().unwrap(), "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in ["episodes.csv", "demos.jsonl"] {
+        let (a, b) = (
+            std::fs::read(whole.join(f)).unwrap(),
+            std::fs::read(cut.join(f)).unwrap(),
+        );
+        assert!(a == b, "{name}: {f} differs from the uninterrupted run's");
+    }
+    assert_eq!(
+        std::fs::read_to_string(cut.join("episodes.csv"))
+            .unwrap()
+            .lines()
+            .count(),
+        41
+    );
+    let o = alfd(&["resume", cut.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("finished"), "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_cartpole_run_stopped_and_resumed_is_the_uninterrupted_run_to_the_byte() {
+    assert_stop_and_resume_is_the_uninterrupted_run(
+        "deploy/configs/cartpole-bdqn-krr.toml",
+        "resume-cartpole",
+    );
+}
+
+#[test]
+fn a_cliffwalk_run_stopped_and_resumed_is_the_uninterrupted_run_to_the_byte() {
+    assert_stop_and_resume_is_the_uninterrupted_run(
+        "deploy/configs/cliffwalk-bootstrapped.toml",
+        "resume-cliffwalk",
+    );
+}
+
+#[test]
+fn resume_refuses_a_bad_checkpoint_saying_why_and_keeps_it() {
+    let dir = tmp("resume-bad");
+    let run = dir.join("run");
+    let o = local_40(
+        "deploy/configs/cliffwalk-bootstrapped.toml",
+        &run,
+        &["--checkpoint-every", "10", "--stop-after-episodes", "15"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let path = run.join("checkpoint.bin");
+    let good = std::fs::read(&path).unwrap();
+    let mut flipped = good.clone();
+    *flipped.last_mut().unwrap() ^= 0x40;
+    let mut version = good.clone();
+    version[8] = version[8].wrapping_add(1);
+    let cases: [(&[u8], &str); 3] = [
+        (&good[..good.len() - 10], "truncated"),
+        (&flipped, "corrupt"),
+        (&version, "another format version"),
+    ];
+    for (bytes, reason) in cases {
+        std::fs::write(&path, bytes).unwrap();
+        let o = alfd(&["resume", run.to_str().unwrap(), "--quiet"]);
+        assert_eq!(o.status.code(), Some(2), "{reason}: {}", stderr(&o));
+        assert!(stderr(&o).contains(reason), "{reason}: {}", stderr(&o));
+        assert_eq!(std::fs::read(&path).unwrap(), bytes, "{reason}: kept");
+    }
+    std::fs::write(&path, &good).unwrap();
+    let config = run.join("config.toml");
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(&config, text.replace("seed = 0", "seed = 1")).unwrap();
+    let o = alfd(&["resume", run.to_str().unwrap(), "--quiet"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("another config"), "{}", stderr(&o));
+    std::fs::write(&config, text).unwrap();
+    let o = alfd(&["resume", run.to_str().unwrap(), "--quiet"]);
+    assert!(
+        o.status.success(),
+        "the good checkpoint resumes: {}",
+        stderr(&o)
+    );
+    let o = alfd(&["resume", dir.join("none").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -4,6 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::checkpoint::StateMismatch;
 use crate::config::DemoModelChoice;
 use crate::demo_model::{DemoModel, DemoModelError, DemoModelKind};
 use crate::nn::Mlp;
@@ -90,6 +91,14 @@ pub struct DemoRecord {
     pub expert: String,
 }
 
+/// What an [`ExpertCore`] must remember: the demonstrations (the budget spent is their number,
+/// and the model is refitted on them) and how many times the model was fitted.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ExpertSnapshot {
+    pub demos: Vec<DemoRecord>,
+    pub model_version: u64,
+}
+
 /// The budget, the demonstration set and the demonstration model.
 #[derive(Debug, Clone)]
 pub struct ExpertCore {
@@ -126,6 +135,29 @@ impl ExpertCore {
         self.budget = Budget::with_used(self.budget.total(), records.len() as u32);
         self.demos = records;
         self.refit()
+    }
+
+    pub fn snapshot(&self) -> ExpertSnapshot {
+        ExpertSnapshot {
+            demos: self.demos.clone(),
+            model_version: self.model_version,
+        }
+    }
+
+    /// Restores [`ExpertCore::snapshot`]: the demonstrations, the budget they spent, the model
+    /// refitted on them (deterministic: the model the run had).
+    pub fn restore_snapshot(&mut self, s: &ExpertSnapshot) -> Result<(), StateMismatch> {
+        if s.demos.len() > self.budget.total() as usize {
+            return Err(StateMismatch(format!(
+                "{} demonstrations against a budget of {}",
+                s.demos.len(),
+                self.budget.total()
+            )));
+        }
+        self.restore(s.demos.clone())
+            .map_err(|e| StateMismatch(format!("demonstration model: {e}")))?;
+        self.model_version = s.model_version;
+        Ok(())
     }
 
     /// Spends one unit of budget on `action`, the demonstrator's answer at `state` (global step

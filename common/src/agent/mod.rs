@@ -9,10 +9,11 @@ pub mod neural;
 pub mod tabular;
 
 pub use expert::{
-    BalancingController, DemoRecord, Demonstrator, ExpertCore, NetworkDemonstrator, TablePolicy,
+    BalancingController, DemoRecord, Demonstrator, ExpertCore, ExpertSnapshot, NetworkDemonstrator,
+    TablePolicy,
 };
-pub use neural::{NeuralActor, NeuralLearner};
-pub use tabular::TabularAgent;
+pub use neural::{ActorSnapshot, LearnerSnapshot, NeuralActor, NeuralLearner};
+pub use tabular::{TabularAgent, TabularSnapshot};
 
 use rand::Rng as _;
 
@@ -70,6 +71,11 @@ impl Explorer {
     /// Actions chosen so far (the clock of ε).
     pub fn steps(&self) -> u64 {
         self.steps
+    }
+
+    /// Puts ε's clock at `steps` (a restored checkpoint).
+    pub fn restore_steps(&mut self, steps: u64) {
+        self.steps = steps;
     }
 
     /// The agent's own action given the acting head's Q-values.

@@ -4,15 +4,18 @@
 
 use rand::Rng as _;
 
+use serde::{Deserialize, Serialize};
+
 use crate::agent::{query_decision, Decision, Explorer};
+use crate::checkpoint::StateMismatch;
 use crate::config::LossKind;
 use crate::config::{AgentConfig, QueryConfig, QueryMode};
 use crate::demo_model::DemoModel;
-use crate::nn::{Adam, AdamConfig, Mlp, NnError, TdConfig, TdLoss, TrainScratch};
+use crate::nn::{Adam, AdamConfig, AdamState, Mlp, NnError, TdConfig, TdLoss, TrainScratch};
 use crate::policy::{js_divergence, softmax_into};
 use crate::query::QueryRule;
 use crate::replay::{Batch, ReplayBuffer, Transition};
-use crate::rng::Rng;
+use crate::rng::{Rng, RngState};
 use crate::shaping::{shaped_reward, ShapingKind};
 
 /// The acting side: the latest weights, exploration, the divergence queue and shaping.
@@ -196,6 +199,97 @@ impl NeuralActor {
             mask,
             demo,
         }
+    }
+}
+
+/// What a [`NeuralActor`] must remember to continue exactly (its hyper-parameters come from the
+/// config): the weights it acts on, ε's clock, the divergence queue, its generator and the head
+/// it follows.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ActorSnapshot {
+    pub weights: Vec<f32>,
+    pub weights_version: u64,
+    pub explorer_steps: u64,
+    pub rule: QueryRule,
+    pub rng: RngState,
+    pub arm: usize,
+}
+
+impl NeuralActor {
+    pub fn snapshot(&self) -> ActorSnapshot {
+        ActorSnapshot {
+            weights: self.net.params_flat(),
+            weights_version: self.weights_version,
+            explorer_steps: self.explorer.steps(),
+            rule: self.rule.clone(),
+            rng: RngState::of(&self.rng),
+            arm: self.arm,
+        }
+    }
+
+    /// Restores [`NeuralActor::snapshot`] into an actor built from the same config.
+    pub fn restore(&mut self, s: &ActorSnapshot) -> Result<(), StateMismatch> {
+        if s.arm >= self.heads {
+            return Err(StateMismatch(format!("head {} of {}", s.arm, self.heads)));
+        }
+        self.set_weights(&s.weights, s.weights_version)
+            .map_err(|e| StateMismatch(format!("actor weights: {e}")))?;
+        self.explorer.restore_steps(s.explorer_steps);
+        self.rule = s.rule.clone();
+        self.rng = s.rng.to_rng();
+        self.arm = s.arm;
+        Ok(())
+    }
+}
+
+/// What a [`NeuralLearner`] must remember to continue exactly: online and target weights, Adam,
+/// the replay buffer (masks, demonstration flags, ring position), its generator and counters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LearnerSnapshot {
+    pub online: Vec<f32>,
+    pub target: Vec<f32>,
+    pub adam: AdamState,
+    pub replay: ReplayBuffer,
+    pub rng: RngState,
+    pub inserted: u64,
+    pub updates: u64,
+}
+
+impl NeuralLearner {
+    pub fn snapshot(&self) -> LearnerSnapshot {
+        LearnerSnapshot {
+            online: self.online.params_flat(),
+            target: self.target.params_flat(),
+            adam: self.adam.state(),
+            replay: self.replay.clone(),
+            rng: RngState::of(&self.rng),
+            inserted: self.inserted,
+            updates: self.updates,
+        }
+    }
+
+    /// Restores [`NeuralLearner::snapshot`] into a learner built from the same config.
+    pub fn restore(&mut self, s: &LearnerSnapshot) -> Result<(), StateMismatch> {
+        let r = &s.replay;
+        if !self.replay.same_shape(r) {
+            return Err(StateMismatch(
+                "the replay buffer has another capacity or layout".into(),
+            ));
+        }
+        let (mut online, mut target) = (self.online.clone(), self.target.clone());
+        online
+            .load_params_flat(&s.online)
+            .and_then(|()| target.load_params_flat(&s.target))
+            .map_err(|e| StateMismatch(format!("learner weights: {e}")))?;
+        if !self.adam.restore(&s.adam) {
+            return Err(StateMismatch("Adam's moments have other sizes".into()));
+        }
+        (self.online, self.target) = (online, target);
+        self.replay = s.replay.clone();
+        self.rng = s.rng.to_rng();
+        self.inserted = s.inserted;
+        self.updates = s.updates;
+        Ok(())
     }
 }
 

@@ -4,7 +4,10 @@
 
 use rand::Rng as _;
 
+use serde::{Deserialize, Serialize};
+
 use crate::agent::{query_decision, Decision, Explorer};
+use crate::checkpoint::StateMismatch;
 use crate::config::{AgentConfig, AgentKind, QueryConfig, QueryMode};
 use crate::demo_model::DemoModel;
 use crate::env::Step;
@@ -12,7 +15,7 @@ use crate::environment_loop::{Actor, Result};
 use crate::policy::argmax;
 use crate::qfunction::{QFunction, TabularQ};
 use crate::query::QueryRule;
-use crate::rng::Rng;
+use crate::rng::{Rng, RngState};
 
 /// A tabular agent over `states` states and `actions` actions.
 #[derive(Debug, Clone)]
@@ -36,7 +39,59 @@ pub struct TabularAgent {
     pending: Option<(usize, usize, f64, usize)>,
 }
 
+/// What a [`TabularAgent`] must remember to continue exactly: the Q-tables, the visit counts,
+/// ε's clock, its generator, the head followed, the divergence queue and SARSA's pending step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TabularSnapshot {
+    pub q: TabularQ,
+    pub visits: Vec<u32>,
+    pub explorer_steps: u64,
+    pub rng: RngState,
+    pub arm: usize,
+    pub rule: QueryRule,
+    pub pending: Option<(usize, usize, f64, usize)>,
+}
+
 impl TabularAgent {
+    pub fn snapshot(&self) -> TabularSnapshot {
+        TabularSnapshot {
+            q: self.q.clone(),
+            visits: self.visits.clone(),
+            explorer_steps: self.explorer.steps(),
+            rng: RngState::of(&self.rng),
+            arm: self.arm,
+            rule: self.rule.clone(),
+            pending: self.pending,
+        }
+    }
+
+    /// Restores [`TabularAgent::snapshot`] into an agent built from the same config and map.
+    pub fn restore(&mut self, s: &TabularSnapshot) -> Result<(), StateMismatch> {
+        let shape = |q: &TabularQ| (q.states(), q.heads(), q.actions());
+        if shape(&s.q) != shape(&self.q) || s.visits.len() != self.visits.len() {
+            return Err(StateMismatch(format!(
+                "Q-tables of shape {:?} where the run has {:?}",
+                shape(&s.q),
+                shape(&self.q)
+            )));
+        }
+        if s.arm >= self.q.heads() {
+            return Err(StateMismatch(format!(
+                "head {} of {}",
+                s.arm,
+                self.q.heads()
+            )));
+        }
+        self.q = s.q.clone();
+        self.visits = s.visits.clone();
+        self.explorer.restore_steps(s.explorer_steps);
+        self.rng = s.rng.to_rng();
+        self.arm = s.arm;
+        self.rule = s.rule.clone();
+        self.pending = s.pending;
+        Ok(())
+    }
+
     pub fn new(
         cfg: &AgentConfig,
         query: &QueryConfig,

@@ -144,6 +144,14 @@ impl Env for CartPole {
             truncated,
         })
     }
+
+    fn snapshot(&self) -> super::EnvState {
+        self.episode.snapshot(&self.state)
+    }
+
+    fn restore(&mut self, state: &super::EnvState) -> Result<(), EnvError> {
+        self.episode.restore(state, &mut self.state)
+    }
 }
 
 #[cfg(test)]

@@ -9,10 +9,30 @@ use crate::rng::Rng;
 
 /// Where the environment is in its episode life cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Phase {
+pub(crate) enum Phase {
     NotReset,
     Running,
     Over,
+}
+
+impl Phase {
+    /// Its number in an [`super::EnvState`].
+    pub(crate) fn code(self) -> u8 {
+        match self {
+            Phase::NotReset => 0,
+            Phase::Running => 1,
+            Phase::Over => 2,
+        }
+    }
+
+    pub(crate) fn from_code(code: u8) -> Result<Self, EnvError> {
+        Ok(match code {
+            0 => Phase::NotReset,
+            1 => Phase::Running,
+            2 => Phase::Over,
+            p => return Err(EnvError::BadState(format!("unknown phase {p}"))),
+        })
+    }
 }
 
 /// An environment's generator, step counter and step limit.
@@ -57,6 +77,36 @@ impl Episode {
     pub(crate) fn start_at_given_state(&mut self) {
         self.phase = Phase::Running;
         self.elapsed_steps = 0;
+    }
+
+    /// The generator, phase and step count, with `state` (the environment's physical state).
+    pub(crate) fn snapshot(&self, state: &[f64]) -> super::EnvState {
+        super::EnvState {
+            rng: crate::rng::RngState::of(&self.rng),
+            phase: self.phase.code(),
+            elapsed_steps: self.elapsed_steps as u64,
+            state: state.to_vec(),
+        }
+    }
+
+    /// Restores what [`Episode::snapshot`] saved and writes the physical state into `state`.
+    pub(crate) fn restore(
+        &mut self,
+        saved: &super::EnvState,
+        state: &mut [f64],
+    ) -> Result<(), EnvError> {
+        if saved.state.len() != state.len() {
+            return Err(EnvError::BadState(format!(
+                "{} state values where this environment has {}",
+                saved.state.len(),
+                state.len()
+            )));
+        }
+        self.phase = Phase::from_code(saved.phase)?;
+        self.rng = saved.rng.to_rng();
+        self.elapsed_steps = saved.elapsed_steps as usize;
+        state.copy_from_slice(&saved.state);
+        Ok(())
     }
 
     /// Refuses a step before the first reset, after the end, or with an action outside

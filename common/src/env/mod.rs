@@ -39,6 +39,20 @@ pub enum EnvError {
     EpisodeOver,
     #[error("step called before reset")]
     NotReset,
+    #[error("a saved environment state does not fit this environment: {0}")]
+    BadState(String),
+}
+
+/// The whole state of an environment, for a checkpoint: its generator, where it is in its
+/// episode life cycle (0 not reset, 1 running, 2 over), the steps of the episode, and its
+/// physical state (CartPole's four values, MountainCar's two, Acrobot's four, CliffWalk's
+/// position).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EnvState {
+    pub rng: crate::rng::RngState,
+    pub phase: u8,
+    pub elapsed_steps: u64,
+    pub state: Vec<f64>,
 }
 
 /// A discrete-action environment.
@@ -58,6 +72,10 @@ pub trait Env {
     fn max_episode_steps(&self) -> usize;
     fn reset(&mut self, seed: Option<u64>) -> Self::Observation;
     fn step(&mut self, action: usize) -> Result<Step<Self::Observation>, EnvError>;
+    /// The whole state, to continue exactly from it later ([`Env::restore`]).
+    fn snapshot(&self) -> EnvState;
+    /// Puts the environment back in a state [`Env::snapshot`] took (of the same environment).
+    fn restore(&mut self, state: &EnvState) -> Result<(), EnvError>;
 }
 
 /// An environment for the neural agents: observations as vectors of `f32`.
@@ -97,6 +115,14 @@ where
             terminated: s.terminated,
             truncated: s.truncated,
         })
+    }
+
+    fn snapshot(&self) -> EnvState {
+        self.0.snapshot()
+    }
+
+    fn restore(&mut self, state: &EnvState) -> Result<(), EnvError> {
+        self.0.restore(state)
     }
 }
 

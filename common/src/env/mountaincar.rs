@@ -130,6 +130,14 @@ impl Env for MountainCar {
             truncated,
         })
     }
+
+    fn snapshot(&self) -> super::EnvState {
+        self.episode.snapshot(&self.state)
+    }
+
+    fn restore(&mut self, state: &super::EnvState) -> Result<(), EnvError> {
+        self.episode.restore(state, &mut self.state)
+    }
 }
 
 #[cfg(test)]

@@ -274,6 +274,39 @@ pub fn run<E, Ac, X>(
     actor: &mut Ac,
     expert: &mut X,
     schedule: Schedule,
+    on_episode: impl FnMut(&mut EpisodeRecord, &Ac) -> Result<ControlFlow<()>>,
+) -> Result<RunEnd>
+where
+    E: Env + ?Sized,
+    Ac: Actor<E::Observation>,
+    X: ExpertClient<E::Observation>,
+{
+    run_from(
+        env,
+        actor,
+        expert,
+        schedule,
+        Progress::default(),
+        on_episode,
+    )
+}
+
+/// Where a run stands between two episodes: episodes played, steps taken by this actor.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Progress {
+    pub episodes: u32,
+    pub steps: u64,
+}
+
+/// [`run`] continued from `start` (a restored checkpoint, or the end of an earlier call): the
+/// environment, the actor and the expert are as they were then, and only episode 0 reseeds the
+/// environment.
+pub fn run_from<E, Ac, X>(
+    env: &mut E,
+    actor: &mut Ac,
+    expert: &mut X,
+    schedule: Schedule,
+    start: Progress,
     mut on_episode: impl FnMut(&mut EpisodeRecord, &Ac) -> Result<ControlFlow<()>>,
 ) -> Result<RunEnd>
 where
@@ -281,8 +314,8 @@ where
     Ac: Actor<E::Observation>,
     X: ExpertClient<E::Observation>,
 {
-    let mut steps = 0u64;
-    let mut episode = 0u32;
+    let mut steps = start.steps;
+    let mut episode = start.episodes;
     while schedule.episodes.is_none_or(|n| episode < n) {
         let seed = (episode == 0).then_some(schedule.env_seed);
         let limit = schedule.steps;

@@ -32,7 +32,52 @@ pub struct Adam {
     v: Params,
 }
 
+/// Adam's state in a checkpoint: the step count and the moments, flattened in the order of
+/// [`Params::tensors`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AdamState {
+    pub step: u64,
+    pub m: Vec<f32>,
+    pub v: Vec<f32>,
+}
+
+fn flat(p: &Params) -> Vec<f32> {
+    p.tensors().concat()
+}
+
+fn unflat(p: &mut Params, flat: &[f32]) -> bool {
+    if flat.len() != p.len() {
+        return false;
+    }
+    let mut offset = 0;
+    for t in p.tensors_mut() {
+        let n = t.len();
+        t.copy_from_slice(&flat[offset..offset + n]);
+        offset += n;
+    }
+    true
+}
+
 impl Adam {
+    /// The step count and the moments, for a checkpoint.
+    pub fn state(&self) -> AdamState {
+        AdamState {
+            step: self.step,
+            m: flat(&self.m),
+            v: flat(&self.v),
+        }
+    }
+
+    /// Restores [`Adam::state`]; `false` (nothing changed) if the moments have other sizes.
+    pub fn restore(&mut self, state: &AdamState) -> bool {
+        let (mut m, mut v) = (self.m.clone(), self.v.clone());
+        if !unflat(&mut m, &state.m) || !unflat(&mut v, &state.v) {
+            return false;
+        }
+        (self.m, self.v, self.step) = (m, v, state.step);
+        true
+    }
+
     /// Adam with the default hyper-parameters for the parameters of `net`.
     pub fn new(net: &Mlp) -> Self {
         Self::with_config(net, AdamConfig::default())

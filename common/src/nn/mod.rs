@@ -19,7 +19,7 @@ pub mod dqn;
 mod io;
 mod mlp;
 
-pub use adam::{Adam, AdamConfig};
+pub use adam::{Adam, AdamConfig, AdamState};
 pub use dqn::{
     clip_grad_norm, dqn_loss, loss_and_grads, loss_and_grads_with, train_step, train_step_with,
     TdConfig, TdLoss, TrainScratch,

@@ -27,6 +27,7 @@ use std::str::FromStr;
 
 use rand::{Rng as _, SeedableRng};
 
+use super::episode::Phase;
 use super::{Env, EnvError, Step};
 
 mod planning;
@@ -380,14 +381,6 @@ pub struct CliffWalk {
     elapsed_steps: usize,
 }
 
-/// Where the environment is in its episode life cycle.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Phase {
-    NotReset,
-    Running,
-    Over,
-}
-
 impl Default for CliffWalk {
     /// The paper's setting: the default map, p_success 0.9, a 500-step limit.
     fn default() -> Self {
@@ -537,6 +530,29 @@ impl Env for CliffWalk {
             terminated,
             truncated,
         })
+    }
+
+    /// The position is the physical state (one value).
+    fn snapshot(&self) -> super::EnvState {
+        super::EnvState {
+            rng: crate::rng::RngState::of(&self.rng),
+            phase: self.phase.code(),
+            elapsed_steps: self.elapsed_steps as u64,
+            state: vec![self.position as f64],
+        }
+    }
+
+    fn restore(&mut self, saved: &super::EnvState) -> Result<(), EnvError> {
+        let bad = |why: String| Err(EnvError::BadState(why));
+        let position = match saved.state[..] {
+            [p] if p >= 0.0 && p.fract() == 0.0 && (p as usize) < self.num_states() => p as usize,
+            _ => return bad(format!("{:?} is no position of this map", saved.state)),
+        };
+        self.phase = Phase::from_code(saved.phase)?;
+        self.rng = saved.rng.to_rng();
+        self.position = position;
+        self.elapsed_steps = saved.elapsed_steps as usize;
+        Ok(())
     }
 }
 
