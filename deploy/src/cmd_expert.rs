@@ -57,6 +57,11 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
                     f(e.median)
                 );
             }
+            println!(
+                "\nmean, median: the undiscounted return per episode, measured as `alfd expert eval` \
+                 does (manifest.json says how). `alfd env show` gives V*(S) instead, the optimal \
+                 discounted value (γ = 0.99) at the start, a different number for the same policy."
+            );
             Ok(())
         }
         ExpertCommand::Eval {
