@@ -11,12 +11,14 @@ use crate::launcher::{self, Plan, SwapRequest, SwapResponse, SWAP_REQUEST, SWAP_
 use crate::usage::usage;
 use crate::{run_dir, setup};
 
-/// The default experiment: CartPole, Bootstrapped DQN with KRR shaping, the 1000 expert.
-pub const DEFAULT_CONFIG: &str = include_str!("../configs/cartpole-bdqn-krr.toml");
+/// The default experiment: the recommended CartPole-1000 preset (Bootstrapped DQN with 100 active
+/// demonstrations of the 1000 expert, 50,000 steps).
+pub const DEFAULT_CONFIG: &str = include_str!("../configs/recommended/cartpole.toml");
 
 #[derive(Debug, clap::Args)]
 pub struct RunArgs {
-    /// The experiment config (TOML); default: CartPole, BDQN + KRR, the 1000 expert.
+    /// The experiment config (TOML); default: the recommended CartPole-1000 preset
+    /// (deploy/configs/recommended/cartpole.toml).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Number of actor processes.
