@@ -2,6 +2,7 @@
 
 mod dqn_loss;
 mod env_conformance;
+mod fuzz;
 mod gymnasium_reference;
 mod js_reference;
 mod kernel_reference;

@@ -42,6 +42,11 @@ pub fn read(path: &Path) -> Result<Vec<DemoRecord>, DemoLogError> {
             })
         }
     };
+    parse(&text, path)
+}
+
+/// The demonstrations of `text`, the contents of the file `path` (named in errors): see [`read`].
+pub fn parse(text: &str, path: &Path) -> Result<Vec<DemoRecord>, DemoLogError> {
     let malformed = |line: usize, reason: String| DemoLogError::Malformed {
         path: path.to_owned(),
         line,
@@ -72,6 +77,39 @@ pub fn read(path: &Path) -> Result<Vec<DemoRecord>, DemoLogError> {
         records.push(record);
     }
     Ok(records)
+}
+
+/// Checks that every record of `path` fits the run's environment: a state of `obs_dim` finite
+/// values and an action below `actions`. The error names the line.
+pub fn check_fits(
+    records: &[DemoRecord],
+    path: &Path,
+    obs_dim: usize,
+    actions: usize,
+) -> Result<(), DemoLogError> {
+    for (i, r) in records.iter().enumerate() {
+        let reason = if r.state.len() != obs_dim {
+            format!(
+                "state of {} values where the environment has {obs_dim}",
+                r.state.len()
+            )
+        } else if r.state.iter().any(|x| !x.is_finite()) {
+            "state with a value that is not finite".to_owned()
+        } else if r.action >= actions {
+            format!(
+                "action {} where the environment has {actions} actions",
+                r.action
+            )
+        } else {
+            continue;
+        };
+        return Err(DemoLogError::Malformed {
+            path: path.to_owned(),
+            line: i + 1,
+            reason,
+        });
+    }
+    Ok(())
 }
 
 /// `demos.jsonl`, open for appending.
@@ -195,5 +233,81 @@ mod tests {
             err.contains("line 2") && err.contains("incomplete last line"),
             "{err}"
         );
+    }
+
+    mod fuzz {
+        use super::*;
+        use proptest::prelude::*;
+
+        fn good_lines(n: u32) -> String {
+            (0..n)
+                .map(|i| serde_json::to_string(&record(i)).unwrap() + "\n")
+                .collect()
+        }
+
+        fn check(text: &str) -> Result<(), TestCaseError> {
+            match parse(text, Path::new("demos.jsonl")) {
+                Ok(records) => {
+                    prop_assert_eq!(records.len(), text.lines().count());
+                    for (i, r) in records.iter().enumerate() {
+                        prop_assert_eq!(r.index as usize, i);
+                    }
+                }
+                Err(e) => {
+                    let malformed = matches!(e, DemoLogError::Malformed { .. });
+                    prop_assert!(malformed);
+                    prop_assert!(e.to_string().contains(" line "), "{}", e);
+                }
+            }
+            Ok(())
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(256))]
+
+            /// Arbitrary lines: never a panic; an error names the line.
+            #[test]
+            fn fuzz_demo_log_arbitrary(lines in proptest::collection::vec("[ -~]{0,40}", 0..5)) {
+                check(&lines.iter().map(|l| format!("{l}\n")).collect::<String>())?;
+                check(&lines.concat())?;
+            }
+
+            /// Valid lines with a few characters changed, deleted or inserted.
+            #[test]
+            fn fuzz_demo_log_mutated(
+                n in 1u32..5,
+                edits in proptest::collection::vec(
+                    (any::<prop::sample::Index>(), 0usize..3, "[ -~\n]{0,3}"),
+                    1..4,
+                ),
+            ) {
+                let mut text: Vec<char> = good_lines(n).chars().collect();
+                for (at, del, ins) in edits {
+                    let a = at.index(text.len() + 1);
+                    let b = (a + del).min(text.len());
+                    text.splice(a..b, ins.chars());
+                }
+                check(&text.into_iter().collect::<String>())?;
+            }
+        }
+
+        // Regression (fuzz): a record of another state size or an action out of range parsed
+        // and reached the demonstration model; it is refused naming the line.
+        #[test]
+        fn a_record_that_does_not_fit_the_environment_is_named() {
+            let path = Path::new("demos.jsonl");
+            let mut records = parse(&good_lines(3), path).unwrap();
+            assert!(check_fits(&records, path, 4, 3).is_ok());
+            records[1].state.pop();
+            let e = check_fits(&records, path, 4, 3).unwrap_err().to_string();
+            assert!(e.contains("line 2") && e.contains("3 values"), "{e}");
+            records[1].state.push(f64::NAN);
+            let e = check_fits(&records, path, 4, 3).unwrap_err().to_string();
+            assert!(e.contains("line 2") && e.contains("not finite"), "{e}");
+            records[1].state[3] = 0.0;
+            records[2].action = 3;
+            let e = check_fits(&records, path, 4, 3).unwrap_err().to_string();
+            assert!(e.contains("line 3") && e.contains("action 3"), "{e}");
+        }
     }
 }

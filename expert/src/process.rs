@@ -54,7 +54,8 @@ enum Mode {
 pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let setup = args.process.load()?;
     let (cfg, runtime) = (&setup.config, &setup.runtime);
-    let actions = setup.vector_env()?.num_actions();
+    let env = setup.vector_env()?;
+    let (actions, obs_dim) = (env.num_actions(), env.observation_dim());
     let name = args
         .expert
         .clone()
@@ -64,7 +65,9 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let demos_path = args.process.run_dir.join("demos.jsonl");
     // Read the demonstrations now, to refuse a bad file before the run depends on us; they are
     // read again when this expert becomes active (its predecessor may have added some).
-    let earlier = demo_log::read(&demos_path).map_err(|e| BadInput(format!("{e:#}")))?;
+    let earlier = demo_log::read(&demos_path)
+        .and_then(|r| demo_log::check_fits(&r, &demos_path, obs_dim, actions).map(|()| r))
+        .map_err(|e| BadInput(format!("{e:#}")))?;
     info!(expert = %name, generation = args.generation, demos = earlier.len(), "expert starting");
 
     let me = Process::new(Role::Expert, args.generation);
@@ -111,6 +114,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         if should_be_active && mode == Mode::Standby {
             // Make-before-break: the previous expert has exited; its demonstrations are final.
             let records = demo_log::read(&demos_path)?;
+            demo_log::check_fits(&records, &demos_path, obs_dim, actions)?;
             let n = records.len();
             core.restore(records)
                 .context("cannot refit the demonstration model on demos.jsonl")?;
@@ -152,6 +156,15 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 continue;
             }
             let request = *query.request();
+            // A state of another size (or not finite) would break the demonstrator and the
+            // demonstration model: refused, and the actor acts on its own after its timeout.
+            let state = match request.checked_state(obs_dim) {
+                Ok(state) => state,
+                Err(e) => {
+                    tracing::error!(actor = request.actor, "{e}; query dropped");
+                    continue;
+                }
+            };
             let step = request.global_step.max(core.last_demo_step());
             let mut response = QueryResponse {
                 expert: u32::from(args.generation),
@@ -159,7 +172,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 expert_name: name_to_bytes(&name),
                 ..QueryResponse::default()
             };
-            match core.answer(demonstrator.as_mut(), request.state(), step, &name) {
+            match core.answer(demonstrator.as_mut(), state, step, &name) {
                 Some(action) => {
                     let record = core
                         .demos()
@@ -182,14 +195,14 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                     // shapes the step it asked about with it (as in one process).
                     publish_model(&mut model_tx, &core, args.generation, &name)?;
                     query.answer(response)?;
-                    actors.ring(request.actor as u16)?;
+                    ring_actor(&mut actors, request.actor)?;
                     answered += 1;
                 }
                 None => {
                     response.outcome = outcome::BUDGET_EXHAUSTED;
                     response.budget_left = 0;
                     query.answer(response)?;
-                    actors.ring(request.actor as u16)?;
+                    ring_actor(&mut actors, request.actor)?;
                     refused += 1;
                 }
             }
@@ -224,6 +237,15 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
 
 /// Publishes the current demonstration model (empty bytes when there is none yet), with the
 /// budget and the step of the last demonstration.
+/// Rings the doorbell of the actor that asked (an id beyond `u16` has none: it is not truncated
+/// onto another actor's).
+fn ring_actor(actors: &mut ActorBells<'_>, actor: u32) -> anyhow::Result<()> {
+    if let Ok(id) = u16::try_from(actor) {
+        actors.ring(id)?;
+    }
+    Ok(())
+}
+
 fn publish_model(
     tx: &mut alfd_wire::DemoModelSender<'_>,
     core: &ExpertCore,

@@ -5,7 +5,7 @@
 use std::collections::VecDeque;
 
 use alfd_common::replay::Transition;
-use alfd_wire::{Credits, TransitionBatch, MAX_ACTORS, TRANSITIONS_PER_BATCH};
+use alfd_wire::{Credits, TransitionBatch, MAX_ACTORS};
 use tracing::{info, warn};
 
 /// Where the credits of each actor stand.
@@ -21,12 +21,23 @@ struct ActorBook {
     blocked_until: Option<u64>,
 }
 
+/// What the learner's batches must hold: the environment's observation size and number of
+/// actions, and the config's K.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BatchShape {
+    pub obs_dim: usize,
+    pub heads: usize,
+    pub actions: usize,
+}
+
 /// The learner's accounts: what each actor sent, what is learned from, and the grants.
 #[derive(Debug, Clone)]
 pub struct CreditBook {
     window: u64,
+    shape: BatchShape,
     actors: [ActorBook; MAX_ACTORS],
     env_steps: u64,
+    refused: u64,
 }
 
 /// One step waiting in the learner's queue.
@@ -40,12 +51,19 @@ pub struct Queued {
 }
 
 impl CreditBook {
-    pub fn new(window: u64) -> Self {
+    pub fn new(window: u64, shape: BatchShape) -> Self {
         Self {
             window,
+            shape,
             actors: [ActorBook::default(); MAX_ACTORS],
             env_steps: 0,
+            refused: 0,
         }
+    }
+
+    /// Batches refused because they did not fit (see [`TransitionBatch::check`]).
+    pub fn refused(&self) -> u64 {
+        self.refused
     }
 
     /// Environment steps received from all actors: the run's global step.
@@ -66,6 +84,16 @@ impl CreditBook {
                 actor = a,
                 "transitions from an actor id beyond the credit table; dropped"
             );
+            return 0;
+        }
+        let BatchShape {
+            obs_dim,
+            heads,
+            actions,
+        } = self.shape;
+        if let Err(e) = b.check(obs_dim, heads, actions) {
+            warn!(actor = a, "{e}; batch dropped");
+            self.refused = self.refused.saturating_add(1);
             return 0;
         }
         let book = &mut self.actors[a];
@@ -91,15 +119,15 @@ impl CreditBook {
                     actor = a,
                     gap, "transitions lost on the way; counted as received"
                 );
-                book.lost += gap;
+                book.lost = book.lost.saturating_add(gap);
             }
             book.received = book.received.max(b.end_seq());
-            book.queued += b.len() as u64;
+            book.queued = book.queued.saturating_add(b.len() as u64);
             if b.blocked != 0 {
                 book.blocked_until = Some(b.end_seq());
             }
         }
-        let n = b.len().min(TRANSITIONS_PER_BATCH);
+        let n = b.len();
         for (i, transition) in b.transitions().enumerate() {
             queue.push_back(Queued {
                 actor: b.actor as u16,
@@ -108,7 +136,7 @@ impl CreditBook {
                 transition,
             });
         }
-        self.env_steps += n as u64;
+        self.env_steps = self.env_steps.saturating_add(n as u64);
         n
     }
 
@@ -152,7 +180,12 @@ impl CreditBook {
         for (i, b) in self.actors.iter().enumerate() {
             c.incarnation[i] = b.incarnation;
             c.received[i] = b.received;
-            c.granted[i] = b.received - b.queued + self.window;
+            // Saturating: a batch sent twice (sequence numbers going back) queues steps that
+            // `received` does not count again.
+            c.granted[i] = b
+                .received
+                .saturating_sub(b.queued)
+                .saturating_add(self.window);
         }
         c
     }
@@ -161,6 +194,13 @@ impl CreditBook {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use alfd_wire::TRANSITIONS_PER_BATCH;
+
+    const SHAPE: BatchShape = BatchShape {
+        obs_dim: 4,
+        heads: 2,
+        actions: 2,
+    };
 
     fn batch(actor: u16, incarnation: u64, first_seq: u64, len: usize) -> TransitionBatch {
         let mut b = TransitionBatch::new(actor, incarnation, 4, 2, first_seq).unwrap();
@@ -181,7 +221,7 @@ mod tests {
 
     #[test]
     fn grants_follow_what_is_learned_from() {
-        let mut book = CreditBook::new(64);
+        let mut book = CreditBook::new(64, SHAPE);
         let mut q = VecDeque::new();
         // Before anything: nobody has a grant (actors start with an implicit one of `window`).
         assert_eq!(book.credits(0).granted_for(0, 1), None);
@@ -218,7 +258,7 @@ mod tests {
 
     #[test]
     fn a_blocked_actor_is_woken_once_its_grant_lets_it_go_on() {
-        let mut book = CreditBook::new(4);
+        let mut book = CreditBook::new(4, SHAPE);
         let mut q = VecDeque::new();
         let mut b = batch(1, 1, 0, 4);
         b.blocked = 1; // sent steps 0..4 with a grant of 4: blocked
@@ -262,7 +302,7 @@ mod tests {
 
     #[test]
     fn a_restarted_actor_starts_a_new_account_and_old_steps_still_count() {
-        let mut book = CreditBook::new(8);
+        let mut book = CreditBook::new(8, SHAPE);
         let mut q = VecDeque::new();
         book.accept(&batch(2, 1, 0, 5), &mut q);
         book.accept(&batch(2, 2, 0, 3), &mut q);
@@ -281,7 +321,7 @@ mod tests {
 
     #[test]
     fn lost_steps_count_as_received_so_credits_keep_flowing() {
-        let mut book = CreditBook::new(4);
+        let mut book = CreditBook::new(4, SHAPE);
         let mut q = VecDeque::new();
         book.accept(&batch(0, 1, 0, 2), &mut q);
         book.accept(&batch(0, 1, 5, 2), &mut q); // steps 2..5 lost
@@ -294,5 +334,169 @@ mod tests {
         let mut out_of_range = batch(0, 1, 0, 1);
         out_of_range.actor = MAX_ACTORS as u32;
         assert_eq!(book.accept(&out_of_range, &mut q2), 0);
+    }
+
+    fn drain(book: &mut CreditBook, q: &mut VecDeque<Queued>) {
+        while let Some(s) = q.pop_front() {
+            book.learned(s.actor, s.incarnation);
+        }
+    }
+
+    // Regression (fuzz): a batch sent twice made `received - queued` underflow in `credits`
+    // (a panic with overflow checks, a grant near u64::MAX without).
+    #[test]
+    fn a_batch_received_twice_does_not_underflow_the_grant() {
+        let mut book = CreditBook::new(4, SHAPE);
+        let mut q = VecDeque::new();
+        book.accept(&batch(0, 1, 0, 3), &mut q);
+        book.accept(&batch(0, 1, 0, 3), &mut q);
+        assert_eq!(book.credits(0).granted_for(0, 1), Some(4));
+        drain(&mut book, &mut q);
+        assert_eq!(book.credits(0).granted_for(0, 1), Some(3 + 4));
+    }
+
+    // Regression (fuzz): `len` beyond the batch's capacity was counted in full in `queued`
+    // while only 32 steps were queued, and `first_seq + len` overflowed in `end_seq`.
+    #[test]
+    fn a_batch_that_does_not_fit_is_refused() {
+        let mut book = CreditBook::new(4, SHAPE);
+        let mut q = VecDeque::new();
+        let mut cases = Vec::new();
+        let mut b = batch(0, 1, 0, 2);
+        b.len = TRANSITIONS_PER_BATCH as u32 + 1;
+        cases.push(b);
+        let mut b = batch(0, 1, u64::MAX - 1, 2);
+        b.blocked = 1;
+        cases.push(b);
+        let mut b = batch(0, 1, 0, 2);
+        b.obs_dim = 9;
+        cases.push(b);
+        let mut b = batch(0, 1, 0, 2);
+        b.heads = 3;
+        cases.push(b);
+        let mut b = batch(0, 1, 0, 2);
+        b.records[1].action = 2;
+        cases.push(b);
+        for (i, b) in cases.iter().enumerate() {
+            assert_eq!(book.accept(b, &mut q), 0, "case {i}");
+        }
+        assert_eq!(book.refused(), cases.len() as u64);
+        assert!(q.is_empty() && !book.any_blocked());
+        assert_eq!(book.env_steps(), 0);
+        assert_eq!(
+            book.credits(0).granted_for(0, 1),
+            None,
+            "a refused batch opens no account"
+        );
+    }
+
+    // Regression (fuzz): a grant near the top of the sequence numbers overflowed `+ window`.
+    #[test]
+    fn a_grant_saturates_at_the_top_of_the_sequence_numbers() {
+        let mut book = CreditBook::new(64, SHAPE);
+        let mut q = VecDeque::new();
+        book.accept(&batch(0, 1, u64::MAX - 2, 2), &mut q);
+        drain(&mut book, &mut q);
+        assert_eq!(book.credits(0).granted_for(0, 1), Some(u64::MAX));
+        assert_eq!(book.credits(0).global_step_for(0, 2, u64::MAX), u64::MAX);
+    }
+
+    mod fuzz {
+        use super::*;
+        use proptest::prelude::*;
+
+        #[derive(Debug, Clone)]
+        enum Op {
+            Accept {
+                actor: u32,
+                incarnation: u64,
+                first_seq: u64,
+                len: u32,
+                blocked: u32,
+                obs_dim: u16,
+                action: u32,
+            },
+            Learn(usize),
+            Grant(u64),
+        }
+
+        fn op() -> impl Strategy<Value = Op> {
+            let accept = (
+                prop_oneof![0u32..3, Just(MAX_ACTORS as u32), any::<u32>()],
+                prop_oneof![1u64..3, any::<u64>()],
+                prop_oneof![0u64..80, any::<u64>(), Just(u64::MAX - 3)],
+                prop_oneof![0u32..=TRANSITIONS_PER_BATCH as u32, any::<u32>()],
+                0u32..3,
+                prop_oneof![Just(4u16), any::<u16>()],
+                prop_oneof![0u32..2, any::<u32>()],
+            )
+                .prop_map(
+                    |(actor, incarnation, first_seq, len, blocked, obs_dim, action)| Op::Accept {
+                        actor,
+                        incarnation,
+                        first_seq,
+                        len,
+                        blocked,
+                        obs_dim,
+                        action,
+                    },
+                );
+            prop_oneof![
+                3 => accept,
+                2 => (0usize..40).prop_map(Op::Learn),
+                1 => any::<u64>().prop_map(Op::Grant),
+            ]
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(256))]
+
+            /// Arbitrary batches (actor ids beyond the table, sequence numbers going back,
+            /// lengths beyond capacity, wrong shapes, blocked flags): no panic, no wrapped grant.
+            #[test]
+            fn fuzz_credit_book(
+                window in prop_oneof![1u64..=64, any::<u64>()],
+                ops in proptest::collection::vec(op(), 1..24),
+            ) {
+                let mut book = CreditBook::new(window, SHAPE);
+                let mut q = VecDeque::new();
+                let mut total = 0u64;
+                for op in ops {
+                    match op {
+                        Op::Accept { actor, incarnation, first_seq, len, blocked, obs_dim, action } => {
+                            let mut b = batch(0, incarnation, first_seq, 2);
+                            b.actor = actor;
+                            b.len = len;
+                            b.blocked = blocked;
+                            b.obs_dim = obs_dim;
+                            b.records[0].action = action;
+                            let n = book.accept(&b, &mut q);
+                            prop_assert!(n <= TRANSITIONS_PER_BATCH);
+                            total += n as u64;
+                        }
+                        Op::Learn(k) => {
+                            for _ in 0..k {
+                                let Some(s) = q.pop_front() else { break };
+                                prop_assert_eq!(s.transition.state.len(), SHAPE.obs_dim);
+                                prop_assert!((s.transition.action as usize) < SHAPE.actions);
+                                book.learned(s.actor, s.incarnation);
+                            }
+                        }
+                        Op::Grant(updates) => {
+                            let (c, wake) = book.grant(updates);
+                            prop_assert!(wake.iter().all(|&a| usize::from(a) < MAX_ACTORS));
+                            prop_assert_eq!(c.updates, updates);
+                        }
+                    }
+                    prop_assert_eq!(book.env_steps(), total);
+                    let c = book.credits(0);
+                    for a in 0..MAX_ACTORS {
+                        // A wrapped grant would fall below the window.
+                        prop_assert!(c.granted[a] >= window);
+                        prop_assert!(c.granted[a] >= c.received[a].saturating_sub(q.len() as u64));
+                    }
+                }
+            }
+        }
     }
 }

@@ -17,7 +17,7 @@ use alfd_wire::{
 };
 use tracing::{debug, info};
 
-pub use credit_book::{CreditBook, Queued};
+pub use credit_book::{BatchShape, CreditBook, Queued};
 
 /// `alfd-learner`: the learner process of a run (started by `alfd run`).
 #[derive(Debug, Clone, clap::Parser)]
@@ -55,7 +55,14 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     );
     let mut params = vec![0.0f32; learner.network().num_params()];
     let mut weights_tx = wire.weights_sender(params.len())?;
-    let mut book = CreditBook::new(runtime.window);
+    let mut book = CreditBook::new(
+        runtime.window,
+        BatchShape {
+            obs_dim: env.observation_dim(),
+            heads: cfg.agent.heads(),
+            actions: env.num_actions(),
+        },
+    );
 
     let publish_weights = |learner: &NeuralLearner,
                            params: &mut Vec<f32>,
@@ -111,7 +118,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 status.loss = f64::from(loss);
             }
             book.learned(q.actor, q.incarnation);
-            if learner.updates() >= published_version + runtime.weights_every {
+            if learner.updates() >= published_version.saturating_add(runtime.weights_every) {
                 let t = Instant::now();
                 publish_weights(&learner, &mut params, &mut weights_tx, book.env_steps())?;
                 publish_time += t.elapsed();

@@ -10,6 +10,13 @@ use serde::{Deserialize, Serialize};
 /// The file in a run directory.
 pub const RUNTIME_FILE: &str = "runtime.toml";
 
+/// Largest `query_timeout_ms`: one hour.
+pub const MAX_QUERY_TIMEOUT_MS: u64 = 3_600_000;
+/// Largest `handshake_timeout_s`: one day.
+pub const MAX_HANDSHAKE_TIMEOUT_S: u64 = 86_400;
+/// Largest `weights_every`.
+pub const MAX_WEIGHTS_EVERY: u64 = 1_000_000_000;
+
 /// Settings of the runtime (not of the experiment: they change speed and robustness, never what
 /// an experiment means).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -71,14 +78,26 @@ impl RuntimeConfig {
                 format!("must be in 1..={MAX_CREDIT_WINDOW}, got {}", self.window),
             );
         }
-        if self.query_timeout_ms == 0 {
-            return invalid("query_timeout_ms", "must be at least 1".to_owned());
-        }
-        if self.handshake_timeout_s == 0 {
-            return invalid("handshake_timeout_s", "must be at least 1".to_owned());
-        }
-        if self.weights_every == 0 {
-            return invalid("weights_every", "must be at least 1".to_owned());
+        // Upper limits: a deadline `now + timeout` must exist (u64::MAX ms panicked there).
+        for (field, value, max) in [
+            (
+                "query_timeout_ms",
+                self.query_timeout_ms,
+                MAX_QUERY_TIMEOUT_MS,
+            ),
+            (
+                "handshake_timeout_s",
+                self.handshake_timeout_s,
+                MAX_HANDSHAKE_TIMEOUT_S,
+            ),
+            ("weights_every", self.weights_every, MAX_WEIGHTS_EVERY),
+        ] {
+            if value == 0 {
+                return invalid(field, "must be at least 1".to_owned());
+            }
+            if value > max {
+                return invalid(field, format!("must be at most {max}, got {value}"));
+            }
         }
         Ok(())
     }
@@ -132,5 +151,86 @@ mod tests {
         assert!(e.to_string().contains("windows"), "{e}");
         let e = RuntimeConfig::from_toml("window = \"big\"").unwrap_err();
         assert!(matches!(e, RuntimeConfigError::Parse(_)), "{e}");
+    }
+
+    // Regression (fuzz): `query_timeout_ms = 18446744073709551615` was accepted, and the
+    // actor's `Instant::now() + timeout` panicked at its first query.
+    #[test]
+    fn timeouts_beyond_their_limits_are_refused_naming_the_field() {
+        for (text, field) in [
+            (
+                "query_timeout_ms = 18446744073709551615",
+                "query_timeout_ms",
+            ),
+            (
+                "handshake_timeout_s = 18446744073709551615",
+                "handshake_timeout_s",
+            ),
+            ("weights_every = 18446744073709551615", "weights_every"),
+        ] {
+            let toml = [
+                "window = 4",
+                "query_timeout_ms = 10",
+                "handshake_timeout_s = 1",
+            ]
+            .into_iter()
+            .chain(["weights_every = 1"])
+            .filter(|l| !l.starts_with(field))
+            .chain([text])
+            .collect::<Vec<_>>()
+            .join("\n");
+            let e = RuntimeConfig::from_toml(&toml).unwrap_err();
+            assert!(
+                matches!(e, RuntimeConfigError::Invalid { field: f, .. } if f == field),
+                "{e}"
+            );
+        }
+    }
+
+    mod fuzz {
+        use super::*;
+        use proptest::prelude::*;
+
+        fn field() -> impl Strategy<Value = String> {
+            let key = prop_oneof![
+                Just("window"),
+                Just("query_timeout_ms"),
+                Just("handshake_timeout_s"),
+                Just("weights_every"),
+                Just("other"),
+            ];
+            let value = prop_oneof![
+                any::<u64>().prop_map(|v| v.to_string()),
+                any::<i64>().prop_map(|v| v.to_string()),
+                Just("0".to_owned()),
+                Just("65".to_owned()),
+                Just("1.5".to_owned()),
+                Just("\"x\"".to_owned()),
+                "[ -~]{0,8}",
+            ];
+            (key, value).prop_map(|(k, v)| format!("{k} = {v}\n"))
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(256))]
+
+            /// Arbitrary text and arbitrary fields: never a panic; what parses is valid and
+            /// round-trips.
+            #[test]
+            fn fuzz_runtime_config(
+                text in "[ -~\n]{0,120}",
+                fields in proptest::collection::vec(field(), 0..6),
+            ) {
+                for t in [text, fields.concat()] {
+                    if let Ok(cfg) = RuntimeConfig::from_toml(&t) {
+                        prop_assert!(cfg.validate().is_ok());
+                        let now = std::time::Instant::now();
+                        prop_assert!(now.checked_add(cfg.query_timeout()).is_some());
+                        prop_assert!(now.checked_add(cfg.handshake_timeout()).is_some());
+                        prop_assert_eq!(RuntimeConfig::from_toml(&cfg.to_toml()), Ok(cfg));
+                    }
+                }
+            }
+        }
     }
 }

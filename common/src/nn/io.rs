@@ -143,7 +143,14 @@ impl Mlp {
                 "obs_dim {obs_dim}, hidden {hidden}, heads {heads}, actions {actions} must all be positive"
             )));
         }
-        let expected = torch_shapes(obs_dim, hidden, heads * actions);
+        // The metadata is the file's word: K * A may not fit (a fuzzed file once overflowed here).
+        let outputs = heads
+            .checked_mul(actions)
+            .ok_or_else(|| NnError::Metadata {
+                key: "heads".to_string(),
+                reason: format!("heads {heads} times actions {actions} does not fit in memory"),
+            })?;
+        let expected = torch_shapes(obs_dim, hidden, outputs);
         for ((name, (shape, _)), e) in PARAM_NAMES.iter().zip(&data).zip(&expected) {
             if shape != e {
                 return Err(NnError::Shape {
@@ -153,7 +160,7 @@ impl Mlp {
                 });
             }
         }
-        let mut params = Params::zeros(obs_dim, hidden, heads * actions);
+        let mut params = Params::zeros(obs_dim, hidden, outputs);
         for (dst, (_, src)) in params.tensors_mut().into_iter().zip(&data) {
             dst.copy_from_slice(src);
         }

@@ -109,7 +109,10 @@ impl Mlp {
                 "obs_dim {d}, hidden {h}, heads {heads}, actions {actions} must all be positive"
             )));
         }
-        let expected = torch_shapes(d, h, heads * actions);
+        let outputs = heads.checked_mul(actions).ok_or_else(|| {
+            NnError::Dims(format!("heads {heads} times actions {actions} overflows"))
+        })?;
+        let expected = torch_shapes(d, h, outputs);
         let found = [
             vec![params.w0.ncols(), params.w0.nrows()],
             vec![params.b0.len()],

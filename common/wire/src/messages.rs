@@ -230,9 +230,63 @@ impl TransitionBatch {
         self.len() == TRANSITIONS_PER_BATCH
     }
 
-    /// Sequence number one past the last step of this batch.
+    /// Sequence number one past the last step of this batch (saturating: a batch received from
+    /// another process may carry any `first_seq`; [`TransitionBatch::check`] refuses one whose
+    /// end does not fit).
     pub fn end_seq(&self) -> u64 {
-        self.first_seq + u64::from(self.len)
+        self.first_seq.saturating_add(u64::from(self.len))
+    }
+
+    /// Checks a received batch against what its receiver expects: at most
+    /// [`TRANSITIONS_PER_BATCH`] steps, the observation size `obs_dim` and `heads` heads, each
+    /// action below `actions`, and sequence numbers that fit in a `u64`. The error names the field.
+    pub fn check(&self, obs_dim: usize, heads: usize, actions: usize) -> Result<()> {
+        if self.len() > TRANSITIONS_PER_BATCH {
+            return Err(WireError::TooLarge {
+                what: "transition batch",
+                got: self.len(),
+                max: TRANSITIONS_PER_BATCH,
+            });
+        }
+        let range = |what, value: u64, expected| {
+            Err(WireError::OutOfRange {
+                what,
+                value,
+                expected,
+            })
+        };
+        if usize::from(self.obs_dim) != obs_dim {
+            return range(
+                "transition batch obs_dim",
+                u64::from(self.obs_dim),
+                "the environment's observation size",
+            );
+        }
+        if usize::from(self.heads) != heads {
+            return range(
+                "transition batch heads",
+                u64::from(self.heads),
+                "the config's K",
+            );
+        }
+        if self.first_seq.checked_add(u64::from(self.len)).is_none() {
+            return range(
+                "transition batch first_seq",
+                self.first_seq,
+                "first_seq + len must fit in 64 bits",
+            );
+        }
+        if let Some(r) = self.records[..self.len()]
+            .iter()
+            .find(|r| r.action as usize >= actions)
+        {
+            return range(
+                "transition action",
+                u64::from(r.action),
+                "below the environment's number of actions",
+            );
+        }
+        Ok(())
     }
 
     /// Appends a step.
@@ -273,12 +327,17 @@ impl TransitionBatch {
         Ok(())
     }
 
-    /// Step `i` of the batch as the replay buffer stores it.
-    pub fn transition(&self, i: usize) -> Transition {
+    /// Step `i` of the batch as the replay buffer stores it; `None` beyond the batch's steps
+    /// (`len`, at most [`TRANSITIONS_PER_BATCH`]). An `obs_dim` or `heads` beyond the wire's
+    /// limits is cut to them; [`TransitionBatch::check`] refuses such a batch.
+    pub fn transition(&self, i: usize) -> Option<Transition> {
+        if i >= self.len().min(TRANSITIONS_PER_BATCH) {
+            return None;
+        }
         let d = (self.obs_dim as usize).min(MAX_OBS_DIM);
         let h = (self.heads as usize).min(MAX_HEADS);
         let r = &self.records[i];
-        Transition {
+        Some(Transition {
             state: r.state[..d].to_vec(),
             action: r.action,
             reward: r.reward,
@@ -286,12 +345,12 @@ impl TransitionBatch {
             terminated: r.flags & flags::TERMINATED != 0,
             mask: r.mask[..h].to_vec(),
             demo: r.flags & flags::DEMO != 0,
-        }
+        })
     }
 
-    /// The steps of the batch, in order.
+    /// The steps of the batch, in order (at most [`TRANSITIONS_PER_BATCH`], whatever `len` says).
     pub fn transitions(&self) -> impl Iterator<Item = Transition> + '_ {
-        (0..self.len().min(TRANSITIONS_PER_BATCH)).map(|i| self.transition(i))
+        (0..self.len().min(TRANSITIONS_PER_BATCH)).filter_map(|i| self.transition(i))
     }
 }
 
@@ -330,7 +389,8 @@ impl Credits {
         } else {
             0
         };
-        self.env_steps + produced.saturating_sub(received)
+        self.env_steps
+            .saturating_add(produced.saturating_sub(received))
     }
 }
 
@@ -410,6 +470,26 @@ impl QueryRequest {
 
     pub fn state(&self) -> &[f32] {
         &self.state[..(self.obs_dim as usize).min(MAX_OBS_DIM)]
+    }
+
+    /// The state, if it has the `obs_dim` its receiver expects and only finite values.
+    pub fn checked_state(&self, obs_dim: usize) -> Result<&[f32]> {
+        if self.obs_dim as usize != obs_dim || obs_dim > MAX_OBS_DIM {
+            return Err(WireError::OutOfRange {
+                what: "query obs_dim",
+                value: u64::from(self.obs_dim),
+                expected: "the environment's observation size",
+            });
+        }
+        let state = self.state();
+        if state.iter().any(|x| !x.is_finite()) {
+            return Err(WireError::OutOfRange {
+                what: "query state",
+                value: obs_dim as u64,
+                expected: "finite values",
+            });
+        }
+        Ok(state)
     }
 }
 
@@ -638,5 +718,214 @@ mod tests {
         assert_eq!(Process::new(Role::Learner, 0).to_string(), "learner");
         assert_eq!(Role::from_u16(Role::Expert as u16), Some(Role::Expert));
         assert_eq!(Role::from_u16(0), None);
+    }
+
+    mod fuzz {
+        use super::super::*;
+        use proptest::prelude::*;
+
+        fn record() -> impl Strategy<Value = TransitionRecord> {
+            (
+                any::<[f32; MAX_OBS_DIM]>(),
+                any::<[f32; MAX_HEADS]>(),
+                any::<u32>(),
+                any::<u32>(),
+                any::<f32>(),
+            )
+                .prop_map(|(state, mask, action, flags, reward)| TransitionRecord {
+                    state,
+                    next_state: state,
+                    mask,
+                    action,
+                    reward,
+                    flags,
+                })
+        }
+
+        /// A batch as another process may have filled it: any field, any record.
+        fn any_batch() -> impl Strategy<Value = TransitionBatch> {
+            (
+                (any::<u32>(), 0u32..4),
+                (any::<u16>(), any::<u16>(), 0u16..=MAX_OBS_DIM as u16 + 1),
+                (any::<u64>(), any::<u64>(), 0u64..4),
+                (
+                    any::<u32>(),
+                    0u32..=TRANSITIONS_PER_BATCH as u32 + 2,
+                    any::<u32>(),
+                ),
+                proptest::collection::vec(record(), 4),
+            )
+                .prop_map(
+                    |(
+                        (actor, a),
+                        (od, hd, od_small),
+                        (inc, seq, inc_small),
+                        (len, len_small, blocked),
+                        recs,
+                    )| {
+                        let mut b = TransitionBatch {
+                            actor: if a == 0 { actor } else { a - 1 },
+                            obs_dim: if od % 2 == 0 { od } else { od_small },
+                            heads: if hd % 2 == 0 {
+                                hd
+                            } else {
+                                hd % (MAX_HEADS as u16 + 2)
+                            },
+                            incarnation: if inc % 2 == 0 { inc } else { inc_small },
+                            first_seq: if seq % 3 == 0 { seq } else { seq % 100 },
+                            len: if len % 4 == 0 { len } else { len_small },
+                            blocked,
+                            ..TransitionBatch::default()
+                        };
+                        for (i, r) in b.records.iter_mut().enumerate() {
+                            *r = recs[i % recs.len()];
+                        }
+                        b
+                    },
+                )
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(512))]
+
+            #[test]
+            fn fuzz_transition_batch(b in any_batch(), i in any::<usize>()) {
+                let ts: Vec<Transition> = b.transitions().collect();
+                prop_assert!(ts.len() <= TRANSITIONS_PER_BATCH && ts.len() <= b.len());
+                for t in &ts {
+                    prop_assert!(t.state.len() <= MAX_OBS_DIM && t.mask.len() <= MAX_HEADS);
+                }
+                prop_assert_eq!(b.transition(i).is_some(), i < ts.len());
+                prop_assert!(b.end_seq() >= b.first_seq);
+                let ok = b.check(usize::from(b.obs_dim), usize::from(b.heads), 3).is_ok();
+                if ok {
+                    prop_assert_eq!(ts.len(), b.len());
+                    prop_assert!(b.first_seq.checked_add(u64::from(b.len)).is_some());
+                }
+            }
+
+            /// What `push` builds, the receiver reads back step for step.
+            #[test]
+            fn fuzz_transition_batch_round_trip(
+                obs_dim in 0usize..=MAX_OBS_DIM,
+                heads in 0usize..=MAX_HEADS,
+                n in 0usize..=TRANSITIONS_PER_BATCH,
+                seed in any::<f32>(),
+                action in 0u32..3,
+            ) {
+                let mut b = TransitionBatch::new(1, 2, obs_dim, heads, 5).unwrap();
+                let mut sent = Vec::new();
+                for k in 0..n {
+                    let t = Transition {
+                        state: vec![seed + k as f32; obs_dim],
+                        action,
+                        reward: k as f32,
+                        next_state: vec![seed - k as f32; obs_dim],
+                        terminated: k % 2 == 0,
+                        mask: vec![1.0; heads],
+                        demo: k % 3 == 0,
+                    };
+                    b.push(&t).unwrap();
+                    sent.push(t);
+                }
+                prop_assert!(b.check(obs_dim, heads, 3).is_ok());
+                let got: Vec<Transition> = b.transitions().collect();
+                prop_assert_eq!(got.len(), sent.len());
+                for (g, s) in got.iter().zip(&sent) {
+                    prop_assert_eq!(g.state.len(), s.state.len());
+                    prop_assert_eq!(g.action, s.action);
+                    prop_assert_eq!((g.terminated, g.demo), (s.terminated, s.demo));
+                }
+            }
+
+            #[test]
+            fn fuzz_query_request(
+                obs_dim in prop_oneof![any::<u32>(), 0u32..=MAX_OBS_DIM as u32 + 1],
+                state in any::<[f32; MAX_OBS_DIM]>(),
+                expected in 0usize..=MAX_OBS_DIM + 1,
+            ) {
+                let q = QueryRequest { obs_dim, state, ..QueryRequest::default() };
+                prop_assert!(q.state().len() <= MAX_OBS_DIM);
+                if let Ok(s) = q.checked_state(expected) {
+                    prop_assert_eq!(s.len(), expected);
+                    prop_assert!(s.iter().all(|x| x.is_finite()));
+                }
+            }
+
+            #[test]
+            fn fuzz_credits(
+                received in any::<[u64; MAX_ACTORS]>(),
+                incarnation in any::<[u64; MAX_ACTORS]>(),
+                granted in any::<[u64; MAX_ACTORS]>(),
+                env_steps in any::<u64>(),
+                actor in any::<u16>(),
+                inc in any::<u64>(),
+                produced in any::<u64>(),
+            ) {
+                let c = Credits { env_steps, received, incarnation, granted, ..Credits::default() };
+                let a = usize::from(actor);
+                let mine = a < MAX_ACTORS && incarnation[a] == inc;
+                prop_assert_eq!(c.granted_for(actor, inc), mine.then(|| granted[a]));
+                let g = c.global_step_for(actor, inc, produced);
+                prop_assert!(g >= env_steps);
+                let own = produced.saturating_sub(if mine { received[a] } else { 0 });
+                let expected = u128::from(env_steps) + u128::from(own);
+                prop_assert_eq!(u128::from(g), expected.min(u128::from(u64::MAX)));
+            }
+
+            #[test]
+            fn fuzz_names_and_headers(
+                bytes in any::<[u8; NAME_LEN]>(),
+                name in "\\PC{0,40}",
+                role in any::<u16>(),
+                id in any::<u16>(),
+            ) {
+                let s = name_from_bytes(&bytes);
+                let no_nul = !s.contains('\0');
+                prop_assert!(no_nul);
+                let back = name_from_bytes(&name_to_bytes(&name));
+                let prefix = name.starts_with(back.as_str());
+                prop_assert!(prefix);
+                let h = DemoModelHeader { expert_name: bytes, ..DemoModelHeader::default() };
+                prop_assert_eq!(h.expert_name(), s);
+                let header = Header { role, id, ..Header::default() };
+                prop_assert!(!header.sender().is_empty());
+                let p = Progress {
+                    header,
+                    kind: u32::from(role),
+                    state: u32::from(id),
+                    ..Progress::default()
+                };
+                prop_assert_eq!(p.header.sender(), header.sender());
+            }
+        }
+
+        // Regression (fuzz): `transition(i)` indexed the records unchecked and panicked for
+        // `i >= 32`; `end_seq` overflowed for `first_seq` near `u64::MAX`; `global_step_for`
+        // overflowed for `env_steps` near `u64::MAX`.
+        #[test]
+        fn out_of_range_fields_do_not_panic() {
+            let b = TransitionBatch {
+                len: u32::MAX,
+                first_seq: u64::MAX,
+                obs_dim: u16::MAX,
+                heads: u16::MAX,
+                ..TransitionBatch::default()
+            };
+            assert_eq!(b.transition(TRANSITIONS_PER_BATCH), None);
+            assert_eq!(b.transitions().count(), TRANSITIONS_PER_BATCH);
+            assert_eq!(b.end_seq(), u64::MAX);
+            assert!(matches!(b.check(4, 2, 2), Err(WireError::TooLarge { .. })));
+            let c = Credits {
+                env_steps: u64::MAX,
+                ..Credits::default()
+            };
+            assert_eq!(c.global_step_for(0, 0, 5), u64::MAX);
+            let q = QueryRequest {
+                obs_dim: u32::MAX,
+                ..QueryRequest::default()
+            };
+            assert!(q.checked_state(4).is_err());
+        }
     }
 }

@@ -414,3 +414,77 @@ fn valid_name(s: &str) -> bool {
         && s.chars()
             .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
+
+#[cfg(test)]
+mod fuzz {
+    use super::*;
+    use proptest::prelude::*;
+    use std::path::PathBuf;
+
+    /// A scratch tree `experiments/` beside a link to the shipped `configs/`, so that a mutated
+    /// experiment file still finds the configs it names.
+    fn scratch() -> PathBuf {
+        let root =
+            std::env::temp_dir().join(format!("alfd-fuzz-experiment-{}", std::process::id()));
+        let experiments = root.join("experiments");
+        if !experiments.exists() {
+            std::fs::create_dir_all(&experiments).unwrap();
+            let configs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs");
+            let _ = std::os::unix::fs::symlink(configs, root.join("configs"));
+        }
+        experiments
+    }
+
+    fn shipped() -> Vec<String> {
+        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("experiments");
+        let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+            .collect();
+        paths.sort();
+        paths
+            .iter()
+            .map(|p| std::fs::read_to_string(p).unwrap())
+            .collect()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// Arbitrary text and shipped experiment files with a few edits: `load` never panics.
+        #[test]
+        fn fuzz_experiment_file(
+            which in any::<prop::sample::Index>(),
+            edits in proptest::collection::vec(
+                (any::<prop::sample::Index>(), 0usize..6, prop_oneof![
+                    "[ -~\n]{0,8}",
+                    Just("0".to_owned()),
+                    Just("nan".to_owned()),
+                    Just("-1".to_owned()),
+                    Just("\n[[method]]\n".to_owned()),
+                ]),
+                0..4,
+            ),
+            arbitrary in "[ -~\n]{0,80}",
+            seeds in proptest::option::of(0u64..3),
+        ) {
+            let files = shipped();
+            let mut text: Vec<char> = files[which.index(files.len())].chars().collect();
+            for (at, del, ins) in edits {
+                let a = at.index(text.len() + 1);
+                let b = (a + del).min(text.len());
+                text.splice(a..b, ins.chars());
+            }
+            let dir = scratch();
+            for (name, t) in [("mutated", text.into_iter().collect::<String>()), ("arbitrary", arbitrary)] {
+                let path = dir.join(format!("{name}.toml"));
+                std::fs::write(&path, &t).unwrap();
+                if let Err(e) = Experiment::load(&path, seeds, None) {
+                    let message = format!("{e:#}");
+                    prop_assert!(!message.is_empty());
+                }
+            }
+        }
+    }
+}
