@@ -43,7 +43,7 @@ pub struct ExperimentConfig {
     #[serde(default, skip_serializing_if = "is_zero_u64")]
     pub steps: u64,
     /// Periodic evaluation of the greedy policy (off by default).
-    #[serde(default, skip_serializing_if = "EvalConfig::is_off")]
+    #[serde(default, skip_serializing_if = "EvalConfig::is_default")]
     pub evaluation: EvalConfig,
     pub env: EnvConfig,
     pub agent: AgentConfig,
@@ -95,6 +95,11 @@ impl Default for EvalConfig {
 impl EvalConfig {
     pub fn is_off(&self) -> bool {
         self.every == 0
+    }
+
+    /// Whether this is the default (left out of a written config, so the config reads back equal).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
     }
 
     /// Whether training episode `episode` (0-based) is followed by an evaluation.
@@ -951,5 +956,13 @@ model = "krr"
             e,
             "unknown environment `pendulum` (known: cartpole, cliffwalk, mountaincar, acrobot)"
         );
+    }
+
+    #[test]
+    fn a_written_config_reads_back_equal_even_with_evaluation_off_and_its_size_set() {
+        // Found by the fuzz pass: `evaluation` was left out whenever it was off, losing `episodes`.
+        let text = "seed = 0\nepisodes = 3\n[evaluation]\nepisodes = 5\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"bdqn\"\n";
+        let cfg = ExperimentConfig::from_toml(text).unwrap();
+        assert_eq!(ExperimentConfig::from_toml(&cfg.to_toml()).unwrap(), cfg);
     }
 }
