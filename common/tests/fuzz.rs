@@ -355,7 +355,11 @@ fn weights_whose_heads_times_actions_overflow_are_refused() {
             .replace("\"actions\":\"3\"", "\"actions\":\"4\"")
     });
     let e = Mlp::from_safetensors_bytes(&bad).unwrap_err().to_string();
-    assert!(e.contains("heads"), "{e}");
+    // The overflow itself is named (a wrapped product would fail later, on a tensor's shape).
+    assert!(
+        e.contains("heads 9223372036854775808 times actions 4 does not fit"),
+        "{e}"
+    );
 }
 
 proptest! {

@@ -152,39 +152,32 @@ impl<A: Adder, V: VariableSource> GenericActor<A, V> {
         }
     }
 
-    /// Potential-based shaping of the step from `obs` with `action` (see the type's docs).
-    fn observe_with_potential(
+    /// Potential-based shaping (see the type's docs): `t`, the transition of the step from `obs`
+    /// with `action` (unshaped), waits for the next action; the one before it goes out now with
+    /// its bonus.
+    fn add_with_potential(
         &mut self,
+        mut t: Transition,
         obs: &[f32],
         action: usize,
         step: &Step<Vec<f32>>,
-        demo: bool,
         shaping: Option<(&DemoModel, f64)>,
     ) -> Result<()> {
+        let gamma = self.core.gamma();
         let phi = shaping.map_or(0.0, |(m, lambda)| {
             NeuralActor::potential(obs, action, m, lambda)
         });
-        if let Some((mut t, phi_prev)) = self.pending.take() {
-            let bonus = potential_bonus(self.core.gamma(), phi, phi_prev);
-            t.reward = (f64::from(t.reward) + bonus) as f32;
-            self.adder.add(t, false)?;
+        if let Some((mut prev, phi_prev)) = self.pending.take() {
+            prev.reward = (f64::from(prev.reward) + potential_bonus(gamma, phi, phi_prev)) as f32;
+            self.adder.add(prev, false)?;
         }
-        let mut t = self.core.transition(
-            obs,
-            action,
-            step.reward,
-            &step.observation,
-            step.terminated,
-            demo,
-            None,
-        );
         if step.done() {
-            t.reward = (f64::from(t.reward) + potential_bonus(self.core.gamma(), 0.0, phi)) as f32;
-            self.adder.add(t, step.truncated)?;
+            t.reward = (f64::from(t.reward) + potential_bonus(gamma, 0.0, phi)) as f32;
+            self.adder.add(t, step.truncated)
         } else {
             self.pending = Some((t, phi));
+            Ok(())
         }
-        Ok(())
     }
 }
 
@@ -217,11 +210,8 @@ impl<A: Adder, V: VariableSource> Actor<Vec<f32>> for GenericActor<A, V> {
         demo: bool,
         shaping: Option<(&DemoModel, f64)>,
     ) -> Result<bool> {
-        let shaped = shaping.is_some();
-        if self.core.shaping_kind() == ShapingKind::Potential {
-            self.observe_with_potential(obs, action, step, demo, shaping)?;
-            return Ok(shaped);
-        }
+        let potential = self.core.shaping_kind() == ShapingKind::Potential;
+        // Eq. 4 shapes the transition itself; potential shaping adds its bonus afterwards.
         let t = self.core.transition(
             obs,
             action,
@@ -229,10 +219,14 @@ impl<A: Adder, V: VariableSource> Actor<Vec<f32>> for GenericActor<A, V> {
             &step.observation,
             step.terminated,
             demo,
-            shaping,
+            if potential { None } else { shaping },
         );
-        self.adder.add(t, step.truncated)?;
-        Ok(shaped)
+        if potential {
+            self.add_with_potential(t, obs, action, step, shaping)?;
+        } else {
+            self.adder.add(t, step.truncated)?;
+        }
+        Ok(shaping.is_some())
     }
 
     fn end_episode(&mut self) -> Result<()> {
