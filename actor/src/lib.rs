@@ -127,8 +127,8 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     )?;
     info!(
         reason = end.stopped.map_or("done", |s| s.0),
-        episodes = end.episodes,
-        steps = end.steps,
+        episodes = end.progress.episodes,
+        steps = end.progress.steps,
         timeouts = expert.timeouts,
         credit_waits = actor.adder.credit_waits,
         credit_wait_s = actor.adder.credit_wait.as_secs_f64(),

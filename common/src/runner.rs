@@ -175,10 +175,7 @@ fn in_segments<S>(
         };
         let mut stopped = false;
         let end = segment(schedule, progress, &mut stopped);
-        progress = Progress {
-            episodes: end.episodes,
-            steps: end.steps,
-        };
+        progress = end.progress;
         let over = stopped
             || end.stopped.is_some()
             || checkpoints.every.is_none()

@@ -251,10 +251,9 @@ pub struct Schedule {
 /// How a run ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RunEnd {
-    /// Episodes played to their end.
-    pub episodes: u32,
-    /// Environment steps this actor took (including those of an unfinished last episode).
-    pub steps: u64,
+    /// Episodes played to their end, and environment steps this actor took (including those of
+    /// an unfinished last episode): where a continued run starts.
+    pub progress: Progress,
     /// Why the run stopped before its episode limit, if it did (the step limit, the transport;
     /// `None`: all episodes played, or `on_episode` said stop).
     pub stopped: Option<Stop>,
@@ -321,8 +320,10 @@ where
             }
             ControlFlow::Break(stop) => {
                 return Ok(RunEnd {
-                    episodes: episode,
-                    steps,
+                    progress: Progress {
+                        episodes: episode,
+                        steps,
+                    },
                     stopped: Some(stop),
                 })
             }
@@ -333,8 +334,10 @@ where
         }
     }
     Ok(RunEnd {
-        episodes: episode,
-        steps,
+        progress: Progress {
+            episodes: episode,
+            steps,
+        },
         stopped: None,
     })
 }
