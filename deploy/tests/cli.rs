@@ -1,8 +1,10 @@
 //! The `alfd` command line as a user meets it: outputs of `local`, `env`, `expert`, and clear
 //! errors with exit code 2 on bad input.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
+
+use crate::support::{repo, timed, tmp};
 
 fn alfd(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_alfd"))
@@ -12,26 +14,13 @@ fn alfd(args: &[&str]) -> Output {
         .expect("alfd runs")
 }
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("alfd-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 #[test]
 fn local_writes_a_byte_identical_episodes_csv_for_the_same_seed() {
+    let _time = timed!();
     let (a, b) = (tmp("local-a"), tmp("local-b"));
     for out in [&a, &b] {
         let o = alfd(&[
@@ -74,6 +63,7 @@ fn local_writes_a_byte_identical_episodes_csv_for_the_same_seed() {
 
 #[test]
 fn local_cartpole_saves_weights_and_demos() {
+    let _time = timed!();
     let out = tmp("local-cartpole");
     let o = alfd(&[
         "local",
@@ -121,6 +111,7 @@ fn assert_usage_error(args: &[&str], needle: &str) {
 
 #[test]
 fn bad_configs_are_refused_with_exit_code_2_naming_the_field() {
+    let _time = timed!();
     let out = tmp("bad");
     let o = out.to_str().unwrap();
     let cfg = "deploy/configs/cliffwalk-bootstrapped.toml";
@@ -233,6 +224,7 @@ fn bad_configs_are_refused_with_exit_code_2_naming_the_field() {
 
 #[test]
 fn a_bad_value_is_refused_with_exit_code_2_saying_where_it_came_from() {
+    let _time = timed!();
     let out = tmp("bad-source");
     let o = out.to_str().unwrap();
     let cfg = "deploy/configs/cartpole-bdqn-krr.toml";
@@ -277,6 +269,7 @@ fn a_bad_value_is_refused_with_exit_code_2_saying_where_it_came_from() {
 
 #[test]
 fn local_refuses_an_output_directory_holding_a_run_and_leaves_it_untouched() {
+    let _time = timed!();
     let out = tmp("local-reused");
     let o = out.to_str().unwrap();
     let args = [
@@ -327,6 +320,7 @@ fn local_refuses_an_output_directory_holding_a_run_and_leaves_it_untouched() {
 
 #[test]
 fn env_rollout_prints_one_json_object_per_step() {
+    let _time = timed!();
     let o = alfd(&[
         "env",
         "rollout",
@@ -352,6 +346,7 @@ fn env_rollout_prints_one_json_object_per_step() {
 
 #[test]
 fn env_rollout_steps_mountaincar_and_acrobot_from_a_given_state() {
+    let _time = timed!();
     // MountainCar pushed right from just below the flag reaches it on the first step.
     let o = alfd(&[
         "env",
@@ -409,6 +404,7 @@ fn env_rollout_steps_mountaincar_and_acrobot_from_a_given_state() {
 
 #[test]
 fn expert_eval_prints_mean_median_std() {
+    let _time = timed!();
     let o = alfd(&["expert", "eval", "cartpole-perfect", "--episodes", "5"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
@@ -500,11 +496,11 @@ fn assert_stop_and_resume_is_the_uninterrupted_run(config: &str, name: &str) {
     let o = alfd(&["resume", cut.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("finished"), "{}", stderr(&o));
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn a_cartpole_run_stopped_and_resumed_is_the_uninterrupted_run_to_the_byte() {
+    let _time = timed!();
     assert_stop_and_resume_is_the_uninterrupted_run(
         "deploy/configs/cartpole-bdqn-krr.toml",
         "resume-cartpole",
@@ -513,6 +509,7 @@ fn a_cartpole_run_stopped_and_resumed_is_the_uninterrupted_run_to_the_byte() {
 
 #[test]
 fn a_cliffwalk_run_stopped_and_resumed_is_the_uninterrupted_run_to_the_byte() {
+    let _time = timed!();
     assert_stop_and_resume_is_the_uninterrupted_run(
         "deploy/configs/cliffwalk-bootstrapped.toml",
         "resume-cliffwalk",
@@ -521,6 +518,7 @@ fn a_cliffwalk_run_stopped_and_resumed_is_the_uninterrupted_run_to_the_byte() {
 
 #[test]
 fn resume_refuses_a_bad_checkpoint_saying_why_and_keeps_it() {
+    let _time = timed!();
     let dir = tmp("resume-bad");
     let run = dir.join("run");
     let o = local_40(
@@ -563,5 +561,4 @@ fn resume_refuses_a_bad_checkpoint_saying_why_and_keeps_it() {
     );
     let o = alfd(&["resume", dir.join("none").to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
-    std::fs::remove_dir_all(&dir).unwrap();
 }

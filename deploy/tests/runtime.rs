@@ -4,71 +4,15 @@
 //! two concurrent runs, a run directory reused, concurrent swaps, and a refused schema version.
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
-use std::sync::OnceLock;
+use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use alfd_wire as wire;
 
+use crate::support::{alfd, bin_dir, text, timed, tmp, Background, TestDir};
+
 /// The expert every test uses (the registry's perfect CartPole controller).
 const EXPERT: &str = "cartpole-perfect";
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
-
-/// The directory holding `alfd` and the process binaries. `cargo test` builds only this
-/// package's binary, so the process binaries are built here once (same profile, same target
-/// directory, the workspace's features), unless `ALFD_BIN_DIR` points at them.
-fn bin_dir() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        if let Some(d) = std::env::var_os("ALFD_BIN_DIR") {
-            return PathBuf::from(d);
-        }
-        let dir = Path::new(env!("CARGO_BIN_EXE_alfd"))
-            .parent()
-            .unwrap()
-            .to_path_buf();
-        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-        let mut cmd = Command::new(cargo);
-        // The whole workspace, as `deploy/test.sh` builds it: the same features, so nothing
-        // is compiled twice.
-        cmd.args(["build", "--workspace", "--bins"])
-            .current_dir(repo());
-        if dir.ends_with("release") {
-            cmd.arg("--release");
-        }
-        let status = cmd.status().expect("cargo runs");
-        assert!(status.success(), "cannot build the process binaries");
-        dir
-    })
-}
-
-fn alfd() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_alfd"));
-    c.env("ALFD_BIN_DIR", bin_dir()).current_dir(repo());
-    c
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("alfd-rt-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "status {:?}\nstdout: {}\nstderr: {}",
-        o.status,
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
 
 /// An endless run with the 200 expert asked on every step (a budget that lasts the whole test) and
 /// no model to refit: demonstrations flow whenever a test looks.
@@ -96,33 +40,6 @@ fn run(out: &Path, actors: usize, sets: &[&str]) -> Output {
         c.args(["--set", s]);
     }
     c.output().expect("alfd runs")
-}
-
-/// A run in the background; stopped with SIGINT when dropped (so a failed test leaves no
-/// processes behind).
-struct Background(Option<Child>);
-
-impl Background {
-    fn child(&mut self) -> &mut Child {
-        self.0.as_mut().expect("running")
-    }
-}
-
-impl Drop for Background {
-    fn drop(&mut self) {
-        if let Some(mut child) = self.0.take() {
-            let _ = Command::new("kill")
-                .args(["-INT", &child.id().to_string()])
-                .status();
-            let start = Instant::now();
-            while matches!(child.try_wait(), Ok(None)) && start.elapsed() < Duration::from_secs(30)
-            {
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-    }
 }
 
 /// The same, in the background (the caller stops it with [`interrupt`]).
@@ -225,6 +142,7 @@ fn check_run_dir(dir: &Path, budget: usize) -> Vec<alfd_common::agent::DemoRecor
 
 #[test]
 fn a_small_run_with_two_actors_fills_its_run_directory() {
+    let _time = timed!();
     let out = tmp("small");
     // `first`: the budget goes on the first steps, so exactly B demonstrations are made. Enough
     // episodes (about a second of play) that an actor starting a little later still gets some.
@@ -274,7 +192,7 @@ fn a_small_run_with_two_actors_fills_its_run_directory() {
 
 /// `alfd local` and `alfd run --actors=1 --window=1` on the KRR config with `sets`: the
 /// directories of both runs.
-fn local_and_lockstep(name: &str, sets: &[&str]) -> (PathBuf, PathBuf) {
+fn local_and_lockstep(name: &str, sets: &[&str]) -> (TestDir, TestDir) {
     let (local, multi) = (tmp(&format!("{name}-local")), tmp(&format!("{name}-multi")));
     let expert = format!("expert.name={EXPERT}");
     for (dir, how) in [
@@ -301,6 +219,7 @@ fn local_and_lockstep(name: &str, sets: &[&str]) -> (PathBuf, PathBuf) {
 
 #[test]
 fn one_actor_in_lockstep_reproduces_the_single_process_run() {
+    let _time = timed!();
     // With one actor and a credit window of 1 the actor always acts on the newest weights, as in
     // one process: one loop, the same seeds, the same episodes, to the byte.
     let (local, multi) = local_and_lockstep("equiv", &["episodes=60"]);
@@ -319,6 +238,7 @@ fn one_actor_in_lockstep_reproduces_the_single_process_run() {
 
 #[test]
 fn lockstep_equivalence_holds_with_every_learner_option_evaluation_and_a_step_budget() {
+    let _time = timed!();
     let (local, multi) = local_and_lockstep(
         "equiv-options",
         &[
@@ -354,6 +274,7 @@ fn lockstep_equivalence_holds_with_every_learner_option_evaluation_and_a_step_bu
 
 #[test]
 fn the_expert_is_swapped_in_a_live_run_without_losing_or_repeating_a_demonstration() {
+    let _time = timed!();
     let out = tmp("swap");
     // Demonstrations flow before, during and after the swap from the 200 expert to the 1000 one.
     let mut child = spawn_run(&out, 2, &ASKING_ALL_ALONG);
@@ -407,6 +328,7 @@ fn the_expert_is_swapped_in_a_live_run_without_losing_or_repeating_a_demonstrati
 
 #[test]
 fn an_actor_killed_with_sigkill_is_restarted_and_the_run_goes_on() {
+    let _time = timed!();
     let out = tmp("kill");
     let mut child = spawn_run(&out, 2, &["episodes=1000000"]);
     wait_rows(&out, 10, &mut child);
@@ -469,9 +391,10 @@ fn an_actor_killed_with_sigkill_is_restarted_and_the_run_goes_on() {
 
 #[test]
 fn two_concurrent_runs_do_not_see_each_other() {
+    let _time = timed!();
     let (a, b) = (tmp("iso-a"), tmp("iso-b"));
     let run_a = std::thread::spawn({
-        let a = a.clone();
+        let a = a.to_path_buf();
         move || {
             run(
                 &a,
@@ -509,6 +432,7 @@ fn two_concurrent_runs_do_not_see_each_other() {
 
 #[test]
 fn a_process_of_another_schema_version_is_refused() {
+    let _time = timed!();
     let out = tmp("schema");
     let mut child = spawn_run(&out, 1, &["episodes=1000000"]);
     wait_rows(&out, 5, &mut child);
@@ -543,6 +467,7 @@ fn a_process_of_another_schema_version_is_refused() {
 
 #[test]
 fn a_killed_learner_ends_the_run_with_a_message_saying_so() {
+    let _time = timed!();
     let out = tmp("learner-killed");
     let mut child = spawn_run(&out, 2, &["episodes=1000000"]);
     wait_rows(&out, 5, &mut child);
@@ -571,6 +496,7 @@ fn a_killed_learner_ends_the_run_with_a_message_saying_so() {
 
 #[test]
 fn stray_signals_stop_no_process_and_the_run_finishes() {
+    let _time = timed!();
     let out = tmp("stray-signals");
     // Many short episodes (at most 50 steps: a run of a few seconds whether or not it learns), and
     // a budget that lasts, so that queries meet the stopped expert.
@@ -627,6 +553,7 @@ fn stray_signals_stop_no_process_and_the_run_finishes() {
 
 #[test]
 fn an_expert_killed_with_sigkill_is_restarted_and_the_run_completes() {
+    let _time = timed!();
     let out = tmp("expert-killed");
     // Every step asks until the budget is spent (no model to refit, so answers are quick): the
     // expert dies with demonstrations flowing, and its successor spends the rest of the budget.
@@ -690,6 +617,7 @@ fn an_expert_killed_with_sigkill_is_restarted_and_the_run_completes() {
 
 #[test]
 fn a_run_directory_belongs_to_one_run() {
+    let _time = timed!();
     let out = tmp("one-run");
     // A second launcher on a live run's directory is refused, as is `alfd local`.
     let mut child = spawn_run(&out, 1, &["episodes=1000000"]);
@@ -756,6 +684,7 @@ fn a_run_directory_belongs_to_one_run() {
 
 #[test]
 fn concurrent_swaps_are_refused_at_once_and_a_refused_swap_says_why() {
+    let _time = timed!();
     let out = tmp("swaps");
     let mut child = spawn_run(&out, 1, &ASKING_ALL_ALONG);
     wait_rows(&out, 5, &mut child);
@@ -892,9 +821,16 @@ fn wait_output(mut run: Background, timeout: Duration) -> Output {
     match rx.recv_timeout(timeout) {
         Ok(output) => output.unwrap(),
         Err(_) => {
-            let _ = Command::new("kill")
-                .args(["-INT", &pid.to_string()])
-                .status();
+            // Stopped (as `Background` would) before the test's directory goes: SIGINT, then
+            // SIGKILL if it is still there 30 s later.
+            for (signal, grace) in [("-INT", 30), ("-KILL", 5)] {
+                let _ = Command::new("kill")
+                    .args([signal, &pid.to_string()])
+                    .status();
+                if rx.recv_timeout(Duration::from_secs(grace)).is_ok() {
+                    break;
+                }
+            }
             panic!("the run did not end within {timeout:?}");
         }
     }

@@ -12,6 +12,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::SystemTime;
 
+use crate::support::{timed, tmp, TestDir};
+
 const METHODS: [&str; 2] = ["qlearning", "bdqn-krr"];
 const SEEDS: u64 = 2;
 const EPISODES: usize = 20;
@@ -35,14 +37,9 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
-/// A fresh scratch directory for one test.
-fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("sweep")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh scratch directory for one test, removed when dropped.
+fn scratch(name: &str) -> TestDir {
+    tmp(&format!("sweep-{name}"))
 }
 
 fn config(name: &str) -> String {
@@ -339,6 +336,7 @@ fn mtimes(out: &Path) -> Vec<SystemTime> {
 
 #[test]
 fn tiny_sweep_writes_curves_and_summary_that_match_the_runs() {
+    let _time = timed!();
     let dir = scratch("tiny");
     // BDQN+KRR evaluates its greedy policy after episodes 7 and 15; Q-learning never does.
     let experiment = write_experiment(
@@ -574,6 +572,7 @@ fn assert_eval(
 
 #[test]
 fn without_a_font_the_plot_is_svg_only_and_the_sweep_succeeds() {
+    let _time = timed!();
     let dir = scratch("no-font");
     let experiment = write_experiment(&dir, "");
     let out = dir.join("out");
@@ -638,6 +637,7 @@ fn assert_refused(name: &str, extra: &str, whole: Option<&str>, args: &[&str], n
 
 #[test]
 fn bad_experiments_are_refused_before_anything_runs() {
+    let _time = timed!();
     // The first method is valid: validation covers every method before any run starts.
     assert_refused(
         "unknown-config",
@@ -690,6 +690,7 @@ fn bad_experiments_are_refused_before_anything_runs() {
 
 #[test]
 fn demo_model_policy_is_reproducible_and_checks_its_input() {
+    let _time = timed!();
     let args = [
         "demo-model-policy",
         "--expert",

@@ -2,4 +2,5 @@
 
 mod cli;
 mod runtime;
+mod support;
 mod sweep;

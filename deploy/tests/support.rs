@@ -1,0 +1,188 @@
+//! What the integration tests share: the repository and the binaries, temporary directories that
+//! remove themselves (also when a test panics), a run in the background stopped when dropped, and
+//! the time each test took.
+//!
+//! Order matters in a test that starts processes: declare the directory first, then the process,
+//! so that the process (dropped first) is stopped before its directory is removed.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+/// The repository's root.
+pub(crate) fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+/// The directory holding `alfd` and the process binaries. `cargo test` builds only this
+/// package's binary, so the process binaries are built here once (same profile, same target
+/// directory, the workspace's features), unless `ALFD_BIN_DIR` points at them.
+pub(crate) fn bin_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        if let Some(d) = std::env::var_os("ALFD_BIN_DIR") {
+            return PathBuf::from(d);
+        }
+        let dir = Path::new(env!("CARGO_BIN_EXE_alfd"))
+            .parent()
+            .unwrap()
+            .to_path_buf();
+        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+        let mut cmd = Command::new(cargo);
+        // The whole workspace, as `deploy/test.sh` builds it: the same features, so nothing
+        // is compiled twice.
+        cmd.args(["build", "--workspace", "--bins"])
+            .current_dir(repo());
+        if dir.ends_with("release") {
+            cmd.arg("--release");
+        }
+        let status = cmd.status().expect("cargo runs");
+        assert!(status.success(), "cannot build the process binaries");
+        dir
+    })
+}
+
+/// `alfd`, run from the repository's root, finding the process binaries in [`bin_dir`].
+pub(crate) fn alfd() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_alfd"));
+    c.env("ALFD_BIN_DIR", bin_dir()).current_dir(repo());
+    c
+}
+
+/// A process's exit status, stdout and stderr, for an assertion's message.
+pub(crate) fn text(o: &Output) -> String {
+    format!(
+        "status {:?}\nstdout: {}\nstderr: {}",
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// A fresh, empty directory `alfd-NAME-XXXXXX` in the system's temporary directory, removed
+/// with everything in it when dropped (see [`TestDir`]).
+pub(crate) fn tmp(name: &str) -> TestDir {
+    let keep = std::env::var_os("ALFD_KEEP_TEST_DIRS").is_some_and(|v| v == "1");
+    let dir = tempfile::Builder::new()
+        .prefix(&format!("alfd-{name}-"))
+        .disable_cleanup(keep)
+        .tempdir()
+        .expect("a temporary directory");
+    if keep {
+        // Straight to stderr: libtest's capture would hide it for a test that passes.
+        let _ = writeln!(
+            std::io::stderr(),
+            "ALFD_KEEP_TEST_DIRS: keeping {}",
+            dir.path().display()
+        );
+    }
+    TestDir(dir)
+}
+
+/// A test's temporary directory: used as a [`Path`], removed when dropped, also while a failed
+/// test unwinds; kept (and named on stderr) when `ALFD_KEEP_TEST_DIRS=1`.
+#[derive(Debug)]
+pub(crate) struct TestDir(tempfile::TempDir);
+
+impl std::ops::Deref for TestDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+impl AsRef<Path> for TestDir {
+    fn as_ref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for TestDir {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.path().as_os_str()
+    }
+}
+
+/// A run in the background; stopped with SIGINT when dropped (so a failed test leaves no
+/// processes behind): waits up to 30 s for it to end, then kills it.
+pub(crate) struct Background(pub(crate) Option<Child>);
+
+impl Background {
+    pub(crate) fn child(&mut self) -> &mut Child {
+        self.0.as_mut().expect("running")
+    }
+}
+
+impl Drop for Background {
+    fn drop(&mut self) {
+        if let Some(mut child) = self.0.take() {
+            let _ = Command::new("kill")
+                .args(["-INT", &child.id().to_string()])
+                .status();
+            let start = Instant::now();
+            while matches!(child.try_wait(), Ok(None)) && start.elapsed() < Duration::from_secs(30)
+            {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// Records the enclosing test's time: `let _time = timed!();` as the test's first line (dropped
+/// last, so the time includes stopping its processes and removing its directories).
+macro_rules! timed {
+    () => {
+        $crate::support::TestTime::start({
+            fn f() {}
+            std::any::type_name_of_val(&f)
+        })
+    };
+}
+pub(crate) use timed;
+
+/// Appends "NAME SECONDS" to `$ALFD_TEST_TIMES/times.txt` when dropped (after a failure too);
+/// does nothing when `ALFD_TEST_TIMES` is unset. `deploy/test.sh` sets it and prints the slowest.
+#[derive(Debug)]
+pub(crate) struct TestTime {
+    name: String,
+    start: Instant,
+}
+
+impl TestTime {
+    /// `path` is `CRATE::MODULE::TEST::f` (see [`timed!`]); the name kept is libtest's,
+    /// `MODULE::TEST`.
+    pub(crate) fn start(path: &str) -> TestTime {
+        let path = path.strip_suffix("::f").unwrap_or(path);
+        let name = path.split_once("::").map_or(path, |(_, rest)| rest);
+        TestTime {
+            name: name.to_owned(),
+            start: Instant::now(),
+        }
+    }
+}
+
+impl Drop for TestTime {
+    fn drop(&mut self) {
+        let Some(dir) = std::env::var_os("ALFD_TEST_TIMES") else {
+            return;
+        };
+        let line = format!("{} {:.1}\n", self.name, self.start.elapsed().as_secs_f64());
+        let dir = PathBuf::from(dir);
+        let _ = std::fs::create_dir_all(&dir);
+        // One short write in append mode: lines of tests running in parallel do not mix.
+        if let Ok(mut f) = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(dir.join("times.txt"))
+        {
+            let _ = f.write_all(line.as_bytes());
+        }
+    }
+}
