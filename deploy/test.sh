@@ -1,10 +1,44 @@
 #!/usr/bin/env bash
 # Builds everything and runs the whole test suite (unit, fixture, CLI and multi-process tests).
 # One profile (release) serves the binaries the multi-process tests start and the tests themselves.
+# At the end, also when a test fails: the 15 slowest tests with their times, and whether the tests
+# left anything named alfd-* in the temporary directory (they should not: each removes its own).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # The fuzz pass (proptest) draws its cases from this seed, so the test command gives the same
 # verdict every time; set PROPTEST_RNG_SEED to another number (or unset it) to explore more cases.
 export PROPTEST_RNG_SEED="${PROPTEST_RNG_SEED:-20261129}"
+# The tests of deploy/tests append "NAME SECONDS" to $ALFD_TEST_TIMES/times.txt as they end.
+export ALFD_TEST_TIMES="${ALFD_TEST_TIMES:-${CARGO_TARGET_DIR:-$PWD/target}/test-times}"
+mkdir -p "$ALFD_TEST_TIMES"
+rm -f "$ALFD_TEST_TIMES/times.txt"
+tmp="${TMPDIR:-/tmp}"
+leftovers() { ls -A "$tmp" | grep '^alfd-' | sort || true; }
+before="$(leftovers)"
+
+report() {
+  local status=$?
+  set +e
+  if [ -s "$ALFD_TEST_TIMES/times.txt" ]; then
+    echo
+    echo "slowest tests:"
+    sort -k2,2 -rn "$ALFD_TEST_TIMES/times.txt" | head -n 15 |
+      awk '{ printf "  %7.1f s  %s\n", $2, $1 }'
+  fi
+  local after new
+  after="$(leftovers)"
+  new="$(comm -13 <(echo "$before") <(echo "$after") | sed '/^$/d')"
+  echo
+  echo "alfd-* entries in $tmp: $(echo "$before" | grep -c . || true) before the tests," \
+    "$(echo "$after" | grep -c . || true) after"
+  if [ -n "$new" ]; then
+    echo "warning: new since the tests started (a test that does not clean up, or another" \
+      "test run at the same time):"
+    echo "$new" | head -n 10 | sed 's/^/  /'
+  fi
+  exit "$status"
+}
+trap report EXIT
+
 cargo build --release --workspace --locked
 cargo test --release --workspace --locked

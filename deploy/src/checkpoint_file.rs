@@ -101,26 +101,20 @@ mod tests {
         }
     }
 
-    fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("alfd-ckpt-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
-    }
-
     #[test]
     fn a_saved_checkpoint_loads_back() {
-        let d = dir("ok");
-        save(&d, &state(), "seed = 0\n").unwrap();
-        let back = load(&d, "seed = 0\n").unwrap();
+        let tmp = crate::run_dir::test_dir("ckpt");
+        let d = tmp.path();
+        save(d, &state(), "seed = 0\n").unwrap();
+        let back = load(d, "seed = 0\n").unwrap();
         assert_eq!(back.every, 5);
         assert_eq!(back.state, state().state);
-        std::fs::remove_dir_all(&d).unwrap();
     }
 
     #[test]
     fn a_bad_checkpoint_is_refused_with_its_reason_and_left_as_it_is() {
-        let d = dir("bad");
+        let tmp = crate::run_dir::test_dir("ckpt");
+        let d = tmp.path();
         let good = to_bytes(&state(), "seed = 0\n");
         let mut flipped = good.clone();
         *flipped.last_mut().unwrap() ^= 1;
@@ -137,17 +131,16 @@ mod tests {
             (&good, "seed = 1\n", "another config"),
         ];
         for (bytes, config, reason) in cases {
-            std::fs::write(path(&d), bytes).unwrap();
-            let e = load(&d, config).unwrap_err();
+            std::fs::write(path(d), bytes).unwrap();
+            let e = load(d, config).unwrap_err();
             assert!(is_usage_error(&e), "{e:#}");
             let msg = format!("{e:#}");
             assert!(msg.contains(reason) && msg.contains(CHECKPOINT), "{msg}");
-            assert_eq!(std::fs::read(path(&d)).unwrap(), bytes, "left as it is");
+            assert_eq!(std::fs::read(path(d)).unwrap(), bytes, "left as it is");
         }
-        std::fs::remove_file(path(&d)).unwrap();
-        let e = load(&d, "seed = 0\n").unwrap_err();
+        std::fs::remove_file(path(d)).unwrap();
+        let e = load(d, "seed = 0\n").unwrap_err();
         assert!(format!("{e:#}").contains("--checkpoint-every"), "{e:#}");
-        std::fs::remove_dir_all(&d).unwrap();
     }
 
     /// The size and write time of the checkpoint of a CartPole run whose 10,000-transition
@@ -194,7 +187,8 @@ mod tests {
             state: RunState::Neural(Box::new(state)),
         };
         let config_toml = cfg.to_toml();
-        let d = dir("bench");
+        let tmp = crate::run_dir::test_dir("ckpt");
+        let d = tmp.path();
         let mut encode_s = Vec::new();
         let mut write_s = Vec::new();
         let mut size = 0;
@@ -204,11 +198,11 @@ mod tests {
             encode_s.push(t.elapsed().as_secs_f64());
             size = bytes.len();
             let t = Instant::now();
-            alfd_harness::write_atomically(&path(&d), &bytes).unwrap();
+            alfd_harness::write_atomically(&path(d), &bytes).unwrap();
             write_s.push(t.elapsed().as_secs_f64());
         }
         let t = Instant::now();
-        let back = load(&d, &config_toml).unwrap();
+        let back = load(d, &config_toml).unwrap();
         let load_s = t.elapsed().as_secs_f64();
         assert_eq!(back.state.progress(), file.state.progress());
         let median = |v: &mut Vec<f64>| {
@@ -225,6 +219,5 @@ mod tests {
             median(&mut write_s),
             load_s * 1e3
         );
-        std::fs::remove_dir_all(&d).unwrap();
     }
 }

@@ -528,8 +528,8 @@ mod tests {
 
     #[test]
     fn show_reads_a_map_file_and_refuses_bad_ones() {
-        let dir = std::env::temp_dir().join(format!("alfd-cmd-env-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
+        let tmp = crate::run_dir::test_dir("cmd-env");
+        let dir = tmp.path();
         let good = dir.join("good.txt");
         std::fs::write(&good, "S.G\n").expect("write");
         let out = run_show(&show_args("cliffwalk", Some(good))).expect("valid");
@@ -573,6 +573,5 @@ mod tests {
         args.gamma = 1.0;
         let e = run_show(&args).expect_err("bad gamma");
         assert!(is_usage_error(&e) && e.to_string().contains("gamma"), "{e}");
-        std::fs::remove_dir_all(&dir).expect("clean up");
     }
 }

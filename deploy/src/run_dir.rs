@@ -138,26 +138,43 @@ fn try_lock(path: &Path) -> anyhow::Result<Result<DirLock, String>> {
     Ok(Ok(DirLock { _file: file }))
 }
 
+/// A unit test's scratch directory `alfd-NAME-XXXXXX` in the system's temporary directory,
+/// removed with everything in it when dropped (also while a failed test unwinds); kept, and named
+/// on stderr, when `ALFD_KEEP_TEST_DIRS=1`.
+#[cfg(test)]
+pub(crate) fn test_dir(name: &str) -> tempfile::TempDir {
+    let keep = std::env::var_os("ALFD_KEEP_TEST_DIRS").is_some_and(|v| v == "1");
+    let dir = tempfile::Builder::new()
+        .prefix(&format!("alfd-{name}-"))
+        .disable_cleanup(keep)
+        .tempdir()
+        .expect("a temporary directory");
+    if keep {
+        // Straight to stderr: libtest's capture would hide it for a test that passes.
+        let _ = writeln!(
+            std::io::stderr(),
+            "ALFD_KEEP_TEST_DIRS: keeping {}",
+            dir.path().display()
+        );
+    }
+    dir
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::usage::is_usage_error;
 
-    fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("alfd-run-dir-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        d
-    }
-
     #[test]
     fn a_directory_holding_a_run_is_refused_untouched() {
-        let d = dir("taken");
+        let root = test_dir("run-dir");
+        let d = root.path().join("taken");
         // A new or empty directory is free.
         drop(claim_new(&d).unwrap());
         assert!(d.join(LOCK_FILE).is_file());
         assert!(claim_new(&d).is_ok());
         for f in RUN_FILES {
-            let other = dir(&format!("taken-{f}"));
+            let other = root.path().join(format!("taken-{f}"));
             std::fs::create_dir_all(&other).unwrap();
             std::fs::write(other.join(f), "x").unwrap();
             let e = claim_new(&other).unwrap_err();
@@ -175,14 +192,13 @@ mod tests {
                 .map(|e| e.unwrap().file_name())
                 .collect();
             assert_eq!(names, vec![std::ffi::OsString::from(f)]);
-            std::fs::remove_dir_all(&other).unwrap();
         }
-        std::fs::remove_dir_all(&d).unwrap();
     }
 
     #[test]
     fn a_locked_directory_is_refused_and_free_again_once_released() {
-        let d = dir("locked");
+        let root = test_dir("run-dir");
+        let d = root.path().join("locked");
         let held = claim_new(&d).unwrap();
         // A second run (another open file description: as another process would be) is refused.
         let e = claim_new(&d).unwrap_err();
@@ -205,6 +221,5 @@ mod tests {
         );
         drop(swap);
         assert!(lock_swaps(&d).is_ok());
-        std::fs::remove_dir_all(&d).unwrap();
     }
 }

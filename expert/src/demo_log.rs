@@ -164,17 +164,31 @@ mod tests {
         }
     }
 
-    fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("alfd-demo-log-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    /// A unit test's scratch directory `alfd-NAME-XXXXXX` in the system's temporary
+    /// directory, removed with everything in it when dropped (also while a failed test unwinds);
+    /// kept, and named on stderr, when `ALFD_KEEP_TEST_DIRS=1`.
+    fn test_dir(name: &str) -> tempfile::TempDir {
+        let keep = std::env::var_os("ALFD_KEEP_TEST_DIRS").is_some_and(|v| v == "1");
+        let dir = tempfile::Builder::new()
+            .prefix(&format!("alfd-{name}-"))
+            .disable_cleanup(keep)
+            .tempdir()
+            .expect("a temporary directory");
+        if keep {
+            // Straight to stderr: libtest's capture would hide it for a test that passes.
+            let _ = writeln!(
+                std::io::stderr(),
+                "ALFD_KEEP_TEST_DIRS: keeping {}",
+                dir.path().display()
+            );
+        }
+        dir
     }
 
     #[test]
     fn appended_records_read_back_identical() {
-        let d = dir("roundtrip");
-        let path = d.join("demos.jsonl");
+        let d = test_dir("demo-log");
+        let path = d.path().join("demos.jsonl");
         assert!(
             read(&path).unwrap().is_empty(),
             "a missing file holds no demos"
@@ -199,8 +213,8 @@ mod tests {
 
     #[test]
     fn a_malformed_line_is_named_and_nothing_is_lost() {
-        let d = dir("malformed");
-        let path = d.join("demos.jsonl");
+        let d = test_dir("demo-log");
+        let path = d.path().join("demos.jsonl");
         let good = |i| serde_json::to_string(&record(i)).unwrap();
         let text = format!(
             "{}\n{}\n{{\"index\": 2, \"state\": oops}}\n{}\n",

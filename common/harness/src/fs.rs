@@ -30,19 +30,41 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A unit test's scratch directory `alfd-NAME-XXXXXX` in the system's temporary directory,
+/// removed with everything in it when dropped (also while a failed test unwinds); kept, and named
+/// on stderr, when `ALFD_KEEP_TEST_DIRS=1`.
+#[cfg(test)]
+pub(crate) fn test_dir(name: &str) -> tempfile::TempDir {
+    let keep = std::env::var_os("ALFD_KEEP_TEST_DIRS").is_some_and(|v| v == "1");
+    let dir = tempfile::Builder::new()
+        .prefix(&format!("alfd-{name}-"))
+        .disable_cleanup(keep)
+        .tempdir()
+        .expect("a temporary directory");
+    if keep {
+        // Straight to stderr: libtest's capture would hide it for a test that passes.
+        let _ = writeln!(
+            std::io::stderr(),
+            "ALFD_KEEP_TEST_DIRS: keeping {}",
+            dir.path().display()
+        );
+    }
+    dir
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn a_file_is_replaced_whole_and_errors_are_returned() {
-        let dir = std::env::temp_dir().join(format!("alfd-fs-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = test_dir("fs");
+        let dir = tmp.path();
         let path = dir.join("x.json");
         write_atomically(&path, b"first").unwrap();
         write_atomically(&path, b"second").unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), b"second");
-        let names: Vec<_> = std::fs::read_dir(&dir)
+        let names: Vec<_> = std::fs::read_dir(dir)
             .unwrap()
             .map(|e| e.unwrap().file_name())
             .collect();
@@ -53,6 +75,5 @@ mod tests {
         );
         let e = write_atomically(&dir.join("missing/y.json"), b"z").unwrap_err();
         assert!(format!("{e:#}").contains("missing"), "{e:#}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

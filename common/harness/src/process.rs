@@ -146,10 +146,10 @@ mod tests {
 
     #[test]
     fn a_run_directory_is_read_and_its_faults_are_bad_input() {
-        let dir = std::env::temp_dir().join(format!("alfd-harness-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = crate::fs::test_dir("harness");
+        let dir = tmp.path();
         let args = ProcessArgs {
-            run_dir: dir.clone(),
+            run_dir: dir.to_path_buf(),
             run_id: "r1".into(),
         };
         let e = args.load().unwrap_err();
@@ -170,6 +170,5 @@ mod tests {
             "seed = 1\nepisodes = 2\n[env]\nname = \"cliffwalk\"\n[agent]\nkind = \"qlearning\"\n";
         std::fs::write(dir.join("config.toml"), tabular).unwrap();
         assert_eq!(exit_code(&args.load().unwrap_err()), 2);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

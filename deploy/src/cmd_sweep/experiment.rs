@@ -422,17 +422,14 @@ mod fuzz {
     use std::path::PathBuf;
 
     /// A scratch tree `experiments/` beside a link to the shipped `configs/`, so that a mutated
-    /// experiment file still finds the configs it names.
-    fn scratch() -> PathBuf {
-        let root =
-            std::env::temp_dir().join(format!("alfd-fuzz-experiment-{}", std::process::id()));
-        let experiments = root.join("experiments");
-        if !experiments.exists() {
-            std::fs::create_dir_all(&experiments).unwrap();
-            let configs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs");
-            let _ = std::os::unix::fs::symlink(configs, root.join("configs"));
-        }
-        experiments
+    /// experiment file still finds the configs it names; removed when the guard is dropped.
+    fn scratch() -> (tempfile::TempDir, PathBuf) {
+        let root = crate::run_dir::test_dir("fuzz-experiment");
+        let experiments = root.path().join("experiments");
+        std::fs::create_dir_all(&experiments).unwrap();
+        let configs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs");
+        std::os::unix::fs::symlink(configs, root.path().join("configs")).unwrap();
+        (root, experiments)
     }
 
     fn shipped() -> Vec<String> {
@@ -476,7 +473,7 @@ mod fuzz {
                 let b = (a + del).min(text.len());
                 text.splice(a..b, ins.chars());
             }
-            let dir = scratch();
+            let (_root, dir) = scratch();
             for (name, t) in [("mutated", text.into_iter().collect::<String>()), ("arbitrary", arbitrary)] {
                 let path = dir.join(format!("{name}.toml"));
                 std::fs::write(&path, &t).unwrap();
