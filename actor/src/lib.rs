@@ -7,6 +7,7 @@
 pub mod links;
 
 use std::ops::ControlFlow;
+use std::time::Duration;
 
 use alfd_common::agent::NeuralActor;
 use alfd_common::environment_loop::{self, GenericActor, LoopError, Schedule};
@@ -30,6 +31,10 @@ pub struct Args {
     /// Which process plays this actor id: 1 for the first, +1 per restart.
     #[arg(long, default_value_t = 1)]
     pub incarnation: u64,
+    /// Episodes this actor plays before it exits (its share of a run with an episode limit);
+    /// default: until the launcher says stop.
+    #[arg(long)]
+    pub episodes: Option<u32>,
 }
 
 /// The name of the process's log file (without `.log`).
@@ -105,7 +110,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         &mut expert,
         Schedule {
             env_seed: derive_seed(cfg.seed, &env_stream),
-            episodes: None,
+            episodes: args.episodes,
             steps: None,
             actor_id: me.id,
         },
@@ -134,6 +139,20 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         credit_wait_s = actor.adder.credit_wait.as_secs_f64(),
         "actor stopping"
     );
+    if end.stopped.is_none() {
+        // Its share played: it stays until the launcher says stop, since messages of a process
+        // that has exited may never reach their receiver (its episodes, its last transitions).
+        info!("played its share of the episodes; waiting for the run to end");
+        let reason = loop {
+            if let Some(stop) = session.should_stop()? {
+                break stop.0;
+            }
+            if let Some(stop) = session.wait(Duration::from_millis(100))? {
+                break stop.0;
+            }
+        };
+        info!(reason, "actor leaving");
+    }
     Ok(())
 }
 

@@ -29,6 +29,10 @@ pub struct Identity {
 /// Control is looked at every this many steps (and during every wait).
 const CHECK_EVERY: u32 = 64;
 
+/// An actor out of credits that the learner does not know (a learner restarted from its
+/// checkpoint) flags itself again after this long.
+const RESYNC_AFTER: Duration = Duration::from_millis(250);
+
 /// The learner as the actor's adder: transitions go out in batches, never beyond the credits the
 /// learner granted (see `alfd_wire`'s crate doc on credits).
 pub struct WireAdder<'s, 'w> {
@@ -90,6 +94,13 @@ impl<'s, 'w> WireAdder<'s, 'w> {
             .max(self.window)
     }
 
+    /// Whether the learner's newest credits say nothing of this incarnation.
+    fn unknown_to_learner(&self) -> bool {
+        self.credits
+            .as_ref()
+            .is_none_or(|c| c.granted_for(self.me.id, self.me.incarnation).is_none())
+    }
+
     fn take_credits(&mut self) -> Result<()> {
         if let Some(c) = self.credits_rx.latest().map_err(LoopError::link)? {
             self.credits = Some(c);
@@ -126,11 +137,18 @@ impl Adder for WireAdder<'_, '_> {
             // credits are there, and wait.
             self.flush(true)?;
             let blocked = Instant::now();
+            let mut flagged = blocked;
             self.credit_waits += 1;
             loop {
                 self.take_credits()?;
                 if self.next_seq < self.granted() {
                     break;
+                }
+                if self.unknown_to_learner() && flagged.elapsed() >= RESYNC_AFTER {
+                    // A learner restarted from its checkpoint does not know this actor, nor
+                    // that it waits: say so again (its book takes the actor from here).
+                    self.flush(true)?;
+                    flagged = Instant::now();
                 }
                 if let Some(stop) = self
                     .session

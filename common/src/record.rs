@@ -126,6 +126,9 @@ pub struct RuntimeSummary {
     /// Times the expert was restarted after its process died.
     #[serde(default)]
     pub expert_restarts: u32,
+    /// Times the learner was restarted from its checkpoint after its process died.
+    #[serde(default)]
+    pub learner_restarts: u32,
     /// The run was stopped by Ctrl-C (or SIGTERM) before its last episode.
     pub interrupted: bool,
 }
@@ -227,6 +230,7 @@ mod tests {
             actor_restarts: 0,
             expert_swaps: 1,
             expert_restarts: 2,
+            learner_restarts: 1,
             interrupted: false,
         });
         let json = serde_json::to_string(&s).unwrap();

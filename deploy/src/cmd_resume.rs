@@ -1,7 +1,12 @@
-//! `alfd resume RUN_DIR`: continues a stopped or crashed `alfd local --checkpoint-every N` run
-//! from its `checkpoint.bin` to its configured end. The episodes after the checkpoint are played
-//! again (the rows the stopped run wrote after it are replaced), so `episodes.csv` and
-//! `demos.jsonl` come out as the uninterrupted run's, to the byte.
+//! `alfd resume RUN_DIR`: continues a stopped or crashed run to its configured end.
+//! - An `alfd local --checkpoint-every N` run, from its `checkpoint.bin`. The episodes after the
+//!   checkpoint are played again (the rows the stopped run wrote after it are replaced), so
+//!   `episodes.csv` and `demos.jsonl` come out as the uninterrupted run's, to the byte.
+//! - An `alfd run` (multi-process) run, with a new launcher: the learner from its
+//!   `learner.ckpt`, the expert from `demos.jsonl` (budget and demonstrations carry over),
+//!   `episodes.csv` appended to (numbering goes on; no row is repeated), and new actors, whose
+//!   exploration follows the restored global step. What the learner learned after its last
+//!   checkpoint is lost; the run is not the uninterrupted one to the byte.
 
 use std::path::PathBuf;
 
@@ -46,6 +51,9 @@ pub fn run(args: ResumeArgs) -> anyhow::Result<()> {
         &[],
         &format!("config {}", config_path.display()),
     )?;
+    if dir.join("run.json").is_file() {
+        return resume_multi_process(&args, cfg, &config_toml);
+    }
     let file = checkpoint_file::load(dir, &config_toml)?;
     let pieces = Pieces::of(&cfg)?;
     tracing::info!(
@@ -59,4 +67,75 @@ pub fn run(args: ResumeArgs) -> anyhow::Result<()> {
         stop_after: args.stop_after_episodes,
     };
     finish(run_pieces(&cfg, pieces, dir, !args.quiet, resumable)?)
+}
+
+/// Continues an `alfd run` run in `args.run_dir` (its lock is held by the caller).
+fn resume_multi_process(
+    args: &ResumeArgs,
+    cfg: alfd_common::config::ExperimentConfig,
+    config_toml: &str,
+) -> anyhow::Result<()> {
+    let dir = &args.run_dir;
+    let info = crate::launcher::read_run_info(dir).map_err(|e| usage(format!("{e:#}")))?;
+    // The processes of the stopped launch may still be saving (a launcher killed a moment ago):
+    // wait for them to leave, then for the files they leave to go.
+    let start = std::time::Instant::now();
+    loop {
+        let alive = alfd_wire::alive_nodes(&info.run_id).unwrap_or_default();
+        if alive.is_empty() {
+            break;
+        }
+        if start.elapsed() > std::time::Duration::from_secs(30) {
+            return Err(usage(format!(
+                "processes of run {} are still alive ({}): stop them before resuming",
+                info.run_id,
+                alive.join(", ")
+            )));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    if alfd_wire::is_launcher_run_id(&info.run_id) {
+        if let Err(e) = alfd_wire::clean_run(&info.run_id) {
+            tracing::warn!("cannot remove what run {} left: {e}", info.run_id);
+        }
+    }
+    // The learner must be able to continue: a checkpoint that cannot be trusted is refused now.
+    match alfd_learner::checkpoint::load(dir, config_toml) {
+        Ok(Some(_)) => {}
+        Ok(None) => {
+            return Err(usage(format!(
+                "{} has no learner.ckpt: the run's learner never checkpointed, so there is \
+                 nothing to continue from",
+                dir.display()
+            )))
+        }
+        Err(e) => return Err(usage(format!("{e:#}"))),
+    }
+    let runtime_path = dir.join(alfd_harness::RUNTIME_FILE);
+    let runtime = std::fs::read_to_string(&runtime_path)
+        .map_err(|e| usage(format!("cannot read {}: {e}", runtime_path.display())))
+        .and_then(|t| {
+            alfd_harness::RuntimeConfig::from_toml(&t)
+                .map_err(|e| usage(format!("in {}: {e}", runtime_path.display())))
+        })?;
+    let plan = crate::launcher::Plan {
+        cfg,
+        actors: info.actors,
+        run_dir: dir.clone(),
+        run_id: crate::launcher::new_run_id(),
+        runtime,
+        max_restarts: 5,
+        progress: !args.quiet,
+        pin: false,
+        bin_dir: crate::launcher::bin_dir()?,
+        resume: true,
+        launches: info.launches.saturating_add(1),
+    };
+    tracing::info!(
+        previous_run_id = %info.run_id,
+        run_id = %plan.run_id,
+        launches = plan.launches,
+        "resuming a multi-process run"
+    );
+    crate::cmd_run::finish(&plan, args.quiet)
 }

@@ -42,7 +42,11 @@ pub struct RunArgs {
     /// The learner publishes its weights every this many updates.
     #[arg(long, default_value_t = 1)]
     pub weights_every: u64,
-    /// Restarts allowed per actor, and of the expert, before the run fails.
+    /// The learner checkpoints its whole state every this many updates (0: only at the end); a
+    /// learner that dies is restarted from its last checkpoint.
+    #[arg(long, default_value_t = alfd_harness::DEFAULT_CHECKPOINT_EVERY)]
+    pub checkpoint_every: u64,
+    /// Restarts allowed per actor, of the expert and of the learner, before the run fails.
     #[arg(long, default_value_t = 5)]
     pub max_restarts: u32,
     /// Pin the learner to CPU 0 and the other processes to the other CPUs (`taskset`); helps on
@@ -79,6 +83,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         window: args.window,
         query_timeout_ms: args.query_timeout_ms,
         weights_every: args.weights_every,
+        checkpoint_every: args.checkpoint_every,
         ..RuntimeConfig::default()
     };
     runtime.validate().map_err(|e| {
@@ -109,8 +114,16 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         progress: !args.quiet,
         pin: args.pin,
         bin_dir: launcher::bin_dir()?,
+        resume: false,
+        launches: 1,
     };
-    let summary = launcher::launch(&plan)?;
+    finish(&plan, args.quiet)
+}
+
+/// Runs `plan` to its end, writes `summary.json` and reports.
+pub fn finish(plan: &Plan, quiet: bool) -> anyhow::Result<()> {
+    let run_dir = &plan.run_dir;
+    let summary = launcher::launch(plan)?;
     crate::cmd_local::write(
         &run_dir,
         "summary.json",
@@ -124,7 +137,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         );
         std::process::exit(130);
     }
-    if !args.quiet {
+    if !quiet {
         eprintln!(
             "done: {} episodes, mean return of the last 50 {:.1}, {} demonstrations used; \
              results in {} (episodes.csv, demos.jsonl, weights.safetensors, summary.json, logs)",

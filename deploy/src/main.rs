@@ -2,6 +2,7 @@
 //! arguments, installs logging, and maps errors to exit codes (2 for bad input, 1 otherwise).
 
 mod checkpoint_file;
+mod cmd_clean;
 mod cmd_demo_model;
 mod cmd_demo_model_policy;
 mod cmd_env;
@@ -30,8 +31,11 @@ struct Cli {
 enum Command {
     /// Run an experiment config in one process.
     Local(cmd_local::LocalArgs),
-    /// Continue a stopped or crashed `alfd local --checkpoint-every N` run from its checkpoint.
+    /// Continue a stopped or crashed run: `alfd local --checkpoint-every N` from its checkpoint,
+    /// `alfd run` from its learner's checkpoint and `demos.jsonl`.
     Resume(cmd_resume::ResumeArgs),
+    /// Remove what dead runs left in iceoryx2's directories (never a live run's files).
+    Clean(cmd_clean::CleanArgs),
     /// Run an experiment as separate processes: learner, expert and N actors over iceoryx2.
     Run(cmd_run::RunArgs),
     /// Replace the expert of a live run (make before break).
@@ -59,6 +63,7 @@ fn main() {
     let result = match cli.command {
         Command::Local(a) => cmd_local::run(a),
         Command::Resume(a) => cmd_resume::run(a),
+        Command::Clean(a) => cmd_clean::run(a),
         Command::Run(a) => cmd_run::run(a),
         Command::SwapExpert(a) => cmd_run::swap(a),
         Command::Env(a) => cmd_env::run(a),

@@ -1,6 +1,6 @@
 //! The multi-process runtime with real processes (`alfd run`: learner, expert and actors over
 //! iceoryx2), asserting on the run directory: a small run, equivalence with the single-process
-//! runner, an expert swap, kill -9 of an actor, of the expert and of the learner, stray signals,
+//! runner, an expert swap, kill -9 of an actor and of the expert, stray signals,
 //! two concurrent runs, a run directory reused, concurrent swaps, and a refused schema version.
 
 use std::path::{Path, PathBuf};
@@ -25,7 +25,7 @@ const ASKING_ALL_ALONG: [&str; 5] = [
 ];
 
 /// `alfd run` on the shipped BDQN + KRR config with the perfect expert, to the end.
-fn run(out: &Path, actors: usize, sets: &[&str]) -> Output {
+pub(crate) fn run(out: &Path, actors: usize, sets: &[&str]) -> Output {
     let mut c = alfd();
     c.args([
         "run",
@@ -37,13 +37,18 @@ fn run(out: &Path, actors: usize, sets: &[&str]) -> Output {
     .arg(format!("--out={}", out.display()))
     .args(["--set", &format!("expert.name={EXPERT}")]);
     for s in sets {
-        c.args(["--set", s]);
+        // A flag of `alfd run` as it is, anything else a config override.
+        if s.starts_with("--") {
+            c.arg(s);
+        } else {
+            c.args(["--set", s]);
+        }
     }
     c.output().expect("alfd runs")
 }
 
 /// The same, in the background (the caller stops it with [`interrupt`]).
-fn spawn_run(out: &Path, actors: usize, sets: &[&str]) -> Background {
+pub(crate) fn spawn_run(out: &Path, actors: usize, sets: &[&str]) -> Background {
     let mut c = alfd();
     c.args([
         "run",
@@ -55,7 +60,12 @@ fn spawn_run(out: &Path, actors: usize, sets: &[&str]) -> Background {
     .arg(format!("--out={}", out.display()))
     .args(["--set", &format!("expert.name={EXPERT}")]);
     for s in sets {
-        c.args(["--set", s]);
+        // A flag of `alfd run` as it is, anything else a config override.
+        if s.starts_with("--") {
+            c.arg(s);
+        } else {
+            c.args(["--set", s]);
+        }
     }
     Background(Some(
         c.stdout(Stdio::piped())
@@ -66,7 +76,7 @@ fn spawn_run(out: &Path, actors: usize, sets: &[&str]) -> Background {
 }
 
 /// Rows of `episodes.csv` (without the header), each split on commas.
-fn rows(dir: &Path) -> Vec<Vec<String>> {
+pub(crate) fn rows(dir: &Path) -> Vec<Vec<String>> {
     std::fs::read_to_string(dir.join("episodes.csv"))
         .unwrap_or_default()
         .lines()
@@ -78,7 +88,7 @@ fn rows(dir: &Path) -> Vec<Vec<String>> {
 }
 
 /// Waits until `episodes.csv` has at least `n` rows.
-fn wait_rows(dir: &Path, n: usize, run: &mut Background) {
+pub(crate) fn wait_rows(dir: &Path, n: usize, run: &mut Background) {
     let child = run.child();
     let start = Instant::now();
     while rows(dir).len() < n {
@@ -94,7 +104,7 @@ fn wait_rows(dir: &Path, n: usize, run: &mut Background) {
 }
 
 /// Stops a background run with SIGINT (Ctrl-C) and returns its output.
-fn interrupt(mut run: Background) -> Output {
+pub(crate) fn interrupt(mut run: Background) -> Output {
     let child = run.0.take().expect("running");
     let ok = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
@@ -104,19 +114,19 @@ fn interrupt(mut run: Background) -> Output {
     child.wait_with_output().unwrap()
 }
 
-fn run_id(dir: &Path) -> String {
+pub(crate) fn run_id(dir: &Path) -> String {
     let info: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).unwrap()).unwrap();
     info["run_id"].as_str().unwrap().to_owned()
 }
 
-fn summary(dir: &Path) -> serde_json::Value {
+pub(crate) fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
 }
 
 /// What every finished run must satisfy: a valid `demos.jsonl` within the budget and counted in
 /// the summary, weights saved, one log per process, nothing left in iceoryx2's directories.
-fn check_run_dir(dir: &Path, budget: usize) -> Vec<alfd_common::agent::DemoRecord> {
+pub(crate) fn check_run_dir(dir: &Path, budget: usize) -> Vec<alfd_common::agent::DemoRecord> {
     let demos = alfd_expert::demo_log::read(&dir.join("demos.jsonl")).expect("demos.jsonl valid");
     assert!(
         demos.len() <= budget,
@@ -332,6 +342,11 @@ fn an_actor_killed_with_sigkill_is_restarted_and_the_run_goes_on() {
     let out = tmp("kill");
     let mut child = spawn_run(&out, 2, &["episodes=1000000"]);
     wait_rows(&out, 10, &mut child);
+    // Actor 1 recorded episodes of its first incarnation (on a loaded machine actor 0 may have
+    // played the first ten alone).
+    wait_until(&mut child, "episodes of actor 1", || {
+        rows(&out).iter().filter(|r| r[8] == "1").count() >= 2
+    });
     let id = run_id(&out);
     let pid = find_process("alfd-actor", &[&format!("--run-id={id}"), "--actor-id=1"])
         .expect("actor 1 is running");
@@ -463,35 +478,6 @@ fn a_process_of_another_schema_version_is_refused() {
     assert_eq!(o.status.code(), Some(130), "{}", text(&o));
     assert!(rows(&out).iter().all(|r| r[8] == "0"));
     check_run_dir(&out, 100);
-}
-
-#[test]
-fn a_killed_learner_ends_the_run_with_a_message_saying_so() {
-    let _time = timed!();
-    let out = tmp("learner-killed");
-    let mut child = spawn_run(&out, 2, &["episodes=1000000"]);
-    wait_rows(&out, 5, &mut child);
-    let id = run_id(&out);
-    let pid = find_process("alfd-learner", &[&format!("--run-id={id}")]).expect("learner");
-    signal("KILL", pid);
-    let o = wait_output(child, Duration::from_secs(60));
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(
-        err.contains(
-            "alfd-learner was killed by signal 9: the run cannot go on without its learner"
-        ) && err.contains("learner.log"),
-        "{err}"
-    );
-    // Every process of the run is gone, and nothing of iceoryx2 is left.
-    for bin in ["alfd-actor", "alfd-expert", "alfd-learner"] {
-        assert_eq!(
-            find_process(bin, &[&format!("--run-id={id}")]),
-            None,
-            "{bin}"
-        );
-    }
-    assert_eq!(wire::leftover_files(&id), Vec::<PathBuf>::new());
 }
 
 #[test]
@@ -762,7 +748,7 @@ fn concurrent_swaps_are_refused_at_once_and_a_refused_swap_says_why() {
 }
 
 /// Waits (at most 90 s, polling) until `done` while the run goes on.
-fn wait_until(run: &mut Background, what: &str, mut done: impl FnMut() -> bool) {
+pub(crate) fn wait_until(run: &mut Background, what: &str, mut done: impl FnMut() -> bool) {
     let start = Instant::now();
     while !done() {
         assert!(
@@ -779,7 +765,7 @@ fn wait_until(run: &mut Background, what: &str, mut done: impl FnMut() -> bool) 
 
 /// Waits for a background run to end by itself, and checks that it finished: exit code 0, every
 /// one of its `episodes` recorded, not interrupted. Returns its output and summary.
-fn finished(run: Background, dir: &Path, episodes: usize) -> (Output, serde_json::Value) {
+pub(crate) fn finished(run: Background, dir: &Path, episodes: usize) -> (Output, serde_json::Value) {
     let o = wait_output(run, Duration::from_secs(180));
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let s = summary(dir);
@@ -801,7 +787,7 @@ fn number_after(text: &str, marker: &str) -> u64 {
 }
 
 /// Sends `signal` (a name: KILL, STOP, CONT, ...) to `pid`.
-fn signal(signal: &str, pid: u32) {
+pub(crate) fn signal(signal: &str, pid: u32) {
     let ok = Command::new("kill")
         .args([&format!("-{signal}"), &pid.to_string()])
         .status()
@@ -810,7 +796,7 @@ fn signal(signal: &str, pid: u32) {
 }
 
 /// Waits (at most `timeout`) for a background run to end by itself, and returns its output.
-fn wait_output(mut run: Background, timeout: Duration) -> Output {
+pub(crate) fn wait_output(mut run: Background, timeout: Duration) -> Output {
     let child = run.0.take().expect("running");
     let pid = child.id();
     let (tx, rx) = std::sync::mpsc::channel();
@@ -837,7 +823,7 @@ fn wait_output(mut run: Background, timeout: Duration) -> Output {
 }
 
 /// The pid of a running `binary` whose command line holds every one of `args`.
-fn find_process(binary: &str, args: &[&str]) -> Option<u32> {
+pub(crate) fn find_process(binary: &str, args: &[&str]) -> Option<u32> {
     for entry in std::fs::read_dir("/proc").ok()?.flatten() {
         let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
             continue;

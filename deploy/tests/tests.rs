@@ -1,6 +1,7 @@
 //! Integration tests of the `alfd` command line and of the multi-process runtime (one binary).
 
 mod cli;
+mod faults;
 mod runtime;
 mod support;
 mod sweep;

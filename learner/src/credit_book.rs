@@ -71,6 +71,12 @@ impl CreditBook {
         self.env_steps
     }
 
+    /// A learner restored from a checkpoint: the run's global step as it was then. The actors'
+    /// accounts start afresh with each one's next batch.
+    pub fn restore_env_steps(&mut self, env_steps: u64) {
+        self.env_steps = env_steps;
+    }
+
     /// Steps of `actor` lost on the way (never expected; logged).
     pub fn lost(&self, actor: u16) -> u64 {
         self.actors.get(actor as usize).map_or(0, |a| a.lost)
@@ -107,8 +113,11 @@ impl CreditBook {
                     "actor restarted"
                 );
             }
+            // An incarnation's first batch sets its baseline: a learner restored from a
+            // checkpoint meets actors in the middle of their sequence, which is no loss.
             *book = ActorBook {
                 incarnation: b.incarnation,
+                received: b.first_seq,
                 ..ActorBook::default()
             };
         }
@@ -334,6 +343,26 @@ mod tests {
         let mut out_of_range = batch(0, 1, 0, 1);
         out_of_range.actor = MAX_ACTORS as u32;
         assert_eq!(book.accept(&out_of_range, &mut q2), 0);
+    }
+
+    #[test]
+    fn a_restored_learner_takes_running_actors_from_where_they_are() {
+        let mut book = CreditBook::new(4, SHAPE);
+        book.restore_env_steps(1000);
+        let mut q = VecDeque::new();
+        // Actor 0 had sent 37 steps to the learner that died; it resends its blocked flag.
+        let mut blocked = batch(0, 3, 37, 0);
+        blocked.blocked = 1;
+        book.accept(&blocked, &mut q);
+        assert_eq!(book.lost(0), 0);
+        let (credits, wake) = book.grant(0);
+        assert_eq!(credits.granted_for(0, 3), Some(37 + 4));
+        assert_eq!(wake, vec![0]);
+        book.accept(&batch(0, 3, 37, 2), &mut q);
+        assert_eq!((book.lost(0), book.env_steps()), (0, 1002));
+        // A gap within a known incarnation is still a loss.
+        book.accept(&batch(0, 3, 40, 1), &mut q);
+        assert_eq!(book.lost(0), 1);
     }
 
     fn drain(book: &mut CreditBook, q: &mut VecDeque<Queued>) {

@@ -3,6 +3,7 @@
 //! credits to the actors (the pure [`CreditBook`]) so that none runs more than a window of steps
 //! ahead.
 
+pub mod checkpoint;
 pub mod credit_book;
 
 use std::collections::VecDeque;
@@ -10,12 +11,14 @@ use std::time::{Duration, Instant};
 
 use alfd_common::agent::NeuralLearner;
 use alfd_common::rng::{derive_seed, seeded};
-use alfd_harness::{write_atomically, ProcessArgs, Session};
+use alfd_harness::{write_atomically, BadInput, ProcessArgs, Session, Setup};
 use alfd_wire::{
     self as wire, process_state, progress_kind, ActorBells, Credits, Doorbell, Process, Progress,
     Role, Wake, WireError, MAX_ACTORS,
 };
-use tracing::{debug, info};
+use tracing::{debug, info, warn};
+
+use crate::checkpoint::LearnerCheckpoint;
 
 pub use credit_book::{BatchShape, CreditBook, Queued};
 
@@ -25,6 +28,10 @@ pub use credit_book::{BatchShape, CreditBook, Queued};
 pub struct Args {
     #[command(flatten)]
     pub process: ProcessArgs,
+    /// Continue from `RUN_DIR/learner.ckpt` when there is one (a learner restarted in a live
+    /// run, or a run resumed with `alfd resume`).
+    #[arg(long)]
+    pub restore: bool,
 }
 
 /// The name of the process's log file (without `.log`).
@@ -32,19 +39,78 @@ pub fn log_name(_args: &Args) -> String {
     "learner".to_owned()
 }
 
-/// Runs the learner until the launcher says stop or a termination signal arrives; saves the final
-/// weights to `RUN_DIR/weights.safetensors`.
+/// How the learner's run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum End {
+    /// The launcher said stop, or a termination signal.
+    Stopped,
+    /// The launcher is gone: the learner saved its state, and closes the run once the other
+    /// processes have left.
+    Orphaned,
+}
+
+/// Runs the learner until the launcher says stop or a termination signal arrives (or the launcher
+/// is gone); checkpoints its whole state to `RUN_DIR/learner.ckpt` every `checkpoint_every`
+/// updates and at the end, and saves the final weights to `RUN_DIR/weights.safetensors`.
 pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let setup = args.process.load()?;
+    let run_dir = &args.process.run_dir;
+    let config_toml = checkpoint::config_text(run_dir)?;
+    let restored = if args.restore {
+        checkpoint::load(run_dir, &config_toml)?
+    } else {
+        None
+    };
+    let end = {
+        let wire = args
+            .process
+            .connect(Process::new(Role::Learner, 0), schema)?;
+        serve(args, &setup, &config_toml, restored, &wire)?
+    };
+    if end == End::Orphaned {
+        close_orphaned_run(&args.process.run_id);
+    }
+    Ok(())
+}
+
+/// The last process of a run whose launcher died: waits (up to 10 s) for the actors and the
+/// expert to leave, then removes the run's iceoryx2 files, as the launcher would have.
+fn close_orphaned_run(run_id: &str) {
+    let start = Instant::now();
+    loop {
+        match wire::alive_nodes(run_id) {
+            Ok(alive) if alive.is_empty() => break,
+            Ok(alive) if start.elapsed() > Duration::from_secs(10) => {
+                warn!(?alive, "processes of the run are still alive; its files are left (`alfd clean` removes them later)");
+                return;
+            }
+            Ok(_) => std::thread::sleep(Duration::from_millis(50)),
+            Err(e) => {
+                warn!("cannot list the run's processes: {e}");
+                return;
+            }
+        }
+    }
+    match wire::close_run(run_id) {
+        Ok(()) => info!("the launcher is gone; the run's iceoryx2 files were removed"),
+        Err(e) => warn!("cannot close the run: {e} (`alfd clean` removes what is left)"),
+    }
+}
+
+fn serve(
+    args: &Args,
+    setup: &Setup,
+    config_toml: &str,
+    restored: Option<LearnerCheckpoint>,
+    wire: &wire::Wire,
+) -> anyhow::Result<End> {
     let (cfg, runtime) = (&setup.config, &setup.runtime);
+    let run_dir = &args.process.run_dir;
     let env = setup.vector_env()?;
-    let wire = args
-        .process
-        .connect(Process::new(Role::Learner, 0), schema)?;
-    let session = Session::join(&wire, Doorbell::Learner, runtime.handshake_timeout())?;
+    let session = Session::join(wire, Doorbell::Learner, runtime.handshake_timeout())?;
     let rx = wire.transitions_receiver()?;
     let mut credits_tx = wire.credits_sender()?;
-    let mut actors = ActorBells::new(&wire);
+    let mut actors = ActorBells::new(wire);
     let mut progress = wire.progress_sender()?;
 
     let mut learner = NeuralLearner::new(
@@ -63,6 +129,25 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             actions: env.num_actions(),
         },
     );
+
+    if let Some(ckpt) = &restored {
+        learner
+            .restore(&ckpt.learner)
+            .map_err(|e| BadInput(format!("{}: {e}", checkpoint::path(run_dir).display())))?;
+        book.restore_env_steps(ckpt.env_steps);
+        info!(
+            updates = learner.updates(),
+            env_steps = ckpt.env_steps,
+            "restored from the checkpoint"
+        );
+    }
+    let mut checkpoints = Checkpoints {
+        every: runtime.checkpoint_every,
+        last: learner.updates(),
+        written: 0,
+        time: Duration::ZERO,
+        bytes: 0,
+    };
 
     let publish_weights = |learner: &NeuralLearner,
                            params: &mut Vec<f32>,
@@ -93,6 +178,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let mut idle_running = Duration::ZERO;
     let mut publish_time = Duration::ZERO;
     let stop_reason;
+    let mut end = End::Stopped;
     loop {
         // Take in whatever arrived.
         loop {
@@ -123,6 +209,9 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 publish_weights(&learner, &mut params, &mut weights_tx, book.env_steps())?;
                 publish_time += t.elapsed();
                 published_version = learner.updates();
+            }
+            if checkpoints.due(learner.updates()) {
+                checkpoints.write(run_dir, &learner, &book, config_toml)?;
             }
             credits_dirty = true;
             learned_since_credits += 1;
@@ -155,9 +244,19 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         // A process that subscribed since the last publication gets the history sample now.
         weights_tx.update_connections()?;
         credits_tx.update_connections()?;
-        if let Some(stop) = session.should_stop()? {
-            stop_reason = stop.0;
-            break;
+        match session.should_stop() {
+            Ok(Some(stop)) => {
+                stop_reason = stop.0;
+                break;
+            }
+            Ok(None) => {}
+            Err(e) if e.orphaned() => {
+                warn!("{e}: saving the learner's state and leaving");
+                stop_reason = "the launcher is gone";
+                end = End::Orphaned;
+                break;
+            }
+            Err(e) => return Err(e.into()),
         }
         if queue.is_empty() {
             let idle_since = Instant::now();
@@ -193,15 +292,65 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             / first_step.map_or(f64::INFINITY, |t| t.elapsed().as_secs_f64()),
         "learner stopping"
     );
-    let path = args.process.run_dir.join("weights.safetensors");
+    let path = run_dir.join("weights.safetensors");
     write_atomically(&path, &learner.network().to_safetensors_bytes())?;
     info!(path = %path.display(), "final weights saved");
+    checkpoints.write(run_dir, &learner, &book, config_toml)?;
+    info!(
+        checkpoints = checkpoints.written,
+        bytes = checkpoints.bytes,
+        write_s = checkpoints.time.as_secs_f64(),
+        "learner state checkpointed"
+    );
     status.send(&mut progress, process_state::EXITING, &book, &learner)?;
     debug!(
         lost = (0..MAX_ACTORS as u16).map(|a| book.lost(a)).sum::<u64>(),
         "lost steps"
     );
-    Ok(())
+    Ok(end)
+}
+
+/// When the learner checkpoints, and what its checkpoints cost.
+struct Checkpoints {
+    /// Every this many updates (0: only at the end).
+    every: u64,
+    /// Updates at the last checkpoint (or the restored one).
+    last: u64,
+    written: u64,
+    time: Duration,
+    bytes: usize,
+}
+
+impl Checkpoints {
+    fn due(&self, updates: u64) -> bool {
+        self.every > 0 && updates >= self.last.saturating_add(self.every)
+    }
+
+    fn write(
+        &mut self,
+        run_dir: &std::path::Path,
+        learner: &NeuralLearner,
+        book: &CreditBook,
+        config_toml: &str,
+    ) -> anyhow::Result<()> {
+        let t = Instant::now();
+        let ckpt = LearnerCheckpoint {
+            learner: learner.snapshot(),
+            env_steps: book.env_steps(),
+        };
+        self.bytes = checkpoint::save(run_dir, &ckpt, config_toml)?;
+        let took = t.elapsed();
+        self.time += took;
+        self.written += 1;
+        self.last = learner.updates();
+        debug!(
+            updates = self.last,
+            bytes = self.bytes,
+            ms = took.as_secs_f64() * 1e3,
+            "checkpoint written"
+        );
+        Ok(())
+    }
 }
 
 /// Publishes the grants, and wakes the actors that wait for them.

@@ -24,6 +24,15 @@ pub enum SessionError {
     Wire(#[from] WireError),
     #[error("no word from the launcher for {0:?}: giving up")]
     LauncherSilent(Duration),
+    #[error("the launcher (pid {0}) is gone: giving up")]
+    LauncherGone(u32),
+}
+
+impl SessionError {
+    /// The run's launcher is gone or hung: the process should save what it must and exit.
+    pub fn orphaned(&self) -> bool {
+        matches!(self, Self::LauncherSilent(_) | Self::LauncherGone(_))
+    }
 }
 
 /// A process joined to a run, after the schema handshake with the launcher.
@@ -31,6 +40,9 @@ pub struct Session<'w> {
     wire: &'w Wire,
     waiter: Waiter,
     control: RefCell<ControlWatch<'w>>,
+    /// The process that started this one (the launcher): when it dies, the process is
+    /// re-parented and knows at once, without waiting out [`LAUNCHER_SILENCE`].
+    parent: u32,
 }
 
 impl std::fmt::Debug for Session<'_> {
@@ -55,6 +67,7 @@ impl<'w> Session<'w> {
             wire,
             waiter,
             control: RefCell::new(control),
+            parent: std::os::unix::process::parent_id(),
         })
     }
 
@@ -68,7 +81,8 @@ impl<'w> Session<'w> {
     }
 
     /// Takes in the launcher's news and says whether to stop: the launcher said so, or a
-    /// termination signal arrived. A launcher silent for [`LAUNCHER_SILENCE`] is an error.
+    /// termination signal arrived. A launcher silent for [`LAUNCHER_SILENCE`], or gone (this
+    /// process re-parented), is an error ([`SessionError::orphaned`]).
     pub fn should_stop(&self) -> Result<Option<Stop>, SessionError> {
         let mut control = self.control.borrow_mut();
         control.poll()?;
@@ -77,6 +91,9 @@ impl<'w> Session<'w> {
         }
         if self.wire.termination_requested() {
             return Ok(Some(TERMINATION_SIGNAL));
+        }
+        if std::os::unix::process::parent_id() != self.parent {
+            return Err(SessionError::LauncherGone(self.parent));
         }
         if control.silence() >= LAUNCHER_SILENCE {
             return Err(SessionError::LauncherSilent(control.silence()));

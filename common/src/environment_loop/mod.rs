@@ -399,6 +399,9 @@ where
         }
     }
     actor.end_episode()?;
+    // The record counts every demonstration of the run known at the episode's end (another
+    // actor's included, in a run of many).
+    expert.update()?;
     Ok(ControlFlow::Continue(EpisodeRecord {
         ret,
         length,

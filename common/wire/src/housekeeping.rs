@@ -146,6 +146,87 @@ pub fn close_run(run_id: &str) -> Result<()> {
     Ok(())
 }
 
+/// Whether `run_id` has the form the launcher gives run ids, `r<unix seconds>-<pid>`: the only
+/// runs `alfd clean` looks at (such an id holds no `_`, so its file prefix is no other run's).
+pub fn is_launcher_run_id(run_id: &str) -> bool {
+    let Some((secs, pid)) = run_id.strip_prefix('r').and_then(|r| r.split_once('-')) else {
+        return false;
+    };
+    let digits = |t: &str| !t.is_empty() && t.len() <= 20 && t.bytes().all(|b| b.is_ascii_digit());
+    digits(secs) && digits(pid)
+}
+
+/// The launcher-made runs (see [`is_launcher_run_id`]) that have files in iceoryx2's
+/// directories, live or not, sorted.
+pub fn runs_with_files() -> Vec<String> {
+    let mut runs = std::collections::BTreeSet::new();
+    let mut stack = vec![PathBuf::from("/tmp/iceoryx2"), PathBuf::from("/dev/shm")];
+    while let Some(dir) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if let Some(id) = name
+                .strip_prefix("alfd_")
+                .and_then(|rest| rest.split_once('_'))
+                .map(|(id, _)| id)
+                .filter(|id| is_launcher_run_id(id))
+            {
+                runs.insert(id.to_owned());
+            } else if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                stack.push(entry.path());
+            }
+        }
+    }
+    runs.into_iter().collect()
+}
+
+/// What [`clean_run`] found.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Cleaned {
+    /// A process of the run is alive: nothing was touched. Its nodes' names.
+    Live(Vec<String>),
+    /// The run is dead: these files of it were removed.
+    Removed(Vec<PathBuf>),
+}
+
+/// Removes everything a dead run left in iceoryx2's directories (a run whose launcher was
+/// killed, say): the dead nodes' resources, the node counter, and whatever file of the run is
+/// still there. A run with a live process is left alone.
+pub fn clean_run(run_id: &str) -> Result<Cleaned> {
+    validate_run_id(run_id)?;
+    let alive = alive_nodes(run_id)?;
+    if !alive.is_empty() {
+        return Ok(Cleaned::Live(alive));
+    }
+    let before = leftover_files(run_id);
+    match close_run(run_id) {
+        Ok(()) => {}
+        // A process of the run came up meanwhile: leave it.
+        Err(WireError::RunAlive { nodes, .. }) => return Ok(Cleaned::Live(vec![nodes])),
+        // Otherwise its files are removed one by one below.
+        Err(_) => {}
+    }
+    for path in leftover_files(run_id) {
+        let removed = if path.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        if let Err(e) = removed {
+            if e.kind() != std::io::ErrorKind::NotFound {
+                return Err(WireError::Transport {
+                    op: "remove a file of",
+                    service: format!("{run_id} ({})", path.display()),
+                    detail: e.to_string(),
+                });
+            }
+        }
+    }
+    Ok(Cleaned::Removed(before))
+}
+
 #[cfg(test)]
 mod tests {
     use std::path::PathBuf;

@@ -21,7 +21,12 @@
 //!   reads `demos.jsonl` back, so the budget and the demonstrations carry over; meanwhile the
 //!   actors act on their own (up to `--max-restarts` expert restarts). The decisions are in
 //!   [`ExpertLifecycle`](crate::expert_lifecycle::ExpertLifecycle).
-//! - The learner's death ends the run (a learner cannot be restarted without a checkpoint).
+//! - A learner that dies is restarted from its last checkpoint (`RUN_DIR/learner.ckpt`, every
+//!   `checkpoint_every` updates) while the actors wait for credits; what it learned since that
+//!   checkpoint is lost (up to `--max-restarts` learner restarts).
+//! - A launcher that dies is noticed at once by its children (re-parented): the learner saves
+//!   its weights and checkpoint, everyone exits, and the learner, last out, removes the run's
+//!   iceoryx2 files; `alfd resume RUN_DIR` continues the run.
 //! - Stray signals (SIGCONT, SIGTSTP, ...) stop no process: the launcher and its children are
 //!   caught by iceoryx2's handler, and only SIGINT/SIGTERM count. Ctrl-Z (SIGTSTP) is therefore
 //!   ignored by the launcher (the children, in process groups of their own, never see it): the
@@ -32,7 +37,7 @@ use std::fs::File;
 use std::io::Write as _;
 use std::os::unix::process::CommandExt as _;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use alfd_common::config::ExperimentConfig;
@@ -50,6 +55,10 @@ use tracing::{debug, info, warn};
 
 use crate::expert_lifecycle::{Action, Exit, ExpertLifecycle};
 
+mod children;
+
+use children::{describe, last_error, pin, proc_binary, RateMeter};
+
 /// Everything a launch needs.
 #[derive(Debug, Clone)]
 pub struct Plan {
@@ -66,6 +75,17 @@ pub struct Plan {
     pub pin: bool,
     /// Where `alfd-learner`, `alfd-actor` and `alfd-expert` are.
     pub bin_dir: PathBuf,
+    /// Continue the run in `run_dir` (`alfd resume`): the learner from its checkpoint, the
+    /// expert from `demos.jsonl`, `episodes.csv` appended to.
+    pub resume: bool,
+    /// Which launcher of the run this is (1, plus one per resume).
+    pub launches: u32,
+}
+
+impl Plan {
+    fn first_incarnation(&self) -> u64 {
+        u64::from(self.launches.max(1) - 1) * INCARNATIONS_PER_LAUNCH + 1
+    }
 }
 
 /// What `run.json` records: how to reach a live run.
@@ -76,7 +96,18 @@ pub struct RunInfo {
     pub launcher_pid: u32,
     pub actors: usize,
     pub schema_version: u32,
+    /// Launchers this run has had: 1, plus one per `alfd resume`.
+    #[serde(default = "one")]
+    pub launches: u32,
 }
+
+fn one() -> u32 {
+    1
+}
+
+/// Incarnation numbers of the actors of a run's n-th launcher start at `(n - 1) ×` this `+ 1`,
+/// so that a resumed run's actors draw new seed streams.
+pub const INCARNATIONS_PER_LAUNCH: u64 = 1_000_000;
 
 /// `swap-expert.request.json`.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -103,7 +134,7 @@ pub const SWAP_RESPONSE: &str = "swap-expert.response.json";
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 enum Kind {
-    Learner,
+    Learner { incarnation: u32 },
     Expert { generation: u16, name: String },
     Actor { id: u16, incarnation: u64 },
 }
@@ -156,7 +187,9 @@ pub fn launch(plan: &Plan) -> anyhow::Result<RunSummary> {
     }
     std::fs::create_dir_all(&plan.run_dir)
         .with_context(|| format!("cannot create run directory {}", plan.run_dir.display()))?;
-    crate::cmd_local::write(&plan.run_dir, "config.toml", plan.cfg.to_toml().as_bytes())?;
+    if !plan.resume {
+        crate::cmd_local::write(&plan.run_dir, "config.toml", plan.cfg.to_toml().as_bytes())?;
+    }
     crate::cmd_local::write(
         &plan.run_dir,
         RUNTIME_FILE,
@@ -168,6 +201,7 @@ pub fn launch(plan: &Plan) -> anyhow::Result<RunSummary> {
         launcher_pid: std::process::id(),
         actors: plan.actors,
         schema_version: wire::SCHEMA_VERSION,
+        launches: plan.launches,
     };
     crate::cmd_local::write(
         &plan.run_dir,
@@ -224,6 +258,11 @@ struct Launcher<'a, 'w> {
     incarnations: [u64; alfd_wire::MAX_ACTORS],
     /// Actor restarts.
     restarts: u32,
+    /// Episodes each actor id is to play (a run with an episode limit), and has recorded.
+    quota: Option<[u32; alfd_wire::MAX_ACTORS]>,
+    recorded_by: [u32; alfd_wire::MAX_ACTORS],
+    /// Learner restarts.
+    learner_restarts: u32,
     /// The expert generations: swaps and restarts.
     experts: ExpertLifecycle,
     started: Instant,
@@ -244,9 +283,15 @@ impl<'a, 'w> Launcher<'a, 'w> {
         };
         let mut control_tx = wire.control_sender()?;
         control_tx.send(control)?;
-        let mut csv = File::create(plan.run_dir.join("episodes.csv"))
-            .context("cannot create episodes.csv")?;
-        writeln!(csv, "{CSV_HEADER}")?;
+        let (csv, earlier) = open_episodes(&plan.run_dir, plan.resume)?;
+        let demos_before = earlier.last().map_or(0, |r| r.1);
+        let all_returns: Vec<f64> = earlier.iter().map(|r| r.0).collect();
+        let quota = plan.cfg.episode_limit().map(|n| {
+            shares(
+                u64::from(n).saturating_sub(all_returns.len() as u64),
+                plan.actors,
+            )
+        });
         let bar = if plan.progress {
             // Episodes when the run has an episode limit, else environment steps.
             let bar = indicatif::ProgressBar::new(match plan.cfg.episode_limit() {
@@ -275,13 +320,16 @@ impl<'a, 'w> Launcher<'a, 'w> {
             procs: Vec::new(),
             seen: Seen::default(),
             csv,
-            recorded: 0,
-            returns: VecDeque::new(),
-            all_returns: Vec::new(),
-            demos_used: 0,
+            recorded: all_returns.len() as u64,
+            returns: all_returns.iter().rev().take(20).rev().copied().collect(),
+            all_returns,
+            demos_used: demos_before,
             demos_answered: 0,
             incarnations: [0; alfd_wire::MAX_ACTORS],
             restarts: 0,
+            quota,
+            recorded_by: [0; alfd_wire::MAX_ACTORS],
+            learner_restarts: 0,
             experts: ExpertLifecycle::new(plan.max_restarts),
             started: Instant::now(),
             running_since: Instant::now(),
@@ -293,7 +341,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
 
     fn run(&mut self) -> anyhow::Result<RunSummary> {
         info!(run_id = %self.plan.run_id, actors = self.plan.actors, "run starting");
-        self.spawn(Kind::Learner)?;
+        self.spawn(Kind::Learner { incarnation: 1 })?;
         let first = self
             .experts
             .start(&self.plan.cfg.expert.name, Instant::now());
@@ -316,8 +364,14 @@ impl<'a, 'w> Launcher<'a, 'w> {
             );
         }
         self.running_since = Instant::now();
+        let first = self.plan.first_incarnation();
         for id in 0..self.plan.actors as u16 {
-            self.spawn(Kind::Actor { id, incarnation: 1 })?;
+            if self.episodes_left(id) != Some(0) {
+                self.spawn(Kind::Actor {
+                    id,
+                    incarnation: first,
+                })?;
+            }
         }
         let interrupted = loop {
             if self.tick()? == Wake::Signal {
@@ -423,6 +477,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 *seen = p.incarnation;
             }
         }
+        if let Some(n) = self.recorded_by.get_mut(actor) {
+            *n = n.saturating_add(1);
+        }
         // Episodes are numbered in order of arrival; demonstrations used never go down.
         let r = EpisodeRecord {
             episode: self.recorded as u32,
@@ -442,6 +499,13 @@ impl<'a, 'w> Launcher<'a, 'w> {
             None => self.bar.set_position(r.total_steps),
         }
         Ok(())
+    }
+
+    /// Episodes actor `id` has still to play (a run with an episode limit).
+    fn episodes_left(&self, id: u16) -> Option<u32> {
+        let i = usize::from(id);
+        self.quota
+            .map(|q| q[i].saturating_sub(self.recorded_by[i]))
     }
 
     /// Whether the run has reached its episode or step limit.
@@ -471,7 +535,16 @@ impl<'a, 'w> Launcher<'a, 'w> {
     fn spawn(&mut self, kind: Kind) -> anyhow::Result<()> {
         let plan = self.plan;
         let (bin, name, mut args) = match &kind {
-            Kind::Learner => ("alfd-learner", "learner".to_owned(), vec![]),
+            Kind::Learner { incarnation } => (
+                "alfd-learner",
+                "learner".to_owned(),
+                // A restarted learner continues from its checkpoint, as does a resumed run's.
+                if *incarnation > 1 || plan.resume {
+                    vec!["--restore".to_owned()]
+                } else {
+                    vec![]
+                },
+            ),
             Kind::Expert { generation, name } => (
                 "alfd-expert",
                 format!("expert-{generation}"),
@@ -483,10 +556,13 @@ impl<'a, 'w> Launcher<'a, 'w> {
             Kind::Actor { id, incarnation } => (
                 "alfd-actor",
                 format!("actor-{id}"),
-                vec![
+                [
                     format!("--actor-id={id}"),
                     format!("--incarnation={incarnation}"),
-                ],
+                ]
+                .into_iter()
+                .chain(self.episodes_left(*id).map(|n| format!("--episodes={n}")))
+                .collect(),
             ),
         };
         args.push(format!("--run-id={}", plan.run_id));
@@ -508,7 +584,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             .with_context(|| format!("cannot start {bin}"))?;
         info!(process = %name, pid = child.id(), "started");
         if plan.pin {
-            pin(child.id(), matches!(kind, Kind::Learner));
+            pin(child.id(), matches!(kind, Kind::Learner { .. }));
         }
         self.procs.push(Proc { name, kind, child });
         Ok(())
@@ -524,12 +600,19 @@ impl<'a, 'w> Launcher<'a, 'w> {
             };
             let proc = self.procs.remove(i);
             let how = describe(status);
+            // What it said before it exited counts (its last episodes).
+            self.drain_progress()?;
             // The dead process's iceoryx2 node goes before its successor comes.
             self.cleanup_dead_nodes();
             match proc.kind {
                 Kind::Actor { id, incarnation } => {
+                    if status.success() && self.episodes_left(id) == Some(0) {
+                        info!(process = %proc.name, "played its share of the episodes");
+                        continue;
+                    }
                     warn!(process = %proc.name, "{how}");
-                    let restarts = (incarnation - 1) as u32;
+                    let restarts =
+                        u32::try_from(incarnation - self.plan.first_incarnation()).unwrap_or(u32::MAX);
                     if restarts >= self.plan.max_restarts {
                         bail!(
                             "alfd-actor {} {how}, and was restarted {restarts} times already; see {}",
@@ -559,13 +642,29 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     let actions = self.experts.exited(generation, &exit, Instant::now());
                     self.apply(actions)?;
                 }
-                Kind::Learner => bail!(
-                    "alfd-learner {how}: the run cannot go on without its learner (a learner \
-                     cannot be restarted: there are no checkpoints), so it was stopped; the \
-                     episodes so far are in {}, and no weights were saved; see {}",
-                    self.plan.run_dir.join("episodes.csv").display(),
-                    self.log_of(&proc.name)
-                ),
+                Kind::Learner { incarnation } => {
+                    let reason = last_error(&self.plan.run_dir.join("learner.log"));
+                    if self.learner_restarts >= self.plan.max_restarts {
+                        bail!(
+                            "alfd-learner {how}{}, and was restarted {} times already; the \
+                             episodes so far are in {}, its last checkpoint in {}; see {}",
+                            reason.map(|r| format!(" ({r})")).unwrap_or_default(),
+                            self.learner_restarts,
+                            self.plan.run_dir.join("episodes.csv").display(),
+                            self.plan.run_dir.join("learner.ckpt").display(),
+                            self.log_of(&proc.name)
+                        );
+                    }
+                    warn!(
+                        "alfd-learner {how}; restarting it from its last checkpoint (the actors \
+                         wait meanwhile)"
+                    );
+                    self.learner_restarts += 1;
+                    self.rate.reset();
+                    self.spawn(Kind::Learner {
+                        incarnation: incarnation + 1,
+                    })?;
+                }
             }
         }
         Ok(())
@@ -777,105 +876,11 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 actor_restarts: self.restarts,
                 expert_swaps: self.experts.swaps(),
                 expert_restarts: self.experts.restarts(),
+                learner_restarts: self.learner_restarts,
                 interrupted,
             }),
         }
     }
-}
-
-/// Gives the learner (the bottleneck: one train step per environment step) a CPU of its own, and
-/// the other processes the rest, so that waking an actor never preempts the learner. Best effort:
-/// without `taskset` or with one CPU, nothing is pinned.
-fn pin(pid: u32, learner: bool) {
-    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
-    if cpus < 2 {
-        return;
-    }
-    let list = if learner {
-        "0".to_owned()
-    } else {
-        format!("1-{}", cpus - 1)
-    };
-    let done = Command::new("taskset")
-        .args(["-pc", &list, &pid.to_string()])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status();
-    if !matches!(done, Ok(s) if s.success()) {
-        debug!(pid, "cannot pin the process to CPUs {list} (no taskset?)");
-    }
-}
-
-/// The binary a process runs, for messages.
-fn proc_binary(kind: &Kind, name: &str) -> String {
-    match kind {
-        Kind::Learner => "alfd-learner".to_owned(),
-        Kind::Expert { .. } => format!("alfd-expert ({name})"),
-        Kind::Actor { .. } => format!("alfd-actor ({name})"),
-    }
-}
-
-/// "exited with status 1", "was killed by signal 9".
-fn describe(status: ExitStatus) -> String {
-    use std::os::unix::process::ExitStatusExt as _;
-    match (status.code(), status.signal()) {
-        (Some(c), _) => format!("exited with status {c}"),
-        (None, Some(s)) => format!("was killed by signal {s}"),
-        _ => "exited".to_owned(),
-    }
-}
-
-/// Environment steps and updates per second over the last few seconds.
-#[derive(Debug, Default)]
-struct RateMeter {
-    samples: VecDeque<(Instant, u64, u64)>,
-}
-
-impl RateMeter {
-    fn observe(&mut self, steps: u64, updates: u64) {
-        let now = Instant::now();
-        self.samples.push_back((now, steps, updates));
-        while self
-            .samples
-            .front()
-            .is_some_and(|s| now.duration_since(s.0) > Duration::from_secs(5))
-        {
-            self.samples.pop_front();
-        }
-    }
-
-    fn rates(&self) -> (f64, f64) {
-        match (self.samples.front(), self.samples.back()) {
-            (Some(a), Some(b)) if b.0 > a.0 => {
-                let dt = b.0.duration_since(a.0).as_secs_f64();
-                ((b.1 - a.1) as f64 / dt, (b.2 - a.2) as f64 / dt)
-            }
-            _ => (0.0, 0.0),
-        }
-    }
-}
-
-/// The error a process printed last in its log (`alfd-expert: error: ...`), if any; only the
-/// end of the log is read.
-fn last_error(log: &Path) -> Option<String> {
-    use std::io::{Read as _, Seek as _, SeekFrom};
-    const TAIL: u64 = 64 * 1024;
-    let mut file = File::open(log).ok()?;
-    let len = file.metadata().ok()?.len();
-    file.seek(SeekFrom::Start(len.saturating_sub(TAIL))).ok()?;
-    let mut bytes = Vec::new();
-    file.read_to_end(&mut bytes).ok()?;
-    error_line(&String::from_utf8_lossy(&bytes))
-}
-
-/// The message of the last `<binary>: error: <message>` line of a log.
-fn error_line(log: &str) -> Option<String> {
-    log.lines().rev().find_map(|l| {
-        let (binary, message) = l.split_once(": error: ")?;
-        binary
-            .starts_with("alfd-")
-            .then(|| message.trim().to_owned())
-    })
 }
 
 /// Reads `run.json` of a run directory.
@@ -886,28 +891,58 @@ pub fn read_run_info(run_dir: &Path) -> anyhow::Result<RunInfo> {
     serde_json::from_str(&text).with_context(|| format!("malformed {}", path.display()))
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_last_error_of_a_log_is_its_reason() {
-        let log = "2026-01-01T00:00:00Z  INFO alfd_expert: expert starting\n\
-                   alfd-expert: error: old trouble\n\
-                   2026-01-01T00:00:01Z  INFO alfd_expert: expert starting\n\
-                   alfd-expert: error: /r/demos.jsonl line 79: not a demonstration record: EOF\n\
-                   2026-01-01T00:00:02Z  WARN some: other line\n";
-        assert_eq!(
-            error_line(log).as_deref(),
-            Some("/r/demos.jsonl line 79: not a demonstration record: EOF")
-        );
-        assert_eq!(error_line("INFO nothing wrong\n"), None);
-        let dir = std::env::temp_dir().join(format!("alfd-last-error-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("expert-2.log");
-        std::fs::write(&path, log).unwrap();
-        assert!(last_error(&path).unwrap().contains("line 79"));
-        assert_eq!(last_error(&dir.join("missing.log")), None);
-        std::fs::remove_dir_all(&dir).unwrap();
+/// `episodes` split among `actors`: the first `episodes % actors` play one more.
+fn shares(episodes: u64, actors: usize) -> [u32; alfd_wire::MAX_ACTORS] {
+    let mut q = [0u32; alfd_wire::MAX_ACTORS];
+    let actors = actors.clamp(1, alfd_wire::MAX_ACTORS) as u64;
+    for (i, share) in q.iter_mut().enumerate().take(actors as usize) {
+        let n = episodes / actors + u64::from((i as u64) < episodes % actors);
+        *share = u32::try_from(n).unwrap_or(u32::MAX);
     }
+    q
+}
+
+/// `RUN_DIR/episodes.csv` opened for this launcher, and the (return, demonstrations used) of
+/// the rows already in it: a new run creates it with its header; a resumed run appends to it,
+/// after dropping a last line cut short by a crash.
+fn open_episodes(run_dir: &Path, resume: bool) -> anyhow::Result<(File, Vec<(f64, u32)>)> {
+    let path = run_dir.join("episodes.csv");
+    if !resume {
+        let mut csv = File::create(&path).context("cannot create episodes.csv")?;
+        writeln!(csv, "{CSV_HEADER}")?;
+        return Ok((csv, Vec::new()));
+    }
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    let whole = text.rfind('\n').map_or(0, |i| i + 1);
+    let mut rows = Vec::new();
+    for (n, line) in text[..whole].lines().enumerate() {
+        if n == 0 {
+            anyhow::ensure!(
+                line == CSV_HEADER,
+                "{} has another header than this alfd writes",
+                path.display()
+            );
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').collect();
+        let parsed = (
+            fields.get(1).and_then(|f| f.parse::<f64>().ok()),
+            fields.get(3).and_then(|f| f.parse::<u32>().ok()),
+        );
+        let (Some(ret), Some(demos)) = parsed else {
+            anyhow::bail!("{} line {}: not an episode row", path.display(), n + 1);
+        };
+        rows.push((ret, demos));
+    }
+    anyhow::ensure!(whole > 0, "{} has no header", path.display());
+    let csv = std::fs::OpenOptions::new()
+        .write(true)
+        .open(&path)
+        .with_context(|| format!("cannot open {}", path.display()))?;
+    csv.set_len(whole as u64)?;
+    let mut csv = csv;
+    use std::io::Seek as _;
+    csv.seek(std::io::SeekFrom::End(0))?;
+    Ok((csv, rows))
 }

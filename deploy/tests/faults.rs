@@ -1,0 +1,231 @@
+//! Faults of a multi-process run, injected with real signals (issue "Runs you can trust"): the
+//! learner killed with SIGKILL is restarted from its checkpoint; the launcher killed with SIGKILL
+//! leaves no process and no iceoryx2 file, and `alfd resume` finishes the run; `episodes = N`
+//! with several actors plays and records exactly N episodes, and the run's files agree;
+//! `alfd clean` removes a dead run's files and leaves a live run alone.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use alfd_wire as wire;
+
+use crate::runtime::{
+    check_run_dir, find_process, finished, interrupt, rows, run, run_id, signal, spawn_run,
+    summary, wait_rows, wait_until,
+};
+use crate::support::{alfd, text, timed, tmp};
+
+/// Every episode of `dir`'s `episodes.csv` once, numbered 0..n in order; the last row's
+/// `demos_used` equals the lines of `demos.jsonl` and `summary.json`'s count.
+fn check_rows_and_demos(dir: &Path, episodes: usize) {
+    let rows = rows(dir);
+    let numbers: Vec<usize> = rows.iter().map(|r| r[0].parse().unwrap()).collect();
+    assert_eq!(numbers, (0..episodes).collect::<Vec<_>>());
+    let demos = std::fs::read_to_string(dir.join("demos.jsonl"))
+        .unwrap()
+        .lines()
+        .count();
+    let s = summary(dir);
+    assert_eq!(
+        (
+            rows.last().unwrap()[3].parse::<usize>().unwrap(),
+            s["demos_used"].as_u64().unwrap() as usize,
+            s["demos"].as_u64().unwrap() as usize,
+        ),
+        (demos, demos, demos),
+        "last row, summary.json and demos.jsonl disagree"
+    );
+}
+
+/// Processes of run `id` still alive.
+fn processes_of(id: &str) -> Vec<(&'static str, u32)> {
+    let run = format!("--run-id={id}");
+    ["alfd-actor", "alfd-expert", "alfd-learner"]
+        .into_iter()
+        .filter_map(|bin| find_process(bin, &[&run]).map(|pid| (bin, pid)))
+        .collect()
+}
+
+/// A run that asks the expert on every step until its budget is spent (no model to refit), with
+/// 200-step episodes and a learner checkpointing every 200 updates.
+const FAULT_RUN: [&str; 6] = [
+    "episodes=300",
+    "env.max_episode_steps=200",
+    "expert.model=none",
+    "query.mode=first",
+    "budget.total=1500",
+    "--checkpoint-every=200",
+];
+
+#[test]
+fn a_learner_killed_with_sigkill_is_restarted_from_its_checkpoint_and_the_run_completes() {
+    let _time = timed!();
+    let out = tmp("learner-killed");
+    let mut child = spawn_run(&out, 2, &FAULT_RUN);
+    wait_until(&mut child, "a learner checkpoint", || {
+        out.join("learner.ckpt").is_file()
+    });
+    wait_rows(&out, 30, &mut child);
+    let id = run_id(&out);
+    let pid = find_process("alfd-learner", &[&format!("--run-id={id}")]).expect("learner");
+    signal("KILL", pid);
+    let (o, s) = finished(child, &out, 300);
+    assert_eq!(
+        (s["learner_restarts"].as_u64(), s["actor_restarts"].as_u64()),
+        (Some(1), Some(0)),
+        "{}",
+        text(&o)
+    );
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(
+        err.contains("alfd-learner was killed by signal 9; restarting it from its last checkpoint"),
+        "{err}"
+    );
+    let log = std::fs::read_to_string(out.join("learner.log")).unwrap();
+    assert!(log.contains("restored from the checkpoint"), "{log}");
+    check_run_dir(&out, 1500);
+    check_rows_and_demos(&out, 300);
+    assert_eq!(wire::leftover_files(&id), Vec::<PathBuf>::new());
+}
+
+#[test]
+fn a_launcher_killed_with_sigkill_leaves_nothing_running_and_alfd_resume_finishes_the_run() {
+    let _time = timed!();
+    let out = tmp("launcher-killed");
+    let mut child = spawn_run(&out, 2, &FAULT_RUN);
+    wait_until(&mut child, "a learner checkpoint", || {
+        out.join("learner.ckpt").is_file()
+    });
+    wait_rows(&out, 30, &mut child);
+    let id = run_id(&out);
+    let launcher = child.child().id();
+    signal("KILL", launcher);
+    let killed = Instant::now();
+    let _ = child.0.take().unwrap().wait();
+    // Every child notices within a few seconds, saves what it must, and the last one out
+    // removes the run's iceoryx2 files.
+    while !processes_of(&id).is_empty() || !wire::leftover_files(&id).is_empty() {
+        assert!(
+            killed.elapsed() < Duration::from_secs(8),
+            "8 s after the launcher's death: processes {:?}, files {:?}",
+            processes_of(&id),
+            wire::leftover_files(&id)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    eprintln!(
+        "launcher killed: its children were gone and the run's files removed {} ms later",
+        killed.elapsed().as_millis()
+    );
+    assert!(out.join("weights.safetensors").is_file());
+    let recorded = rows(&out).len();
+    assert!((30..300).contains(&recorded), "{recorded}");
+
+    let o = alfd()
+        .args(["resume", out.to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let s = summary(&out);
+    assert_eq!(
+        (s["episodes"].as_u64(), s["interrupted"].as_bool()),
+        (Some(300), Some(false))
+    );
+    let log = std::fs::read_to_string(out.join("learner.log")).unwrap();
+    assert!(log.contains("restored from the checkpoint"), "{log}");
+    check_run_dir(&out, 1500);
+    check_rows_and_demos(&out, 300);
+    let resumed = run_id(&out);
+    assert_ne!(resumed, id);
+    assert_eq!(wire::leftover_files(&resumed), Vec::<PathBuf>::new());
+    // A finished run is not resumed again.
+    let again = alfd()
+        .args(["resume", out.to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert_eq!(again.status.code(), Some(2), "{}", text(&again));
+}
+
+#[test]
+fn episodes_n_with_two_actors_plays_and_records_n_and_the_files_agree() {
+    let _time = timed!();
+    for (episodes, actors) in [(5usize, 2usize), (7, 3)] {
+        let out = tmp(&format!("episodes-{episodes}-{actors}"));
+        let o = run(
+            &out,
+            actors,
+            &[
+                &format!("episodes={episodes}"),
+                "query.mode=first",
+                "expert.model=none",
+                "budget.total=1000",
+            ],
+        );
+        assert!(o.status.success(), "{}", text(&o));
+        assert_eq!(summary(&out)["episodes"], episodes);
+        check_rows_and_demos(&out, episodes);
+        // Every actor played its share.
+        for a in 0..actors {
+            let share = episodes / actors + usize::from(a < episodes % actors);
+            assert_eq!(
+                rows(&out).iter().filter(|r| r[8] == a.to_string()).count(),
+                share,
+                "actor {a}"
+            );
+        }
+        let log = std::fs::read_to_string(out.join("actor-0.log")).unwrap();
+        assert!(log.contains("played its share"), "{log}");
+    }
+}
+
+#[test]
+fn alfd_clean_removes_a_dead_runs_files_and_leaves_a_live_run_alone() {
+    let _time = timed!();
+    let (dead_dir, live_dir) = (tmp("clean-dead"), tmp("clean-live"));
+    let mut dead = spawn_run(&dead_dir, 1, &["episodes=1000000"]);
+    let mut live = spawn_run(&live_dir, 1, &["episodes=1000000"]);
+    wait_rows(&dead_dir, 3, &mut dead);
+    wait_rows(&live_dir, 3, &mut live);
+    let (dead_id, live_id) = (run_id(&dead_dir), run_id(&live_dir));
+    // Everything of the first run dies at once: nobody is left to remove its files.
+    let pids: Vec<u32> = processes_of(&dead_id).into_iter().map(|(_, p)| p).collect();
+    assert_eq!(pids.len(), 3);
+    signal("KILL", dead.child().id());
+    for pid in pids {
+        signal("KILL", pid);
+    }
+    let _ = dead.0.take().unwrap().wait();
+    let start = Instant::now();
+    while !processes_of(&dead_id).is_empty() {
+        assert!(start.elapsed() < Duration::from_secs(5));
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let left = wire::leftover_files(&dead_id);
+    assert!(!left.is_empty(), "a run killed whole leaves files");
+    let live_files = wire::leftover_files(&live_id);
+    assert!(!live_files.is_empty());
+
+    let dry = alfd().args(["clean", "--dry-run"]).output().unwrap();
+    assert!(dry.status.success(), "{}", text(&dry));
+    let said = String::from_utf8_lossy(&dry.stdout).into_owned();
+    assert!(said.contains(&format!("{dead_id}: dead")), "{said}");
+    assert!(said.contains(&format!("{live_id}: live")), "{said}");
+    assert_eq!(wire::leftover_files(&dead_id), left, "a dry run removes nothing");
+
+    let o = alfd().arg("clean").output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let said = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        said.contains(&format!("{dead_id}: dead, {} files removed", left.len())),
+        "{said}"
+    );
+    assert!(said.contains(&format!("{live_id}: live")), "{said}");
+    assert_eq!(wire::leftover_files(&dead_id), Vec::<PathBuf>::new());
+    // The live run kept its files and goes on to a clean end.
+    assert!(!wire::leftover_files(&live_id).is_empty());
+    let n = rows(&live_dir).len();
+    wait_rows(&live_dir, n + 3, &mut live);
+    let o = interrupt(live);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    assert_eq!(wire::leftover_files(&live_id), Vec::<PathBuf>::new());
+}
