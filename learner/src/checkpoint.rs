@@ -89,16 +89,32 @@ mod tests {
         l
     }
 
-    fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("alfd-learner-ckpt-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    /// A unit test's scratch directory `alfd-NAME-XXXXXX` in the system's temporary
+    /// directory, removed with everything in it when dropped (also while a failed test unwinds);
+    /// kept, and named on stderr, when `ALFD_KEEP_TEST_DIRS=1`.
+    fn test_dir(name: &str) -> tempfile::TempDir {
+        use std::io::Write as _;
+        let keep = std::env::var_os("ALFD_KEEP_TEST_DIRS").is_some_and(|v| v == "1");
+        let dir = tempfile::Builder::new()
+            .prefix(&format!("alfd-{name}-"))
+            .disable_cleanup(keep)
+            .tempdir()
+            .expect("a temporary directory");
+        if keep {
+            // Straight to stderr: libtest's capture would hide it for a test that passes.
+            let _ = writeln!(
+                std::io::stderr(),
+                "ALFD_KEEP_TEST_DIRS: keeping {}",
+                dir.path().display()
+            );
+        }
+        dir
     }
 
     #[test]
     fn a_checkpoint_restores_the_learner_exactly_and_bad_ones_are_refused_saying_why() {
-        let d = dir("roundtrip");
+        let tmp = test_dir("learner-ckpt");
+        let d = tmp.path();
         assert!(load(&d, CONFIG).unwrap().is_none());
         let l = learner();
         let ckpt = LearnerCheckpoint {
@@ -143,6 +159,5 @@ mod tests {
         let e = load(&d, CONFIG).unwrap_err().to_string();
         assert!(e.contains("corrupt") || e.contains("checksum"), "{e}");
         assert_eq!(std::fs::read(path(&d)).unwrap(), flipped);
-        std::fs::remove_dir_all(&d).unwrap();
     }
 }

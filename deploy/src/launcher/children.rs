@@ -131,12 +131,11 @@ mod tests {
             Some("/r/demos.jsonl line 79: not a demonstration record: EOF")
         );
         assert_eq!(error_line("INFO nothing wrong\n"), None);
-        let dir = std::env::temp_dir().join(format!("alfd-last-error-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = crate::run_dir::test_dir("last-error");
+        let dir = tmp.path();
         let path = dir.join("expert-2.log");
         std::fs::write(&path, log).unwrap();
         assert!(last_error(&path).unwrap().contains("line 79"));
         assert_eq!(last_error(&dir.join("missing.log")), None);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
