@@ -113,8 +113,11 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         let should_be_active = c.active_expert == u32::from(args.generation);
         if should_be_active && mode == Mode::Standby {
             // Make-before-break: the previous expert has exited; its demonstrations are final.
-            let records = demo_log::read(&demos_path)?;
-            demo_log::check_fits(&records, &demos_path, obs_dim, actions)?;
+            // A file that went bad meanwhile is bad input too (exit code 2, the reason in the
+            // launcher's message).
+            let records = demo_log::read(&demos_path)
+                .and_then(|r| demo_log::check_fits(&r, &demos_path, obs_dim, actions).map(|()| r))
+                .map_err(|e| BadInput(format!("{e:#}")))?;
             let n = records.len();
             core.restore(records)
                 .context("cannot refit the demonstration model on demos.jsonl")?;

@@ -160,4 +160,58 @@ mod tests {
         assert!(e.contains("corrupt") || e.contains("checksum"), "{e}");
         assert_eq!(std::fs::read(path(&d)).unwrap(), flipped);
     }
+
+    /// BENCHMARKS.md, "Checkpoints": the size and write time of `learner.ckpt` with a full
+    /// 10,000-transition CartPole buffer (the recommended preset's learner). Run with
+    /// `cargo test --release -p alfd-learner -- --ignored --nocapture learner_checkpoint_cost`.
+    #[test]
+    #[ignore = "a measurement, not a test"]
+    fn learner_checkpoint_cost() {
+        let text = include_str!("../../deploy/configs/recommended/cartpole.toml");
+        let cfg = ExperimentConfig::from_toml(text).unwrap();
+        let mut l = NeuralLearner::new(&cfg.agent, 4, 2, seeded(1));
+        let mut rng = seeded(2);
+        for i in 0..cfg.agent.replay_capacity {
+            let s: Vec<f32> = (0..4).map(|_| rand::Rng::random_range(&mut rng, -1.0..1.0)).collect();
+            l.learn(&Transition {
+                next_state: s.iter().map(|x| x + 0.01).collect(),
+                state: s,
+                action: (i % 2) as u32,
+                reward: 1.0,
+                terminated: i % 200 == 199,
+                mask: vec![1.0, 0.0],
+                demo: i < 100,
+            });
+        }
+        let tmp = test_dir("learner-ckpt-cost");
+        let d = tmp.path();
+        let mut times = Vec::new();
+        let mut size = 0;
+        for _ in 0..10 {
+            let t = std::time::Instant::now();
+            size = save(
+                d,
+                &LearnerCheckpoint {
+                    learner: l.snapshot(),
+                    env_steps: 10_000,
+                },
+                text,
+            )
+            .unwrap();
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        let mut loads = Vec::new();
+        for _ in 0..10 {
+            let t = std::time::Instant::now();
+            load(d, text).unwrap().unwrap();
+            loads.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        times.sort_by(f64::total_cmp);
+        loads.sort_by(f64::total_cmp);
+        eprintln!(
+            "learner.ckpt: {size} bytes; snapshot + encode + write (fsync, rename, fsync dir): \
+             median {:.2} ms (min {:.2}, max {:.2}); read + check + decode: median {:.2} ms",
+            times[5], times[0], times[9], loads[5]
+        );
+    }
 }

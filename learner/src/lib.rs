@@ -141,6 +141,7 @@ fn serve(
             "restored from the checkpoint"
         );
     }
+    let started = Instant::now();
     let mut checkpoints = Checkpoints {
         every: runtime.checkpoint_every,
         last: learner.updates(),
@@ -300,6 +301,7 @@ fn serve(
         checkpoints = checkpoints.written,
         bytes = checkpoints.bytes,
         write_s = checkpoints.time.as_secs_f64(),
+        share_of_learner_time = checkpoints.time.as_secs_f64() / started.elapsed().as_secs_f64(),
         "learner state checkpointed"
     );
     status.send(&mut progress, process_state::EXITING, &book, &learner)?;

@@ -137,8 +137,10 @@ pub fn close_run(run_id: &str) -> Result<()> {
     //   the run is alive (dead ones were cleaned, live ones refused, just above).
     // - No node is created between that check and the removal: the callers are the process
     //   that started the run's processes (the launcher; `alfd-bench-ipc` for its own runs),
-    //   after its children exited and its own `Wire` was dropped, and tests after dropping
-    //   every node. Should a late tool join in that window anyway, the segment is POSIX shared
+    //   after its children exited and its own `Wire` was dropped; the learner of a run whose
+    //   launcher died (nobody is left to start a process of that run id: a resume uses a new
+    //   one), after its own `Wire` was dropped and the others left; `alfd clean` for runs
+    //   whose every node is dead; and tests after dropping every node. Should a late tool join in that window anyway, the segment is POSIX shared
     //   memory, so its mapping stays valid after the unlink; node ids also carry the pid and the
     //   creation time, so a counter restarting at 0 repeats none.
     let removed = unsafe { iceoryx2::testing::remove_global_mgmt_segment::<Transport>(&cfg) };
