@@ -214,4 +214,40 @@ mod tests {
             times[5], times[0], times[9], loads[5]
         );
     }
+
+    // The fuzz pass (issue 10): a damaged learner.ckpt (truncated, bytes changed, bytes
+    // appended) is refused with an error and never panics; nothing else decodes it.
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+        #[test]
+        fn fuzz_a_damaged_learner_checkpoint_is_refused_never_a_panic(
+            cut in proptest::option::of(0usize..200_000),
+            flips in proptest::collection::vec((0usize..200_000, 1u8..=255), 0..4),
+            tail in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..8),
+        ) {
+            use std::sync::OnceLock;
+            static GOOD: OnceLock<Vec<u8>> = OnceLock::new();
+            let good = GOOD.get_or_init(|| {
+                encode(
+                    &LearnerCheckpoint { learner: learner().snapshot(), env_steps: 20 },
+                    config_hash(CONFIG),
+                )
+            });
+            let mut bytes = good.clone();
+            if let Some(c) = cut {
+                bytes.truncate(c % (good.len() + 1));
+            }
+            for (at, x) in flips {
+                if !bytes.is_empty() {
+                    let i = at % bytes.len();
+                    bytes[i] ^= x;
+                }
+            }
+            bytes.extend_from_slice(&tail);
+            let decoded = decode::<LearnerCheckpoint>(&bytes, config_hash(CONFIG));
+            if bytes != *good {
+                proptest::prop_assert!(decoded.is_err());
+            }
+        }
+    }
 }
