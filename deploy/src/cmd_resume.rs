@@ -12,6 +12,7 @@ use std::path::PathBuf;
 
 use crate::checkpoint_file;
 use crate::cmd_local::{finish, run_pieces, Pieces, Resumable};
+use crate::report::Output;
 use crate::usage::usage;
 use crate::{run_dir, setup};
 
@@ -19,12 +20,25 @@ use crate::{run_dir, setup};
 pub struct ResumeArgs {
     /// The run directory of the run to continue.
     pub run_dir: PathBuf,
-    /// Print no progress.
+    /// Print no progress and no summary at the end.
     #[arg(long)]
     pub quiet: bool,
+    /// Print only the machine-readable line: the run's summary as JSON on stdout (printed also
+    /// without this flag when stdout is not a terminal).
+    #[arg(long)]
+    pub json: bool,
     /// Testing: stop (as a crash would, without the final files) after this many episodes.
     #[arg(long, hide = true, value_name = "N")]
     pub stop_after_episodes: Option<u32>,
+}
+
+impl ResumeArgs {
+    fn output(&self) -> Output {
+        Output {
+            json: self.json,
+            quiet: self.quiet,
+        }
+    }
 }
 
 pub fn run(args: ResumeArgs) -> anyhow::Result<()> {
@@ -38,7 +52,7 @@ pub fn run(args: ResumeArgs) -> anyhow::Result<()> {
     }
     // The run's own lock: refused while the run (or another resume) is alive.
     let _lock = run_dir::lock(dir)?;
-    if dir.join("summary.json").exists() {
+    if dir.join("summary.json").exists() && !interrupted(dir) {
         return Err(usage(format!(
             "the run in {} is finished (it has summary.json): there is nothing to resume",
             dir.display()
@@ -66,7 +80,9 @@ pub fn run(args: ResumeArgs) -> anyhow::Result<()> {
         from: Some(file),
         stop_after: args.stop_after_episodes,
     };
-    finish(run_pieces(&cfg, pieces, dir, !args.quiet, resumable)?)
+    let output = args.output();
+    let summary = run_pieces(&cfg, pieces, dir, output.progress(), resumable)?;
+    finish(&cfg, dir, summary, output)
 }
 
 /// Continues an `alfd run` run in `args.run_dir` (its lock is held by the caller).
@@ -125,7 +141,7 @@ fn resume_multi_process(
         run_id: crate::launcher::new_run_id(),
         runtime,
         max_restarts: 5,
-        progress: !args.quiet,
+        progress: args.output().progress(),
         pin: false,
         bin_dir: crate::launcher::bin_dir()?,
         resume: true,
@@ -137,5 +153,15 @@ fn resume_multi_process(
         launches = plan.launches,
         "resuming a multi-process run"
     );
-    crate::cmd_run::finish(&plan, args.quiet)
+    crate::cmd_run::finish(&plan, args.output())
+}
+
+/// Whether the run in `dir` was stopped with Ctrl-C (its `summary.json` says so): such a run is
+/// resumed like a crashed one.
+fn interrupted(dir: &std::path::Path) -> bool {
+    std::fs::read_to_string(dir.join("summary.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<alfd_common::record::RunSummary>(&t).ok())
+        .and_then(|s| s.runtime)
+        .is_some_and(|r| r.interrupted)
 }

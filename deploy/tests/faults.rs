@@ -229,3 +229,24 @@ fn alfd_clean_removes_a_dead_runs_files_and_leaves_a_live_run_alone() {
     assert_eq!(o.status.code(), Some(130), "{}", text(&o));
     assert_eq!(wire::leftover_files(&live_id), Vec::<PathBuf>::new());
 }
+
+#[test]
+fn a_run_stopped_with_ctrl_c_is_resumed_to_its_end() {
+    let _time = timed!();
+    let out = tmp("interrupted");
+    let mut child = spawn_run(&out, 2, &FAULT_RUN);
+    wait_rows(&out, 30, &mut child);
+    let o = interrupt(child);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    assert_eq!(summary(&out)["interrupted"], true);
+    let recorded = rows(&out).len();
+    assert!(recorded < 300, "{recorded}");
+    let o = alfd()
+        .args(["resume", out.to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert_eq!(summary(&out)["interrupted"], false);
+    check_run_dir(&out, 1500);
+    check_rows_and_demos(&out, 300);
+}
