@@ -6,6 +6,10 @@
 
 use serde::{Deserialize, Serialize};
 
+mod validate;
+
+pub use validate::{MAX_BATCH_SIZE, MAX_HIDDEN, MAX_QUEUE_LEN, MAX_REPLAY_CAPACITY};
+
 /// A config that cannot be used, with the field (or TOML line) at fault.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ConfigError {
@@ -257,7 +261,7 @@ pub struct AgentConfig {
     /// K, the number of heads (default 1 for qlearning/sarsa/dqn, 2 for bootstrapped-q/bdqn).
     #[serde(default)]
     pub heads: Option<usize>,
-    /// Discount factor γ.
+    /// Discount factor γ, in [0, 1] (below 1 for the tabular agents).
     #[serde(default = "default_gamma")]
     pub gamma: f64,
     /// Temperature of the softmax policies of eq. 2 (JS divergence, shaping, softmax exploration).
@@ -287,10 +291,10 @@ pub struct AgentConfig {
     /// Probability that a transition trains a given head (the Bernoulli bootstrap mask).
     #[serde(default = "default_bootstrap_probability")]
     pub bootstrap_probability: f64,
-    /// Neural: replay buffer capacity.
+    /// Neural: replay buffer capacity (at most [`MAX_REPLAY_CAPACITY`]).
     #[serde(default = "default_replay_capacity")]
     pub replay_capacity: usize,
-    /// Neural: mini-batch size.
+    /// Neural: mini-batch size (at most [`MAX_BATCH_SIZE`] and the replay capacity).
     #[serde(default = "default_batch_size")]
     pub batch_size: usize,
     /// Neural: the target networks are copied from the online one every this many updates.
@@ -299,7 +303,7 @@ pub struct AgentConfig {
     /// Neural: updates per environment step (the replay ratio U).
     #[serde(default = "default_updates_per_step")]
     pub updates_per_step: u32,
-    /// Neural: width of the two hidden layers.
+    /// Neural: width of the two hidden layers (at most [`MAX_HIDDEN`]).
     #[serde(default = "default_hidden")]
     pub hidden: usize,
     /// Neural: the loss on TD errors, `huber` (SmoothL1, the paper's) or `mse`.
@@ -427,7 +431,7 @@ pub struct QueryConfig {
     /// `never`, `first` or `active`.
     #[serde(default = "default_query_mode")]
     pub mode: QueryMode,
-    /// L_q: length of the divergence queue.
+    /// L_q: length of the divergence queue (at most [`MAX_QUEUE_LEN`]).
     #[serde(default = "default_queue_len")]
     pub queue_len: usize,
     /// p_r: percentile of the queue the divergence must exceed, in [0, 100].
@@ -623,198 +627,6 @@ impl ExperimentConfig {
     /// Whether the reward is shaped (a demonstration model is chosen).
     pub fn shaping_enabled(&self) -> bool {
         self.expert.model != DemoModelChoice::None
-    }
-
-    /// Checks every value; the error names the field.
-    pub fn validate(&self) -> Result<()> {
-        if self.episodes == 0 && self.steps == 0 {
-            return Err(invalid(
-                "episodes",
-                "set `episodes` or `steps` (or both) to at least 1",
-            ));
-        }
-        if self.evaluation.every > 0 && self.evaluation.episodes == 0 {
-            return Err(invalid("evaluation.episodes", "must be at least 1"));
-        }
-        let e = &self.env;
-        if !(e.p_success > 0.0 && e.p_success <= 1.0) {
-            return Err(invalid(
-                "env.p_success",
-                format!("must be in (0, 1], got {}", e.p_success),
-            ));
-        }
-        if e.max_episode_steps() == 0 {
-            return Err(invalid("env.max_episode_steps", "must be at least 1"));
-        }
-        if e.name != EnvName::Cliffwalk && e.map.is_some() {
-            return Err(invalid("env.map", "applies to cliffwalk only"));
-        }
-        let a = &self.agent;
-        if a.heads() == 0 {
-            return Err(invalid("agent.heads", "K must be at least 1"));
-        }
-        if a.heads() > 8 {
-            return Err(invalid(
-                "agent.heads",
-                format!("at most 8 heads are supported, got {}", a.heads()),
-            ));
-        }
-        if matches!(
-            a.kind,
-            AgentKind::Qlearning | AgentKind::Sarsa | AgentKind::Dqn
-        ) && a.heads() != 1
-        {
-            return Err(invalid(
-                "agent.heads",
-                format!(
-                    "{:?} has one head; use bdqn or bootstrapped-q for K > 1",
-                    a.kind
-                ),
-            ));
-        }
-        if a.kind.is_tabular() != e.name.is_tabular() {
-            return Err(invalid(
-                "agent.kind",
-                format!("{:?} does not run on {}: tabular agents run on cliffwalk, neural ones on cartpole, mountaincar and acrobot", a.kind, e.name),
-            ));
-        }
-        if !(a.gamma >= 0.0 && a.gamma <= 1.0) {
-            return Err(invalid(
-                "agent.gamma",
-                format!("must be in [0, 1], got {}", a.gamma),
-            ));
-        }
-        if !(a.temperature > 0.0 && a.temperature.is_finite()) {
-            return Err(invalid(
-                "agent.temperature",
-                format!("must be > 0, got {}", a.temperature),
-            ));
-        }
-        if !(a.learning_rate() > 0.0 && a.learning_rate().is_finite()) {
-            return Err(invalid(
-                "agent.learning_rate",
-                format!("must be > 0, got {}", a.learning_rate()),
-            ));
-        }
-        for (field, v) in [
-            ("agent.epsilon_start", a.epsilon_start),
-            ("agent.epsilon_end", a.epsilon_end),
-        ] {
-            if !(0.0..=1.0).contains(&v) {
-                return Err(invalid(field, format!("must be in [0, 1], got {v}")));
-            }
-        }
-        if a.epsilon_decay_steps.is_nan() || a.epsilon_decay_steps <= 0.0 {
-            return Err(invalid("agent.epsilon_decay_steps", "must be > 0"));
-        }
-        if !(a.bootstrap_probability > 0.0 && a.bootstrap_probability <= 1.0) {
-            return Err(invalid(
-                "agent.bootstrap_probability",
-                format!("must be in (0, 1], got {}", a.bootstrap_probability),
-            ));
-        }
-        if a.replay_capacity == 0 {
-            return Err(invalid("agent.replay_capacity", "must be at least 1"));
-        }
-        if a.batch_size == 0 {
-            return Err(invalid("agent.batch_size", "must be at least 1"));
-        }
-        if a.target_update_every == 0 {
-            return Err(invalid("agent.target_update_every", "must be at least 1"));
-        }
-        if a.hidden == 0 {
-            return Err(invalid("agent.hidden", "must be at least 1"));
-        }
-        if !a.epsilon_decay_steps.is_finite() {
-            return Err(invalid("agent.epsilon_decay_steps", "must be finite"));
-        }
-        if !a.kind.is_tabular() {
-            if a.replay_capacity < a.batch_size {
-                return Err(invalid(
-                    "agent.replay_capacity",
-                    format!(
-                        "must hold at least one batch (batch_size = {}), got {}",
-                        a.batch_size, a.replay_capacity
-                    ),
-                ));
-            }
-            if a.updates_per_step == 0 {
-                return Err(invalid(
-                    "agent.updates_per_step",
-                    "must be at least 1 (with 0 the agent never learns)",
-                ));
-            }
-        }
-        if !(a.tau > 0.0 && a.tau <= 1.0) {
-            return Err(invalid(
-                "agent.tau",
-                format!("must be in (0, 1], got {}", a.tau),
-            ));
-        }
-        if let Some(g) = a.max_grad_norm {
-            if !(g > 0.0 && g.is_finite()) {
-                return Err(invalid(
-                    "agent.max_grad_norm",
-                    format!("must be > 0, got {g}"),
-                ));
-            }
-        }
-        if !(0.0..=1.0).contains(&a.demo_fraction) {
-            return Err(invalid(
-                "agent.demo_fraction",
-                format!("must be in [0, 1], got {}", a.demo_fraction),
-            ));
-        }
-        for (field, v) in [
-            ("agent.margin_loss_weight", a.margin_loss_weight),
-            ("agent.margin", a.margin),
-        ] {
-            if !(v >= 0.0 && v.is_finite()) {
-                return Err(invalid(field, format!("must be >= 0, got {v}")));
-            }
-        }
-        let q = &self.query;
-        if q.queue_len == 0 {
-            return Err(invalid("query.queue_len", "L_q must be at least 1"));
-        }
-        if !(0.0..=100.0).contains(&q.percentile) {
-            return Err(invalid(
-                "query.percentile",
-                format!("p_r must be in [0, 100], got {}", q.percentile),
-            ));
-        }
-        if self.budget.total < 0 {
-            return Err(invalid(
-                "budget.total",
-                format!("B must not be negative, got {}", self.budget.total),
-            ));
-        }
-        if self.budget.total > u32::MAX as i64 {
-            return Err(invalid("budget.total", "is too large"));
-        }
-        let s = &self.shaping;
-        if !(s.lambda >= 0.0 && s.lambda.is_finite()) {
-            return Err(invalid(
-                "shaping.lambda",
-                format!("must be >= 0, got {}", s.lambda),
-            ));
-        }
-        if !(s.stop_multiple >= 0.0 && s.stop_multiple.is_finite()) {
-            return Err(invalid(
-                "shaping.stop_multiple",
-                format!("must be >= 0, got {}", s.stop_multiple),
-            ));
-        }
-        if self.shaping_enabled() && a.kind.is_tabular() {
-            return Err(invalid(
-                "expert.model",
-                "reward shaping with a kernel model applies to the neural agents (cartpole, mountaincar, acrobot)",
-            ));
-        }
-        if self.expert.name.trim().is_empty() {
-            return Err(invalid("expert.name", "must not be empty"));
-        }
-        Ok(())
     }
 }
 

@@ -8,7 +8,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use alfd_common::demo_model::{DemoModel, DemoModelError, DemoModelKind};
+use alfd_common::demo_model::{DemoModel, DemoModelError, DemoModelKind, MAX_ACTIONS, MAX_DEMOS};
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
 
@@ -44,7 +44,7 @@ pub struct DemoModelArgs {
     /// JSON lines of query states, `{"state":[…]}`.
     #[arg(long)]
     pub query: PathBuf,
-    /// Number of actions (default: the largest demonstrated action + 1, at least 2).
+    /// Number of actions (default: the largest demonstrated action + 1, at least 2), at most 1024.
     #[arg(long)]
     pub actions: Option<usize>,
 }
@@ -132,11 +132,18 @@ fn parse_lines<T: for<'de> Deserialize<'de>>(
     Ok(out)
 }
 
-/// Parses a demos file's text (`file` names it in errors).
+/// Parses a demos file's text (`file` names it in errors): at most [`MAX_DEMOS`] demonstrations.
 pub fn parse_demos(text: &str, file: &str) -> Result<Demos, UsageError> {
     let items = parse_lines::<DemoLine>(text, file, None, |d| &d.state)?;
     if items.is_empty() {
         return Err(UsageError(format!("{file}: no demonstrations")));
+    }
+    if items.len() > MAX_DEMOS {
+        return Err(UsageError(format!(
+            "{file}: {} demonstrations, but a demonstration model is fitted on at most {MAX_DEMOS} \
+             (its kernel matrix holds n × n numbers)",
+            items.len()
+        )));
     }
     let mut demos = Demos {
         states: Vec::new(),
@@ -158,18 +165,31 @@ pub fn parse_queries(text: &str, file: &str, dim: usize) -> Result<Vec<Vec<f64>>
 }
 
 /// The number of actions: `requested` if given (every action must be below it), else the largest
-/// action + 1, at least 2.
+/// action + 1, at least 2; at most [`MAX_ACTIONS`] either way.
 pub fn num_actions(
     demos: &Demos,
     requested: Option<usize>,
     file: &str,
 ) -> Result<usize, UsageError> {
-    let inferred = demos.actions.iter().max().map_or(2, |&m| (m + 1).max(2));
     let Some(n) = requested else {
-        return Ok(inferred);
+        if let Some(i) = demos.actions.iter().position(|&a| a >= MAX_ACTIONS) {
+            return Err(UsageError(format!(
+                "{file}:{}: action {} is too large: a demonstration model handles at most \
+                 {MAX_ACTIONS} actions (0 to {})",
+                demos.lines[i],
+                demos.actions[i],
+                MAX_ACTIONS - 1
+            )));
+        }
+        return Ok(demos.actions.iter().max().map_or(2, |&m| (m + 1).max(2)));
     };
     if n == 0 {
         return Err(UsageError("--actions must be at least 1".to_string()));
+    }
+    if n > MAX_ACTIONS {
+        return Err(UsageError(format!(
+            "--actions {n}: a demonstration model handles at most {MAX_ACTIONS} actions"
+        )));
     }
     if let Some(i) = demos.actions.iter().position(|&a| a >= n) {
         return Err(UsageError(format!(
@@ -208,9 +228,11 @@ pub fn run(args: DemoModelArgs) -> anyhow::Result<()> {
     let kind = DemoModelKind::from(args.kind);
     let model = match DemoModel::fit(kind, &demos.states, &demos.actions, num_actions) {
         Ok(m) => m,
-        Err(e @ DemoModelError::Unsupported(_)) => {
-            return Err(UsageError(format!("{kind} on {demos_name}: {e}")).into())
-        }
+        Err(
+            e @ (DemoModelError::Unsupported(_)
+            | DemoModelError::TooManyActions(_)
+            | DemoModelError::TooManyDemos(_)),
+        ) => return Err(UsageError(format!("{kind} on {demos_name}: {e}")).into()),
         Err(e) => return Err(e).with_context(|| format!("fitting {kind} on {demos_name}")),
     };
 
@@ -297,6 +319,34 @@ mod tests {
         assert!(e.0.starts_with("d:2: action 3"), "{e}");
         let d = parse_demos("{\"state\":[0],\"action\":0}\n", "d").unwrap();
         assert_eq!(num_actions(&d, None, "d").unwrap(), 2);
+    }
+
+    #[test]
+    fn sizes_beyond_the_limits_are_refused_naming_the_argument_or_line() {
+        let d = parse_demos("{\"state\":[0],\"action\":1}\n", "d").unwrap();
+        assert_eq!(
+            num_actions(&d, Some(100_000_000_000), "d").unwrap_err().0,
+            "--actions 100000000000: a demonstration model handles at most 1024 actions"
+        );
+        assert_eq!(
+            num_actions(&d, Some(MAX_ACTIONS), "d").unwrap(),
+            MAX_ACTIONS
+        );
+        // An action in the file sets the number of actions when --actions is absent.
+        let d = parse_demos(
+            "{\"state\":[0],\"action\":0}\n{\"state\":[1],\"action\":100000000000}\n",
+            "d",
+        )
+        .unwrap();
+        assert_eq!(
+            num_actions(&d, None, "d").unwrap_err().0,
+            "d:2: action 100000000000 is too large: a demonstration model handles at most 1024 actions (0 to 1023)"
+        );
+        let many = "{\"state\":[0],\"action\":0}\n".repeat(MAX_DEMOS + 1);
+        assert_eq!(
+            parse_demos(&many, "d").unwrap_err().0,
+            "d: 10001 demonstrations, but a demonstration model is fitted on at most 10000 (its kernel matrix holds n × n numbers)"
+        );
     }
 
     #[test]

@@ -21,7 +21,7 @@ use std::ops::ControlFlow;
 use std::path::PathBuf;
 
 use alfd_common::config::{EnvName, ExperimentConfig};
-use alfd_common::demo_model::{DemoModel, DemoModelKind};
+use alfd_common::demo_model::{DemoModel, DemoModelKind, MAX_DEMOS};
 use alfd_common::env::{CartPole, Env};
 use alfd_common::policy::argmax;
 use alfd_common::record::ReturnStats;
@@ -95,6 +95,20 @@ pub fn run(args: DemoModelPolicyArgs) -> anyhow::Result<()> {
     if args.demos == 0 {
         return Err(usage("--demos must be at least 1"));
     }
+    if args.demos > MAX_DEMOS {
+        return Err(usage(format!(
+            "--demos {}: a demonstration model is fitted on at most {MAX_DEMOS} demonstrations",
+            args.demos
+        )));
+    }
+    if args.seed.checked_add(args.runs - 1).is_none() {
+        return Err(usage(format!(
+            "--seed {} --runs {}: the last run's seed would be beyond {}",
+            args.seed,
+            args.runs,
+            u64::MAX
+        )));
+    }
     alfd_expert::registry::cartpole(&args.expert)?;
     let source = match &args.queries_config {
         None => DemoSource::ExpertTrajectory,
@@ -104,7 +118,8 @@ pub fn run(args: DemoModelPolicyArgs) -> anyhow::Result<()> {
             DemoSource::Queries(Box::new(cfg))
         }
     };
-    let returns = (args.seed..args.seed + args.runs)
+    let returns = (0..args.runs)
+        .map(|i| args.seed + i)
         .map(|s| play(&args.expert, args.demos, args.model.into(), s, &source).map(|r| r.ret))
         .collect::<anyhow::Result<Vec<f64>>>()?;
     let stats = ReturnStats::of(&returns);

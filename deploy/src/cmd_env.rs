@@ -220,7 +220,10 @@ fn rollout(args: &RolloutArgs, out: &mut impl Write, err: &mut impl Write) -> an
     }
 }
 
-/// Steps `r.env` from `--initial-state` through `--actions`.
+/// Steps `r.env` from `--initial-state` through `--actions`. The whole rollout is computed before
+/// anything is printed: should the dynamics overflow (a state value becoming infinite or NaN, as
+/// from an initial state of magnitude near 1e308), the rollout is refused, naming the step, and
+/// no line is printed.
 fn roll<E: Env, const N: usize>(
     mut r: Rollable<E, N>,
     args: &RolloutArgs,
@@ -230,38 +233,54 @@ fn roll<E: Env, const N: usize>(
     let state = parse_state::<N>(&args.initial_state, r.names)?;
     let actions = parse_actions(&args.actions, r.env.num_actions())?;
     (r.set_state)(&mut r.env, state);
+    let mut lines = Vec::new();
+    let mut warning = None;
     for (i, &action) in actions.iter().enumerate() {
         let step = r
             .env
             .step(action)
             .with_context(|| format!("step {} (action {action})", i + 1))?;
+        let state = (r.state)(&r.env);
+        if let Some(c) = state.iter().position(|v| !v.is_finite()) {
+            return Err(usage(format!(
+                "--initial-state {}: the state stopped being finite at step {} (action {action}): \
+                 {} became {}; the dynamics overflow f64 from an initial state this large, so \
+                 nothing was printed (give one of smaller magnitude)",
+                args.initial_state,
+                i + 1,
+                r.names.split(',').nth(c).unwrap_or("a value"),
+                state[c]
+            )));
+        }
         let line = RolloutLine {
-            state: &(r.state)(&r.env),
+            state: &state,
             reward: step.reward,
             terminated: step.terminated,
             truncated: step.truncated,
         };
-        serde_json::to_writer(&mut *out, &line).context("writing a step")?;
-        writeln!(out).context("writing a step")?;
+        serde_json::to_writer(&mut lines, &line).context("writing a step")?;
+        lines.push(b'\n');
         if step.done() && i + 1 < actions.len() {
-            writeln!(
-                err,
+            warning = Some(format!(
                 "warning: the episode ended after step {} ({}); the {} remaining action(s) were ignored",
                 i + 1,
                 if step.terminated { "terminated" } else { "truncated" },
                 actions.len() - i - 1
-            )
-            .context("writing to stderr")?;
+            ));
             break;
         }
+    }
+    out.write_all(&lines).context("writing the steps")?;
+    if let Some(w) = warning {
+        writeln!(err, "{w}").context("writing to stderr")?;
     }
     Ok(())
 }
 
 /// Reads and parses a map file; both failures are usage errors naming the file.
 fn load_map(path: &Path) -> anyhow::Result<CliffMap> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| usage(format!("--map {}: cannot read: {e}", path.display())))?;
+    let text = crate::setup::read_map_text(path)
+        .map_err(|e| usage(format!("--map {}: {e}", path.display())))?;
     CliffMap::parse(&text).map_err(|e| usage(format!("--map {}: {e}", path.display())))
 }
 
@@ -367,6 +386,41 @@ mod tests {
             lines[1]
         );
         assert!(err.contains("3 remaining action(s) were ignored"), "{err}");
+    }
+
+    #[test]
+    fn a_rollout_whose_state_overflows_is_refused_naming_the_step_and_prints_nothing() {
+        for (env, state, actions, step, value) in [
+            ("cartpole", "0,0,0,1e308", "0,1", 1, "XDOT became NaN"),
+            (
+                "mountaincar",
+                "1e308,1e308",
+                "0,1",
+                1,
+                "POSITION became NaN",
+            ),
+            ("acrobot", "0,0,1e308,1e308", "0,1", 1, "THETA1 became NaN"),
+        ] {
+            let (mut out, mut err) = (Vec::new(), Vec::new());
+            let e =
+                rollout(&rollout_args(env, state, actions, 100), &mut out, &mut err).unwrap_err();
+            assert!(is_usage_error(&e), "{env}: {e:#}");
+            let msg = format!("{e:#}");
+            assert!(
+                msg.contains(&format!("stopped being finite at step {step} (action 0)"))
+                    && msg.contains(value)
+                    && msg.contains(&format!("--initial-state {state}")),
+                "{env}: {msg}"
+            );
+            assert!(
+                out.is_empty() && err.is_empty(),
+                "{env}: something was printed"
+            );
+        }
+        // A large state whose steps stay finite is rolled out.
+        let (out, _) = run_rollout(&rollout_args("cartpole", "1e300,1e300,0,0", "0", 10))
+            .expect("finite all along");
+        assert_eq!(out.lines().count(), 1);
     }
 
     #[test]

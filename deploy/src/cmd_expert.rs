@@ -30,7 +30,7 @@ pub enum ExpertCommand {
     Eval {
         /// Its name (see `alfd expert list`).
         name: String,
-        /// Episodes to play.
+        /// Episodes to play (at most 1,000,000).
         #[arg(long, default_value_t = 100)]
         episodes: usize,
         /// Seed of the first reset.
@@ -38,6 +38,9 @@ pub enum ExpertCommand {
         seed: u64,
     },
 }
+
+/// The most episodes `alfd expert eval` plays (their returns are kept to compute the median).
+const MAX_EVAL_EPISODES: usize = 1_000_000;
 
 pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
     match args.command {
@@ -71,6 +74,11 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
         } => {
             if episodes == 0 {
                 return Err(usage("--episodes must be at least 1"));
+            }
+            if episodes > MAX_EVAL_EPISODES {
+                return Err(usage(format!(
+                    "--episodes {episodes}: at most {MAX_EVAL_EPISODES} episodes are evaluated"
+                )));
             }
             let stats = evaluate_named(&name, episodes, seed)?;
             println!("{}", serde_json::to_string(&stats)?);

@@ -89,13 +89,35 @@ fn blame(err: &ConfigError, overrides: &[String], file_alone: Option<&ConfigErro
     }
 }
 
+/// The most bytes read from a map file: the largest map (`MAX_MAP_SIDE` = 128 rows of 128 tiles)
+/// takes 16.5 kB, so this leaves room for trailing whitespace and blank lines, and a larger file
+/// (or `/dev/zero`) is refused rather than read whole.
+pub const MAX_MAP_FILE_BYTES: u64 = 1 << 20;
+
+/// The text of a map file, at most [`MAX_MAP_FILE_BYTES`]; the error says why not (without the
+/// path, which the caller names).
+pub fn read_map_text(path: &Path) -> Result<String, String> {
+    use std::io::Read as _;
+    let file = std::fs::File::open(path).map_err(|e| format!("cannot read: {e}"))?;
+    let mut text = String::new();
+    file.take(MAX_MAP_FILE_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(|e| format!("cannot read: {e}"))?;
+    if text.len() as u64 > MAX_MAP_FILE_BYTES {
+        return Err(format!(
+            "the file is larger than {MAX_MAP_FILE_BYTES} bytes; a map has at most {side}x{side} tiles",
+            side = alfd_common::env::cliffwalk::MAX_MAP_SIDE
+        ));
+    }
+    Ok(text)
+}
+
 /// Reads a CliffWalk map file, or the built-in map.
 pub fn load_map(path: Option<&str>) -> anyhow::Result<CliffMap> {
     match path {
         None => Ok(CliffMap::default_map()),
         Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .map_err(|e| usage(format!("cannot read map {p}: {e}")))?;
+            let text = read_map_text(Path::new(p)).map_err(|e| usage(format!("map {p}: {e}")))?;
             CliffMap::parse(&text).with_context(|| format!("in map {p}"))
         }
     }

@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-use crate::support::{repo, timed, tmp};
+use crate::support::{repo, text, timed, tmp};
 
 fn alfd(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_alfd"))
@@ -561,4 +561,266 @@ fn resume_refuses_a_bad_checkpoint_saying_why_and_keeps_it() {
     );
     let o = alfd(&["resume", dir.join("none").to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
+}
+
+/// A `width`×`height` CliffWalk map: plates, S at the bottom left, G at the bottom right.
+fn open_map(width: usize, height: usize) -> String {
+    let mut rows = vec![".".repeat(width); height];
+    let last = &mut rows[height - 1];
+    last.replace_range(0..1, "S");
+    last.replace_range(width - 1..width, "G");
+    rows.join("\n") + "\n"
+}
+
+#[test]
+fn a_map_over_the_size_limit_is_refused_wherever_a_map_is_read() {
+    let _time = timed!();
+    let dir = tmp("big-map");
+    let big = dir.join("big.txt");
+    std::fs::write(&big, open_map(129, 3)).unwrap();
+    let big = big.to_str().unwrap();
+    let too_large =
+        "map is too large: 129x3 tiles (width x height, the width of line 1); at most 128x128 are allowed";
+    assert_usage_error(
+        &["env", "show", "--env", "cliffwalk", "--map", big],
+        too_large,
+    );
+    // In a config: refused before anything runs (no output directory).
+    let out = dir.join("out");
+    let o = out.to_str().unwrap();
+    let set = format!("env.map=\"{big}\"");
+    let cfg = "deploy/configs/cliffwalk-qlearning.toml";
+    assert_usage_error(
+        &["local", "--config", cfg, "--set", &set, "--out", o],
+        too_large,
+    );
+    let experiment = dir.join("exp.toml");
+    let qlearning = repo().join("deploy/configs/cliffwalk-qlearning.toml");
+    std::fs::write(
+        &experiment,
+        format!(
+            "title = \"t\"\nseeds = 1\n[[method]]\nname = \"q\"\nconfig = \"{}\"\nset = [{set:?}]\n",
+            qlearning.display()
+        ),
+    )
+    .unwrap();
+    assert_usage_error(
+        &[
+            "sweep",
+            "--config",
+            experiment.to_str().unwrap(),
+            "--out",
+            o,
+        ],
+        too_large,
+    );
+    assert!(!out.exists(), "nothing ran");
+    // A file far larger than any map is not read whole.
+    let huge = dir.join("huge.txt");
+    std::fs::write(&huge, ".".repeat(2 << 20)).unwrap();
+    let huge = huge.to_str().unwrap();
+    assert_usage_error(
+        &["env", "show", "--env", "cliffwalk", "--map", huge],
+        "the file is larger than 1048576 bytes",
+    );
+    // The largest map is shown, and trained on, quickly.
+    let largest = dir.join("largest.txt");
+    std::fs::write(&largest, open_map(128, 128)).unwrap();
+    let largest = largest.to_str().unwrap();
+    let o = alfd(&["env", "show", "--env", "cliffwalk", "--map", largest]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("128x128 (width x height), 0 pits"));
+    let run = dir.join("run");
+    let set = format!("env.map=\"{largest}\"");
+    let o = alfd(&[
+        "local",
+        "--config",
+        "deploy/configs/cliffwalk-qlearning.toml",
+        "--set",
+        &set,
+        "--set",
+        "episodes=5",
+        "--out",
+        run.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(summary["greedy_value_at_start"].is_f64(), "{summary}");
+}
+
+#[test]
+fn demo_model_refuses_an_absurd_number_of_actions_or_demonstrations() {
+    let _time = timed!();
+    let dir = tmp("demo-model-limits");
+    let (demos, query) = (dir.join("demos.jsonl"), dir.join("query.jsonl"));
+    std::fs::write(
+        &demos,
+        "{\"state\":[0,1],\"action\":1}\n{\"state\":[1,0],\"action\":0}\n",
+    )
+    .unwrap();
+    std::fs::write(&query, "{\"state\":[0.5,0.5]}\n").unwrap();
+    let (d, q) = (demos.to_str().unwrap(), query.to_str().unwrap());
+    let fit = |extra: &[&str]| {
+        let mut args = vec!["demo-model", "--kind", "krr", "--demos", d, "--query", q];
+        args.extend_from_slice(extra);
+        args.into_iter().map(str::to_owned).collect::<Vec<_>>()
+    };
+    let args = fit(&["--actions", "100000000000"]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    assert_usage_error(
+        &args,
+        "--actions 100000000000: a demonstration model handles at most 1024 actions",
+    );
+    // The largest number of actions still fits.
+    let args = fit(&["--actions", "1024"]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = alfd(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Without --actions, the largest demonstrated action sets it.
+    std::fs::write(&demos, "{\"state\":[0,1],\"action\":100000000000}\n").unwrap();
+    let args = fit(&[]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    assert_usage_error(
+        &args,
+        &format!("{d}:1: action 100000000000 is too large: a demonstration model handles at most 1024 actions"),
+    );
+    std::fs::write(&demos, "{\"state\":[0,1],\"action\":1}\n".repeat(10_001)).unwrap();
+    assert_usage_error(
+        &args,
+        &format!("{d}: 10001 demonstrations, but a demonstration model is fitted on at most 10000"),
+    );
+    assert_usage_error(
+        &["demo-model-policy", "--demos", "100000", "--runs", "1"],
+        "--demos 100000: a demonstration model is fitted on at most 10000 demonstrations",
+    );
+}
+
+#[test]
+fn a_rollout_whose_state_overflows_is_refused_naming_the_step() {
+    let _time = timed!();
+    for (env, state, component) in [
+        ("cartpole", "0,0,0,1e308", "XDOT"),
+        ("mountaincar", "1e308,1e308", "POSITION"),
+        ("acrobot", "0,0,1e308,1e308", "THETA1"),
+    ] {
+        let args = [
+            "env",
+            "rollout",
+            "--env",
+            env,
+            "--initial-state",
+            state,
+            "--actions",
+            "0,1",
+        ];
+        assert_usage_error(
+            &args,
+            &format!(
+                "--initial-state {state}: the state stopped being finite at step 1 (action 0): {component} became NaN"
+            ),
+        );
+        let o = alfd(&args);
+        assert!(o.stdout.is_empty(), "{env}: no null printed: {}", text(&o));
+    }
+}
+
+#[test]
+fn config_values_accepted_silently_before_are_refused_naming_the_field() {
+    let _time = timed!();
+    let out = tmp("bad-config-values");
+    let o = out.join("run");
+    let o = o.to_str().unwrap();
+    let tabular = "deploy/configs/cliffwalk-qlearning.toml";
+    let neural = "deploy/configs/cartpole-bdqn-krr.toml";
+    for (config, set, message) in [
+        (
+            tabular,
+            "agent.gamma=1.0",
+            "`agent.gamma` must be in [0, 1) for the tabular agents",
+        ),
+        (
+            neural,
+            "agent.hidden=100000000",
+            "`agent.hidden` must be at most 1024, got 100000000",
+        ),
+        (
+            neural,
+            "agent.replay_capacity=100000000000",
+            "`agent.replay_capacity` must be at most 1000000",
+        ),
+        (
+            neural,
+            "agent.batch_size=100000",
+            "`agent.batch_size` must be at most 8192",
+        ),
+        (
+            neural,
+            "query.queue_len=100000000000",
+            "`query.queue_len` must be at most 100000",
+        ),
+        (
+            neural,
+            "budget.total=100000",
+            "`budget.total` is 100000, but the demonstration model (`expert.model`) is refitted on every demonstration and takes at most 10000",
+        ),
+        (
+            neural,
+            "agent.epsilon_decay_steps=nan",
+            "`agent.epsilon_decay_steps` must be > 0 and finite, got NaN",
+        ),
+    ] {
+        let args = ["local", "--config", config, "--set", set, "--out", o];
+        assert_usage_error(&args, &format!("in `--set {set}` (on the command line)"));
+        assert_usage_error(&args, message);
+    }
+    assert!(!out.join("run").exists(), "nothing ran");
+}
+
+#[test]
+fn size_like_arguments_have_limits_naming_the_argument() {
+    let _time = timed!();
+    let out = tmp("size-arguments");
+    let o = out.join("sweep");
+    let o = o.to_str().unwrap();
+    assert_usage_error(
+        &[
+            "expert",
+            "eval",
+            "cartpole-1000",
+            "--episodes",
+            "100000000000",
+        ],
+        "--episodes 100000000000: at most 1000000 episodes are evaluated",
+    );
+    let experiment = "deploy/experiments/fig3-cliffwalk.toml";
+    assert_usage_error(
+        &[
+            "sweep",
+            "--config",
+            experiment,
+            "--seeds",
+            "100000000000",
+            "--out",
+            o,
+        ],
+        "`seeds` (or --seeds) is 100000000000; at most 10000 are allowed",
+    );
+    assert_usage_error(
+        &[
+            "sweep", "--config", experiment, "--jobs", "100000", "--out", o,
+        ],
+        "--jobs 100000: at most 256 runs at a time",
+    );
+    assert_usage_error(
+        &[
+            "demo-model-policy",
+            "--seed",
+            "18446744073709551615",
+            "--runs",
+            "2",
+        ],
+        "the last run's seed would be beyond 18446744073709551615",
+    );
+    assert!(!out.join("sweep").exists(), "nothing ran");
 }

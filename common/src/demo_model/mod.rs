@@ -20,6 +20,14 @@ use serde::{Deserialize, Serialize};
 /// The RBF kernel width used by both models, `k(x, y) = exp(-GAMMA |x - y|^2)`.
 pub const GAMMA: f64 = 0.1;
 
+/// The most demonstrations a model is fitted on. Both models hold the `n × n` kernel matrix:
+/// 10,000 demonstrations take 800 MB and a KRR fit about three minutes on a 2-core machine; many
+/// more would exhaust memory (50,000: 20 GB).
+pub const MAX_DEMOS: usize = 10_000;
+
+/// The most actions a model gives probabilities for (the environments have at most 4).
+pub const MAX_ACTIONS: usize = 1024;
+
 /// Which demonstration model to fit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -89,6 +97,10 @@ pub enum DemoModelError {
     },
     #[error("the number of actions must be at least 1, got {0}")]
     NoActions(usize),
+    #[error("{0} actions: a demonstration model handles at most {MAX_ACTIONS}")]
+    TooManyActions(usize),
+    #[error("{0} demonstrations: a demonstration model is fitted on at most {MAX_DEMOS} (its kernel matrix holds n × n numbers)")]
+    TooManyDemos(usize),
     #[error("unsupported: {0}")]
     Unsupported(String),
     #[error("the SVM solver failed: {0}")]
@@ -230,6 +242,12 @@ pub(crate) fn validate<S: AsRef<[f64]>>(
     if num_actions == 0 {
         return Err(DemoModelError::NoActions(num_actions));
     }
+    if num_actions > MAX_ACTIONS {
+        return Err(DemoModelError::TooManyActions(num_actions));
+    }
+    if states.len() > MAX_DEMOS {
+        return Err(DemoModelError::TooManyDemos(states.len()));
+    }
     let dim = states[0].as_ref().len();
     if dim == 0 {
         return Err(DemoModelError::EmptyState { row: 0 });
@@ -320,6 +338,23 @@ mod tests {
             validate(&[vec![1.0]], &[0], 0).unwrap_err(),
             DemoModelError::NoActions(0)
         );
+    }
+
+    #[test]
+    fn sizes_beyond_the_limits_are_refused_before_anything_is_allocated() {
+        // 10^11 actions would ask for an 800 GB matrix of targets.
+        let e = validate(&[vec![1.0]], &[0], 100_000_000_000).unwrap_err();
+        assert_eq!(e, DemoModelError::TooManyActions(100_000_000_000));
+        assert_eq!(
+            e.to_string(),
+            "100000000000 actions: a demonstration model handles at most 1024"
+        );
+        assert!(validate(&[vec![1.0]], &[0], MAX_ACTIONS).is_ok());
+        let states = vec![vec![0.0]; MAX_DEMOS + 1];
+        let actions = vec![0; MAX_DEMOS + 1];
+        let e = DemoModel::fit(DemoModelKind::Krr, &states, &actions, 2).unwrap_err();
+        assert_eq!(e, DemoModelError::TooManyDemos(MAX_DEMOS + 1));
+        assert!(e.to_string().contains("at most 10000"), "{e}");
     }
 
     #[test]

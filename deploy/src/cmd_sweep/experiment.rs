@@ -214,6 +214,9 @@ impl Method {
     }
 }
 
+/// The most seeds a sweep runs (the paper's figures use 10 to 50).
+pub const MAX_SEEDS: u64 = 10_000;
+
 impl Experiment {
     /// Reads and validates an experiment file; `seeds` and `episodes` override the file's.
     /// Every method's config is loaded and checked, and its expert looked up, so that a bad entry
@@ -247,6 +250,11 @@ impl Experiment {
         let seeds = seeds.unwrap_or(file.seeds);
         if seeds == 0 {
             return Err(bad("`seeds` (or --seeds) must be at least 1, got 0".into()));
+        }
+        if seeds > MAX_SEEDS {
+            return Err(bad(format!(
+                "`seeds` (or --seeds) is {seeds}; at most {MAX_SEEDS} are allowed (every run's config is prepared before the first starts)"
+            )));
         }
         let episodes = episodes.or(file.episodes);
         if episodes == Some(0) {
@@ -360,6 +368,12 @@ fn policy_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {
     let demos = m.demos.unwrap_or(100);
     if demos == 0 {
         anyhow::bail!("`demos` must be at least 1");
+    }
+    if demos > alfd_common::demo_model::MAX_DEMOS {
+        anyhow::bail!(
+            "`demos` = {demos}: a demonstration model is fitted on at most {} demonstrations",
+            alfd_common::demo_model::MAX_DEMOS
+        );
     }
     let model = m
         .model

@@ -67,10 +67,18 @@ pub struct SweepArgs {
     pub quiet: bool,
 }
 
+/// The most runs a sweep runs at a time.
+const MAX_JOBS: usize = 256;
+
 pub fn run(args: SweepArgs) -> anyhow::Result<()> {
     let exp = Experiment::load(&args.config, args.seeds, args.episodes)?;
     let jobs = match args.jobs {
         Some(0) => return Err(usage("--jobs must be at least 1")),
+        Some(j) if j > MAX_JOBS => {
+            return Err(usage(format!(
+                "--jobs {j}: at most {MAX_JOBS} runs at a time (one thread each)"
+            )))
+        }
         Some(j) => j,
         None => std::thread::available_parallelism().map_or(1, usize::from),
     };
