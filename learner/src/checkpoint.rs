@@ -115,15 +115,15 @@ mod tests {
     fn a_checkpoint_restores_the_learner_exactly_and_bad_ones_are_refused_saying_why() {
         let tmp = test_dir("learner-ckpt");
         let d = tmp.path();
-        assert!(load(&d, CONFIG).unwrap().is_none());
+        assert!(load(d, CONFIG).unwrap().is_none());
         let l = learner();
         let ckpt = LearnerCheckpoint {
             learner: l.snapshot(),
             env_steps: 1234,
         };
-        let size = save(&d, &ckpt, CONFIG).unwrap();
-        assert_eq!(std::fs::metadata(path(&d)).unwrap().len(), size as u64);
-        let back = load(&d, CONFIG).unwrap().unwrap();
+        let size = save(d, &ckpt, CONFIG).unwrap();
+        assert_eq!(std::fs::metadata(path(d)).unwrap().len(), size as u64);
+        let back = load(d, CONFIG).unwrap().unwrap();
         assert_eq!(back, ckpt);
         // Restored, the learner goes on exactly as the original does.
         let cfg = ExperimentConfig::from_toml(CONFIG).unwrap();
@@ -146,19 +146,19 @@ mod tests {
 
         // Another config, a truncated file, a flipped byte: refused, the file kept.
         let other = CONFIG.replace("seed = 3", "seed = 4");
-        let e = load(&d, &other).unwrap_err().to_string();
+        let e = load(d, &other).unwrap_err().to_string();
         assert!(e.contains("learner.ckpt") && e.contains("config"), "{e}");
-        let good = std::fs::read(path(&d)).unwrap();
-        std::fs::write(path(&d), &good[..good.len() / 2]).unwrap();
-        let e = load(&d, CONFIG).unwrap_err().to_string();
+        let good = std::fs::read(path(d)).unwrap();
+        std::fs::write(path(d), &good[..good.len() / 2]).unwrap();
+        let e = load(d, CONFIG).unwrap_err().to_string();
         assert!(e.contains("truncated"), "{e}");
         let mut flipped = good.clone();
         let n = flipped.len() - 10;
         flipped[n] ^= 0x40;
-        std::fs::write(path(&d), &flipped).unwrap();
-        let e = load(&d, CONFIG).unwrap_err().to_string();
+        std::fs::write(path(d), &flipped).unwrap();
+        let e = load(d, CONFIG).unwrap_err().to_string();
         assert!(e.contains("corrupt") || e.contains("checksum"), "{e}");
-        assert_eq!(std::fs::read(path(&d)).unwrap(), flipped);
+        assert_eq!(std::fs::read(path(d)).unwrap(), flipped);
     }
 
     /// BENCHMARKS.md, "Checkpoints": the size and write time of `learner.ckpt` with a full

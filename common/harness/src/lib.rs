@@ -14,4 +14,4 @@ pub use fs::write_atomically;
 pub use process::{check_wire_limits, exit_code, main, BadInput, ProcessArgs, Setup};
 pub use runtime::{RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY, RUNTIME_FILE};
 pub use session::{Session, SessionError, LAUNCHER_SILENCE, STOP_REQUESTED, TERMINATION_SIGNAL};
-pub use startup::{init_process_logging, schema_version_from_env};
+pub use startup::{init_process_logging, log_filter, schema_version_from_env};
