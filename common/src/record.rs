@@ -84,6 +84,84 @@ pub fn episodes_csv(records: &[EpisodeRecord]) -> String {
     out
 }
 
+/// Why `episodes.csv` text cannot be read back.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EpisodesCsvError {
+    #[error("episodes.csv is empty (no header line)")]
+    NoHeader,
+    #[error("episodes.csv has no `{0}` column")]
+    MissingColumn(&'static str),
+    #[error("episodes.csv line {line}, column `{column}`: cannot read {value:?}")]
+    BadValue {
+        /// 1-based line number (the header is line 1).
+        line: usize,
+        column: &'static str,
+        value: String,
+    },
+}
+
+/// Reads `episodes.csv` text back into records, the inverse of [`episodes_csv`]. Columns are found
+/// by their header name, so files of an older layout read too: `episode`, `return`, `length` and
+/// `demos_used` are required, the others take [`EpisodeRecord::default`]'s values when absent;
+/// an empty `eval_return` is NaN (no evaluation). Blank lines are skipped.
+pub fn parse_episodes_csv(text: &str) -> Result<Vec<EpisodeRecord>, EpisodesCsvError> {
+    let mut lines = text.lines().enumerate();
+    let header: Vec<&str> = match lines.next() {
+        Some((_, h)) if !h.trim().is_empty() => h.split(',').map(str::trim).collect(),
+        _ => return Err(EpisodesCsvError::NoHeader),
+    };
+    let col = |name: &str| header.iter().position(|h| *h == name);
+    let need = |name: &'static str| col(name).ok_or(EpisodesCsvError::MissingColumn(name));
+    let (episode, ret, length, demos_used) = (
+        need("episode")?,
+        need("return")?,
+        need("length")?,
+        need("demos_used")?,
+    );
+    let (mean_js, queries, shaped_steps) = (col("mean_js"), col("queries"), col("shaped_steps"));
+    let (total_steps, actor, eval_return) = (col("total_steps"), col("actor"), col("eval_return"));
+    let mut records = Vec::new();
+    for (i, line) in lines.filter(|(_, l)| !l.trim().is_empty()) {
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let n = i + 1;
+        let d = EpisodeRecord::default();
+        let eval = match eval_return.and_then(|c| fields.get(c)) {
+            Some(v) if !v.is_empty() => value(&fields, eval_return, "eval_return", n)?,
+            _ => None,
+        };
+        records.push(EpisodeRecord {
+            episode: value(&fields, Some(episode), "episode", n)?.unwrap_or_default(),
+            ret: value(&fields, Some(ret), "return", n)?.unwrap_or_default(),
+            length: value(&fields, Some(length), "length", n)?.unwrap_or_default(),
+            demos_used: value(&fields, Some(demos_used), "demos_used", n)?.unwrap_or_default(),
+            mean_js: value(&fields, mean_js, "mean_js", n)?.unwrap_or(d.mean_js),
+            queries: value(&fields, queries, "queries", n)?.unwrap_or(d.queries),
+            shaped_steps: value(&fields, shaped_steps, "shaped_steps", n)?
+                .unwrap_or(d.shaped_steps),
+            total_steps: value(&fields, total_steps, "total_steps", n)?.unwrap_or(d.total_steps),
+            actor: value(&fields, actor, "actor", n)?.unwrap_or(d.actor),
+            eval_return: eval.unwrap_or(d.eval_return),
+        });
+    }
+    Ok(records)
+}
+
+/// The value in column `at` (if the file has that column) of a row's `fields`.
+fn value<T: std::str::FromStr>(
+    fields: &[&str],
+    at: Option<usize>,
+    column: &'static str,
+    line: usize,
+) -> Result<Option<T>, EpisodesCsvError> {
+    let Some(c) = at else { return Ok(None) };
+    let v = fields.get(c).copied().unwrap_or_default();
+    v.parse().map(Some).map_err(|_| EpisodesCsvError::BadValue {
+        line,
+        column,
+        value: v.to_owned(),
+    })
+}
+
 /// Mean of the last (at most) 50 returns, as run summaries report it (0 with no episodes).
 pub fn mean_return_last_50(returns: &[f64]) -> f64 {
     let tail = &returns[returns.len().saturating_sub(50)..];
@@ -200,6 +278,57 @@ mod tests {
             episodes_csv(&[r, r]),
             format!("{CSV_HEADER}\n3,12.5,12,4,0.1,2,7,99,5,\n3,12.5,12,4,0.1,2,7,99,5,\n")
         );
+    }
+
+    #[test]
+    fn episodes_csv_reads_back_what_it_wrote_and_older_layouts_too() {
+        let r = |episode, ret, eval_return| EpisodeRecord {
+            episode,
+            ret,
+            length: 12,
+            demos_used: episode * 2,
+            mean_js: 0.125,
+            queries: 1,
+            shaped_steps: episode,
+            total_steps: u64::from(episode) * 12 + 12,
+            actor: 1,
+            eval_return,
+        };
+        let records = [r(0, 12.5, f64::NAN), r(1, -3.0, 950.5), r(2, 0.1, f64::NAN)];
+        let text = episodes_csv(&records);
+        let back = parse_episodes_csv(&text).unwrap();
+        // NaN is not equal to itself: compare the rows.
+        assert_eq!(episodes_csv(&back), text);
+        assert!(back[0].eval_return.is_nan() && back[1].eval_return == 950.5);
+        // Blank lines are skipped; a file with only its header has no records.
+        assert_eq!(parse_episodes_csv(&format!("{text}\n\n")).unwrap().len(), 3);
+        assert_eq!(
+            parse_episodes_csv(&format!("{CSV_HEADER}\n")).unwrap(),
+            vec![]
+        );
+        // An older layout, columns in another order, some missing: defaults.
+        let old = parse_episodes_csv("return,episode,length,demos_used\n7,4,7,3\n").unwrap();
+        assert_eq!(
+            (old[0].episode, old[0].ret, old[0].length, old[0].demos_used),
+            (4, 7.0, 7, 3)
+        );
+        assert!(old[0].eval_return.is_nan() && old[0].total_steps == 0);
+        // Errors say where.
+        assert_eq!(parse_episodes_csv(""), Err(EpisodesCsvError::NoHeader));
+        assert_eq!(
+            parse_episodes_csv("episode,return,length\n"),
+            Err(EpisodesCsvError::MissingColumn("demos_used"))
+        );
+        let bad = format!("{CSV_HEADER}\n0,1,2,3,0.1,0,0,12,0,\n1,x,2,3,0.1,0,0,12,0,\n");
+        assert_eq!(
+            parse_episodes_csv(&bad),
+            Err(EpisodesCsvError::BadValue {
+                line: 3,
+                column: "return",
+                value: "x".into()
+            })
+        );
+        assert!(parse_episodes_csv(&format!("{CSV_HEADER}\n0,1\n")).is_err());
     }
 
     #[test]

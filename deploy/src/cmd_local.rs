@@ -18,6 +18,7 @@ use alfd_common::runner::{
 use anyhow::Context as _;
 
 use crate::checkpoint_file::{self, CheckpointFile};
+use crate::report::{self, Output};
 use crate::usage::usage;
 use crate::{run_dir, setup};
 
@@ -32,9 +33,13 @@ pub struct LocalArgs {
     /// Output directory (created if missing); it must not hold a run already.
     #[arg(long)]
     pub out: PathBuf,
-    /// Print no progress.
+    /// Print no progress and no summary at the end.
     #[arg(long)]
     pub quiet: bool,
+    /// Print only the machine-readable line: the run's summary as JSON on stdout (printed also
+    /// without this flag when stdout is not a terminal).
+    #[arg(long)]
+    pub json: bool,
     /// Write `OUT/checkpoint.bin` every N episodes, so that `alfd resume OUT` can continue the
     /// run if it stops.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
@@ -55,16 +60,29 @@ pub fn run(args: LocalArgs) -> anyhow::Result<()> {
         from: None,
         stop_after: args.stop_after_episodes,
     };
-    finish(run_pieces(&cfg, pieces, &args.out, !args.quiet, resumable)?)
+    let output = Output {
+        json: args.json,
+        quiet: args.quiet,
+    };
+    let summary = run_pieces(&cfg, pieces, &args.out, output.progress(), resumable)?;
+    finish(&cfg, &args.out, summary, output)
 }
 
-/// Prints the summary of a run that ended, or says where a stopped run stopped.
-pub(crate) fn finish(summary: Option<RunSummary>) -> anyhow::Result<()> {
+/// Reports a run in `dir` that ended (its learning curve, the JSON line, the summary: see
+/// [`report`]), or says where a stopped run stopped.
+pub(crate) fn finish(
+    cfg: &ExperimentConfig,
+    dir: &Path,
+    summary: Option<RunSummary>,
+    output: Output,
+) -> anyhow::Result<()> {
     match summary {
-        Some(summary) => println!("{}", serde_json::to_string(&summary)?),
-        None => eprintln!("stopped as asked (--stop-after-episodes); continue with `alfd resume`"),
+        Some(summary) => report::finish_run(cfg, dir, &summary, output),
+        None => {
+            eprintln!("stopped as asked (--stop-after-episodes); continue with `alfd resume`");
+            Ok(())
+        }
     }
-    Ok(())
 }
 
 /// How a run checkpoints, and where it starts.

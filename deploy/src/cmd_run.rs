@@ -8,6 +8,7 @@ use alfd_harness::RuntimeConfig;
 use alfd_wire::MAX_ACTORS;
 
 use crate::launcher::{self, Plan, SwapRequest, SwapResponse, SWAP_REQUEST, SWAP_RESPONSE};
+use crate::report::{self, Output};
 use crate::usage::usage;
 use crate::{run_dir, setup};
 
@@ -30,9 +31,13 @@ pub struct RunArgs {
     /// The run directory; default `runs/<run id>`. It must not hold a run already.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Print no progress bar.
+    /// Print no progress bar and no summary at the end.
     #[arg(long)]
     pub quiet: bool,
+    /// Print only the machine-readable line: the run's summary as JSON on stdout (printed also
+    /// without this flag when stdout is not a terminal).
+    #[arg(long)]
+    pub json: bool,
     /// Credit window: steps an actor may run ahead of the learner's updates (1..=64).
     #[arg(long, default_value_t = 32)]
     pub window: u64,
@@ -104,6 +109,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| PathBuf::from("runs").join(&run_id));
     // A run directory belongs to one run: refused if it holds one, locked while this one runs.
     let _lock = run_dir::claim_new(&run_dir)?;
+    let output = Output {
+        json: args.json,
+        quiet: args.quiet,
+    };
     let plan = Plan {
         cfg,
         actors: args.actors,
@@ -111,41 +120,32 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         run_id,
         runtime,
         max_restarts: args.max_restarts,
-        progress: !args.quiet,
+        progress: output.progress(),
         pin: args.pin,
         bin_dir: launcher::bin_dir()?,
         resume: false,
         launches: 1,
     };
-    finish(&plan, args.quiet)
+    finish(&plan, output)
 }
 
-/// Runs `plan` to its end, writes `summary.json` and reports.
-pub fn finish(plan: &Plan, quiet: bool) -> anyhow::Result<()> {
+/// Runs `plan` to its end, writes `summary.json` and reports (the learning curve, the JSON
+/// line, the summary: see [`crate::report`]).
+pub fn finish(plan: &Plan, output: Output) -> anyhow::Result<()> {
     let run_dir = &plan.run_dir;
     let summary = launcher::launch(plan)?;
     crate::cmd_local::write(
-        &run_dir,
+        run_dir,
         "summary.json",
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
-    println!("{}", serde_json::to_string(&summary)?);
+    report::finish_run(&plan.cfg, run_dir, &summary, output)?;
     if summary.runtime.as_ref().is_some_and(|r| r.interrupted) {
         eprintln!(
             "interrupted: the run was stopped cleanly; its directory is {}",
             run_dir.display()
         );
         std::process::exit(130);
-    }
-    if !quiet {
-        eprintln!(
-            "done: {} episodes, mean return of the last 50 {:.1}, {} demonstrations used; \
-             results in {} (episodes.csv, demos.jsonl, weights.safetensors, summary.json, logs)",
-            summary.episodes,
-            summary.mean_return_last_50,
-            summary.demos_used,
-            run_dir.display()
-        );
     }
     Ok(())
 }

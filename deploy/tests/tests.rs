@@ -2,6 +2,7 @@
 
 mod cli;
 mod faults;
+mod report;
 mod runtime;
 mod support;
 mod sweep;

@@ -24,7 +24,7 @@
 //! other episodes) is refused rather than mixed in.
 
 mod experiment;
-mod plot;
+pub(crate) mod plot;
 mod stats;
 mod summary;
 
@@ -40,6 +40,7 @@ use anyhow::Context as _;
 
 use crate::cmd_demo_model_policy::{self, PolicyRun};
 use crate::cmd_local::{self, write};
+use crate::report::{Output, SweepReport};
 use crate::usage::usage;
 use alfd_common::record::RunSummary;
 use experiment::{Experiment, ExperimentKind, Method, MethodSpec};
@@ -62,9 +63,13 @@ pub struct SweepArgs {
     /// Training episodes of every run; overrides the experiment file's and the configs'.
     #[arg(long)]
     pub episodes: Option<u32>,
-    /// Print no progress bar.
+    /// Print no progress bar and no summary at the end.
     #[arg(long)]
     pub quiet: bool,
+    /// Print only a machine-readable line: the sweep's numbers and files as JSON on stdout.
+    /// (Without it, a stdout that is not a terminal gets the one-line summary as before.)
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// The most runs a sweep runs at a time.
@@ -93,11 +98,16 @@ pub fn run(args: SweepArgs) -> anyhow::Result<()> {
         write!(command, " --episodes {e}")?;
     }
     write!(command, " --out {}", args.out.display())?;
+    let output = Output {
+        json: args.json,
+        quiet: args.quiet,
+    };
     let ctx = Ctx {
         exp: &exp,
         out: &args.out,
         jobs,
-        progress: !args.quiet,
+        progress: output.progress(),
+        output,
         command,
         start: Instant::now(),
     };
@@ -112,6 +122,7 @@ struct Ctx<'a> {
     out: &'a Path,
     jobs: usize,
     progress: bool,
+    output: Output,
     command: String,
     start: Instant,
 }
@@ -164,7 +175,7 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
     let wall = ctx.start.elapsed().as_secs_f64();
     let md = summary::training_summary(ctx, &results, pending.len(), resumed, wall, &plotted);
     write(ctx.out, "summary.md", md.as_bytes())?;
-    println!(
+    let line = format!(
         "sweep {}: {} runs, {} run now, {} resumed (complete already), {:.1} s; see {}",
         exp.name,
         total,
@@ -173,7 +184,44 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
         wall,
         ctx.out.join("summary.md").display()
     );
-    Ok(())
+    let files = ["summary.md", "curves.csv"].map(str::to_owned);
+    sweep_report(
+        ctx,
+        total,
+        pending.len(),
+        resumed,
+        wall,
+        &files,
+        &plotted,
+        line,
+    )
+    .print(ctx.output)
+}
+
+/// The end of a sweep, for [`SweepReport::print`].
+#[allow(clippy::too_many_arguments)]
+fn sweep_report(
+    ctx: &Ctx,
+    runs: u64,
+    run_now: usize,
+    resumed: u64,
+    wall_clock_s: f64,
+    files: &[String],
+    plotted: &[String],
+    line: String,
+) -> SweepReport {
+    SweepReport {
+        sweep: ctx.exp.name.clone(),
+        out: ctx.out.display().to_string(),
+        methods: ctx.exp.methods.iter().map(|m| m.name.clone()).collect(),
+        seeds: ctx.exp.seeds,
+        runs,
+        run_now,
+        resumed,
+        wall_clock_s,
+        files: files.iter().chain(plotted).cloned().collect(),
+        line,
+    }
 }
 
 fn run_dir(out: &Path, method: &str, seed: u64) -> PathBuf {
@@ -483,10 +531,12 @@ fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
         plotted.join(", ")
     );
     write(ctx.out, "summary.md", md.as_bytes())?;
-    println!(
+    let line = format!(
         "sweep {}: {total} runs, {wall:.1} s; see {}",
         exp.name,
         ctx.out.join("summary.md").display()
     );
-    Ok(())
+    let files = ["summary.md", "returns.csv"].map(str::to_owned);
+    let n = usize::try_from(total).unwrap_or(usize::MAX);
+    sweep_report(ctx, total, n, 0, wall, &files, &plotted, line).print(ctx.output)
 }
