@@ -138,27 +138,8 @@ fn try_lock(path: &Path) -> anyhow::Result<Result<DirLock, String>> {
     Ok(Ok(DirLock { _file: file }))
 }
 
-/// A unit test's scratch directory `alfd-NAME-XXXXXX` in the system's temporary directory,
-/// removed with everything in it when dropped (also while a failed test unwinds); kept, and named
-/// on stderr, when `ALFD_KEEP_TEST_DIRS=1`.
 #[cfg(test)]
-pub(crate) fn test_dir(name: &str) -> tempfile::TempDir {
-    let keep = std::env::var_os("ALFD_KEEP_TEST_DIRS").is_some_and(|v| v == "1");
-    let dir = tempfile::Builder::new()
-        .prefix(&format!("alfd-{name}-"))
-        .disable_cleanup(keep)
-        .tempdir()
-        .expect("a temporary directory");
-    if keep {
-        // Straight to stderr: libtest's capture would hide it for a test that passes.
-        let _ = writeln!(
-            std::io::stderr(),
-            "ALFD_KEEP_TEST_DIRS: keeping {}",
-            dir.path().display()
-        );
-    }
-    dir
-}
+pub(crate) use alfd_harness::test_dir;
 
 #[cfg(test)]
 mod tests {

@@ -67,21 +67,7 @@ pub(crate) fn text(o: &Output) -> String {
 /// A fresh, empty directory `alfd-NAME-XXXXXX` in the system's temporary directory, removed
 /// with everything in it when dropped (see [`TestDir`]).
 pub(crate) fn tmp(name: &str) -> TestDir {
-    let keep = std::env::var_os("ALFD_KEEP_TEST_DIRS").is_some_and(|v| v == "1");
-    let dir = tempfile::Builder::new()
-        .prefix(&format!("alfd-{name}-"))
-        .disable_cleanup(keep)
-        .tempdir()
-        .expect("a temporary directory");
-    if keep {
-        // Straight to stderr: libtest's capture would hide it for a test that passes.
-        let _ = writeln!(
-            std::io::stderr(),
-            "ALFD_KEEP_TEST_DIRS: keeping {}",
-            dir.path().display()
-        );
-    }
-    TestDir(dir)
+    TestDir(alfd_harness::test_dir(name))
 }
 
 /// A test's temporary directory: used as a [`Path`], removed when dropped, also while a failed

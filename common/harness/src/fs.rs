@@ -30,11 +30,11 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A unit test's scratch directory `alfd-NAME-XXXXXX` in the system's temporary directory,
-/// removed with everything in it when dropped (also while a failed test unwinds); kept, and named
-/// on stderr, when `ALFD_KEEP_TEST_DIRS=1`.
-#[cfg(test)]
-pub(crate) fn test_dir(name: &str) -> tempfile::TempDir {
+/// A test's scratch directory `alfd-NAME-XXXXXX` in the system's temporary directory, removed
+/// with everything in it when dropped (also while a failed test unwinds); kept, and named on
+/// stderr, when `ALFD_KEEP_TEST_DIRS=1`. The one helper every crate's tests use (tempfile is in
+/// every binary's graph already, through safetensors, so this costs the build nothing).
+pub fn test_dir(name: &str) -> tempfile::TempDir {
     let keep = std::env::var_os("ALFD_KEEP_TEST_DIRS").is_some_and(|v| v == "1");
     let dir = tempfile::Builder::new()
         .prefix(&format!("alfd-{name}-"))
