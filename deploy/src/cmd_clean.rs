@@ -40,7 +40,11 @@ pub fn run(args: CleanArgs) -> anyhow::Result<()> {
             }
         }
     }
-    let verb = if args.dry_run { "would remove" } else { "removed" };
+    let verb = if args.dry_run {
+        "would remove"
+    } else {
+        "removed"
+    };
     println!(
         "{} runs with iceoryx2 files: {cleaned} dead ({verb} {files} files), {live} live (left alone)",
         runs.len()

@@ -210,7 +210,11 @@ fn alfd_clean_removes_a_dead_runs_files_and_leaves_a_live_run_alone() {
     let said = String::from_utf8_lossy(&dry.stdout).into_owned();
     assert!(said.contains(&format!("{dead_id}: dead")), "{said}");
     assert!(said.contains(&format!("{live_id}: live")), "{said}");
-    assert_eq!(wire::leftover_files(&dead_id), left, "a dry run removes nothing");
+    assert_eq!(
+        wire::leftover_files(&dead_id),
+        left,
+        "a dry run removes nothing"
+    );
 
     let o = alfd().arg("clean").output().unwrap();
     assert!(o.status.success(), "{}", text(&o));

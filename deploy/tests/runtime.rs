@@ -765,7 +765,11 @@ pub(crate) fn wait_until(run: &mut Background, what: &str, mut done: impl FnMut(
 
 /// Waits for a background run to end by itself, and checks that it finished: exit code 0, every
 /// one of its `episodes` recorded, not interrupted. Returns its output and summary.
-pub(crate) fn finished(run: Background, dir: &Path, episodes: usize) -> (Output, serde_json::Value) {
+pub(crate) fn finished(
+    run: Background,
+    dir: &Path,
+    episodes: usize,
+) -> (Output, serde_json::Value) {
     let o = wait_output(run, Duration::from_secs(180));
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let s = summary(dir);

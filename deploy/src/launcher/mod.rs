@@ -504,8 +504,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
     /// Episodes actor `id` has still to play (a run with an episode limit).
     fn episodes_left(&self, id: u16) -> Option<u32> {
         let i = usize::from(id);
-        self.quota
-            .map(|q| q[i].saturating_sub(self.recorded_by[i]))
+        self.quota.map(|q| q[i].saturating_sub(self.recorded_by[i]))
     }
 
     /// Whether the run has reached its episode or step limit.
@@ -611,8 +610,8 @@ impl<'a, 'w> Launcher<'a, 'w> {
                         continue;
                     }
                     warn!(process = %proc.name, "{how}");
-                    let restarts =
-                        u32::try_from(incarnation - self.plan.first_incarnation()).unwrap_or(u32::MAX);
+                    let restarts = u32::try_from(incarnation - self.plan.first_incarnation())
+                        .unwrap_or(u32::MAX);
                     if restarts >= self.plan.max_restarts {
                         bail!(
                             "alfd-actor {} {how}, and was restarted {restarts} times already; see {}",
