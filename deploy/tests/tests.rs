@@ -4,5 +4,6 @@ mod cli;
 mod faults;
 mod report;
 mod runtime;
+mod shards;
 mod support;
 mod sweep;

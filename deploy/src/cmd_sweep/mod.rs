@@ -22,9 +22,13 @@
 //! unfinished run is run again in its directory, under the directory's lock, so a second sweep of
 //! the same `--out` cannot run it at the same time). A complete run of a different config (say,
 //! other episodes) is refused rather than mixed in.
+//!
+//! `--shard I/N` runs only a share of the runs and `--collect DIR...` merges the shards into the
+//! usual outputs (`shard.rs`), so that a cluster's scheduler can spread a sweep over machines.
 
 mod experiment;
 pub(crate) mod plot;
+mod shard;
 mod stats;
 mod summary;
 
@@ -70,13 +74,43 @@ pub struct SweepArgs {
     /// (Without it, a stdout that is not a terminal gets the one-line summary as before.)
     #[arg(long)]
     pub json: bool,
+    /// Run only shard I of N (1-based) of a training sweep: the runs whose index k in the fixed
+    /// method-major order (method, then seed) has k % N == I - 1. Writes the runs and
+    /// `shard.json`, no curves or summary; merge the shards with `--collect`.
+    #[arg(long, value_name = "I/N", conflicts_with = "collect")]
+    pub shard: Option<String>,
+    /// Merge the output directories of every shard (`--shard I/N`, same experiment, seeds and
+    /// episodes) into --out, and write the curves, plot and summary as the unsharded sweep does.
+    #[arg(long, value_name = "DIR", num_args = 1..)]
+    pub collect: Vec<PathBuf>,
+}
+
+/// What a sweep does: all of its runs, one shard of them, or the merge of the shards.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    Whole,
+    Shard(shard::Shard),
+    Collect,
 }
 
 /// The most runs a sweep runs at a time.
 const MAX_JOBS: usize = 256;
 
 pub fn run(args: SweepArgs) -> anyhow::Result<()> {
+    let mode = match &args.shard {
+        Some(s) => Mode::Shard(shard::Shard::parse(s)?),
+        None if !args.collect.is_empty() => Mode::Collect,
+        None => Mode::Whole,
+    };
     let exp = Experiment::load(&args.config, args.seeds, args.episodes)?;
+    if mode != Mode::Whole && exp.kind != ExperimentKind::Training {
+        return Err(usage(format!(
+            "--shard and --collect split training sweeps; {} is a {:?} experiment (it runs no \
+             run directories)",
+            args.config.display(),
+            exp.kind
+        )));
+    }
     let jobs = match args.jobs {
         Some(0) => return Err(usage("--jobs must be at least 1")),
         Some(j) if j > MAX_JOBS => {
@@ -97,7 +131,22 @@ pub fn run(args: SweepArgs) -> anyhow::Result<()> {
     if let Some(e) = args.episodes {
         write!(command, " --episodes {e}")?;
     }
+    match mode {
+        Mode::Whole => {}
+        Mode::Shard(s) => write!(command, " --shard {s}")?,
+        Mode::Collect => {
+            command.push_str(" --collect");
+            for d in &args.collect {
+                write!(command, " {}", d.display())?;
+            }
+        }
+    }
     write!(command, " --out {}", args.out.display())?;
+    match mode {
+        Mode::Whole => {}
+        Mode::Shard(s) => shard::begin(&exp, s, &args.out)?,
+        Mode::Collect => shard::collect(&exp, &args.collect, &args.out)?,
+    }
     let output = Output {
         json: args.json,
         quiet: args.quiet,
@@ -106,6 +155,7 @@ pub fn run(args: SweepArgs) -> anyhow::Result<()> {
         exp: &exp,
         out: &args.out,
         jobs,
+        mode,
         progress: output.progress(),
         output,
         command,
@@ -121,6 +171,7 @@ struct Ctx<'a> {
     exp: &'a Experiment,
     out: &'a Path,
     jobs: usize,
+    mode: Mode,
     progress: bool,
     output: Output,
     command: String,
@@ -140,8 +191,15 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
     // Every run's config first, seed-major so that an interrupted sweep has whole seeds done.
     let mut pending = Vec::new();
     let mut resumed = 0u64;
+    let mut total = 0u64;
     for seed in 0..exp.seeds {
-        for method in &exp.methods {
+        for (m, method) in exp.methods.iter().enumerate() {
+            if let Mode::Shard(s) = ctx.mode {
+                if !s.owns(shard::index_of(exp, m, seed)) {
+                    continue;
+                }
+            }
+            total += 1;
             let cfg = method.config(seed, exp.episodes)?;
             let dir = run_dir(ctx.out, &method.name, seed);
             if is_complete(&dir, &cfg)? {
@@ -156,9 +214,19 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
             }
         }
     }
-    let total = exp.seeds * exp.methods.len() as u64;
+    if ctx.mode == Mode::Collect && !pending.is_empty() {
+        anyhow::bail!(
+            "--collect: {} runs are still missing in {} after copying the shards'",
+            pending.len(),
+            ctx.out.display()
+        );
+    }
     tracing::info!(total, resumed, jobs = ctx.jobs, "sweep {}", exp.name);
     run_jobs(&pending, ctx.jobs, total, resumed, ctx.progress)?;
+    if let Mode::Shard(s) = ctx.mode {
+        let wall = ctx.start.elapsed().as_secs_f64();
+        return shard::finish(exp, s, ctx.out, ctx.output, pending.len(), resumed, wall);
+    }
 
     let mut results = Vec::with_capacity(exp.methods.len());
     for method in &exp.methods {
