@@ -121,8 +121,12 @@ pub fn run(args: SweepArgs) -> anyhow::Result<()> {
         Some(j) => j,
         None => std::thread::available_parallelism().map_or(1, usize::from),
     };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
+    // A collect creates its output directory itself, once every shard has been checked: a
+    // refused one leaves nothing behind.
+    if !matches!(mode, Mode::Collect) {
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
+    }
     let mut command = format!(
         "alfd sweep --config {} --seeds {} --jobs {jobs}",
         args.config.display(),
