@@ -126,7 +126,10 @@ fn sharded_sweep_collects_to_the_unsharded_curves() {
     let bad = dir.join("bad");
     let o = collect(&bad, &[&s1, &o2]);
     refused(&o, &[&o2.display().to_string(), "another experiment"]);
-    assert!(!bad.exists(), "a refused collect leaves no output directory");
+    assert!(
+        !bad.exists(),
+        "a refused collect leaves no output directory"
+    );
     // So is a shard given with other --episodes than it was run with.
     let mut c = sweep(
         &exp,
@@ -152,7 +155,10 @@ fn sharded_sweep_collects_to_the_unsharded_curves() {
     // The same shard twice.
     c = collect(&bad, &[&s1, &s1]);
     refused(&c, &[&s1.display().to_string(), "twice"]);
-    assert!(!bad.exists(), "a refused collect leaves no output directory");
+    assert!(
+        !bad.exists(),
+        "a refused collect leaves no output directory"
+    );
 }
 
 #[test]

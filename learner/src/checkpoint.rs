@@ -152,7 +152,9 @@ mod tests {
         let mut l = NeuralLearner::new(&cfg.agent, 4, 2, seeded(1));
         let mut rng = seeded(2);
         for i in 0..cfg.agent.replay_capacity {
-            let s: Vec<f32> = (0..4).map(|_| rand::Rng::random_range(&mut rng, -1.0..1.0)).collect();
+            let s: Vec<f32> = (0..4)
+                .map(|_| rand::Rng::random_range(&mut rng, -1.0..1.0))
+                .collect();
             l.learn(&Transition {
                 next_state: s.iter().map(|x| x + 0.01).collect(),
                 state: s,

@@ -233,7 +233,9 @@ const PREFERRED_FAMILIES: [&str; 6] = [
 /// its font stack, about 14% of a clean build): no PNG, a warning, the SVG as always.
 #[cfg(not(feature = "png"))]
 pub fn png_from_svg(_svg: &str) -> anyhow::Result<Option<Vec<u8>>> {
-    eprintln!("warning: this alfd was built without the `png` feature: the plot is written as SVG only");
+    eprintln!(
+        "warning: this alfd was built without the `png` feature: the plot is written as SVG only"
+    );
     Ok(None)
 }
 
