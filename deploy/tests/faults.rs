@@ -13,7 +13,7 @@ use crate::runtime::{
     check_run_dir, find_process, finished, interrupt, rows, run, run_id, signal, spawn_run,
     summary, wait_rows, wait_until,
 };
-use crate::support::{alfd, text, timed, tmp};
+use crate::support::{alfd, text, timed, tmp, Background};
 
 /// Every episode of `dir`'s `episodes.csv` once, numbered 0..n in order; the last row's
 /// `demos_used` equals the lines of `demos.jsonl` and `summary.json`'s count.
@@ -57,15 +57,22 @@ const FAULT_RUN: [&str; 6] = [
     "--checkpoint-every=200",
 ];
 
+/// [`FAULT_RUN`] with 2 actors in the background, once its learner has checkpointed and 30
+/// episodes are recorded.
+fn checkpointed_fault_run(out: &Path) -> Background {
+    let mut child = spawn_run(out, 2, &FAULT_RUN);
+    wait_until(&mut child, "a learner checkpoint", || {
+        out.join("learner.ckpt").is_file()
+    });
+    wait_rows(out, 30, &mut child);
+    child
+}
+
 #[test]
 fn a_learner_killed_with_sigkill_is_restarted_from_its_checkpoint_and_the_run_completes() {
     let _time = timed!();
     let out = tmp("learner-killed");
-    let mut child = spawn_run(&out, 2, &FAULT_RUN);
-    wait_until(&mut child, "a learner checkpoint", || {
-        out.join("learner.ckpt").is_file()
-    });
-    wait_rows(&out, 30, &mut child);
+    let mut child = checkpointed_fault_run(&out);
     let id = run_id(&out);
     let pid = find_process("alfd-learner", &[&format!("--run-id={id}")]).expect("learner");
     signal("KILL", pid);
@@ -92,11 +99,7 @@ fn a_learner_killed_with_sigkill_is_restarted_from_its_checkpoint_and_the_run_co
 fn a_launcher_killed_with_sigkill_leaves_nothing_running_and_alfd_resume_finishes_the_run() {
     let _time = timed!();
     let out = tmp("launcher-killed");
-    let mut child = spawn_run(&out, 2, &FAULT_RUN);
-    wait_until(&mut child, "a learner checkpoint", || {
-        out.join("learner.ckpt").is_file()
-    });
-    wait_rows(&out, 30, &mut child);
+    let mut child = checkpointed_fault_run(&out);
     let id = run_id(&out);
     let launcher = child.child().id();
     signal("KILL", launcher);

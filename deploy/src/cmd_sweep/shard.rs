@@ -370,6 +370,7 @@ pub fn collect(exp: &Experiment, dirs: &[PathBuf], out: &Path) -> anyhow::Result
     }
     // Every run of every shard is complete and of this experiment's config, before anything is
     // copied.
+    let mut copies = Vec::new();
     for (&i, dir) in &seen {
         for run in runs_of(exp, Shard { index: i, count: n }) {
             let m = exp
@@ -388,24 +389,17 @@ pub fn collect(exp: &Experiment, dirs: &[PathBuf], out: &Path) -> anyhow::Result
                     src.display()
                 )));
             }
+            copies.push((src, run_dir(out, &run.method, run.seed), cfg));
         }
     }
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create output directory {}", out.display()))?;
-    for (&i, dir) in &seen {
-        for run in runs_of(exp, Shard { index: i, count: n }) {
-            let m = exp
-                .methods
-                .iter()
-                .find(|m| m.name == run.method)
-                .expect("a method of the experiment");
-            let dst = run_dir(out, &run.method, run.seed);
-            if is_complete(&dst, &m.config(run.seed, exp.episodes)?)? {
-                continue; // Collected before, or `OUT` is this shard's directory.
-            }
-            let _lock = crate::run_dir::lock(&dst)?;
-            copy_run(&run_dir(dir, &run.method, run.seed), &dst)?;
+    for (src, dst, cfg) in copies {
+        if is_complete(&dst, &cfg)? {
+            continue; // Collected before, or `OUT` is this shard's directory.
         }
+        let _lock = crate::run_dir::lock(&dst)?;
+        copy_run(&src, &dst)?;
     }
     Ok(())
 }

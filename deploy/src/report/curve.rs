@@ -10,6 +10,7 @@ use std::path::Path;
 use alfd_common::config::ExperimentConfig;
 use alfd_common::record::EpisodeRecord;
 use anyhow::Context as _;
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -138,6 +139,50 @@ fn format_number(v: f64) -> String {
     }
 }
 
+/// One panel of the picture: episodes on x, `y_desc` on y over `y`, the grid drawn.
+fn panel<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    x_max: f64,
+    y: (f64, f64),
+    y_desc: &str,
+) -> anyhow::Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>> {
+    let err =
+        |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("drawing the learning curve: {e}");
+    let mut chart = ChartBuilder::on(area)
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(64)
+        .build_cartesian_2d(0.0..x_max, y.0..y.1)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("episode")
+        .y_desc(y_desc)
+        .axis_desc_style(("sans-serif", 15))
+        .label_style(("sans-serif", 13))
+        .x_label_formatter(&|v| format_number(*v))
+        .y_label_formatter(&|v| format_number(*v))
+        .light_line_style(RGBColor(238, 238, 238))
+        .bold_line_style(RGBColor(210, 210, 210))
+        .draw()
+        .map_err(err)?;
+    Ok(chart)
+}
+
+/// A panel's legend, upper left.
+fn legend<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+) -> anyhow::Result<()> {
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .label_font(("sans-serif", 13))
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .draw()
+        .map_err(|e| anyhow::anyhow!("drawing the learning curve: {e}"))
+}
+
 fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Curve) -> anyhow::Result<()> {
     let err =
         |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("drawing the learning curve: {e}");
@@ -166,24 +211,7 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Curve) -> anyhow:
     // Room above the data for the legend.
     let hi = hi + (hi - lo) * 0.35;
 
-    let mut chart = ChartBuilder::on(&top)
-        .margin(12)
-        .x_label_area_size(36)
-        .y_label_area_size(64)
-        .build_cartesian_2d(0.0..x_max, lo..hi)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("episode")
-        .y_desc("return")
-        .axis_desc_style(("sans-serif", 15))
-        .label_style(("sans-serif", 13))
-        .x_label_formatter(&|v| format_number(*v))
-        .y_label_formatter(&|v| format_number(*v))
-        .light_line_style(RGBColor(238, 238, 238))
-        .bold_line_style(RGBColor(210, 210, 210))
-        .draw()
-        .map_err(err)?;
+    let mut chart = panel(&top, x_max, (lo, hi), "return")?;
     let windows = shaping_windows(c.records);
     if !windows.is_empty() {
         chart
@@ -234,36 +262,12 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Curve) -> anyhow:
             .label(label(&format!("expert {name}: {mean:.1} (measured)")))
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], EXPERT.stroke_width(2)));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .label_font(("sans-serif", 13))
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(160, 160, 160))
-        .draw()
-        .map_err(err)?;
+    legend(&mut chart)?;
 
     let most = c.records.iter().map(|r| r.demos_used).max().unwrap_or(0);
     // Room above the budget's line for the legend.
     let y_max = (f64::from(most.max(c.budget)) * 1.5).max(1.0);
-    let mut chart = ChartBuilder::on(&bottom)
-        .margin(12)
-        .x_label_area_size(36)
-        .y_label_area_size(64)
-        .build_cartesian_2d(0.0..x_max, 0.0..y_max)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("episode")
-        .y_desc("demonstrations")
-        .axis_desc_style(("sans-serif", 15))
-        .label_style(("sans-serif", 13))
-        .x_label_formatter(&|v| format_number(*v))
-        .y_label_formatter(&|v| format_number(*v))
-        .light_line_style(RGBColor(238, 238, 238))
-        .bold_line_style(RGBColor(210, 210, 210))
-        .draw()
-        .map_err(err)?;
+    let mut chart = panel(&bottom, x_max, (0.0, y_max), "demonstrations")?;
     let points = c.records.iter().map(|r| (x(r), f64::from(r.demos_used)));
     chart
         .draw_series(LineSeries::new(points, DEMOS.stroke_width(2)))
@@ -281,14 +285,7 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Curve) -> anyhow:
         .map_err(err)?
         .label(label(&format!("budget B = {}", c.budget)))
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], GREY.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .label_font(("sans-serif", 13))
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(160, 160, 160))
-        .draw()
-        .map_err(err)?;
+    legend(&mut chart)?;
     Ok(())
 }
 
