@@ -95,20 +95,14 @@ fn resume_multi_process(
     let info = crate::launcher::read_run_info(dir).map_err(|e| usage(format!("{e:#}")))?;
     // The processes of the stopped launch may still be saving (a launcher killed a moment ago):
     // wait for them to leave, then for the files they leave to go.
-    let start = std::time::Instant::now();
-    loop {
-        let alive = alfd_wire::alive_nodes(&info.run_id).unwrap_or_default();
-        if alive.is_empty() {
-            break;
-        }
-        if start.elapsed() > std::time::Duration::from_secs(30) {
-            return Err(usage(format!(
-                "processes of run {} are still alive ({}): stop them before resuming",
-                info.run_id,
-                alive.join(", ")
-            )));
-        }
-        std::thread::sleep(std::time::Duration::from_millis(100));
+    let alive = alfd_wire::wait_for_run_end(&info.run_id, std::time::Duration::from_secs(30))
+        .unwrap_or_default();
+    if !alive.is_empty() {
+        return Err(usage(format!(
+            "processes of run {} are still alive ({}): stop them before resuming",
+            info.run_id,
+            alive.join(", ")
+        )));
     }
     if alfd_wire::is_launcher_run_id(&info.run_id) {
         if let Err(e) = alfd_wire::clean_run(&info.run_id) {

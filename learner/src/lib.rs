@@ -76,19 +76,15 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
 /// The last process of a run whose launcher died: waits (up to 10 s) for the actors and the
 /// expert to leave, then removes the run's iceoryx2 files, as the launcher would have.
 fn close_orphaned_run(run_id: &str) {
-    let start = Instant::now();
-    loop {
-        match wire::alive_nodes(run_id) {
-            Ok(alive) if alive.is_empty() => break,
-            Ok(alive) if start.elapsed() > Duration::from_secs(10) => {
-                warn!(?alive, "processes of the run are still alive; its files are left (`alfd clean` removes them later)");
-                return;
-            }
-            Ok(_) => std::thread::sleep(Duration::from_millis(50)),
-            Err(e) => {
-                warn!("cannot list the run's processes: {e}");
-                return;
-            }
+    match wire::wait_for_run_end(run_id, Duration::from_secs(10)) {
+        Ok(alive) if alive.is_empty() => {}
+        Ok(alive) => {
+            warn!(?alive, "processes of the run are still alive; its files are left (`alfd clean` removes them later)");
+            return;
+        }
+        Err(e) => {
+            warn!("cannot list the run's processes: {e}");
+            return;
         }
     }
     match wire::close_run(run_id) {

@@ -106,6 +106,19 @@ pub fn alive_nodes(run_id: &str) -> Result<Vec<String>> {
     Ok(alive)
 }
 
+/// Waits (polling every 50 ms, at most `timeout`) until no process of run `run_id` is alive;
+/// returns the nodes still alive then (empty: the run has ended).
+pub fn wait_for_run_end(run_id: &str, timeout: std::time::Duration) -> Result<Vec<String>> {
+    let start = std::time::Instant::now();
+    loop {
+        let alive = alive_nodes(run_id)?;
+        if alive.is_empty() || start.elapsed() >= timeout {
+            return Ok(alive);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
 /// Removes what run `run_id` left in the system after its last process exited: the resources of
 /// dead nodes, and the run's node counter (a persistent segment iceoryx2 keeps per prefix).
 /// Refuses while a node of the run is alive (including one of the calling process), and never

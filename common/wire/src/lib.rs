@@ -65,7 +65,7 @@ pub use control::{ControlWatch, CONTROL_PERIOD};
 pub use error::{Result, WireError};
 pub use housekeeping::{
     alive_nodes, clean_run, cleanup_dead_nodes, close_run, is_launcher_run_id, leftover_files,
-    run_prefix, runs_with_files, validate_run_id, Cleaned,
+    run_prefix, runs_with_files, validate_run_id, wait_for_run_end, Cleaned,
 };
 pub use messages::{
     command, flags, name_from_bytes, name_to_bytes, outcome, process_state, progress_kind, Control,
