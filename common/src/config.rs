@@ -332,6 +332,33 @@ pub struct AgentConfig {
     /// Neural: the margin `l` of that loss (Hester et al. use 0.8).
     #[serde(default = "default_margin")]
     pub margin: f64,
+    /// Neural: Adam's learning rate goes linearly from `learning_rate` to this over the first
+    /// `learning_rate_anneal_steps` stored transitions, then stays there (absent: constant; as
+    /// Stable-Baselines3's linear schedule, on the transition count instead of the run's fraction).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub learning_rate_end: Option<f64>,
+    /// Neural: the length of that anneal, in stored transitions (environment steps).
+    #[serde(default, skip_serializing_if = "is_zero_u64")]
+    pub learning_rate_anneal_steps: u64,
+}
+
+/// A linear learning-rate anneal: `start` at 0 stored transitions, `end` from `steps` on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LrSchedule {
+    pub start: f64,
+    pub end: f64,
+    pub steps: u64,
+}
+
+impl LrSchedule {
+    /// The learning rate once `inserted` transitions were stored.
+    pub fn at(&self, inserted: u64) -> f64 {
+        if inserted >= self.steps {
+            return self.end;
+        }
+        let f = inserted as f64 / self.steps as f64;
+        self.start + (self.end - self.start) * f
+    }
 }
 
 /// The loss on TD errors.
@@ -395,6 +422,15 @@ impl AgentConfig {
     pub fn learning_rate(&self) -> f64 {
         self.learning_rate
             .unwrap_or(if self.kind.is_tabular() { 0.1 } else { 1e-3 })
+    }
+
+    /// The neural agents' learning-rate anneal (`learning_rate_end`), `None` if constant.
+    pub fn learning_rate_schedule(&self) -> Option<LrSchedule> {
+        self.learning_rate_end.map(|end| LrSchedule {
+            start: self.learning_rate(),
+            end,
+            steps: self.learning_rate_anneal_steps,
+        })
     }
 
     pub fn exploration(&self) -> Exploration {

@@ -122,6 +122,7 @@ const KEYS: &[&str] = &[
     "agent.tau",
     "agent.max_grad_norm",
     "agent.demo_fraction",
+    "agent.learning_rate_end",
     "agent.margin",
     "query.queue_len",
     "query.percentile",

@@ -266,4 +266,56 @@ fn config_refuses_options_out_of_range_naming_the_field() {
     bad("updates_per_step = 0", "agent.updates_per_step");
     bad("epsilon_decay_steps = inf", "agent.epsilon_decay_steps");
     bad("loss = \"l1\"", "loss");
+    bad("learning_rate_end = -0.1", "agent.learning_rate_end");
+    bad("learning_rate_end = nan", "agent.learning_rate_end");
+}
+
+#[test]
+fn the_learning_rate_anneals_linearly_over_stored_transitions() {
+    let text = "seed = 0\nepisodes = 1\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"bdqn\"\n\
+                learning_rate = 0.001\nlearning_rate_end = 0.0001\nlearning_rate_anneal_steps = 10\n";
+    let s = ExperimentConfig::from_toml(text)
+        .unwrap()
+        .agent
+        .learning_rate_schedule()
+        .unwrap();
+    // By hand: 1e-3 + (1e-4 - 1e-3) * n / 10, then 1e-4.
+    for (n, lr) in [(0, 1e-3), (5, 5.5e-4), (9, 1.9e-4), (10, 1e-4), (10_000, 1e-4)] {
+        assert!((s.at(n) - lr).abs() < 1e-15, "at {n}: {} vs {lr}", s.at(n));
+    }
+    let e = ExperimentConfig::from_toml(&text.replace("learning_rate_end = 0.0001\n", ""))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("agent.learning_rate_anneal_steps"), "{e}");
+}
+
+#[test]
+fn an_annealed_learner_moves_until_its_rate_reaches_zero_then_holds() {
+    // Batch 4: updates from the 4th stored transition; the rate is 1e-3 * (1 - n/6), 0 from n = 6.
+    let mut annealed = learner("learning_rate_end = 0.0\nlearning_rate_anneal_steps = 6");
+    let mut constant = learner("");
+    let mut moved = Vec::new();
+    for i in 0..10 {
+        let before = annealed.network().params_flat();
+        annealed.learn(&step(i as f32, false));
+        constant.learn(&step(i as f32, false));
+        moved.push(annealed.network().params_flat() != before);
+    }
+    // Inserted n = i + 1 before the update: rate > 0 for n = 4, 5; 0 for n >= 6.
+    assert_eq!(
+        moved,
+        [false, false, false, true, true, false, false, false, false, false]
+    );
+    assert_ne!(
+        annealed.network().params_flat(),
+        constant.network().params_flat()
+    );
+    // A schedule that starts and ends at the same rate is the constant learner, to the bit.
+    let mut flat = learner("learning_rate_end = 0.001\nlearning_rate_anneal_steps = 6");
+    let mut plain = learner("");
+    for i in 0..10 {
+        flat.learn(&step(i as f32, true));
+        plain.learn(&step(i as f32, true));
+    }
+    assert_eq!(flat.network().params_flat(), plain.network().params_flat());
 }

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::agent::{query_decision, Decision, Explorer};
 use crate::checkpoint::StateMismatch;
 use crate::config::LossKind;
-use crate::config::{AgentConfig, QueryConfig, QueryMode};
+use crate::config::{AgentConfig, LrSchedule, QueryConfig, QueryMode};
 use crate::demo_model::DemoModel;
 use crate::nn::{Adam, AdamConfig, AdamState, Mlp, NnError, TdConfig, TdLoss, TrainScratch};
 use crate::policy::{js_divergence, softmax_into};
@@ -310,6 +310,8 @@ pub struct NeuralLearner {
     learning_starts: u64,
     demo_fraction: f64,
     updates_per_step: u32,
+    /// Adam's learning rate at a transition count (`agent.learning_rate_end`); `None`: constant.
+    lr_schedule: Option<LrSchedule>,
     /// Transitions stored so far.
     inserted: u64,
     updates: u64,
@@ -353,6 +355,7 @@ impl NeuralLearner {
             learning_starts: agent.learning_starts,
             demo_fraction: agent.demo_fraction,
             updates_per_step: agent.updates_per_step,
+            lr_schedule: agent.learning_rate_schedule(),
             inserted: 0,
             updates: 0,
         }
@@ -390,6 +393,9 @@ impl NeuralLearner {
             &mut self.rng,
             &mut self.batch,
         );
+        if let Some(schedule) = &self.lr_schedule {
+            self.adam.set_lr(schedule.at(self.inserted));
+        }
         let loss = crate::nn::train_step_with(
             &mut self.online,
             &self.target,

@@ -180,6 +180,26 @@ impl ExperimentConfig {
                 format!("must be in [0, 1], got {}", a.demo_fraction),
             ));
         }
+        if let Some(end) = a.learning_rate_end {
+            if a.kind.is_tabular() {
+                return Err(invalid(
+                    "agent.learning_rate_end",
+                    "applies to the neural agents (dqn, bdqn); the tabular ones anneal with \
+                     agent.learning_rate_decay",
+                ));
+            }
+            if !(end >= 0.0 && end.is_finite()) {
+                return Err(invalid(
+                    "agent.learning_rate_end",
+                    format!("must be >= 0, got {end}"),
+                ));
+            }
+        } else if a.learning_rate_anneal_steps > 0 {
+            return Err(invalid(
+                "agent.learning_rate_anneal_steps",
+                "has no effect without agent.learning_rate_end",
+            ));
+        }
         for (field, v) in [
             ("agent.margin_loss_weight", a.margin_loss_weight),
             ("agent.margin", a.margin),

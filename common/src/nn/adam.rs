@@ -97,6 +97,11 @@ impl Adam {
     }
 
     /// How many steps were taken.
+    /// Sets the learning rate of the next steps (a schedule's).
+    pub fn set_lr(&mut self, lr: f64) {
+        self.config.lr = lr;
+    }
+
     pub fn steps(&self) -> u64 {
         self.step
     }
