@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# Side-by-side speed of alfd and PyTorch / Gymnasium (issue 14, item 1): the train step, the act
+# step, environment steps/s and an end-to-end DQN, measured interleaved; prints one table.
+#
+#   bash deploy/bench/peers.sh            # 5 rounds, about 5 minutes after the first install
+#   bash deploy/bench/peers.sh --quick    # one short round, a smoke run
+#   bash deploy/bench/peers.sh --rounds 9 # more rounds
+#
+# On first use it makes the virtual environment .venv-bench/ (or $ALFD_BENCH_VENV) with Python
+# 3.11 and installs deploy/bench/requirements.txt from PyPI (about 3 GB: PyPI's torch for Linux
+# brings CUDA libraries); later runs reuse it until requirements.txt changes.
+set -euo pipefail
+
+cd "$(dirname "$0")/../.."
+venv="${ALFD_BENCH_VENV:-.venv-bench}"
+requirements="deploy/bench/requirements.txt"
+
+python="${ALFD_BENCH_PYTHON:-}"
+if [[ -z "$python" ]]; then
+    for candidate in python3.11 python3; do
+        if command -v "$candidate" >/dev/null &&
+            "$candidate" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
+            python="$candidate"
+            break
+        fi
+    done
+fi
+if [[ -z "$python" ]]; then
+    echo "peers.sh: needs Python 3.11 (the pinned wheels are for CPython 3.11); set ALFD_BENCH_PYTHON" >&2
+    exit 2
+fi
+
+stamp="$venv/.requirements.sha256"
+want="$(sha256sum "$requirements" | cut -d' ' -f1)"
+if [[ ! -x "$venv/bin/python" || ! -f "$stamp" || "$(cat "$stamp")" != "$want" ]]; then
+    echo "peers.sh: installing the Python peers into $venv (once; about 3 GB)" >&2
+    [[ -x "$venv/bin/python" ]] || "$python" -m venv "$venv"
+    # --no-deps: the list is torch's dependency closure pinned, less what CPU code never loads.
+    "$venv/bin/python" -m pip install --quiet --no-deps -r "$requirements"
+    "$venv/bin/python" -c 'import torch, gymnasium, numpy'
+    echo "$want" >"$stamp"
+fi
+
+echo "peers.sh: building alfd and the Criterion benches (release)" >&2
+cargo build --release --quiet -p alfd-deploy --bin alfd
+benches="$(cargo bench --quiet -p alfd-common --bench core --bench envs --no-run \
+    --message-format=json-render-diagnostics)"
+bench_exe() {
+    "$venv/bin/python" -c '
+import json, sys
+name = sys.argv[1]
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m["target"]["name"] == name \
+            and m.get("executable"):
+        print(m["executable"])
+' "$1" <<<"$benches" | tail -n1
+}
+core="$(bench_exe core)"
+envs="$(bench_exe envs)"
+[[ -n "$core" && -n "$envs" ]] || { echo "peers.sh: bench binaries not found" >&2; exit 1; }
+
+exec "$venv/bin/python" deploy/bench/peers.py --alfd target/release/alfd \
+    --core-bench "$core" --envs-bench "$envs" "$@"
