@@ -4,16 +4,18 @@
 //! learner under its credits, the newest weights and demonstration model come back, queries go
 //! to the expert. Every finished episode goes to the launcher as a progress message.
 
+pub mod checkpoint;
 pub mod links;
 
 use std::ops::ControlFlow;
 use std::time::Duration;
 
 use alfd_common::agent::NeuralActor;
-use alfd_common::environment_loop::{self, GenericActor, LoopError, Schedule};
+use alfd_common::checkpoint::Cadence;
+use alfd_common::environment_loop::{self, Actor as _, GenericActor, LoopError, Schedule};
 use alfd_common::rng::{derive_seed, seeded};
 use alfd_common::runner::evaluate_greedy;
-use alfd_harness::{ProcessArgs, Session};
+use alfd_harness::{BadInput, ProcessArgs, Session};
 use alfd_wire::{Doorbell, Process, Progress, Role, MAX_ACTORS};
 use tracing::info;
 
@@ -31,10 +33,14 @@ pub struct Args {
     /// Which process plays this actor id: 1 for the first, +1 per restart.
     #[arg(long, default_value_t = 1)]
     pub incarnation: u64,
-    /// Episodes this actor plays before it exits (its share of a run with an episode limit);
-    /// default: until the launcher says stop.
+    /// Episodes this actor plays before it exits (its share of a run with an episode limit, not
+    /// counting those of a restored state); default: until the launcher says stop.
     #[arg(long)]
     pub episodes: Option<u32>,
+    /// Continue from the state `RUN_DIR/actor-<id>.ckpt` holds for this global step (`alfd
+    /// resume` chooses it).
+    #[arg(long, value_name = "STEP")]
+    pub restore_step: Option<u64>,
 }
 
 /// The name of the process's log file (without `.log`).
@@ -83,14 +89,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         seeded(derive_seed(cfg.seed, &actor_stream)),
     );
     let mut variables = WireVariables::new(&session)?;
-    variables.first(&session, &mut core, runtime.handshake_timeout())?;
-    info!(
-        actor = me.id,
-        incarnation = me.incarnation,
-        weights = core.weights_version(),
-        "actor running"
-    );
-    let adder = WireAdder::new(&session, me, runtime.window, obs_dim, cfg.agent.heads())?;
+    let mut adder = WireAdder::new(&session, me, runtime.window, obs_dim, cfg.agent.heads())?;
     let schedule = cfg.shaping_enabled().then(|| cfg.shaping.schedule());
     let mut expert = WireExpert::new(
         &session,
@@ -99,37 +98,110 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         schedule,
         runtime.query_timeout(),
     )?;
+    // A restored actor continues where its checkpoint stands (the weights come from the learner,
+    // restored from the checkpoint that pairs with this one).
+    let run_dir = &args.process.run_dir;
+    let config_toml = std::fs::read_to_string(run_dir.join("config.toml"))
+        .map_err(|e| BadInput(format!("cannot read the run's config.toml: {e}")))?;
+    let mut saved = checkpoint::ActorCheckpoints::default();
+    let mut start = environment_loop::Progress::default();
+    let mut cadence_from = 0;
+    if let Some(step) = args.restore_step {
+        let file = checkpoint::load(run_dir, me.id, &config_toml)?.ok_or_else(|| {
+            BadInput(format!(
+                "--restore-step {step}: {} does not exist",
+                checkpoint::path(run_dir, me.id).display()
+            ))
+        })?;
+        let c = file.at(step).ok_or_else(|| {
+            BadInput(format!(
+                "--restore-step {step}: {} holds no state at that step",
+                checkpoint::path(run_dir, me.id).display()
+            ))
+        })?;
+        core.restore(&c.core)
+            .map_err(|e| BadInput(format!("actor checkpoint: {e}")))?;
+        env.restore(&c.env)
+            .map_err(|e| BadInput(format!("actor checkpoint: {e}")))?;
+        adder.restored(c.progress.steps);
+        expert.restore_view(c.expert.clone());
+        start = c.progress;
+        cadence_from = c.global_step;
+        info!(
+            episodes = start.episodes,
+            steps = start.steps,
+            global_step = step,
+            "restored from the checkpoint"
+        );
+        saved.push(c.clone());
+    }
+    variables.first(&session, &mut core, runtime.handshake_timeout())?;
+    info!(
+        actor = me.id,
+        incarnation = me.incarnation,
+        weights = core.weights_version(),
+        "actor running"
+    );
     let mut progress = wire.progress_sender()?;
     let mut actor = GenericActor::new(core, adder, variables);
     let mut eval_env = setup.vector_env()?;
     let eval_seed = derive_seed(cfg.seed, "eval");
-
-    let end = environment_loop::run(
-        env.as_mut(),
-        &mut actor,
-        &mut expert,
-        Schedule {
-            env_seed: derive_seed(cfg.seed, &env_stream),
-            episodes: args.episodes,
-            steps: None,
-            actor_id: me.id,
-        },
-        |record, actor| {
-            // Actor 0 evaluates, with the weights it acts on (as the single-process run does).
-            if me.id == 0 && cfg.evaluation.due(record.episode) {
-                record.eval_return = evaluate_greedy(
-                    actor.core.network(),
-                    eval_env.as_mut(),
-                    cfg.evaluation.episodes,
-                    eval_seed,
-                );
-            }
-            progress
-                .send(Progress::episode(me.incarnation, *record))
-                .map_err(LoopError::link)?;
-            Ok(ControlFlow::Continue(()))
-        },
-    )?;
+    let mut cadence = Cadence::new(
+        Cadence::steps_for_updates(runtime.checkpoint_every, cfg.agent.updates_per_step),
+        cadence_from,
+    );
+    let quota = args.episodes.map(|n| n.saturating_add(start.episodes));
+    let mut on_episode = |record: &mut alfd_common::record::EpisodeRecord,
+                          actor: &GenericActor<WireAdder, WireVariables>| {
+        // Actor 0 evaluates, with the weights it acts on (as the single-process run does).
+        if me.id == 0 && cfg.evaluation.due(record.episode) {
+            record.eval_return = evaluate_greedy(
+                actor.core.network(),
+                eval_env.as_mut(),
+                cfg.evaluation.episodes,
+                eval_seed,
+            );
+        }
+        progress
+            .send(Progress::episode(me.incarnation, *record))
+            .map_err(LoopError::link)?;
+        Ok(ControlFlow::Continue(()))
+    };
+    let (mut ckpts, mut ckpt_time) = (0u32, Duration::ZERO);
+    // One episode at a time, so that the environment can be saved between two.
+    let end = loop {
+        let end = environment_loop::run_from(
+            env.as_mut(),
+            &mut actor,
+            &mut expert,
+            Schedule {
+                env_seed: derive_seed(cfg.seed, &env_stream),
+                episodes: Some(quota.map_or(start.episodes + 1, |q| q.min(start.episodes + 1))),
+                steps: None,
+                actor_id: me.id,
+            },
+            start,
+            &mut on_episode,
+        )?;
+        start = end.progress;
+        if end.stopped.is_some() || quota.is_some_and(|q| start.episodes >= q) {
+            break end;
+        }
+        let global_step = actor.global_step(start.steps);
+        if cadence.episode_end(global_step) {
+            saved.push(checkpoint::ActorCheckpoint {
+                progress: start,
+                global_step,
+                core: actor.core.snapshot(),
+                env: env.snapshot(),
+                expert: expert.view().clone(),
+            });
+            let t = std::time::Instant::now();
+            checkpoint::save(run_dir, me.id, &saved, &config_toml)?;
+            ckpt_time += t.elapsed();
+            ckpts += 1;
+        }
+    };
     info!(
         reason = end.stopped.map_or("done", |s| s.0),
         episodes = end.progress.episodes,
@@ -137,6 +209,8 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         timeouts = expert.timeouts,
         credit_waits = actor.adder.credit_waits,
         credit_wait_s = actor.adder.credit_wait.as_secs_f64(),
+        checkpoints = ckpts,
+        checkpoint_write_s = ckpt_time.as_secs_f64(),
         "actor stopping"
     );
     if end.stopped.is_none() {

@@ -48,6 +48,8 @@ pub struct WireAdder<'s, 'w> {
     heads: usize,
     /// Sequence number of the next transition (= transitions this incarnation produced).
     next_seq: u64,
+    /// The actor's own steps before this incarnation (an actor restored from its checkpoint).
+    steps_before: u64,
     since_check: u32,
     pub credit_waits: u64,
     pub credit_wait: Duration,
@@ -74,6 +76,7 @@ impl<'s, 'w> WireAdder<'s, 'w> {
             obs_dim,
             heads,
             next_seq: 0,
+            steps_before: 0,
             since_check: 0,
             credit_waits: 0,
             credit_wait: Duration::ZERO,
@@ -81,6 +84,11 @@ impl<'s, 'w> WireAdder<'s, 'w> {
     }
 
     /// Transitions produced by this incarnation.
+    /// An actor restored from its checkpoint had taken `steps` steps before this incarnation.
+    pub fn restored(&mut self, steps: u64) {
+        self.steps_before = steps;
+    }
+
     pub fn produced(&self) -> u64 {
         self.next_seq
     }
@@ -182,8 +190,11 @@ impl Adder for WireAdder<'_, '_> {
         Ok(ControlFlow::Continue(()))
     }
 
-    fn add(&mut self, transition: Transition, _truncated: bool) -> Result<()> {
+    fn add(&mut self, transition: Transition, truncated: bool) -> Result<()> {
         self.batch.push(&transition).map_err(LoopError::link)?;
+        if transition.terminated || truncated {
+            self.batch.mark_episode_end();
+        }
         self.next_seq += 1;
         if self.batch.is_full() {
             self.flush(false)?;
@@ -197,7 +208,8 @@ impl Adder for WireAdder<'_, '_> {
 
     fn global_step(&self, own_steps: u64) -> u64 {
         self.credits.as_ref().map_or(own_steps, |c| {
-            c.global_step_for(self.me.id, self.me.incarnation, own_steps)
+            let produced = own_steps.saturating_sub(self.steps_before);
+            c.global_step_for(self.me.id, self.me.incarnation, produced)
         })
     }
 }
@@ -265,15 +277,16 @@ impl VariableSource for WireVariables<'_> {
     }
 }
 
-/// What the actor knows of the expert's side: the budget, the demonstrations, the model.
-#[derive(Debug)]
-struct ExpertView {
-    budget_left: u32,
-    /// Demonstrations in the run, as far as known.
-    demos: u64,
-    model: Option<DemoModel>,
-    model_demos: usize,
-    last_demo_step: u64,
+/// What the actor knows of the expert's side: the budget, the demonstrations, the model (saved
+/// in the actor's checkpoint).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ExpertView {
+    pub budget_left: u32,
+    /// Demonstrations in the run, as far as known (the lines of `demos.jsonl` they are).
+    pub demos: u64,
+    pub model: Option<DemoModel>,
+    pub model_demos: usize,
+    pub last_demo_step: u64,
 }
 
 /// The expert process as the actor's expert client: a query with a client-side timeout (no
@@ -330,6 +343,16 @@ impl<'s, 'w> WireExpert<'s, 'w> {
             schedule,
             timeouts: 0,
         })
+    }
+
+    /// What this actor knows of the expert, for its checkpoint.
+    pub fn view(&self) -> &ExpertView {
+        &self.view
+    }
+
+    /// Continues from a checkpoint's view (the expert then publishes the same model again).
+    pub fn restore_view(&mut self, view: ExpertView) {
+        self.view = view;
     }
 
     /// Takes in the newest demonstration model, if one arrived.

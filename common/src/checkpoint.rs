@@ -46,6 +46,50 @@ impl From<StateMismatch> for CheckpointError {
     }
 }
 
+/// When the processes of a run checkpoint: at the first episode end once `every` environment
+/// steps have passed since the last checkpoint. The learner applies it to every actor's episode
+/// ends (flagged on their last transitions), an actor to its own, both with the run's global
+/// step; with one actor in lockstep (window 1) both see the same episode ends at the same global
+/// steps, so their checkpoints pair up, and a run resumed from such a pair is the uninterrupted
+/// run to the byte.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Cadence {
+    every: u64,
+    last: u64,
+}
+
+impl Cadence {
+    /// Every `every` steps (0: never), the last checkpoint at global step `last` (0 at the start,
+    /// the checkpoint's step when restored).
+    pub fn new(every: u64, last: u64) -> Self {
+        Self { every, last }
+    }
+
+    /// The steps between checkpoints for a learner that checkpoints every `updates` updates and
+    /// makes `updates_per_step` per step (at least 1; 0 updates: never).
+    pub fn steps_for_updates(updates: u64, updates_per_step: u32) -> u64 {
+        match updates {
+            0 => 0,
+            u => (u / u64::from(updates_per_step.max(1))).max(1),
+        }
+    }
+
+    /// An episode ended at global step `step` (the steps taken by then): whether to checkpoint
+    /// now (and count from here).
+    pub fn episode_end(&mut self, step: u64) -> bool {
+        if self.every == 0 || step < self.last.saturating_add(self.every) {
+            return false;
+        }
+        self.last = step;
+        true
+    }
+
+    /// The global step of the last checkpoint.
+    pub fn last(&self) -> u64 {
+        self.last
+    }
+}
+
 /// 64-bit FNV-1a.
 pub fn fnv1a64(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
@@ -129,6 +173,31 @@ mod tests {
 
     fn state() -> State {
         (vec![1.5, -2.0, 3.25], 42, "replay".to_owned())
+    }
+
+    #[test]
+    fn the_cadence_waits_for_an_episode_end_past_every_steps() {
+        // Every 100 steps: episodes ending at 40, 90, 130, 150, 229, 230, 400.
+        let mut c = Cadence::new(100, 0);
+        let due: Vec<bool> = [40, 90, 130, 150, 229, 230, 400]
+            .iter()
+            .map(|&s| c.episode_end(s))
+            .collect();
+        assert_eq!(due, [false, false, true, false, false, true, true]);
+        assert_eq!(c.last(), 400);
+        // Restored at 130: the same decisions from there on.
+        let mut r = Cadence::new(100, 130);
+        assert_eq!(
+            [150, 229, 230, 400].map(|s| r.episode_end(s)),
+            [false, false, true, true]
+        );
+        // 0: never.
+        let mut never = Cadence::new(0, 0);
+        assert!(!never.episode_end(u64::MAX));
+        assert_eq!(Cadence::steps_for_updates(10_000, 2), 5_000);
+        assert_eq!(Cadence::steps_for_updates(1, 4), 1);
+        assert_eq!(Cadence::steps_for_updates(0, 1), 0);
+        assert_eq!(Cadence::steps_for_updates(7, 0), 7);
     }
 
     #[test]

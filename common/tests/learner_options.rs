@@ -280,7 +280,13 @@ fn the_learning_rate_anneals_linearly_over_stored_transitions() {
         .learning_rate_schedule()
         .unwrap();
     // By hand: 1e-3 + (1e-4 - 1e-3) * n / 10, then 1e-4.
-    for (n, lr) in [(0, 1e-3), (5, 5.5e-4), (9, 1.9e-4), (10, 1e-4), (10_000, 1e-4)] {
+    for (n, lr) in [
+        (0, 1e-3),
+        (5, 5.5e-4),
+        (9, 1.9e-4),
+        (10, 1e-4),
+        (10_000, 1e-4),
+    ] {
         assert!((s.at(n) - lr).abs() < 1e-15, "at {n}: {} vs {lr}", s.at(n));
     }
     let e = ExperimentConfig::from_toml(&text.replace("learning_rate_end = 0.0001\n", ""))

@@ -3,10 +3,14 @@
 //!   checkpoint are played again (the rows the stopped run wrote after it are replaced), so
 //!   `episodes.csv` and `demos.jsonl` come out as the uninterrupted run's, to the byte.
 //! - An `alfd run` (multi-process) run, with a new launcher: the learner from its
-//!   `learner.ckpt`, the expert from `demos.jsonl` (budget and demonstrations carry over),
-//!   `episodes.csv` appended to (numbering goes on; no row is repeated), and new actors, whose
-//!   exploration follows the restored global step. What the learner learned after its last
-//!   checkpoint is lost; the run is not the uninterrupted one to the byte.
+//!   `learner.ckpt`, the expert from `demos.jsonl` (budget and demonstrations carry over), each
+//!   actor from its `actor-<id>.ckpt` (ε position, divergence queue, generators, environment,
+//!   what it knew of the expert), `episodes.csv` appended to (numbering goes on; no row is
+//!   repeated). With one actor in lockstep (window 1) the learner's checkpoint pairs with one of
+//!   the actor's (both are written at the same episode end): the rows and demonstrations after
+//!   it are dropped and played again, and the run is the uninterrupted one to the byte.
+//!   Otherwise what the learner learned after its last checkpoint is lost, and the actors go on
+//!   from their own newest states.
 
 use std::path::PathBuf;
 
@@ -110,8 +114,8 @@ fn resume_multi_process(
         }
     }
     // The learner must be able to continue: a checkpoint that cannot be trusted is refused now.
-    match alfd_learner::checkpoint::load(dir, config_toml) {
-        Ok(Some(_)) => {}
+    let learner = match alfd_learner::checkpoint::load(dir, config_toml) {
+        Ok(Some(c)) => c,
         Ok(None) => {
             return Err(usage(format!(
                 "{} has no learner.ckpt: the run's learner never checkpointed, so there is \
@@ -120,7 +124,7 @@ fn resume_multi_process(
             )))
         }
         Err(e) => return Err(usage(format!("{e:#}"))),
-    }
+    };
     let runtime_path = dir.join(alfd_harness::RUNTIME_FILE);
     let runtime = std::fs::read_to_string(&runtime_path)
         .map_err(|e| usage(format!("cannot read {}: {e}", runtime_path.display())))
@@ -128,6 +132,7 @@ fn resume_multi_process(
             alfd_harness::RuntimeConfig::from_toml(&t)
                 .map_err(|e| usage(format!("in {}: {e}", runtime_path.display())))
         })?;
+    let restore_actors = actor_states(dir, config_toml, info.actors, &runtime, learner.env_steps)?;
     let plan = crate::launcher::Plan {
         cfg,
         actors: info.actors,
@@ -140,6 +145,7 @@ fn resume_multi_process(
         bin_dir: crate::launcher::bin_dir()?,
         resume: true,
         launches: info.launches.saturating_add(1),
+        restore_actors,
     };
     tracing::info!(
         previous_run_id = %info.run_id,
@@ -148,6 +154,79 @@ fn resume_multi_process(
         "resuming a multi-process run"
     );
     crate::cmd_run::finish(&plan, args.output())
+}
+
+/// The state each actor continues from (see the module doc); in lockstep with one actor, when its
+/// checkpoint pairs with the learner's, the run's files are cut back to that pair.
+fn actor_states(
+    dir: &std::path::Path,
+    config_toml: &str,
+    actors: usize,
+    runtime: &alfd_harness::RuntimeConfig,
+    learner_step: u64,
+) -> anyhow::Result<Vec<Option<u64>>> {
+    let mut files = Vec::with_capacity(actors);
+    for id in 0..actors as u16 {
+        files.push(
+            alfd_actor::checkpoint::load(dir, id, config_toml)
+                .map_err(|e| usage(format!("{e:#}")))?,
+        );
+    }
+    if let [Some(file)] = &files[..] {
+        if runtime.window == 1 {
+            if let Some(c) = file.at(learner_step) {
+                let rows = c.progress.episodes as usize;
+                let demos = c.expert.demos as usize;
+                if cut_lines(&dir.join("episodes.csv"), 1 + rows)?
+                    && cut_lines(&dir.join("demos.jsonl"), demos)?
+                {
+                    tracing::info!(
+                        step = learner_step,
+                        episodes = rows,
+                        demos,
+                        "the learner's and the actor's checkpoints pair up: continuing from there"
+                    );
+                    return Ok(vec![Some(c.global_step)]);
+                }
+            }
+            tracing::warn!(
+                step = learner_step,
+                "the actor's checkpoint does not pair with the learner's: the run goes on, \
+                 not as the uninterrupted run"
+            );
+        }
+    }
+    Ok(files
+        .iter()
+        .map(|f| f.as_ref().and_then(|f| f.newest()).map(|c| c.global_step))
+        .collect())
+}
+
+/// Keeps the first `lines` lines of the file at `path` (written whole); `false` (and the file as
+/// it is) if it has fewer.
+fn cut_lines(path: &std::path::Path, lines: usize) -> anyhow::Result<bool> {
+    let text = match std::fs::read(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(lines == 0),
+        Err(e) => return Err(usage(format!("cannot read {}: {e}", path.display()))),
+    };
+    let ends: Vec<usize> = text
+        .iter()
+        .enumerate()
+        .filter(|(_, &b)| b == b'\n')
+        .map(|(i, _)| i + 1)
+        .collect();
+    let keep = match lines {
+        0 => 0,
+        n => match ends.get(n - 1) {
+            Some(&end) => end,
+            None => return Ok(false),
+        },
+    };
+    if keep < text.len() {
+        alfd_harness::write_atomically(path, &text[..keep])?;
+    }
+    Ok(true)
 }
 
 /// Whether the run in `dir` was stopped with Ctrl-C (its `summary.json` says so): such a run is

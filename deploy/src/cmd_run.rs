@@ -47,8 +47,9 @@ pub struct RunArgs {
     /// The learner publishes its weights every this many updates.
     #[arg(long, default_value_t = 1)]
     pub weights_every: u64,
-    /// The learner checkpoints its whole state every this many updates (0: only at the end); a
-    /// learner that dies is restarted from its last checkpoint.
+    /// The learner and the actors checkpoint their whole state at the first episode end after
+    /// every this many updates' worth of steps (0: only at the end); a learner that dies is
+    /// restarted from its last checkpoint, and `alfd resume` continues from them.
     #[arg(long, default_value_t = alfd_harness::DEFAULT_CHECKPOINT_EVERY)]
     pub checkpoint_every: u64,
     /// Restarts allowed per actor, of the expert and of the learner, before the run fails.
@@ -125,6 +126,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         bin_dir: launcher::bin_dir()?,
         resume: false,
         launches: 1,
+        restore_actors: Vec::new(),
     };
     finish(&plan, output)
 }

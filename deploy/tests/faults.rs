@@ -72,7 +72,7 @@ fn checkpointed_fault_run(out: &Path) -> Background {
 fn a_learner_killed_with_sigkill_is_restarted_from_its_checkpoint_and_the_run_completes() {
     let _time = timed!();
     let out = tmp("learner-killed");
-    let mut child = checkpointed_fault_run(&out);
+    let child = checkpointed_fault_run(&out);
     let id = run_id(&out);
     let pid = find_process("alfd-learner", &[&format!("--run-id={id}")]).expect("learner");
     signal("KILL", pid);
@@ -256,4 +256,86 @@ fn a_run_stopped_with_ctrl_c_is_resumed_to_its_end() {
     assert_eq!(summary(&out)["interrupted"], false);
     check_run_dir(&out, 1500);
     check_rows_and_demos(&out, 300);
+}
+
+/// One actor in lockstep, stopped with Ctrl-C after its checkpoints, then `alfd resume`: the
+/// learner's and the actor's checkpoints pair up at an episode end, and the run comes out as the
+/// uninterrupted one (which is `alfd local`'s) to the byte.
+#[test]
+fn a_lockstep_run_stopped_and_resumed_is_the_uninterrupted_run_to_the_byte() {
+    let _time = timed!();
+    let sets = [
+        "episodes=120",
+        "evaluation.every=5",
+        "evaluation.episodes=2",
+    ];
+    let local = tmp("exact-resume-local");
+    let mut c = alfd();
+    c.args([
+        "local",
+        "--config",
+        "deploy/configs/cartpole-bdqn-krr.toml",
+        "--quiet",
+    ])
+    .arg(format!("--out={}", local.display()))
+    .args(["--set", &format!("expert.name={}", crate::runtime::EXPERT)]);
+    for s in sets {
+        c.args(["--set", s]);
+    }
+    let o = c.output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+
+    let out = tmp("exact-resume");
+    let mut lockstep = sets.to_vec();
+    lockstep.extend(["--window=1", "--checkpoint-every=100"]);
+    let mut child = spawn_run(&out, 1, &lockstep);
+    wait_until(&mut child, "two actor checkpoints", || {
+        alfd_actor::checkpoint::load(
+            &out,
+            0,
+            &std::fs::read_to_string(out.join("config.toml")).unwrap_or_default(),
+        )
+        .ok()
+        .flatten()
+        .is_some_and(|f| f.slots.len() == 2)
+    });
+    let o = interrupt(child);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    let stopped_at = rows(&out).len();
+    assert!(stopped_at < 120, "{stopped_at}");
+    // A damaged actor checkpoint is refused, naming it, and left as it is.
+    let ckpt = out.join("actor-0.ckpt");
+    let good = std::fs::read(&ckpt).unwrap();
+    std::fs::write(&ckpt, &good[..good.len() - 9]).unwrap();
+    let o = alfd()
+        .args(["resume", out.to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(
+        text(&o).contains("actor-0.ckpt: truncated checkpoint"),
+        "{}",
+        text(&o)
+    );
+    assert_eq!(std::fs::read(&ckpt).unwrap().len(), good.len() - 9);
+    std::fs::write(&ckpt, &good).unwrap();
+
+    let o = alfd()
+        .args(["resume", out.to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let actor_log = std::fs::read_to_string(out.join("actor-0.log")).unwrap();
+    assert!(
+        actor_log.contains("restored from the checkpoint"),
+        "{actor_log}"
+    );
+    let single = std::fs::read_to_string(local.join("episodes.csv")).unwrap();
+    let resumed = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert_eq!(single.lines().count(), 121);
+    assert_eq!(resumed, single, "stopped after {stopped_at} episodes");
+    let d1 = alfd_expert::demo_log::read(&local.join("demos.jsonl")).unwrap();
+    let d2 = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    assert!(!d1.is_empty());
+    assert_eq!(d2[..d1.len()], d1[..]);
 }

@@ -12,7 +12,7 @@ use alfd_wire as wire;
 use crate::support::{alfd, bin_dir, text, timed, tmp, Background, TestDir};
 
 /// The expert every test uses (the registry's perfect CartPole controller).
-const EXPERT: &str = "cartpole-perfect";
+pub(crate) const EXPERT: &str = "cartpole-perfect";
 
 /// An endless run with the 200 expert asked on every step (a budget that lasts the whole test) and
 /// no model to refit: demonstrations flow whenever a test looks.

@@ -9,8 +9,7 @@
 use std::path::{Path, PathBuf};
 
 use alfd_common::agent::LearnerSnapshot;
-use alfd_common::checkpoint::{config_hash, decode, encode};
-use alfd_harness::{write_atomically, BadInput};
+use alfd_harness::{load_checkpoint, save_checkpoint, BadInput};
 use serde::{Deserialize, Serialize};
 
 /// The checkpoint's name in a run directory.
@@ -37,35 +36,21 @@ pub fn config_text(run_dir: &Path) -> anyhow::Result<String> {
 
 /// Writes the checkpoint whole; returns its size in bytes.
 pub fn save(run_dir: &Path, ckpt: &LearnerCheckpoint, config_toml: &str) -> anyhow::Result<usize> {
-    let bytes = encode(ckpt, config_hash(config_toml));
-    write_atomically(&path(run_dir), &bytes)?;
-    Ok(bytes.len())
+    save_checkpoint(&path(run_dir), ckpt, config_toml)
 }
 
 /// Reads the checkpoint, if there is one; one that cannot be trusted (truncated, corrupt, of
-/// another version or another config) is [`BadInput`] saying which, and is left as it is.
+/// another version or another config) is [`BadInput`](alfd_harness::BadInput) saying which, and
+/// is left as it is.
 pub fn load(run_dir: &Path, config_toml: &str) -> anyhow::Result<Option<LearnerCheckpoint>> {
-    let p = path(run_dir);
-    let bytes = match std::fs::read(&p) {
-        Ok(b) => b,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(BadInput(format!("cannot read {}: {e}", p.display())).into()),
-    };
-    decode(&bytes, config_hash(config_toml))
-        .map(Some)
-        .map_err(|e| {
-            BadInput(format!(
-                "{}: {e}; the learner was not restored and the file was left as it is",
-                p.display()
-            ))
-            .into()
-        })
+    load_checkpoint(&path(run_dir), config_toml, "the learner was not restored")
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use alfd_common::agent::NeuralLearner;
+    use alfd_common::checkpoint::{config_hash, decode, encode};
     use alfd_common::config::ExperimentConfig;
     use alfd_common::replay::Transition;
     use alfd_common::rng::seeded;

@@ -47,6 +47,8 @@ pub struct Queued {
     pub incarnation: u64,
     /// The last step of its batch: its processing frees a batch worth of credit.
     pub last_of_batch: bool,
+    /// The last step of its episode (where the learner may checkpoint).
+    pub episode_end: bool,
     pub transition: Transition,
 }
 
@@ -67,6 +69,11 @@ impl CreditBook {
     }
 
     /// Environment steps received from all actors: the run's global step.
+    /// How many actor ids have sent transitions.
+    pub fn senders(&self) -> usize {
+        self.actors.iter().filter(|a| a.incarnation != 0).count()
+    }
+
     pub fn env_steps(&self) -> u64 {
         self.env_steps
     }
@@ -142,6 +149,7 @@ impl CreditBook {
                 actor: b.actor as u16,
                 incarnation: b.incarnation,
                 last_of_batch: i + 1 == n,
+                episode_end: b.ends_episode(i),
                 transition,
             });
         }

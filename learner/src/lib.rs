@@ -10,6 +10,7 @@ use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use alfd_common::agent::NeuralLearner;
+use alfd_common::checkpoint::Cadence;
 use alfd_common::rng::{derive_seed, seeded};
 use alfd_harness::{write_atomically, BadInput, ProcessArgs, Session, Setup};
 use alfd_wire::{
@@ -138,9 +139,12 @@ fn serve(
         );
     }
     let started = Instant::now();
+    let restored_step = restored.as_ref().map_or(0, |c| c.env_steps);
     let mut checkpoints = Checkpoints {
-        every: runtime.checkpoint_every,
-        last: learner.updates(),
+        cadence: Cadence::new(
+            Cadence::steps_for_updates(runtime.checkpoint_every, cfg.agent.updates_per_step),
+            restored_step,
+        ),
         written: 0,
         time: Duration::ZERO,
         bytes: 0,
@@ -207,7 +211,9 @@ fn serve(
                 publish_time += t.elapsed();
                 published_version = learner.updates();
             }
-            if checkpoints.due(learner.updates()) {
+            // At an actor's episode end, every `checkpoint_every` updates' worth of steps: in
+            // lockstep with one actor, where that actor checkpoints too.
+            if q.episode_end && checkpoints.cadence.episode_end(book.env_steps()) {
                 checkpoints.write(run_dir, &learner, &book, config_toml)?;
             }
             credits_dirty = true;
@@ -292,7 +298,14 @@ fn serve(
     let path = run_dir.join("weights.safetensors");
     write_atomically(&path, &learner.network().to_safetensors_bytes())?;
     info!(path = %path.display(), "final weights saved");
-    checkpoints.write(run_dir, &learner, &book, config_toml)?;
+    // One actor in lockstep: the last checkpoint pairs with the actor's at an episode end, from
+    // which `alfd resume` continues as the uninterrupted run; a final one would not pair.
+    if runtime.window == 1 && book.senders() <= 1 && (checkpoints.written > 0 || restored_step > 0)
+    {
+        info!("lockstep with one actor: the last checkpoint (at an episode end) is kept");
+    } else {
+        checkpoints.write(run_dir, &learner, &book, config_toml)?;
+    }
     info!(
         checkpoints = checkpoints.written,
         bytes = checkpoints.bytes,
@@ -310,20 +323,13 @@ fn serve(
 
 /// When the learner checkpoints, and what its checkpoints cost.
 struct Checkpoints {
-    /// Every this many updates (0: only at the end).
-    every: u64,
-    /// Updates at the last checkpoint (or the restored one).
-    last: u64,
+    cadence: Cadence,
     written: u64,
     time: Duration,
     bytes: usize,
 }
 
 impl Checkpoints {
-    fn due(&self, updates: u64) -> bool {
-        self.every > 0 && updates >= self.last.saturating_add(self.every)
-    }
-
     fn write(
         &mut self,
         run_dir: &std::path::Path,
@@ -340,9 +346,9 @@ impl Checkpoints {
         let took = t.elapsed();
         self.time += took;
         self.written += 1;
-        self.last = learner.updates();
         debug!(
-            updates = self.last,
+            updates = learner.updates(),
+            env_steps = book.env_steps(),
             bytes = self.bytes,
             ms = took.as_secs_f64() * 1e3,
             "checkpoint written"

@@ -77,3 +77,43 @@ mod tests {
         assert!(format!("{e:#}").contains("missing"), "{e:#}");
     }
 }
+
+/// Writes `state` to `path` whole in the core's checkpoint format, tied to the run's config
+/// (`config.toml`'s text); returns its size in bytes.
+pub fn save_checkpoint<T: serde::Serialize>(
+    path: &Path,
+    state: &T,
+    config_toml: &str,
+) -> anyhow::Result<usize> {
+    use alfd_common::checkpoint::{config_hash, encode};
+    let bytes = encode(state, config_hash(config_toml));
+    write_atomically(path, &bytes)?;
+    Ok(bytes.len())
+}
+
+/// Reads a checkpoint written by [`save_checkpoint`], if there is one. One that cannot be trusted
+/// (truncated, corrupt, of another version or another config) is [`crate::BadInput`] saying which
+/// and what was not done (`refused`), and the file is left as it is.
+pub fn load_checkpoint<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    config_toml: &str,
+    refused: &str,
+) -> anyhow::Result<Option<T>> {
+    use alfd_common::checkpoint::{config_hash, decode};
+    let bytes = match std::fs::read(path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => {
+            return Err(crate::BadInput(format!("cannot read {}: {e}", path.display())).into())
+        }
+    };
+    decode(&bytes, config_hash(config_toml))
+        .map(Some)
+        .map_err(|e| {
+            crate::BadInput(format!(
+                "{}: {e}; {refused} and the file was left as it is",
+                path.display()
+            ))
+            .into()
+        })
+}

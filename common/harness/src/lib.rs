@@ -10,7 +10,7 @@ mod runtime;
 mod session;
 mod startup;
 
-pub use fs::{test_dir, write_atomically};
+pub use fs::{load_checkpoint, save_checkpoint, test_dir, write_atomically};
 pub use process::{check_wire_limits, exit_code, main, BadInput, ProcessArgs, Setup};
 pub use runtime::{RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY, RUNTIME_FILE};
 pub use session::{Session, SessionError, LAUNCHER_SILENCE, STOP_REQUESTED, TERMINATION_SIGNAL};

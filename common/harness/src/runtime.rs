@@ -31,8 +31,10 @@ pub struct RuntimeConfig {
     pub handshake_timeout_s: u64,
     /// The learner publishes its weights every this many updates.
     pub weights_every: u64,
-    /// The learner writes its whole state to `RUN_DIR/learner.ckpt` every this many updates
-    /// (and when it stops); 0: only when it stops. A learner that dies is restarted from it.
+    /// The learner writes its whole state to `RUN_DIR/learner.ckpt`, and each actor to
+    /// `RUN_DIR/actor-<id>.ckpt`, at the first episode end after every this many updates' worth
+    /// of environment steps (`alfd_common::checkpoint::Cadence`), and the learner when it stops;
+    /// 0: only when it stops. A learner that dies is restarted from it.
     #[serde(default = "default_checkpoint_every")]
     pub checkpoint_every: u64,
 }

@@ -146,6 +146,9 @@ pub mod flags {
     pub const TERMINATED: u32 = 1;
     /// The action came from the expert.
     pub const DEMO: u32 = 4;
+    /// The last step of an episode (terminated or truncated): where the learner may checkpoint
+    /// in step with the actors (see `alfd_common::checkpoint::Cadence`).
+    pub const EPISODE_END: u32 = 8;
 }
 
 /// One environment step as it travels from an actor to the learner.
@@ -346,6 +349,22 @@ impl TransitionBatch {
             mask: r.mask[..h].to_vec(),
             demo: r.flags & flags::DEMO != 0,
         })
+    }
+
+    /// Flags the last step pushed as the end of its episode.
+    pub fn mark_episode_end(&mut self) {
+        if let Some(i) = self.len().checked_sub(1) {
+            if let Some(r) = self.records.get_mut(i) {
+                r.flags |= flags::EPISODE_END;
+            }
+        }
+    }
+
+    /// Whether step `i` of the batch ended its episode.
+    pub fn ends_episode(&self, i: usize) -> bool {
+        self.records
+            .get(i)
+            .is_some_and(|r| r.flags & flags::EPISODE_END != 0)
     }
 
     /// The steps of the batch, in order (at most [`TRANSITIONS_PER_BATCH`], whatever `len` says).

@@ -80,6 +80,9 @@ pub struct Plan {
     pub resume: bool,
     /// Which launcher of the run this is (1, plus one per resume).
     pub launches: u32,
+    /// A resumed run: the global step of the state in `actor-<id>.ckpt` each actor id starts
+    /// from (`alfd-actor --restore-step`); none: a fresh actor.
+    pub restore_actors: Vec<Option<u64>>,
 }
 
 impl Plan {
@@ -561,6 +564,13 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 ]
                 .into_iter()
                 .chain(self.episodes_left(*id).map(|n| format!("--episodes={n}")))
+                // The first actors of a resumed launch continue from their checkpoints.
+                .chain(
+                    (*incarnation == plan.first_incarnation())
+                        .then(|| plan.restore_actors.get(usize::from(*id)).copied().flatten())
+                        .flatten()
+                        .map(|step| format!("--restore-step={step}")),
+                )
                 .collect(),
             ),
         };
