@@ -338,23 +338,24 @@ def rustc_version():
         return "rustc ?"
 
 
-def spread(values, fmt):
+def scaled(values, kind):
+    """`values` (seconds, or per second) in one unit chosen by their median: the median, its
+    range, and the unit."""
     med = statistics.median(values)
-    if len(values) == 1:
-        return fmt(med)
-    return f"{fmt(med)} ({fmt(min(values))}-{fmt(max(values))})"
-
-
-def micros(seconds):
-    return f"{seconds * 1e6:,.1f} µs" if seconds < 1e-3 else f"{seconds * 1e3:,.2f} ms"
-
-
-def rate(per_s):
-    if per_s >= 1e6:
-        return f"{per_s / 1e6:.2f} M/s"
-    if per_s >= 1e4:
-        return f"{per_s / 1e3:.0f} k/s"
-    return f"{per_s:,.0f}/s"
+    if kind == "time":
+        scale, unit = (1e6, "µs") if med < 1e-3 else (1e3, "ms")
+    elif med >= 1e6:
+        scale, unit = 1e-6, "M/s"
+    elif med >= 1e4:
+        scale, unit = 1e-3, "k/s"
+    else:
+        scale, unit = 1.0, "/s"
+    digits = 0 if unit == "/s" else 2 if med * scale < 10 else 1 if med * scale < 1000 else 0
+    show = lambda v: f"{v * scale:,.{digits}f}"
+    text = f"{show(med)}{'' if unit == '/s' else ' '}{unit}"
+    if len(values) > 1:
+        text += f" ({show(min(values))}-{show(max(values))})"
+    return text
 
 
 def main():
@@ -413,11 +414,10 @@ def main():
     print("|---|---|---|---|")
     for label, kind, *_ in rows:
         mine, theirs = results[label]
-        fmt = micros if kind == "time" else rate
         ratio = statistics.median(theirs) / statistics.median(mine)
         if kind == "rate":
             ratio = 1.0 / ratio
-        print(f"| {label} | {spread(mine, fmt)} | {spread(theirs, fmt)} | {ratio:,.1f}× |")
+        print(f"| {label} | {scaled(mine, kind)} | {scaled(theirs, kind)} | {ratio:,.1f}× |")
     print()
     print(f"Medians over {rounds} interleaved round(s), range in parentheses; "
           f"{minutes:.1f} min of measuring.")
