@@ -125,5 +125,17 @@ fn bench_act_step(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, bench_train_step, bench_act_step);
+/// The single-core FMA peak (12 independent chains of 8-wide FMAs; 192 flops a round), against
+/// which the train step's GFLOP/s are reported in BENCHMARKS.md.
+fn bench_fma_peak(c: &mut Criterion) {
+    if alfd_common::nn::fma_peak_probe(1).is_none() {
+        eprintln!("no AVX2+FMA: fma_peak_10k_rounds skipped");
+        return;
+    }
+    c.bench_function("fma_peak_10k_rounds", |b| {
+        b.iter(|| black_box(alfd_common::nn::fma_peak_probe(black_box(10_000))))
+    });
+}
+
+criterion_group!(benches, bench_train_step, bench_act_step, bench_fma_peak);
 criterion_main!(benches);

@@ -61,6 +61,7 @@ fn main() {
         Err(e) => e.exit(),
     };
     setup::init_logging();
+    alfd_harness::portable_kernels_from_env();
     let result = match cli.command {
         Command::Local(a) => cmd_local::run(a),
         Command::Resume(a) => cmd_resume::run(a),

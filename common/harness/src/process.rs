@@ -109,6 +109,7 @@ pub fn main<A>(
     run: impl FnOnce(&A, u32) -> anyhow::Result<()>,
 ) -> ! {
     crate::startup::init_process_logging(binary, &process.run_dir, log);
+    crate::startup::portable_kernels_from_env();
     let schema = crate::startup::schema_version_from_env().unwrap_or_else(|e| {
         eprintln!("{binary}: {e}");
         std::process::exit(2)

@@ -64,3 +64,13 @@ pub fn schema_version_from_env() -> Result<u32, String> {
         Err(_) => Ok(alfd_wire::SCHEMA_VERSION),
     }
 }
+
+/// `ALFD_PORTABLE_KERNELS=1`: this process computes with the core's portable kernels (no AVX2, a
+/// software FMA per element), which must give the same numbers as the fast ones (the golden-run
+/// test checks it).
+pub fn portable_kernels_from_env() {
+    if std::env::var_os("ALFD_PORTABLE_KERNELS").is_some_and(|v| v == "1") {
+        alfd_common::nn::use_portable_kernels(true);
+        tracing::info!("ALFD_PORTABLE_KERNELS=1: the portable kernels (slow)");
+    }
+}

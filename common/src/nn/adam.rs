@@ -141,14 +141,21 @@ impl Adam {
             .zip(grads.tensors())
             .zip(self.m.tensors_mut())
             .zip(self.v.tensors_mut());
-        for (((p, g), m), v) in tensors {
-            for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
-                *m += w1 * (g - *m);
-                *v = *v * beta2 + w2 * (g * g);
-                let denom = v.sqrt() / bias_correction2_sqrt + eps;
-                *p -= step_size * (*m / denom);
-            }
-        }
+        // Element by element: AVX2 where there is one changes the speed, not the numbers.
+        super::gemm::wide(
+            #[inline(always)]
+            || {
+                for (((p, g), m), v) in tensors {
+                    for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut())
+                    {
+                        *m += w1 * (g - *m);
+                        *v = *v * beta2 + w2 * (g * g);
+                        let denom = v.sqrt() / bias_correction2_sqrt + eps;
+                        *p -= step_size * (*m / denom);
+                    }
+                }
+            },
+        );
     }
 }
 

@@ -4,13 +4,14 @@
 //!
 //! Batched activations are nalgebra matrices of shape `(batch, features)`, one sample per row;
 //! with the weights stored as `(in, out)` (see the module docs of [`crate::nn`]) a layer is
-//! `Z = A W^T + b = A * w + b`. The 64x64 products go to nalgebra's `gemm` (matrixmultiply); the
-//! thin ones (4 inputs, K*A outputs) become dot products or axpys over contiguous columns.
+//! `Z = A W^T + b = A * w + b`. The 64x64 products go to [`super::gemm`] (a fixed order of fused
+//! multiply-adds, the same on every CPU); the thin ones (4 inputs, K*A outputs) become dot
+//! products or axpys over contiguous columns.
 
-use nalgebra::storage::Storage;
-use nalgebra::{DMatrix, DMatrixView, DVector, Dyn, Matrix};
+use nalgebra::{DMatrix, DVector};
 use rand::Rng as _;
 
+use super::gemm::{gemm, wide, MatRef};
 use super::{torch_shapes, NnError, Params, Result};
 use crate::rng::Rng;
 
@@ -40,6 +41,8 @@ pub struct ForwardCache {
     /// dL/d(pre-activation) of `torso.1` and `torso.0`, `(batch, hidden)`.
     dz1: DMatrix<f32>,
     dz0: DMatrix<f32>,
+    /// Scratch of the wide products (a transposed operand, packed).
+    pack: Vec<f32>,
 }
 
 impl Default for ForwardCache {
@@ -51,6 +54,7 @@ impl Default for ForwardCache {
             q: DMatrix::zeros(0, 0),
             dz1: DMatrix::zeros(0, 0),
             dz0: DMatrix::zeros(0, 0),
+            pack: Vec::new(),
         }
     }
 }
@@ -308,11 +312,17 @@ impl Mlp {
             }
         }
         let p = &self.params;
-        linear(&mut cache.h0, &cache.x, &p.w0, &p.b0);
-        relu(&mut cache.h0);
-        linear(&mut cache.h1, &cache.h0, &p.w1, &p.b1);
-        relu(&mut cache.h1);
-        linear(&mut cache.q, &cache.h1, &p.wh, &p.bh);
+        // AVX2 where there is one: faster, the same numbers (see `gemm::wide`).
+        wide(
+            #[inline(always)]
+            || {
+                linear(&mut cache.h0, &cache.x, &p.w0, &p.b0);
+                relu(&mut cache.h0);
+                linear(&mut cache.h1, &cache.h0, &p.w1, &p.b1);
+                relu(&mut cache.h1);
+                linear(&mut cache.q, &cache.h1, &p.wh, &p.bh);
+            },
+        );
     }
 
     /// The backward pass of the batch last given to [`Mlp::forward_batch`] with `cache`: from
@@ -332,19 +342,25 @@ impl Mlp {
         }
         let p = &self.params;
         let c = cache;
-        // Output layer: Q = h1 * wh + bh.
-        tr_matmul(&mut grads.wh, &c.h1, dq);
-        column_sums(dq, &mut grads.bh);
-        matmul(&mut c.dz1, dq, &transposed(&p.wh), 0.0);
-        relu_backward(&mut c.dz1, &c.h1);
-        // torso.1: h1 = relu(h0 * w1 + b1).
-        tr_matmul(&mut grads.w1, &c.h0, &c.dz1);
-        column_sums(&c.dz1, &mut grads.b1);
-        matmul(&mut c.dz0, &c.dz1, &transposed(&p.w1), 0.0);
-        relu_backward(&mut c.dz0, &c.h0);
-        // torso.0: h0 = relu(x * w0 + b0).
-        tr_matmul(&mut grads.w0, &c.x, &c.dz0);
-        column_sums(&c.dz0, &mut grads.b0);
+        // AVX2 where there is one: faster, the same numbers (see `gemm::wide`).
+        wide(
+            #[inline(always)]
+            || {
+                // Output layer: Q = h1 * wh + bh.
+                tr_matmul(&mut grads.wh, &c.h1, dq, &mut c.pack);
+                column_sums(dq, &mut grads.bh);
+                matmul(&mut c.dz1, dq, transposed(&p.wh), 0.0);
+                relu_backward(&mut c.dz1, &c.h1);
+                // torso.1: h1 = relu(h0 * w1 + b1).
+                tr_matmul(&mut grads.w1, &c.h0, &c.dz1, &mut c.pack);
+                column_sums(&c.dz1, &mut grads.b1);
+                matmul(&mut c.dz0, &c.dz1, transposed(&p.w1), 0.0);
+                relu_backward(&mut c.dz0, &c.h0);
+                // torso.0: h0 = relu(x * w0 + b0).
+                tr_matmul(&mut grads.w0, &c.x, &c.dz0, &mut c.pack);
+                column_sums(&c.dz0, &mut grads.b0);
+            },
+        );
     }
 }
 
@@ -364,37 +380,62 @@ fn ensure_shape(m: &mut DMatrix<f32>, rows: usize, cols: usize) {
     }
 }
 
-/// The transpose of `m` as a strided view, without copying.
-fn transposed(m: &DMatrix<f32>) -> DMatrixView<'_, f32, Dyn, Dyn> {
-    DMatrixView::from_slice_with_strides(m.as_slice(), m.ncols(), m.nrows(), m.nrows(), 1)
+/// `m` as the wide products read it.
+fn view(m: &DMatrix<f32>) -> MatRef<'_> {
+    MatRef {
+        data: m.as_slice(),
+        rs: 1,
+        cs: m.nrows(),
+    }
+}
+
+/// The transpose of `m`, without copying.
+fn transposed(m: &DMatrix<f32>) -> MatRef<'_> {
+    MatRef {
+        data: m.as_slice(),
+        rs: m.nrows(),
+        cs: 1,
+    }
 }
 
 /// `out = input * w + b` (b broadcast over rows).
+#[inline(always)]
 fn linear(out: &mut DMatrix<f32>, input: &DMatrix<f32>, w: &DMatrix<f32>, b: &DVector<f32>) {
     let rows = out.nrows().max(1);
     for (col, &bias) in out.as_mut_slice().chunks_exact_mut(rows).zip(b.iter()) {
         col.fill(bias);
     }
-    matmul(out, input, w, 1.0);
+    matmul(out, input, view(w), 1.0);
 }
 
-/// Below this, a dimension is "thin": nalgebra hands products to matrixmultiply only when every
-/// dimension exceeds 5, and does the rest with generic per-element code.
+/// Below this, a dimension is "thin": products whose dimensions all exceed it go to
+/// [`super::gemm`] (the bound at which nalgebra handed them to matrixmultiply, whose results
+/// that kernel keeps), the others are done here.
 const THIN: usize = 5;
 
-/// `out = beta * out + a * b`. Products whose dimensions all exceed [`THIN`] go to nalgebra's
-/// `gemm` (matrixmultiply); thin ones become axpys over the contiguous columns of `a`, which
-/// vectorise.
-fn matmul<S>(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &Matrix<f32, Dyn, Dyn, S>, beta: f32)
-where
-    S: Storage<f32, Dyn, Dyn>,
-{
+/// `out = beta * out + a * b`, `b` of shape `(a.ncols(), out.ncols())`. Products whose dimensions
+/// all exceed [`THIN`] go to [`super::gemm`]; thin ones become axpys over the contiguous columns
+/// of `a`, which vectorise.
+#[inline(always)]
+fn matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: MatRef<'_>, beta: f32) {
     let (m, k) = a.shape();
-    let n = b.ncols();
-    debug_assert_eq!(b.nrows(), k);
-    debug_assert_eq!(out.shape(), (m, n));
+    let n = out.ncols();
+    debug_assert_eq!(out.nrows(), m);
     if m > THIN && k > THIN && n > THIN {
-        out.gemm(1.0, a, b, beta);
+        if beta != 0.0 && beta != 1.0 {
+            for v in out.as_mut_slice() {
+                *v *= beta;
+            }
+        }
+        let beta = if beta == 0.0 { 0.0 } else { 1.0 };
+        gemm(
+            (m, k, n),
+            view(a),
+            b,
+            beta,
+            out.as_mut_slice(),
+            &mut Vec::new(),
+        );
         return;
     }
     if beta == 0.0 {
@@ -416,12 +457,12 @@ where
             let (a0, rest) = block.split_at(m);
             let (a1, rest) = rest.split_at(m);
             let (a2, a3) = rest.split_at(m);
-            let s = [b[(p, j)], b[(p + 1, j)], b[(p + 2, j)], b[(p + 3, j)]];
+            let s = [b.at(p, j), b.at(p + 1, j), b.at(p + 2, j), b.at(p + 3, j)];
             axpy4(out_col, s, [a0, a1, a2, a3]);
             p += 4;
         }
         for a_col in blocks.remainder().chunks_exact(m) {
-            axpy(out_col, b[(p, j)], a_col);
+            axpy(out_col, b.at(p, j), a_col);
             p += 1;
         }
     }
@@ -429,13 +470,21 @@ where
 
 /// `out = a^T * b` (overwritten), `a` and `b` with the same number of rows (the batch). Thin
 /// products become dot products of contiguous columns.
-fn tr_matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &DMatrix<f32>) {
+#[inline(always)]
+fn tr_matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &DMatrix<f32>, pack: &mut Vec<f32>) {
     let (m, k) = a.shape();
     let n = b.ncols();
     debug_assert_eq!(b.nrows(), m);
     debug_assert_eq!(out.shape(), (k, n));
     if m > THIN && k > THIN && n > THIN {
-        out.gemm(1.0, &transposed(a), b, 0.0);
+        gemm(
+            (k, m, n),
+            transposed(a),
+            view(b),
+            0.0,
+            out.as_mut_slice(),
+            pack,
+        );
         return;
     }
     if m == 0 {
@@ -469,7 +518,7 @@ fn tr_matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &DMatrix<f32>) {
 
 /// `y += s[0] * x[0] + s[1] * x[1] + s[2] * x[2] + s[3] * x[3]`, added left to right as four
 /// [`axpy`]s would.
-#[inline]
+#[inline(always)]
 fn axpy4(y: &mut [f32], s: [f32; 4], x: [&[f32]; 4]) {
     for ((((y, &a), &b), &c), &d) in y.iter_mut().zip(x[0]).zip(x[1]).zip(x[2]).zip(x[3]) {
         *y = *y + s[0] * a + s[1] * b + s[2] * c + s[3] * d;
@@ -477,13 +526,14 @@ fn axpy4(y: &mut [f32], s: [f32; 4], x: [&[f32]; 4]) {
 }
 
 /// `y += alpha * x`.
-#[inline]
+#[inline(always)]
 fn axpy(y: &mut [f32], alpha: f32, x: &[f32]) {
     for (y, &x) in y.iter_mut().zip(x) {
         *y += alpha * x;
     }
 }
 
+#[inline(always)]
 fn relu(m: &mut DMatrix<f32>) {
     for v in m.as_mut_slice() {
         *v = v.max(0.0);
@@ -491,6 +541,7 @@ fn relu(m: &mut DMatrix<f32>) {
 }
 
 /// Zeroes the gradient where the ReLU output is not positive (as PyTorch's `threshold_backward`).
+#[inline(always)]
 fn relu_backward(grad: &mut DMatrix<f32>, out: &DMatrix<f32>) {
     // A select rather than a conditional store, so that it vectorises without branches.
     for (g, &h) in grad.as_mut_slice().iter_mut().zip(out.as_slice()) {
@@ -499,6 +550,7 @@ fn relu_backward(grad: &mut DMatrix<f32>, out: &DMatrix<f32>) {
 }
 
 /// `out[j] = sum_i m[(i, j)]`.
+#[inline(always)]
 fn column_sums(m: &DMatrix<f32>, out: &mut DVector<f32>) {
     let rows = m.nrows();
     for (o, col) in out.iter_mut().zip(m.as_slice().chunks_exact(rows.max(1))) {
@@ -572,7 +624,7 @@ fn lanes(v: &[f32]) -> [f32; 8] {
 
 /// Dot product with sixteen independent accumulators, so that it vectorises and the additions
 /// do not wait on one another.
-#[inline]
+#[inline(always)]
 fn dot(a: &[f32], b: &[f32]) -> f32 {
     let mut acc = [0.0f32; 16];
     let ca = a.chunks_exact(16);
@@ -596,7 +648,7 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 }
 
 /// Sum with eight independent accumulators, so that it vectorises.
-#[inline]
+#[inline(always)]
 fn sum(a: &[f32]) -> f32 {
     let mut acc = [0.0f32; 8];
     let chunks = a.chunks_exact(8);
@@ -695,18 +747,18 @@ mod tests {
             let b = rand(k, n);
             let mut out = rand(m, n);
             let expected = &a * &b + &out * 0.5;
-            matmul(&mut out, &a, &b, 0.5);
+            matmul(&mut out, &a, view(&b), 0.5);
             assert!((out - &expected).abs().max() < 1e-5, "matmul {m}x{k}x{n}");
             let bt = b.transpose();
             let mut out = rand(m, n);
-            matmul(&mut out, &a, &transposed(&bt), 0.0);
+            matmul(&mut out, &a, transposed(&bt), 0.0);
             assert!(
                 (out - &a * &b).abs().max() < 1e-5,
                 "matmul by a view {m}x{k}x{n}"
             );
             let c = rand(m, n);
             let mut out = rand(k, n);
-            tr_matmul(&mut out, &a, &c);
+            tr_matmul(&mut out, &a, &c, &mut Vec::new());
             assert!(
                 (out - a.transpose() * &c).abs().max() < 1e-5,
                 "tr_matmul {m}x{k}x{n}"
