@@ -179,6 +179,13 @@ impl Pieces {
                     demonstrator,
                 }
             }
+            EnvName::Gymnasium => {
+                return Err(crate::usage::usage(
+                    "a gymnasium environment runs in `alfd run` (each actor starts its Python \
+                     adapter); the single-process runner (`alfd local`, `alfd sweep`) does not \
+                     run it yet",
+                ))
+            }
             _ => Self::Neural {
                 demonstrator: setup::neural_demonstrator(cfg)?,
             },
