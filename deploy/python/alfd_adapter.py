@@ -344,7 +344,10 @@ def serve(run_id, name, schema, server):
     seq = 0
     print(f"alfd_adapter: serving {base}", file=sys.stderr, flush=True)
     while not stop["now"]:
-        requests.timed_wait(iox2.Duration.from_millis(200))
+        try:
+            requests.timed_wait(iox2.Duration.from_millis(200))
+        except iox2.ListenerWaitError:
+            pass  # a signal cut the wait short: SIGTERM sets `stop`, anything else goes on
         answered = False
         while True:
             active = srv.receive()

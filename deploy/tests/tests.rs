@@ -2,6 +2,7 @@
 
 mod cli;
 mod faults;
+mod gymnasium;
 mod report;
 mod runtime;
 mod shards;

@@ -1,0 +1,228 @@
+//! Bring your own environment and your own expert (issue 12): Gymnasium environments served by
+//! the Python adapter (`deploy/python/alfd_adapter.py`) pass the same conformance suite as the
+//! built-in ones and give our CartPole's trajectories, and a multi-process run plays one with
+//! an external Python expert.
+//!
+//! The adapter's Python comes from `.venv/`, installed on first use by
+//! `deploy/python/setup-venv.sh` (as `alfd` itself does).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use alfd_common::config::{EnvConfig, EnvName};
+use alfd_common::env::{CartPole, Env, EnvError};
+use alfd_harness::python::{Adapter, AdapterEnv};
+use alfd_wire::{self as wire, Process, Role, SCHEMA_VERSION};
+
+#[path = "../../common/tests/conformance_suite.rs"]
+mod conformance_suite;
+
+use crate::support::{alfd, text, timed, tmp};
+
+fn gym(id: &str, max_episode_steps: Option<usize>) -> EnvConfig {
+    EnvConfig {
+        name: EnvName::Gymnasium,
+        max_episode_steps,
+        p_success: 0.9,
+        map: None,
+        id: Some(id.to_owned()),
+        kwargs: None,
+    }
+}
+
+/// Sessions on one adapter of run `run_id`; the run's iceoryx2 files are removed when dropped.
+struct Served {
+    adapter: Option<Arc<Adapter>>,
+    run_id: String,
+}
+
+impl Served {
+    fn new(id: &str, dir: &Path, tag: &str) -> Self {
+        let run_id = format!("gymtest-{tag}-{}", std::process::id());
+        let adapter = Adapter::env(
+            &gym(id, None),
+            &run_id,
+            "env-0",
+            SCHEMA_VERSION,
+            &dir.join("adapter.log"),
+        )
+        .expect("the adapter starts");
+        Self {
+            adapter: Some(Arc::new(adapter)),
+            run_id,
+        }
+    }
+
+    fn open(&self, id: &str, limit: usize) -> AdapterEnv {
+        AdapterEnv::open(
+            self.adapter.clone().expect("running"),
+            &gym(id, Some(limit)),
+            &self.run_id,
+            Process::new(Role::Tool, 0),
+            SCHEMA_VERSION,
+        )
+        .expect("a session opens")
+    }
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        self.adapter = None;
+        let _ = wire::close_run(&self.run_id);
+    }
+}
+
+#[test]
+fn gymnasium_cartpole_through_the_adapter_conforms_and_follows_the_native_cartpole() {
+    let _time = timed!();
+    let dir = tmp("gym-cartpole");
+    let served = Served::new("CartPole-v1", &dir, "cp");
+    // The same suite as the built-in environments.
+    conformance_suite::conformance(
+        "gymnasium:CartPole-v1",
+        |limit| served.open("CartPole-v1", limit),
+        2,
+        |i| i % 2,
+        |_| 0,
+    );
+
+    // From the same internal state and actions, Gymnasium's CartPole through the adapter and our
+    // native one give the same trajectory: every float64 state to 1e-9, observations, rewards
+    // and both flags.
+    let mut remote = served.open("CartPole-v1", 200);
+    let mut native = CartPole::new(200);
+    let starts = [
+        [0.0, 0.0, 0.0, 0.0],
+        [0.01, -0.02, 0.03, 0.04],
+        [-0.5, 0.3, -0.1, -0.2],
+        [1.0, 1.0, 0.15, 0.5],
+    ];
+    let (mut steps, mut terminated) = (0, 0);
+    for (k, s0) in starts.iter().enumerate() {
+        remote.reset(Some(k as u64));
+        native.reset(Some(k as u64));
+        remote.env.set_internal_state(s0).unwrap();
+        native.set_state(*s0);
+        assert_eq!(remote.env.internal_state().unwrap(), s0.to_vec());
+        for i in 0..200 {
+            // A fixed sequence that keeps the pole up a while, then lets it fall.
+            let a = if i < 20 { (i + k) % 2 } else { 1 };
+            let r = remote.step(a).unwrap();
+            let n = native.step(a).unwrap();
+            for (x, y) in r.observation.iter().zip(n.observation.iter()) {
+                assert!((f64::from(*x) - f64::from(*y)).abs() <= 1e-9, "start {k} step {i}");
+            }
+            assert_eq!(
+                (r.reward, r.terminated, r.truncated),
+                (n.reward, n.terminated, n.truncated),
+                "start {k} step {i}"
+            );
+            let (rs, ns) = (remote.env.internal_state().unwrap(), native.state());
+            for (x, y) in rs.iter().zip(ns.iter()) {
+                assert!((x - y).abs() <= 1e-9, "start {k} step {i}: {rs:?} vs {ns:?}");
+            }
+            steps += 1;
+            if r.done() {
+                terminated += usize::from(r.terminated);
+                break;
+            }
+        }
+    }
+    assert!(steps > 40 && terminated == starts.len(), "{steps} {terminated}");
+    // What a remote environment cannot do, it says.
+    let e = remote.restore(&native.snapshot()).unwrap_err();
+    assert!(
+        matches!(&e, EnvError::Unsupported(m) if m.contains("gymnasium:CartPole-v1")),
+        "{e}"
+    );
+    drop((remote, served));
+}
+
+#[test]
+fn a_gymnasium_environment_with_a_wrong_space_is_refused_naming_it() {
+    let _time = timed!();
+    let out = tmp("gym-wrong");
+    for (id, says) in [
+        ("Pendulum-v1", "the action space Box(-2.0, 2.0, (1,), float32) is not Discrete"),
+        ("CliffWalking-v1", "the observation space Discrete(48) is not a one-dimensional Box"),
+    ] {
+        let o = alfd()
+            .args(["run", "--quiet", "--actors=1"])
+            .arg(format!("--out={}", out.join(id).display()))
+            .args(["--set", "env.name=gymnasium", "--set"])
+            .arg(format!("env.id={id}"))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(stderr.contains(says), "{id}: {stderr}");
+    }
+}
+
+/// The scripted controller of `deploy/python/examples/alfd_examples.py`, `acrobot_pump`.
+fn acrobot_pump(obs: &[f64]) -> usize {
+    if obs[4] > 0.0 {
+        0
+    } else {
+        2
+    }
+}
+
+#[test]
+fn a_run_on_gymnasium_acrobot_with_an_external_python_expert_completes() {
+    let _time = timed!();
+    let out = tmp("gym-acrobot");
+    let config = out.join("acrobot.toml");
+    let expert = "python:alfd_examples:acrobot_pump";
+    std::fs::write(
+        &config,
+        format!(
+            "seed = 5\nepisodes = 6\n[env]\nname = \"gymnasium\"\nid = \"Acrobot-v1\"\n\
+             max_episode_steps = 60\n[agent]\nkind = \"bdqn\"\nbatch_size = 16\n\
+             [query]\nmode = \"first\"\n[budget]\ntotal = 25\n\
+             [expert]\nname = \"{expert}\"\nmodel = \"krr\"\n"
+        ),
+    )
+    .unwrap();
+    let run_dir = out.join("run");
+    let o = alfd()
+        .args(["run", "--quiet", "--actors=2", "--query-timeout-ms=5000"])
+        .arg(format!("--config={}", config.display()))
+        .arg(format!("--out={}", run_dir.display()))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["episodes"], 6);
+    let rows: Vec<Vec<String>> = std::fs::read_to_string(run_dir.join("episodes.csv"))
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect();
+    assert_eq!(rows.len(), 6);
+    for r in &rows {
+        // Acrobot-v1: -1 per step until the tip clears the bar, at most 60 steps here.
+        let (ret, len): (f64, u32) = (r[1].parse().unwrap(), r[2].parse().unwrap());
+        assert!((1..=60).contains(&len) && ret <= 0.0 && ret >= -(len as f64), "{r:?}");
+    }
+    assert!(rows.iter().any(|r| r[8] == "0") && rows.iter().any(|r| r[8] == "1"));
+    // The whole budget, spent on the first steps, each answer the controller's, with its name.
+    let demos = alfd_expert::demo_log::read(&run_dir.join("demos.jsonl")).unwrap();
+    assert_eq!(demos.len(), 25);
+    assert_eq!(summary["demos"], 25);
+    for d in &demos {
+        assert_eq!(d.expert, expert);
+        assert_eq!(d.state.len(), 6);
+        assert_eq!(d.action, acrobot_pump(&d.state), "{d:?}");
+    }
+    let spec = std::fs::read_to_string(run_dir.join("runtime.toml")).unwrap();
+    assert!(spec.contains("obs_dim = 6") && spec.contains("num_actions = 3"), "{spec}");
+    for log in ["adapter-env-0.log", "adapter-env-1.log", "adapter-expert-1.log"] {
+        assert!(run_dir.join(log).is_file(), "{log} missing");
+    }
+    let id = crate::runtime::run_id(&run_dir);
+    assert_eq!(wire::leftover_files(&id), Vec::<std::path::PathBuf>::new());
+}
