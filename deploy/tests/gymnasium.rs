@@ -226,3 +226,85 @@ fn a_run_on_gymnasium_acrobot_with_an_external_python_expert_completes() {
     let id = crate::runtime::run_id(&run_dir);
     assert_eq!(wire::leftover_files(&id), Vec::<std::path::PathBuf>::new());
 }
+
+/// The experts named in `demos.jsonl`, in order, each run of equal names once.
+fn expert_segments(demos: &[alfd_common::agent::DemoRecord]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for d in demos {
+        if out.last() != Some(&d.expert) {
+            out.push(d.expert.clone());
+        }
+    }
+    out
+}
+
+#[test]
+fn swap_expert_goes_from_a_built_in_expert_to_an_external_one_and_back() {
+    let _time = timed!();
+    let out = tmp("gym-swap");
+    let external = "python:alfd_examples:acrobot_pump";
+    let demos_of = |name: &str| {
+        alfd_expert::demo_log::read(&out.join("demos.jsonl"))
+            .unwrap_or_default()
+            .iter()
+            .filter(|d| d.expert == name)
+            .count()
+    };
+    // The built-in Acrobot, asking on every step (a budget that lasts), so demonstrations flow
+    // before and after each swap.
+    let mut run = crate::support::Background(Some(
+        alfd()
+            .args(["run", "--quiet", "--actors=2", "--query-timeout-ms=5000"])
+            .arg(format!("--out={}", out.display()))
+            .args(["--config", "deploy/configs/cartpole-bdqn-krr.toml"])
+            .args(["--set", "env.name=acrobot", "--set", "env.max_episode_steps=50"])
+            .args(["--set", "expert.name=acrobot-energy", "--set", "query.mode=first"])
+            .args(["--set", "budget.total=100000", "--set", "episodes=1000000"])
+            .args(["--set", "expert.model=none"])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
+    let swap = |to: &str, generation: u64| {
+        let o = alfd()
+            .args(["swap-expert", "--run"])
+            .arg(&*out)
+            .args(["--expert", to])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", text(&o));
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!((r["ok"].as_bool(), r["generation"].as_u64()), (Some(true), Some(generation)));
+        assert_eq!(r["to"].as_str(), Some(to));
+    };
+    crate::runtime::wait_until(&mut run, "built-in demonstrations", || {
+        demos_of("acrobot-energy") >= 20
+    });
+    swap(external, 2);
+    crate::runtime::wait_until(&mut run, "external demonstrations", || demos_of(external) >= 20);
+    swap("acrobot-energy", 3);
+    let before = demos_of("acrobot-energy");
+    crate::runtime::wait_until(&mut run, "built-in demonstrations again", || {
+        demos_of("acrobot-energy") >= before + 20
+    });
+    let o = crate::runtime::interrupt(run);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    assert_eq!(crate::runtime::summary(&out)["demos"], demos.len());
+    let id = crate::runtime::run_id(&out);
+    assert_eq!(wire::leftover_files(&id), Vec::<std::path::PathBuf>::new());
+    assert_eq!(wire::alive_nodes(&id).unwrap(), Vec::<String>::new());
+    assert_eq!(
+        expert_segments(&demos),
+        ["acrobot-energy", external, "acrobot-energy"],
+        "one block per generation, in order"
+    );
+    for (i, d) in demos.iter().enumerate() {
+        assert_eq!(d.index as usize, i, "no demonstration lost or repeated");
+        if d.expert == external {
+            assert_eq!(d.action, acrobot_pump(&d.state), "{d:?}");
+        }
+    }
+    assert!(out.join("adapter-expert-2.log").is_file());
+}
