@@ -810,7 +810,8 @@ model = "krr"
             assert!(
                 tabular.contains("agent.kind")
                     && tabular.contains(&format!("does not run on {name}"))
-                    && tabular.contains("neural ones on cartpole, mountaincar, acrobot and gymnasium"),
+                    && tabular
+                        .contains("neural ones on cartpole, mountaincar, acrobot and gymnasium"),
                 "{tabular}"
             );
             let map = err(&[&format!("env.name={name}"), "env.map=m.txt"]);
@@ -839,10 +840,14 @@ model = "krr"
         assert!(e.contains("env.id") && e.contains("gymnasium.make"), "{e}");
         let e = gym("id = \"Bad id;rm\"").unwrap_err().to_string();
         assert!(e.contains("env.id"), "{e}");
-        let e = gym("id = \"CartPole-v1\"\nmax_episode_steps = 0").unwrap_err().to_string();
+        let e = gym("id = \"CartPole-v1\"\nmax_episode_steps = 0")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("env.max_episode_steps"), "{e}");
         assert!(err(&["env.id=CartPole-v1"]).contains("applies to gymnasium only"));
-        let e = gym("id = \"CartPole-v1\"\n[agent2]").unwrap_err().to_string();
+        let e = gym("id = \"CartPole-v1\"\n[agent2]")
+            .unwrap_err()
+            .to_string();
         assert!(!e.is_empty());
         let tab = ExperimentConfig::from_toml(
             "seed = 1\nepisodes = 2\n[env]\nname = \"gymnasium\"\nid = \"CartPole-v1\"\n[agent]\nkind = \"qlearning\"\n",

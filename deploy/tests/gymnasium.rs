@@ -110,7 +110,10 @@ fn gymnasium_cartpole_through_the_adapter_conforms_and_follows_the_native_cartpo
             let r = remote.step(a).unwrap();
             let n = native.step(a).unwrap();
             for (x, y) in r.observation.iter().zip(n.observation.iter()) {
-                assert!((f64::from(*x) - f64::from(*y)).abs() <= 1e-9, "start {k} step {i}");
+                assert!(
+                    (f64::from(*x) - f64::from(*y)).abs() <= 1e-9,
+                    "start {k} step {i}"
+                );
             }
             assert_eq!(
                 (r.reward, r.terminated, r.truncated),
@@ -119,7 +122,10 @@ fn gymnasium_cartpole_through_the_adapter_conforms_and_follows_the_native_cartpo
             );
             let (rs, ns) = (remote.env.internal_state().unwrap(), native.state());
             for (x, y) in rs.iter().zip(ns.iter()) {
-                assert!((x - y).abs() <= 1e-9, "start {k} step {i}: {rs:?} vs {ns:?}");
+                assert!(
+                    (x - y).abs() <= 1e-9,
+                    "start {k} step {i}: {rs:?} vs {ns:?}"
+                );
             }
             steps += 1;
             if r.done() {
@@ -128,7 +134,10 @@ fn gymnasium_cartpole_through_the_adapter_conforms_and_follows_the_native_cartpo
             }
         }
     }
-    assert!(steps > 40 && terminated == starts.len(), "{steps} {terminated}");
+    assert!(
+        steps > 40 && terminated == starts.len(),
+        "{steps} {terminated}"
+    );
     // What a remote environment cannot do, it says.
     let e = remote.restore(&native.snapshot()).unwrap_err();
     assert!(
@@ -143,8 +152,14 @@ fn a_gymnasium_environment_with_a_wrong_space_is_refused_naming_it() {
     let _time = timed!();
     let out = tmp("gym-wrong");
     for (id, says) in [
-        ("Pendulum-v1", "the action space Box(-2.0, 2.0, (1,), float32) is not Discrete"),
-        ("CliffWalking-v1", "the observation space Discrete(48) is not a one-dimensional Box"),
+        (
+            "Pendulum-v1",
+            "the action space Box(-2.0, 2.0, (1,), float32) is not Discrete",
+        ),
+        (
+            "CliffWalking-v1",
+            "the observation space Discrete(48) is not a one-dimensional Box",
+        ),
     ] {
         let o = alfd()
             .args(["run", "--quiet", "--actors=1"])
@@ -206,7 +221,10 @@ fn a_run_on_gymnasium_acrobot_with_an_external_python_expert_completes() {
     for r in &rows {
         // Acrobot-v1: -1 per step until the tip clears the bar, at most 60 steps here.
         let (ret, len): (f64, u32) = (r[1].parse().unwrap(), r[2].parse().unwrap());
-        assert!((1..=60).contains(&len) && ret <= 0.0 && ret >= -(len as f64), "{r:?}");
+        assert!(
+            (1..=60).contains(&len) && ret <= 0.0 && ret >= -(len as f64),
+            "{r:?}"
+        );
     }
     assert!(rows.iter().any(|r| r[8] == "0") && rows.iter().any(|r| r[8] == "1"));
     // The whole budget, spent on the first steps, each answer the controller's, with its name.
@@ -219,8 +237,15 @@ fn a_run_on_gymnasium_acrobot_with_an_external_python_expert_completes() {
         assert_eq!(d.action, acrobot_pump(&d.state), "{d:?}");
     }
     let spec = std::fs::read_to_string(run_dir.join("runtime.toml")).unwrap();
-    assert!(spec.contains("obs_dim = 6") && spec.contains("num_actions = 3"), "{spec}");
-    for log in ["adapter-env-0.log", "adapter-env-1.log", "adapter-expert-1.log"] {
+    assert!(
+        spec.contains("obs_dim = 6") && spec.contains("num_actions = 3"),
+        "{spec}"
+    );
+    for log in [
+        "adapter-env-0.log",
+        "adapter-env-1.log",
+        "adapter-expert-1.log",
+    ] {
         assert!(run_dir.join(log).is_file(), "{log} missing");
     }
     let id = crate::runtime::run_id(&run_dir);
@@ -257,8 +282,18 @@ fn swap_expert_goes_from_a_built_in_expert_to_an_external_one_and_back() {
             .args(["run", "--quiet", "--actors=2", "--query-timeout-ms=5000"])
             .arg(format!("--out={}", out.display()))
             .args(["--config", "deploy/configs/cartpole-bdqn-krr.toml"])
-            .args(["--set", "env.name=acrobot", "--set", "env.max_episode_steps=50"])
-            .args(["--set", "expert.name=acrobot-energy", "--set", "query.mode=first"])
+            .args([
+                "--set",
+                "env.name=acrobot",
+                "--set",
+                "env.max_episode_steps=50",
+            ])
+            .args([
+                "--set",
+                "expert.name=acrobot-energy",
+                "--set",
+                "query.mode=first",
+            ])
             .args(["--set", "budget.total=100000", "--set", "episodes=1000000"])
             .args(["--set", "expert.model=none"])
             .stdout(std::process::Stdio::piped())
@@ -275,14 +310,19 @@ fn swap_expert_goes_from_a_built_in_expert_to_an_external_one_and_back() {
             .unwrap();
         assert!(o.status.success(), "{}", text(&o));
         let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-        assert_eq!((r["ok"].as_bool(), r["generation"].as_u64()), (Some(true), Some(generation)));
+        assert_eq!(
+            (r["ok"].as_bool(), r["generation"].as_u64()),
+            (Some(true), Some(generation))
+        );
         assert_eq!(r["to"].as_str(), Some(to));
     };
     crate::runtime::wait_until(&mut run, "built-in demonstrations", || {
         demos_of("acrobot-energy") >= 20
     });
     swap(external, 2);
-    crate::runtime::wait_until(&mut run, "external demonstrations", || demos_of(external) >= 20);
+    crate::runtime::wait_until(&mut run, "external demonstrations", || {
+        demos_of(external) >= 20
+    });
     swap("acrobot-energy", 3);
     let before = demos_of("acrobot-energy");
     crate::runtime::wait_until(&mut run, "built-in demonstrations again", || {

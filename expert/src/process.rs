@@ -212,7 +212,10 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                     Ok(action) => core.answer(&mut Given(action), state, step, &name),
                     Err(e) => {
                         // The actor acts on its own after its timeout; no budget is spent.
-                        tracing::error!(actor = request.actor, "external expert: {e}; query dropped");
+                        tracing::error!(
+                            actor = request.actor,
+                            "external expert: {e}; query dropped"
+                        );
                         if let Some(why) = adapter.as_ref().and_then(|a| a.gone()) {
                             anyhow::bail!("the external expert stopped: {why}");
                         }

@@ -255,10 +255,12 @@ impl AdapterEnv {
     ) -> anyhow::Result<Self> {
         let client = adapter.connect(run_id, me, schema)?;
         let label = format!("gymnasium:{}", env.id.as_deref().unwrap_or("?"));
-        let remote = RemoteEnv::open(client, env.max_episode_steps.unwrap_or(0), &label)
-            .map_err(|e| match adapter.gone() {
-                Some(why) => anyhow::anyhow!("{e}: {why}"),
-                None => e.into(),
+        let remote =
+            RemoteEnv::open(client, env.max_episode_steps.unwrap_or(0), &label).map_err(|e| {
+                match adapter.gone() {
+                    Some(why) => anyhow::anyhow!("{e}: {why}"),
+                    None => e.into(),
+                }
             })?;
         Ok(Self {
             env: remote,

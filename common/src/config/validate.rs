@@ -75,7 +75,11 @@ impl ExperimentConfig {
                 Some(_) => {}
             }
         } else if e.id.is_some() || e.kwargs.is_some() {
-            let field = if e.id.is_some() { "env.id" } else { "env.kwargs" };
+            let field = if e.id.is_some() {
+                "env.id"
+            } else {
+                "env.kwargs"
+            };
             return Err(invalid(field, "applies to gymnasium only"));
         }
         if e.name != EnvName::Cliffwalk && e.map.is_some() {

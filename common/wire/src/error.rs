@@ -38,7 +38,9 @@ pub enum WireError {
     RunAlive { run_id: String, nodes: String },
     #[error("`{service}` failed: {message}")]
     Remote { service: String, message: String },
-    #[error("no answer on `{service}` within {waited_ms} ms (is its adapter running? see its log)")]
+    #[error(
+        "no answer on `{service}` within {waited_ms} ms (is its adapter running? see its log)"
+    )]
     NoAnswer { service: String, waited_ms: u64 },
     #[error("iceoryx2 failed to {op} `{service}`: {detail}")]
     Transport {

@@ -323,7 +323,11 @@ impl RemoteClient {
 
     /// Sends `request` and waits up to `timeout` for its answer. A failed request is
     /// [`WireError::Remote`] with the adapter's message.
-    pub fn call(&mut self, mut request: RemoteRequest, timeout: Duration) -> Result<RemoteResponse> {
+    pub fn call(
+        &mut self,
+        mut request: RemoteRequest,
+        timeout: Duration,
+    ) -> Result<RemoteResponse> {
         let seq = self.seq;
         self.seq += 1;
         request.header = Header {

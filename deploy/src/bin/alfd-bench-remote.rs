@@ -17,7 +17,10 @@ use anyhow::Context as _;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let id = args.first().cloned().unwrap_or_else(|| "CartPole-v1".into());
+    let id = args
+        .first()
+        .cloned()
+        .unwrap_or_else(|| "CartPole-v1".into());
     let steps: usize = args.get(1).map_or(Ok(20_000), |s| s.parse())?;
     let queries: usize = args.get(2).map_or(Ok(5_000), |s| s.parse())?;
     let run_id = format!("bench-remote-{}", std::process::id());
