@@ -348,3 +348,57 @@ fn swap_expert_goes_from_a_built_in_expert_to_an_external_one_and_back() {
     }
     assert!(out.join("adapter-expert-2.log").is_file());
 }
+
+/// The controller of `alfd_examples.cartpole_balance`.
+fn cartpole_balance(obs: &[f64]) -> usize {
+    usize::from(obs[2] as f32 + 0.5 * obs[3] as f32 > 0.0)
+}
+
+#[test]
+fn alfd_local_plays_a_gymnasium_environment_with_an_external_expert_reproducibly() {
+    let _time = timed!();
+    let out = tmp("gym-local");
+    let expert = "python:alfd_examples:cartpole_balance";
+    let config = out.join("cartpole.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "seed = 2\nepisodes = 5\n[env]\nname = \"gymnasium\"\nid = \"CartPole-v1\"\n\
+             [agent]\nkind = \"bdqn\"\nbatch_size = 16\n[query]\nmode = \"first\"\n\
+             [budget]\ntotal = 15\n[expert]\nname = \"{expert}\"\nmodel = \"krr\"\n"
+        ),
+    )
+    .unwrap();
+    let run = |name: &str| {
+        let dir = out.join(name);
+        let o = alfd()
+            .args(["local", "--quiet"])
+            .arg(format!("--config={}", config.display()))
+            .arg(format!("--out={}", dir.display()))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", text(&o));
+        dir
+    };
+    let (a, b) = (run("a"), run("b"));
+    let csv = |d: &Path| std::fs::read_to_string(d.join("episodes.csv")).unwrap();
+    assert_eq!(csv(&a), csv(&b), "one config and seed, one result");
+    assert_eq!(csv(&a).lines().count(), 6);
+    let demos = alfd_expert::demo_log::read(&a.join("demos.jsonl")).unwrap();
+    assert_eq!(demos.len(), 15);
+    for d in &demos {
+        assert_eq!(
+            (d.expert.as_str(), d.action),
+            (expert, cartpole_balance(&d.state))
+        );
+    }
+    // Checkpointing the Python environment is refused, saying why.
+    let o = alfd()
+        .args(["local", "--quiet", "--checkpoint-every=2"])
+        .arg(format!("--config={}", config.display()))
+        .arg(format!("--out={}", out.join("c").display()))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("checkpointing it is not supported"));
+}
