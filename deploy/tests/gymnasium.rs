@@ -151,26 +151,71 @@ fn gymnasium_cartpole_through_the_adapter_conforms_and_follows_the_native_cartpo
 fn a_gymnasium_environment_with_a_wrong_space_is_refused_naming_it() {
     let _time = timed!();
     let out = tmp("gym-wrong");
-    for (id, says) in [
+    for (id, kwargs, says) in [
         (
             "Pendulum-v1",
+            "{}",
             "the action space Box(-2.0, 2.0, (1,), float32) is not Discrete",
         ),
         (
             "CliffWalking-v1",
+            "{}",
             "the observation space Discrete(48) is not a one-dimensional Box",
+        ),
+        (
+            "alfd_examples:AlfdCorridor-v0",
+            "{width = 12}",
+            "has 12 values; the wire carries 1 to MAX_OBS_DIM = 8",
         ),
     ] {
         let o = alfd()
             .args(["run", "--quiet", "--actors=1"])
-            .arg(format!("--out={}", out.join(id).display()))
+            .arg(format!(
+                "--out={}",
+                out.join(id.replace(':', "_")).display()
+            ))
             .args(["--set", "env.name=gymnasium", "--set"])
             .arg(format!("env.id={id}"))
+            .arg("--set")
+            .arg(format!("env.kwargs={kwargs}"))
             .output()
             .unwrap();
         assert_eq!(o.status.code(), Some(2), "{}", text(&o));
         let stderr = String::from_utf8_lossy(&o.stderr);
         assert!(stderr.contains(says), "{id}: {stderr}");
+    }
+}
+
+#[test]
+fn an_environment_of_ones_own_module_runs_with_its_kwargs() {
+    let _time = timed!();
+    let out = tmp("gym-own");
+    // deploy/python/examples/alfd_examples.py registers AlfdCorridor-v0; `width` is its kwarg.
+    let o = alfd()
+        .args(["local", "--quiet"])
+        .args(["--config", "deploy/configs/cartpole-bdqn-krr.toml"])
+        .arg(format!("--out={}", out.join("run").display()))
+        .args(["--set", "env.name=gymnasium"])
+        .args(["--set", "env.id=alfd_examples:AlfdCorridor-v0"])
+        .args(["--set", "env.kwargs={width = 6}", "--set", "episodes=3"])
+        .args(["--set", "env.max_episode_steps=40"])
+        .args(["--set", "expert.name=python:alfd_examples:corridor_right"])
+        .args(["--set", "query.mode=first", "--set", "budget.total=4"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let demos = alfd_expert::demo_log::read(&out.join("run/demos.jsonl")).unwrap();
+    assert_eq!(demos.len(), 4);
+    assert!(demos.iter().all(|d| d.action == 1 && d.state.len() == 6));
+    // The first state is the start, one-hot in the first of 6 cells.
+    assert_eq!(demos[0].state, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    let csv = std::fs::read_to_string(out.join("run/episodes.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 4);
+    for row in csv.lines().skip(1) {
+        let f: Vec<&str> = row.split(',').collect();
+        // -1 per step; the end is 5 moves away at best, 40 steps at most.
+        let (ret, len): (f64, u32) = (f[1].parse().unwrap(), f[2].parse().unwrap());
+        assert!((5..=40).contains(&len) && ret == -(len as f64), "{row}");
     }
 }
 

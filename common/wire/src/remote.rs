@@ -686,4 +686,27 @@ mod tests {
         resp.message[..5].copy_from_slice(b"boom!");
         assert_eq!(resp.message(), "boom!");
     }
+
+    mod fuzz {
+        use super::super::*;
+        use proptest::prelude::*;
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(256))]
+
+            /// A response as an adapter may have filled it: any length, any message bytes.
+            #[test]
+            fn fuzz_remote_response(
+                len in any::<u32>(),
+                values in any::<[f64; MAX_REMOTE_VALUES]>(),
+                message in proptest::collection::vec(any::<u8>(), REMOTE_MESSAGE_LEN),
+            ) {
+                let mut r = RemoteResponse { len, values, ..RemoteResponse::default() };
+                r.message.copy_from_slice(&message);
+                prop_assert!(r.values().len() <= MAX_REMOTE_VALUES);
+                prop_assert_eq!(r.values().len(), (len as usize).min(MAX_REMOTE_VALUES));
+                prop_assert!(!r.message().contains('\0'));
+            }
+        }
+    }
 }
