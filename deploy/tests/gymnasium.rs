@@ -447,3 +447,46 @@ fn alfd_local_plays_a_gymnasium_environment_with_an_external_expert_reproducibly
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(String::from_utf8_lossy(&o.stderr).contains("checkpointing it is not supported"));
 }
+
+#[test]
+fn an_adapter_killed_with_sigkill_takes_its_actor_down_and_both_are_restarted() {
+    let _time = timed!();
+    let out = tmp("gym-kill");
+    let mut run = crate::support::Background(Some(
+        alfd()
+            .args(["run", "--quiet", "--actors=2"])
+            .arg(format!("--out={}", out.display()))
+            .args(["--config", "deploy/configs/cartpole-bdqn-krr.toml"])
+            .args(["--set", "env.name=gymnasium", "--set", "env.id=CartPole-v1"])
+            .args(["--set", "episodes=1000000", "--set", "expert.model=none"])
+            .args(["--set", "expert.name=python:alfd_examples:cartpole_balance"])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
+    crate::runtime::wait_rows(&out, 5, &mut run);
+    let adapter = crate::runtime::find_process("python", &["env", "--name=env-0"])
+        .or_else(|| crate::runtime::find_process("python3", &["env", "--name=env-0"]))
+        .expect("actor 0's adapter runs");
+    crate::runtime::signal("KILL", adapter);
+    // Actor 0 stops at its next step, naming the adapter; the launcher restarts it, and the new
+    // incarnation starts a new adapter.
+    crate::runtime::wait_until(&mut run, "actor 0 restarted", || {
+        std::fs::read_to_string(out.join("actor-0.log"))
+            .is_ok_and(|l| l.contains("incarnation=2") || l.contains("incarnation: 2"))
+    });
+    let n = crate::runtime::rows(&out).len();
+    crate::runtime::wait_rows(&out, n + 5, &mut run);
+    let o = crate::runtime::interrupt(run);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    let s = crate::runtime::summary(&out);
+    assert_eq!(s["actor_restarts"].as_u64(), Some(1), "{s}");
+    let log = std::fs::read_to_string(out.join("actor-0.log")).unwrap();
+    assert!(
+        log.contains("remote/env-0") && log.contains("exited"),
+        "{log}"
+    );
+    let id = crate::runtime::run_id(&out);
+    assert_eq!(wire::leftover_files(&id), Vec::<std::path::PathBuf>::new());
+}

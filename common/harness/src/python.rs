@@ -253,15 +253,13 @@ impl AdapterEnv {
         me: Process,
         schema: u32,
     ) -> anyhow::Result<Self> {
-        let client = adapter.connect(run_id, me, schema)?;
+        // A wait for an answer ends as soon as the adapter exits, naming why.
+        let alive = adapter.clone();
+        let client = adapter
+            .connect(run_id, me, schema)?
+            .with_liveness(Box::new(move || alive.gone()));
         let label = format!("gymnasium:{}", env.id.as_deref().unwrap_or("?"));
-        let remote =
-            RemoteEnv::open(client, env.max_episode_steps.unwrap_or(0), &label).map_err(|e| {
-                match adapter.gone() {
-                    Some(why) => anyhow::anyhow!("{e}: {why}"),
-                    None => e.into(),
-                }
-            })?;
+        let remote = RemoteEnv::open(client, env.max_episode_steps.unwrap_or(0), &label)?;
         Ok(Self {
             env: remote,
             _adapter: adapter,

@@ -82,8 +82,8 @@ pub use ports::{
     Receiver, Sender, WeightsReceiver, WeightsSender,
 };
 pub use remote::{
-    remote_kind, remote_limits, remote_status, RemoteClient, RemoteDemonstrator, RemoteEnv,
-    RemoteRequest, RemoteResponse, RemoteSpec, MAX_REMOTE_VALUES, REMOTE_MESSAGE_LEN,
+    remote_kind, remote_limits, remote_status, Liveness, RemoteClient, RemoteDemonstrator,
+    RemoteEnv, RemoteRequest, RemoteResponse, RemoteSpec, MAX_REMOTE_VALUES, REMOTE_MESSAGE_LEN,
 };
 pub use services::{quiet_transport_logs, Wire};
 pub use wakeups::{ActorBells, Bell, Doorbell, Waiter, Wake};

@@ -210,6 +210,9 @@ fn service_name(run_id: &str, topic: &str) -> Result<ServiceName> {
     ServiceName::new(&name).map_err(transport("name service", name.clone()))
 }
 
+/// Says why an adapter will never answer (it exited), `None` while it runs.
+pub type Liveness = Box<dyn Fn() -> Option<String>>;
+
 /// One side's connection to an adapter: its own iceoryx2 node (so that an environment can live
 /// in a `Box<dyn Env>` without borrowing the process's [`Wire`](crate::Wire)), a client, and
 /// the two doorbells.
@@ -221,6 +224,8 @@ pub struct RemoteClient {
     service: String,
     me: Process,
     schema: u32,
+    /// Asked while waiting for an answer: why the adapter will never answer (it exited).
+    gone: Option<Liveness>,
     // Dropped last: the ports above belong to it.
     _node: Node<Transport>,
 }
@@ -312,8 +317,16 @@ impl RemoteClient {
             service,
             me,
             schema,
+            gone: None,
             _node: node,
         })
+    }
+
+    /// Makes a wait for an answer end as soon as `gone` says the adapter exited (instead of at
+    /// the timeout).
+    pub fn with_liveness(mut self, gone: Liveness) -> Self {
+        self.gone = Some(gone);
+        self
     }
 
     /// The service's name (`remote/<name>`), for messages.
@@ -374,6 +387,12 @@ impl RemoteClient {
                 return Err(WireError::NoAnswer {
                     service: self.service.clone(),
                     waited_ms: timeout.as_millis() as u64,
+                });
+            }
+            if let Some(why) = self.gone.as_ref().and_then(|g| g()) {
+                return Err(WireError::Remote {
+                    service: self.service.clone(),
+                    message: why,
                 });
             }
             // A signal cuts the wait short: the loop looks again.
