@@ -41,4 +41,7 @@ report() {
 trap report EXIT
 
 cargo build --release --workspace --locked
+# The Python side (the Gymnasium adapter's .venv/, deploy/python/requirements.txt): installed here
+# the way alfd installs it on first use, so that no test waits on it (a no-op once installed).
+bash deploy/python/setup-venv.sh >/dev/null
 cargo test --release --workspace --locked

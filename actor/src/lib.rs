@@ -68,7 +68,9 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     anyhow::ensure!(args.incarnation >= 1, "--incarnation must be at least 1");
     let setup = args.process.load()?;
     let (cfg, runtime) = (&setup.config, &setup.runtime);
-    let mut env = setup.vector_env()?;
+    // A Gymnasium environment is served by this actor's adapter (started here, stopped with it).
+    let mut adapter = None;
+    let mut env = setup.actor_env(&mut adapter, &args.process, args.actor_id, schema)?;
     let (obs_dim, actions) = (env.observation_dim(), env.num_actions());
     let me = Identity {
         id: args.actor_id,
@@ -144,7 +146,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     );
     let mut progress = wire.progress_sender()?;
     let mut actor = GenericActor::new(core, adder, variables);
-    let mut eval_env = setup.vector_env()?;
+    let mut eval_env = setup.actor_env(&mut adapter, &args.process, args.actor_id, schema)?;
     let eval_seed = derive_seed(cfg.seed, "eval");
     let mut cadence = Cadence::new(
         Cadence::steps_for_updates(runtime.checkpoint_every, cfg.agent.updates_per_step),

@@ -132,36 +132,47 @@ pub enum EnvName {
     Cliffwalk,
     Mountaincar,
     Acrobot,
+    /// Any Gymnasium environment (`env.id`), served by a Python adapter in another process.
+    Gymnasium,
 }
 
 impl EnvName {
     /// Every environment, in the order a message lists them.
-    pub const ALL: [EnvName; 4] = [
+    pub const ALL: [EnvName; 5] = [
         EnvName::Cartpole,
         EnvName::Cliffwalk,
         EnvName::Mountaincar,
         EnvName::Acrobot,
+        EnvName::Gymnasium,
     ];
 
-    /// The name a config uses (`cartpole`, `cliffwalk`, `mountaincar`, `acrobot`).
+    /// The name a config uses (`cartpole`, `cliffwalk`, `mountaincar`, `acrobot`, `gymnasium`).
     pub fn as_str(self) -> &'static str {
         match self {
             EnvName::Cartpole => "cartpole",
             EnvName::Cliffwalk => "cliffwalk",
             EnvName::Mountaincar => "mountaincar",
             EnvName::Acrobot => "acrobot",
+            EnvName::Gymnasium => "gymnasium",
         }
     }
 
     /// The step limit of a config that sets none: the paper's 1000 for CartPole, CliffWalk's
-    /// 500, and `gym.make`'s for MountainCar-v0 (200) and Acrobot-v1 (500).
+    /// 500, and `gym.make`'s for MountainCar-v0 (200) and Acrobot-v1 (500); 0 for Gymnasium,
+    /// meaning the registration's own (the adapter reports it).
     pub fn default_max_episode_steps(self) -> usize {
         match self {
             EnvName::Cartpole => 1000,
             EnvName::Cliffwalk => 500,
             EnvName::Mountaincar => 200,
             EnvName::Acrobot => 500,
+            EnvName::Gymnasium => 0,
         }
+    }
+
+    /// Whether the environment runs in another process (a Gymnasium adapter).
+    pub fn is_remote(self) -> bool {
+        self == EnvName::Gymnasium
     }
 
     /// Whether the states are ids (the tabular agents' environments) rather than vectors.
@@ -194,12 +205,18 @@ impl std::str::FromStr for EnvName {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EnvConfig {
-    /// `cartpole`, `cliffwalk`, `mountaincar` or `acrobot`.
+    /// `cartpole`, `cliffwalk`, `mountaincar`, `acrobot` or `gymnasium`.
     pub name: EnvName,
     /// Step limit after which an episode is truncated (by default CartPole 1000, CliffWalk 500,
-    /// MountainCar 200, Acrobot 500).
+    /// MountainCar 200, Acrobot 500, a Gymnasium environment its registration's).
     #[serde(default)]
     pub max_episode_steps: Option<usize>,
+    /// Gymnasium: the environment id given to `gymnasium.make`, e.g. `Acrobot-v1`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub id: Option<String>,
+    /// Gymnasium: keyword arguments of `gymnasium.make` (numbers, strings, booleans).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kwargs: Option<toml::Table>,
     /// CliffWalk: probability that the chosen move happens, in (0, 1].
     #[serde(default = "default_p_success")]
     pub p_success: f64,
@@ -793,7 +810,8 @@ model = "krr"
             assert!(
                 tabular.contains("agent.kind")
                     && tabular.contains(&format!("does not run on {name}"))
-                    && tabular.contains("neural ones on cartpole, mountaincar and acrobot"),
+                    && tabular
+                        .contains("neural ones on cartpole, mountaincar, acrobot and gymnasium"),
                 "{tabular}"
             );
             let map = err(&[&format!("env.name={name}"), "env.map=m.txt"]);
@@ -802,8 +820,41 @@ model = "krr"
         let e = "pendulum".parse::<EnvName>().unwrap_err();
         assert_eq!(
             e,
-            "unknown environment `pendulum` (known: cartpole, cliffwalk, mountaincar, acrobot)"
+            "unknown environment `pendulum` (known: cartpole, cliffwalk, mountaincar, acrobot, gymnasium)"
         );
+    }
+
+    #[test]
+    fn a_gymnasium_env_needs_an_id_and_keeps_its_kwargs() {
+        let gym = |extra: &str| {
+            ExperimentConfig::from_toml(&format!(
+                "seed = 1\nepisodes = 2\n[env]\nname = \"gymnasium\"\n{extra}\n[agent]\nkind = \"bdqn\"\n"
+            ))
+        };
+        let c = gym("id = \"Acrobot-v1\"\nkwargs = { render_mode = \"rgb_array\" }").unwrap();
+        assert_eq!(c.env.id.as_deref(), Some("Acrobot-v1"));
+        assert_eq!(c.env.max_episode_steps(), 0, "the registration's own limit");
+        assert!(c.env.name.is_remote());
+        assert_eq!(ExperimentConfig::from_toml(&c.to_toml()).unwrap(), c);
+        let e = gym("").unwrap_err().to_string();
+        assert!(e.contains("env.id") && e.contains("gymnasium.make"), "{e}");
+        let e = gym("id = \"Bad id;rm\"").unwrap_err().to_string();
+        assert!(e.contains("env.id"), "{e}");
+        let e = gym("id = \"CartPole-v1\"\nmax_episode_steps = 0")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("env.max_episode_steps"), "{e}");
+        assert!(err(&["env.id=CartPole-v1"]).contains("applies to gymnasium only"));
+        let e = gym("id = \"CartPole-v1\"\n[agent2]")
+            .unwrap_err()
+            .to_string();
+        assert!(!e.is_empty());
+        let tab = ExperimentConfig::from_toml(
+            "seed = 1\nepisodes = 2\n[env]\nname = \"gymnasium\"\nid = \"CartPole-v1\"\n[agent]\nkind = \"qlearning\"\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(tab.contains("agent.kind"), "{tab}");
     }
 
     #[test]

@@ -304,10 +304,49 @@ pub fn run_neural_checkpointed(
     cfg: &ExperimentConfig,
     demonstrator: &mut dyn Demonstrator<[f32]>,
     checkpoints: Checkpoints<'_, NeuralRunState>,
+    save: impl FnMut(&NeuralRunState) -> ControlFlow<()>,
+    on_episode: impl FnMut(&EpisodeRecord, &Mlp) -> ControlFlow<()>,
+) -> Result<NeuralRun, StateMismatch> {
+    let env = vector_env(&cfg.env).expect("a neural agent runs on a vector environment");
+    let eval_env = vector_env(&cfg.env).expect("the same environment");
+    let envs = NeuralEnvs { env, eval_env };
+    run_neural_on(cfg, envs, demonstrator, checkpoints, save, on_episode).map_err(|e| match e {
+        RunError::Mismatch(m) => m,
+        RunError::Loop(e) => unreachable!("an in-process neural run cannot fail: {e}"),
+    })
+}
+
+/// The environments of a neural run built outside the core (a Gymnasium environment in another
+/// process): the one trained on and the one evaluated on.
+pub struct NeuralEnvs {
+    pub env: Box<VectorEnv>,
+    pub eval_env: Box<VectorEnv>,
+}
+
+/// Why a run on environments of [`NeuralEnvs`] stopped short.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error(transparent)]
+    Mismatch(#[from] StateMismatch),
+    /// The environment or the expert (in another process) failed.
+    #[error("{0}")]
+    Loop(#[from] environment_loop::LoopError),
+}
+
+/// [`run_neural_checkpointed`] on the environments `envs` (the config's environment, made by
+/// the caller); an environment or expert that fails stops the run with [`RunError::Loop`].
+pub fn run_neural_on(
+    cfg: &ExperimentConfig,
+    envs: NeuralEnvs,
+    demonstrator: &mut dyn Demonstrator<[f32]>,
+    checkpoints: Checkpoints<'_, NeuralRunState>,
     mut save: impl FnMut(&NeuralRunState) -> ControlFlow<()>,
     mut on_episode: impl FnMut(&EpisodeRecord, &Mlp) -> ControlFlow<()>,
-) -> Result<NeuralRun, StateMismatch> {
-    let mut env = vector_env(&cfg.env).expect("a neural agent runs on a vector environment");
+) -> Result<NeuralRun, RunError> {
+    let NeuralEnvs {
+        mut env,
+        mut eval_env,
+    } = envs;
     let (obs_dim, actions) = (env.observation_dim(), env.num_actions());
     let mut learner = NeuralLearner::new(
         &cfg.agent,
@@ -343,9 +382,9 @@ pub fn run_neural_checkpointed(
         &cfg.expert.name,
         cfg.shaping_enabled(),
     );
-    let mut eval_env = vector_env(&cfg.env).expect("the same environment");
     let eval_seed = derive_seed(cfg.seed, "eval");
     let records = std::cell::RefCell::new(records);
+    let failure = std::cell::RefCell::new(None);
     let state = std::cell::RefCell::new((env, actor, expert));
     in_segments(
         cfg,
@@ -373,7 +412,14 @@ pub fn run_neural_checkpointed(
                     Ok(continue_unless(*stopped))
                 },
             )
-            .expect("an in-process neural run cannot fail")
+            .unwrap_or_else(|e| {
+                // Only an environment or expert in another process fails: the run stops here.
+                *failure.borrow_mut() = Some(e);
+                environment_loop::RunEnd {
+                    progress,
+                    stopped: Some(environment_loop::Stop("failed")),
+                }
+            })
         },
         |progress| {
             let (env, actor, expert) = &*state.borrow();
@@ -387,6 +433,9 @@ pub fn run_neural_checkpointed(
             })
         },
     );
+    if let Some(e) = failure.into_inner() {
+        return Err(RunError::Loop(e));
+    }
     let (_, actor, expert) = state.into_inner();
     drop(actor);
     Ok(NeuralRun {

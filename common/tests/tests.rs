@@ -1,5 +1,6 @@
 //! Integration tests of the core against the reference fixtures (one test binary).
 
+mod conformance_suite;
 mod dqn_loss;
 mod env_conformance;
 mod fuzz;

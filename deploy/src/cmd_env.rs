@@ -216,7 +216,7 @@ fn rollout(args: &RolloutArgs, out: &mut impl Write, err: &mut impl Write) -> an
             out,
             err,
         ),
-        EnvName::Cliffwalk => unreachable!("refused by check_env"),
+        EnvName::Cliffwalk | EnvName::Gymnasium => unreachable!("refused by check_env"),
     }
 }
 
@@ -525,7 +525,7 @@ mod tests {
             ),
             (
                 rollout_args("pendulum", "0,0,0,0", "1", 10),
-                "unknown environment `pendulum` (known: cartpole, cliffwalk, mountaincar, acrobot)",
+                "unknown environment `pendulum` (known: cartpole, cliffwalk, mountaincar, acrobot, gymnasium)",
             ),
             (
                 rollout_args("cliffwalk", "0,0,0,0", "1", 10),

@@ -13,7 +13,8 @@ use alfd_common::config::{EnvName, ExperimentConfig};
 use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration};
 use alfd_common::record::{episodes_csv, EpisodeRecord, RunSummary};
 use alfd_common::runner::{
-    run_neural_checkpointed, run_tabular_checkpointed, Checkpoints, RunState,
+    run_neural_checkpointed, run_neural_on, run_tabular_checkpointed, Checkpoints, NeuralEnvs,
+    RunError, RunState,
 };
 use anyhow::Context as _;
 
@@ -53,6 +54,12 @@ pub fn run(args: LocalArgs) -> anyhow::Result<()> {
     let cfg = setup::load_config(&args.config, &args.set)?;
     // Every input is checked before the directory is claimed.
     let pieces = Pieces::of(&cfg)?;
+    if cfg.env.name.is_remote() && args.checkpoint_every.is_some() {
+        return Err(usage(
+            "--checkpoint-every: a gymnasium environment's state lives in its Python adapter; \
+             checkpointing it is not supported",
+        ));
+    }
     let _lock = run_dir::claim_new(&args.out)?;
     let resumable = Resumable {
         config_toml: cfg.to_toml(),
@@ -166,6 +173,8 @@ pub(crate) enum Pieces {
     Neural {
         demonstrator: Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>,
     },
+    /// A Gymnasium environment or an external expert (see `local_remote`).
+    Remote,
 }
 
 impl Pieces {
@@ -178,6 +187,11 @@ impl Pieces {
                     env: Box::new(env),
                     demonstrator,
                 }
+            }
+            // Python pieces start with the run (their logs go to its directory).
+            _ if crate::local_remote::needed(cfg) => {
+                setup::check_demonstrator(cfg)?;
+                Self::Remote
             }
             _ => Self::Neural {
                 demonstrator: setup::neural_demonstrator(cfg)?,
@@ -269,6 +283,39 @@ pub(crate) fn run_pieces(
                 Some(greedy[s0]),
                 Some(vi.values[s0]),
             )
+        }
+        Pieces::Remote => {
+            let (_adapters, envs, mut demonstrator) = crate::local_remote::start(cfg, out)?;
+            let envs = match envs {
+                Some(envs) => envs,
+                None => NeuralEnvs {
+                    env: alfd_common::env::vector_env(&cfg.env).context("a vector environment")?,
+                    eval_env: alfd_common::env::vector_env(&cfg.env)
+                        .context("a vector environment")?,
+                },
+            };
+            let checkpoints = resumable.checkpoints(RunState::neural, "neural")?;
+            let run = run_neural_on(
+                cfg,
+                envs,
+                demonstrator.as_mut(),
+                checkpoints,
+                |s| save(RunState::Neural(Box::new(s.clone()))),
+                |r, _| show(r),
+            )
+            .map_err(|e| match e {
+                RunError::Mismatch(e) => usage(format!("cannot resume from the checkpoint: {e}")),
+                RunError::Loop(e) => anyhow::Error::new(e).context("the run failed"),
+            })?;
+            if interrupted(save_error, stopped)? {
+                return Ok(None);
+            }
+            write(
+                out,
+                "weights.safetensors",
+                &run.network.to_safetensors_bytes(),
+            )?;
+            (run.records, run.expert.demos().to_vec(), None, None)
         }
         Pieces::Neural { mut demonstrator } => {
             let checkpoints = resumable.checkpoints(RunState::neural, "neural")?;

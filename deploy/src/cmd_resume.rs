@@ -69,6 +69,14 @@ pub fn run(args: ResumeArgs) -> anyhow::Result<()> {
         &[],
         &format!("config {}", config_path.display()),
     )?;
+    if cfg.env.name.is_remote() {
+        // Say so rather than pretend: the environment's generator and state are in Python.
+        return Err(usage(format!(
+            "the run in {} plays a gymnasium environment, whose state lives in its Python \
+             adapter: checkpointing it is not supported, so the run cannot be resumed",
+            dir.display()
+        )));
+    }
     if dir.join("run.json").is_file() {
         return resume_multi_process(&args, cfg, &config_toml);
     }

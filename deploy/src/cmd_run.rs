@@ -71,14 +71,30 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             "`alfd run` runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
         ));
     }
-    let env = alfd_common::env::vector_env(&cfg.env).ok_or_else(|| {
-        usage(format!(
-            "`alfd run` needs an environment with vector observations, not {:?}",
-            cfg.env.name
-        ))
-    })?;
-    alfd_harness::check_wire_limits(env.observation_dim(), cfg.agent.heads())
-        .map_err(|e| usage(e.to_string()))?;
+    // A Gymnasium environment is made once in Python now: a wrong space is refused before
+    // anything starts, and its sizes go to runtime.toml for the learner and the expert.
+    let env_spec = if cfg.env.name.is_remote() {
+        let spec = alfd_harness::python::probe_env(&cfg.env).map_err(|e| {
+            if alfd_harness::exit_code(&e) == 2 {
+                usage(format!("{e:#}"))
+            } else {
+                e
+            }
+        })?;
+        alfd_harness::check_wire_limits(spec.obs_dim, cfg.agent.heads())
+            .map_err(|e| usage(e.to_string()))?;
+        Some(spec)
+    } else {
+        let env = alfd_common::env::vector_env(&cfg.env).ok_or_else(|| {
+            usage(format!(
+                "`alfd run` needs an environment with vector observations, not {:?}",
+                cfg.env.name
+            ))
+        })?;
+        alfd_harness::check_wire_limits(env.observation_dim(), cfg.agent.heads())
+            .map_err(|e| usage(e.to_string()))?;
+        None
+    };
     if !(1..=MAX_ACTORS).contains(&args.actors) {
         return Err(usage(format!(
             "--actors must be in 1..={MAX_ACTORS}, got {}",
@@ -90,6 +106,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         query_timeout_ms: args.query_timeout_ms,
         weights_every: args.weights_every,
         checkpoint_every: args.checkpoint_every,
+        env_spec,
         ..RuntimeConfig::default()
     };
     runtime.validate().map_err(|e| {
@@ -102,7 +119,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         ))
     })?;
     // Fail before starting anything if the expert is unknown.
-    setup::neural_demonstrator(&cfg)?;
+    setup::check_demonstrator(&cfg)?;
     let run_id = launcher::new_run_id();
     let run_dir = args
         .out
@@ -173,7 +190,7 @@ pub fn swap(args: SwapArgs) -> anyhow::Result<()> {
     // The new expert must exist for the run's environment.
     let mut cfg = setup::load_config(&args.run.join("config.toml"), &[])?;
     cfg.expert.name = args.expert.clone();
-    setup::neural_demonstrator(&cfg)?;
+    setup::check_demonstrator(&cfg)?;
     if !PathBuf::from(format!("/proc/{}", info.launcher_pid)).exists() {
         return Err(usage(format!(
             "run {} is not live (its launcher, pid {}, has exited)",

@@ -13,6 +13,7 @@ mod cmd_run;
 mod cmd_sweep;
 mod expert_lifecycle;
 mod launcher;
+mod local_remote;
 mod report;
 mod run_dir;
 mod setup;

@@ -137,6 +137,16 @@ pub fn cliffwalk(cfg: &ExperimentConfig) -> anyhow::Result<CliffWalk> {
 }
 
 /// The demonstrator named by a neural config, for its environment.
+/// The config's demonstrator exists: a built-in one for its environment, or a well-formed
+/// external one (`python:MODULE:FUNCTION`, `sb3:ALGO:PATH`), which the expert process starts.
+pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
+    if alfd_expert::registry::external_policy(&cfg.expert.name).is_some() {
+        return alfd_expert::registry::check_external(&cfg.expert.name)
+            .map_err(|e| usage(e.to_string()));
+    }
+    neural_demonstrator(cfg).map(|_| ())
+}
+
 pub fn neural_demonstrator(
     cfg: &ExperimentConfig,
 ) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>> {

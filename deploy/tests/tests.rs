@@ -3,6 +3,7 @@
 mod cli;
 mod faults;
 mod golden;
+mod gymnasium;
 mod report;
 mod runtime;
 mod shards;

@@ -10,12 +10,13 @@
 
 use std::time::{Duration, Instant};
 
-use alfd_common::agent::ExpertCore;
+use alfd_common::agent::{Demonstrator, ExpertCore};
 use alfd_common::runner::expert_core;
+use alfd_harness::python::Adapter;
 use alfd_harness::{BadInput, ProcessArgs, Session};
 use alfd_wire::{
     name_to_bytes, outcome, process_state, progress_kind, ActorBells, DemoModelHeader, Doorbell,
-    Process, Progress, QueryResponse, Role, WireError,
+    Process, Progress, QueryResponse, RemoteDemonstrator, Role, WireError,
 };
 use anyhow::Context as _;
 use tracing::{debug, info};
@@ -54,14 +55,35 @@ enum Mode {
 pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let setup = args.process.load()?;
     let (cfg, runtime) = (&setup.config, &setup.runtime);
-    let env = setup.vector_env()?;
-    let (actions, obs_dim) = (env.num_actions(), env.observation_dim());
+    let (obs_dim, actions) = setup.env_dims()?;
     let name = args
         .expert
         .clone()
         .unwrap_or_else(|| cfg.expert.name.clone());
-    let mut demonstrator =
-        registry::for_env(cfg.env.name, &name).map_err(|e| BadInput(e.to_string()))?;
+    // A built-in demonstrator, or an external one: a Python adapter started here (it answers as
+    // `remote/expert-<generation>`, logs to RUN_DIR/adapter-expert-<generation>.log and stops
+    // with this process). Budget, demos.jsonl and the model stay here either way.
+    let adapter = match registry::external_policy(&name) {
+        Some(policy) => {
+            let adapter_name = format!("expert-{}", args.generation);
+            let log = args
+                .process
+                .run_dir
+                .join(format!("adapter-{adapter_name}.log"));
+            Some(Adapter::expert(
+                policy,
+                &args.process.run_id,
+                &adapter_name,
+                schema,
+                &log,
+            )?)
+        }
+        None => None,
+    };
+    let mut builtin = match adapter {
+        Some(_) => None,
+        None => Some(registry::for_env(cfg.env.name, &name).map_err(|e| BadInput(e.to_string()))?),
+    };
     let demos_path = args.process.run_dir.join("demos.jsonl");
     // Read the demonstrations now, to refuse a bad file before the run depends on us; they are
     // read again when this expert becomes active (its predecessor may have added some).
@@ -71,6 +93,13 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     info!(expert = %name, generation = args.generation, demos = earlier.len(), "expert starting");
 
     let me = Process::new(Role::Expert, args.generation);
+    let mut external = match &adapter {
+        Some(a) => Some(RemoteDemonstrator::new(
+            a.connect(&args.process.run_id, me, schema)?,
+            actions,
+        )),
+        None => None,
+    };
     let wire = args.process.connect(me, schema)?;
     let session = Session::join(&wire, Doorbell::Expert, runtime.handshake_timeout())?;
     let server = wire.query_server()?;
@@ -175,7 +204,27 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 expert_name: name_to_bytes(&name),
                 ..QueryResponse::default()
             };
-            match core.answer(demonstrator.as_mut(), state, step, &name) {
+            let answer = match (builtin.as_mut(), external.as_mut()) {
+                (Some(d), _) => core.answer(d.as_mut(), state, step, &name),
+                // No budget, no question to the external demonstrator.
+                (None, Some(_)) if core.budget().is_exhausted() => None,
+                (None, Some(remote)) => match remote.act(state, runtime.query_timeout()) {
+                    Ok(action) => core.answer(&mut Given(action), state, step, &name),
+                    Err(e) => {
+                        // The actor acts on its own after its timeout; no budget is spent.
+                        tracing::error!(
+                            actor = request.actor,
+                            "external expert: {e}; query dropped"
+                        );
+                        if let Some(why) = adapter.as_ref().and_then(|a| a.gone()) {
+                            anyhow::bail!("the external expert stopped: {why}");
+                        }
+                        continue;
+                    }
+                },
+                (None, None) => unreachable!("an expert is built-in or external"),
+            };
+            match answer {
                 Some(action) => {
                     let record = core
                         .demos()
@@ -236,6 +285,16 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     status(&mut progress, process_state::EXITING, &core)?;
     launcher.ring()?;
     Ok(())
+}
+
+/// The action an external demonstrator gave, as the core's demonstrator (so the core records it
+/// as it records a built-in one's).
+struct Given(usize);
+
+impl Demonstrator<[f32]> for Given {
+    fn act(&mut self, _s: &[f32]) -> usize {
+        self.0
+    }
 }
 
 /// Publishes the current demonstration model (empty bytes when there is none yet), with the

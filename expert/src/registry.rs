@@ -153,6 +153,30 @@ fn entry(name: &str, env: &str) -> Result<ExpertEntry, RegistryError> {
     }
 }
 
+/// The policy of an external demonstrator's name (`python:MODULE:FUNCTION`,
+/// `sb3:ALGO:PATH.zip`), answered by the Python adapter; `None` for a built-in name.
+pub fn external_policy(name: &str) -> Option<&str> {
+    (name.starts_with("python:") || name.starts_with("sb3:")).then_some(name)
+}
+
+/// Checks an external demonstrator's name: `python:MODULE:FUNCTION` or `sb3:ALGO:PATH`, each
+/// part non-empty (whether it loads is the adapter's to say, at start-up).
+pub fn check_external(name: &str) -> Result<(), RegistryError> {
+    let mut parts = name.splitn(3, ':');
+    let (kind, a, b) = (parts.next(), parts.next(), parts.next());
+    let ok = matches!(kind, Some("python") | Some("sb3"))
+        && a.is_some_and(|s| !s.is_empty())
+        && b.is_some_and(|s| !s.is_empty());
+    if ok {
+        Ok(())
+    } else {
+        Err(RegistryError::Corrupt {
+            name: name.to_owned(),
+            reason: "an external expert is python:MODULE:FUNCTION or sb3:ALGO:PATH.zip".into(),
+        })
+    }
+}
+
 /// A CartPole demonstrator by name (the same as `for_env(EnvName::Cartpole, name)`).
 pub fn cartpole(name: &str) -> Result<Box<dyn Demonstrator<[f32]> + Send>, RegistryError> {
     for_env(EnvName::Cartpole, name)

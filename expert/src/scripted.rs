@@ -160,7 +160,7 @@ impl Scripted {
         match self.env {
             EnvName::Mountaincar => noisy(EnergyPumping, self),
             EnvName::Acrobot => noisy(SwingUp, self),
-            EnvName::Cartpole | EnvName::Cliffwalk => {
+            EnvName::Cartpole | EnvName::Cliffwalk | EnvName::Gymnasium => {
                 unreachable!("no scripted expert for {}", self.env)
             }
         }

@@ -103,7 +103,7 @@ fn serve(
 ) -> anyhow::Result<End> {
     let (cfg, runtime) = (&setup.config, &setup.runtime);
     let run_dir = &args.process.run_dir;
-    let env = setup.vector_env()?;
+    let (obs_dim, num_actions) = setup.env_dims()?;
     let session = Session::join(wire, Doorbell::Learner, runtime.handshake_timeout())?;
     let rx = wire.transitions_receiver()?;
     let mut credits_tx = wire.credits_sender()?;
@@ -112,8 +112,8 @@ fn serve(
 
     let mut learner = NeuralLearner::new(
         &cfg.agent,
-        env.observation_dim(),
-        env.num_actions(),
+        obs_dim,
+        num_actions,
         seeded(derive_seed(cfg.seed, "learner")),
     );
     let mut params = vec![0.0f32; learner.network().num_params()];
@@ -121,9 +121,9 @@ fn serve(
     let mut book = CreditBook::new(
         runtime.window,
         BatchShape {
-            obs_dim: env.observation_dim(),
+            obs_dim,
             heads: cfg.agent.heads(),
-            actions: env.num_actions(),
+            actions: num_actions,
         },
     );
 

@@ -1,11 +1,13 @@
 //! The harness of the alfd process binaries (`alfd-actor`, `alfd-learner`, `alfd-expert`): what
 //! all three share, in one place. Their common arguments and reading the run directory
 //! (`process`), the runtime settings every process reads from `runtime.toml` (`runtime`),
-//! joining the run and the one `should_stop` (`session`), start-up (logging, the schema-version
+//! joining the run and the one `should_stop` (`session`), the Python adapters of Gymnasium
+//! environments and external experts (`python`), start-up (logging, the schema-version
 //! hook: `startup`), and durable file writes (`fs`).
 
 mod fs;
 mod process;
+pub mod python;
 mod runtime;
 mod session;
 mod startup;

@@ -5,10 +5,13 @@
 use std::path::{Path, PathBuf};
 
 use alfd_common::config::ExperimentConfig;
-use alfd_common::env::{vector_env, VectorEnv};
-use alfd_wire::{Process, Wire, MAX_HEADS, MAX_OBS_DIM};
+use alfd_common::env::{vector_env, Env as _, VectorEnv};
+use std::sync::Arc;
+
+use alfd_wire::{Process, Role, Wire, MAX_HEADS, MAX_OBS_DIM};
 use anyhow::Context as _;
 
+use crate::python::{Adapter, AdapterEnv};
 use crate::runtime::{RuntimeConfig, RUNTIME_FILE};
 
 /// Bad input (a config, a file of the run directory, a flag): the process exits with code 2.
@@ -44,7 +47,7 @@ impl ProcessArgs {
             RuntimeConfig::from_toml(t).map_err(|e| e.to_string())
         })?;
         let setup = Setup { config, runtime };
-        setup.vector_env()?;
+        setup.env_dims()?;
         Ok(setup)
     }
 
@@ -61,7 +64,69 @@ fn read<T>(path: &Path, parse: impl FnOnce(&str) -> Result<T, String>) -> anyhow
 }
 
 impl Setup {
-    /// The config's environment, checked against what the wire carries.
+    /// The environment's observation size and number of actions, checked against what the wire
+    /// carries: a built-in environment's, or a Gymnasium environment's as `runtime.toml`
+    /// recorded them when the run started.
+    pub fn env_dims(&self) -> anyhow::Result<(usize, usize)> {
+        if self.config.env.name.is_remote() {
+            let spec = self.runtime.env_spec.ok_or_else(|| {
+                BadInput(format!(
+                    "{RUNTIME_FILE} has no env_spec for the gymnasium environment (the launcher \
+                     writes it)"
+                ))
+            })?;
+            check_wire_limits(spec.obs_dim, self.config.agent.heads())?;
+            return Ok((spec.obs_dim, spec.num_actions));
+        }
+        let env = self.vector_env()?;
+        Ok((env.observation_dim(), env.num_actions()))
+    }
+
+    /// The environment actor `actor_id` plays: a built-in one, or a session on the actor's
+    /// Gymnasium adapter (`remote/env-<id>`), which the first call starts (logging to
+    /// `RUN_DIR/adapter-env-<id>.log`) and later calls share.
+    pub fn actor_env(
+        &self,
+        adapter: &mut Option<Arc<Adapter>>,
+        process: &ProcessArgs,
+        actor_id: u16,
+        schema: u32,
+    ) -> anyhow::Result<Box<VectorEnv>> {
+        if !self.config.env.name.is_remote() {
+            return self.vector_env();
+        }
+        let name = format!("env-{actor_id}");
+        let adapter = match adapter {
+            Some(a) => a.clone(),
+            None => {
+                let log = process.run_dir.join(format!("adapter-{name}.log"));
+                let a = Arc::new(Adapter::env(
+                    &self.config.env,
+                    &process.run_id,
+                    &name,
+                    schema,
+                    &log,
+                )?);
+                *adapter = Some(a.clone());
+                a
+            }
+        };
+        let me = Process::new(Role::Actor, actor_id);
+        let env = AdapterEnv::open(adapter, &self.config.env, &process.run_id, me, schema)?;
+        let (obs_dim, actions) = self.env_dims()?;
+        if (env.observation_dim(), env.num_actions()) != (obs_dim, actions) {
+            return Err(BadInput(format!(
+                "the adapter's environment has {} values and {} actions, but the run started \
+                 with {obs_dim} and {actions}",
+                env.observation_dim(),
+                env.num_actions()
+            ))
+            .into());
+        }
+        Ok(Box::new(env))
+    }
+
+    /// The config's built-in environment, checked against what the wire carries.
     pub fn vector_env(&self) -> anyhow::Result<Box<VectorEnv>> {
         let env = vector_env(&self.config.env).ok_or_else(|| {
             BadInput(format!(

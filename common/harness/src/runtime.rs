@@ -37,6 +37,10 @@ pub struct RuntimeConfig {
     /// 0: only when it stops. A learner that dies is restarted from it.
     #[serde(default = "default_checkpoint_every")]
     pub checkpoint_every: u64,
+    /// A Gymnasium environment's spaces and limit, as its adapter reported them when the run
+    /// started (absent for the built-in environments).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub env_spec: Option<crate::python::EnvSpec>,
 }
 
 /// The default of [`RuntimeConfig::checkpoint_every`] (see BENCHMARKS.md: a CartPole checkpoint
@@ -55,6 +59,7 @@ impl Default for RuntimeConfig {
             handshake_timeout_s: 20,
             weights_every: 1,
             checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
+            env_spec: None,
         }
     }
 }

@@ -15,6 +15,11 @@ use crate::shaping::ShapingSchedule;
 /// Anything that answers "which action would you take in state `s`?".
 pub trait Demonstrator<S: ?Sized> {
     fn act(&mut self, s: &S) -> usize;
+    /// The action, or why none could be had (a demonstrator in another process that failed or
+    /// did not answer); what the in-process expert asks. By default [`Demonstrator::act`].
+    fn try_act(&mut self, s: &S) -> Result<usize, String> {
+        Ok(self.act(s))
+    }
 }
 
 /// A deterministic policy table (CliffWalk experts).

@@ -27,6 +27,15 @@ fn in_range(field: &'static str, value: usize, max: usize) -> Result<()> {
     Ok(())
 }
 
+/// A Gymnasium id as `gymnasium.make` takes it: 1 to 128 ASCII letters, digits and `-_./:`.
+fn valid_gym_id(id: &str) -> bool {
+    !id.is_empty()
+        && id.len() <= 128
+        && id
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b"-_./:".contains(&b))
+}
+
 impl ExperimentConfig {
     /// Checks every value; the error names the field.
     pub fn validate(&self) -> Result<()> {
@@ -46,8 +55,32 @@ impl ExperimentConfig {
                 format!("must be in (0, 1], got {}", e.p_success),
             ));
         }
-        if e.max_episode_steps() == 0 {
+        if e.max_episode_steps == Some(0) {
             return Err(invalid("env.max_episode_steps", "must be at least 1"));
+        }
+        if e.name == EnvName::Gymnasium {
+            match e.id.as_deref() {
+                None => {
+                    return Err(invalid(
+                        "env.id",
+                        "is needed for gymnasium: the id given to gymnasium.make, e.g. \"Acrobot-v1\"",
+                    ))
+                }
+                Some(id) if !valid_gym_id(id) => {
+                    return Err(invalid(
+                        "env.id",
+                        format!("`{id}` is not a Gymnasium id (letters, digits, `-`, `_`, `.`, `/`, `:`; e.g. Acrobot-v1)"),
+                    ))
+                }
+                Some(_) => {}
+            }
+        } else if e.id.is_some() || e.kwargs.is_some() {
+            let field = if e.id.is_some() {
+                "env.id"
+            } else {
+                "env.kwargs"
+            };
+            return Err(invalid(field, "applies to gymnasium only"));
         }
         if e.name != EnvName::Cliffwalk && e.map.is_some() {
             return Err(invalid("env.map", "applies to cliffwalk only"));
@@ -78,7 +111,7 @@ impl ExperimentConfig {
         if a.kind.is_tabular() != e.name.is_tabular() {
             return Err(invalid(
                 "agent.kind",
-                format!("{:?} does not run on {}: tabular agents run on cliffwalk, neural ones on cartpole, mountaincar and acrobot", a.kind, e.name),
+                format!("{:?} does not run on {}: tabular agents run on cliffwalk, neural ones on cartpole, mountaincar, acrobot and gymnasium", a.kind, e.name),
             ));
         }
         if !(a.gamma >= 0.0 && a.gamma <= 1.0) {

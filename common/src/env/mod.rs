@@ -41,6 +41,12 @@ pub enum EnvError {
     NotReset,
     #[error("a saved environment state does not fit this environment: {0}")]
     BadState(String),
+    /// An environment in another process failed or did not answer (the message says which).
+    #[error("remote environment: {0}")]
+    Remote(String),
+    /// What this environment cannot do, named (e.g. restoring a remote environment's state).
+    #[error("not supported: {0}")]
+    Unsupported(String),
 }
 
 /// The whole state of an environment, for a checkpoint: its generator, where it is in its
@@ -133,7 +139,7 @@ pub fn vector_env(cfg: &crate::config::EnvConfig) -> Option<Box<VectorEnv>> {
 }
 
 /// The environment `name` with vector observations, truncated after `max_episode_steps` steps;
-/// `None` for CliffWalk.
+/// `None` for CliffWalk and for Gymnasium's (served by another process, see `alfd-wire`).
 pub fn vector_env_named(
     name: crate::config::EnvName,
     max_episode_steps: usize,
@@ -144,6 +150,7 @@ pub fn vector_env_named(
         EnvName::Cartpole => Some(Box::new(Vectorized(CartPole::new(limit)))),
         EnvName::Mountaincar => Some(Box::new(Vectorized(MountainCar::new(limit)))),
         EnvName::Acrobot => Some(Box::new(Vectorized(Acrobot::new(limit)))),
-        EnvName::Cliffwalk => None,
+        // In another process (the Python adapter): built outside the core, by `alfd-wire`.
+        EnvName::Cliffwalk | EnvName::Gymnasium => None,
     }
 }

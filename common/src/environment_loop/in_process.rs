@@ -5,7 +5,7 @@
 use std::borrow::Borrow;
 use std::cell::RefCell;
 
-use super::{Adder, ExpertClient, Result, VariableSource};
+use super::{Adder, ExpertClient, LoopError, Result, VariableSource};
 use crate::agent::{Demonstrator, ExpertCore, NeuralActor, NeuralLearner};
 use crate::demo_model::DemoModel;
 use crate::replay::Transition;
@@ -79,7 +79,10 @@ impl<S: ?Sized, O: Borrow<S> + Features> ExpertClient<O> for LocalExpert<'_, S> 
         if self.core.budget().is_exhausted() {
             return Ok(None);
         }
-        let action = self.demonstrator.act(obs.borrow());
+        let action = self
+            .demonstrator
+            .try_act(obs.borrow())
+            .map_err(|e| LoopError::link(format!("the expert `{}`: {e}", self.name)))?;
         Ok(self
             .core
             .record(&obs.features(), action, step, &self.name)

@@ -36,6 +36,12 @@ pub enum WireError {
     Interrupted,
     #[error("run `{run_id}` still has live processes: {nodes}")]
     RunAlive { run_id: String, nodes: String },
+    #[error("`{service}` failed: {message}")]
+    Remote { service: String, message: String },
+    #[error(
+        "no answer on `{service}` within {waited_ms} ms (is its adapter running? see its log)"
+    )]
+    NoAnswer { service: String, waited_ms: u64 },
     #[error("iceoryx2 failed to {op} `{service}`: {detail}")]
     Transport {
         op: &'static str,

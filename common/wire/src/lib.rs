@@ -16,6 +16,7 @@
 //! | `progress`          | pub/sub           | every process → launcher| [`Progress`]                 |
 //! | `control`           | pub/sub, hist. 1  | launcher → every process| [`Control`]                  |
 //! | `doorbell/<who>`    | event             | anyone → one process    | (wakes a blocked process)    |
+//! | `remote/<name>`     | request/response  | actor or expert → Python adapter | [`RemoteRequest`] → [`RemoteResponse`] (see `remote`) |
 //!
 //! Data services never wake anybody: a sender rings the receiver's doorbell (`learner`, `expert`,
 //! `launcher`, `actor-<id>`), and a process with nothing to do blocks on its own doorbell in a
@@ -43,6 +44,8 @@
 //! - `services`: [`Wire`] (joining a run, one builder per service, the port constructors).
 //! - `ports`: [`Sender`], [`Receiver`], the weights and demonstration-model slices, and both
 //!   sides of a query.
+//! - `remote`: services to Python adapters: [`RemoteEnv`] (an environment in another process)
+//!   and [`RemoteDemonstrator`] (an external expert).
 //! - `wakeups`: doorbells ([`Doorbell`], [`Bell`], [`ActorBells`]) and the [`Waiter`].
 //! - `control`: [`ControlWatch`], a process's view of the launcher.
 //! - `housekeeping`: run ids and prefixes, the files a run leaves, and their removal
@@ -55,6 +58,7 @@ mod error;
 mod housekeeping;
 mod messages;
 mod ports;
+mod remote;
 mod services;
 mod wakeups;
 
@@ -76,6 +80,10 @@ pub use messages::{
 pub use ports::{
     DemoModelReceiver, DemoModelSender, IncomingQuery, PendingQuery, QueryClient, QueryServer,
     Receiver, Sender, WeightsReceiver, WeightsSender,
+};
+pub use remote::{
+    remote_kind, remote_limits, remote_status, Liveness, RemoteClient, RemoteDemonstrator,
+    RemoteEnv, RemoteRequest, RemoteResponse, RemoteSpec, MAX_REMOTE_VALUES, REMOTE_MESSAGE_LEN,
 };
 pub use services::{quiet_transport_logs, Wire};
 pub use wakeups::{ActorBells, Bell, Doorbell, Waiter, Wake};

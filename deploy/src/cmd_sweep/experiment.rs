@@ -414,7 +414,7 @@ fn check_expert(cfg: &ExperimentConfig) -> anyhow::Result<()> {
             alfd_expert::registry::cliffwalk(&cfg.expert.name, &env)?;
         }
         _ => {
-            setup::neural_demonstrator(cfg)?;
+            setup::check_demonstrator(cfg)?;
         }
     }
     Ok(())
