@@ -162,7 +162,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 eval_env.as_mut(),
                 cfg.evaluation.episodes,
                 eval_seed,
-            );
+            )?;
         }
         progress
             .send(Progress::episode(me.incarnation, *record))

@@ -13,7 +13,7 @@ use crate::agent::{
 };
 use crate::checkpoint::StateMismatch;
 use crate::config::ExperimentConfig;
-use crate::env::{vector_env, CartPole, CliffWalk, Env, EnvState, VectorEnv};
+use crate::env::{vector_env, CartPole, CliffWalk, Env, EnvError, EnvState, VectorEnv};
 use crate::environment_loop::in_process::{LearnerHandle, LocalExpert};
 use crate::environment_loop::{self, GenericActor, Progress, Schedule};
 use crate::nn::Mlp;
@@ -405,7 +405,7 @@ pub fn run_neural_on(
                             eval_env.as_mut(),
                             cfg.evaluation.episodes,
                             eval_seed,
-                        );
+                        )?;
                     }
                     records.borrow_mut().push(*r);
                     *stopped |= on_episode(r, handle.learner().network()).is_break();
@@ -447,30 +447,36 @@ pub fn run_neural_on(
 
 /// Mean return of `episodes` episodes of `env` played greedily by `net` (on the mean of its
 /// heads' Q-values), the first reset seeded with `seed`: the `eval_return` of a record.
-pub fn evaluate_greedy(net: &Mlp, env: &mut VectorEnv, episodes: u32, seed: u64) -> f64 {
+pub fn evaluate_greedy(
+    net: &Mlp,
+    env: &mut VectorEnv,
+    episodes: u32,
+    seed: u64,
+) -> Result<f64, EnvError> {
     let mut policy = NetworkDemonstrator::new(net.clone());
-    let returns = evaluate(env, episodes as usize, seed, |obs| policy.act(obs));
-    returns.iter().sum::<f64>() / returns.len().max(1) as f64
+    let returns = evaluate(env, episodes as usize, seed, |obs| policy.act(obs))?;
+    Ok(returns.iter().sum::<f64>() / returns.len().max(1) as f64)
 }
 
-/// Returns of `episodes` episodes of `env` played by `act`, the first reset seeded with `seed`.
+/// Returns of `episodes` episodes of `env` played by `act`, the first reset seeded with `seed`;
+/// the environment's error if a step fails (one in another process that died, say).
 pub fn evaluate<E: Env + ?Sized>(
     env: &mut E,
     episodes: usize,
     seed: u64,
     mut act: impl FnMut(&E::Observation) -> usize,
-) -> Vec<f64> {
+) -> Result<Vec<f64>, EnvError> {
     (0..episodes)
         .map(|i| {
             let mut obs = env.reset(if i == 0 { Some(seed) } else { None });
             let mut ret = 0.0;
             loop {
-                let step = env.step(act(&obs)).expect("valid action on a live episode");
+                let step = env.step(act(&obs))?;
                 ret += step.reward;
                 let done = step.done();
                 obs = step.observation;
                 if done {
-                    return ret;
+                    return Ok(ret);
                 }
             }
         })
@@ -487,6 +493,7 @@ pub fn evaluate_cartpole(
     evaluate(&mut CartPole::new(max_steps), episodes, seed, |obs| {
         policy.act(obs)
     })
+    .expect("the native CartPole steps every action of a live episode")
 }
 
 /// Returns of `episodes` CliffWalk episodes played by `policy` on a clone of `env`.
@@ -497,4 +504,5 @@ pub fn evaluate_cliffwalk(
     seed: u64,
 ) -> Vec<f64> {
     evaluate(&mut env.clone(), episodes, seed, |s| policy.act(s))
+        .expect("the native CliffWalk steps every action of a live episode")
 }

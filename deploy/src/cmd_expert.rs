@@ -107,6 +107,7 @@ pub fn evaluate_named(name: &str, episodes: usize, seed: u64) -> anyhow::Result<
             let mut env = vector_env_named(env, env.default_max_episode_steps())
                 .expect("every env but cliffwalk has vector observations");
             evaluate(env.as_mut(), episodes, seed, |obs| d.act(obs))
+                .map_err(|e| anyhow::anyhow!("evaluating {name}: {e}"))?
         }
     };
     Ok(ReturnStats::of(&returns))
