@@ -2,6 +2,7 @@
 
 mod cli;
 mod faults;
+mod remote;
 mod report;
 mod runtime;
 mod shards;

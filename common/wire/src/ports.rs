@@ -42,6 +42,16 @@ impl<T: Message> Sender<'_, T> {
         Ok(seq)
     }
 
+    /// Sends `msg` as it is, its header (sender, sequence number) untouched: a bridge passes on
+    /// what another process sent. The schema version is checked like a received message's.
+    pub fn forward(&mut self, msg: T) -> Result<()> {
+        self.wire.check(T::SERVICE, msg.header())?;
+        self.port
+            .send_copy(msg)
+            .map_err(transport("send on", T::SERVICE))?;
+        Ok(())
+    }
+
     /// Delivers the history to subscribers that connected since the last send.
     pub fn update_connections(&self) -> Result<()> {
         self.port
@@ -105,6 +115,21 @@ impl fmt::Debug for WeightsSender<'_> {
 }
 
 impl WeightsSender<'_> {
+    /// Publishes weights another process published, under their header as it is (a bridge).
+    pub fn forward(&mut self, header: WeightsHeader, weights: &[f32]) -> Result<()> {
+        self.wire.check("weights", &header.header)?;
+        let mut sample = self
+            .port
+            .loan_slice_uninit(weights.len())
+            .map_err(transport("loan on", "weights"))?;
+        *sample.user_header_mut() = header;
+        sample
+            .write_from_slice(weights)
+            .send()
+            .map_err(transport("send on", "weights"))?;
+        Ok(())
+    }
+
     /// Publishes `weights` as version `version`.
     pub fn publish(
         &mut self,
@@ -188,6 +213,23 @@ impl fmt::Debug for DemoModelSender<'_> {
 }
 
 impl DemoModelSender<'_> {
+    /// Publishes a model another process published, under its header as it is (a bridge).
+    pub fn forward(&mut self, header: DemoModelHeader, bytes: &[u8]) -> Result<()> {
+        self.wire.check("demo-model", &header.header)?;
+        let mut sample = self
+            .port
+            .loan_slice_uninit(bytes.len().max(1))
+            .map_err(transport("loan on", "demo-model"))?;
+        *sample.user_header_mut() = header;
+        let sample = if bytes.is_empty() {
+            sample.write_from_slice(&[0u8])
+        } else {
+            sample.write_from_slice(bytes)
+        };
+        sample.send().map_err(transport("send on", "demo-model"))?;
+        Ok(())
+    }
+
     /// Publishes `bytes` (the model, serialized) under `header` (whose `header` and `len` are
     /// filled in here).
     pub fn publish(&mut self, mut header: DemoModelHeader, bytes: &[u8]) -> Result<()> {

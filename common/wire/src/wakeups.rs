@@ -23,6 +23,8 @@ pub enum Doorbell {
     /// its answer is there.
     Actor(u16),
     Launcher,
+    /// The bridge of a run across hosts: rung when something arrived over zenoh.
+    Bridge,
 }
 
 impl Doorbell {
@@ -32,6 +34,7 @@ impl Doorbell {
             Doorbell::Expert => "doorbell/expert".to_owned(),
             Doorbell::Actor(id) => format!("doorbell/actor-{id}"),
             Doorbell::Launcher => "doorbell/launcher".to_owned(),
+            Doorbell::Bridge => "doorbell/bridge".to_owned(),
         }
     }
 }
@@ -111,9 +114,9 @@ pub enum Wake {
     Signal,
 }
 
-/// A process's own doorbell, and a WaitSet to block on it.
+/// A process's own doorbell (a bridge's: several), and a WaitSet to block on it.
 pub struct Waiter {
-    pub(crate) listener: Listener<Transport>,
+    pub(crate) listeners: Vec<Listener<Transport>>,
     pub(crate) waitset: WaitSet<Transport>,
     pub(crate) bell: Doorbell,
 }
@@ -136,9 +139,11 @@ impl Waiter {
         let deadline = Instant::now() + timeout;
         let mut rang = false;
         {
-            let _guard = self
-                .waitset
-                .attach_notification(&self.listener)
+            let _guards = self
+                .listeners
+                .iter()
+                .map(|l| self.waitset.attach_notification(l))
+                .collect::<std::result::Result<Vec<_>, _>>()
                 .map_err(transport("attach to a waitset", self.bell.topic()))?;
             for _ in 0..MAX_INTERRUPTED_CHECKS {
                 let left = deadline.saturating_duration_since(Instant::now());
@@ -176,9 +181,13 @@ impl Waiter {
 
     /// Consumes pending rings without blocking; returns how many there were.
     fn drain(&self) -> Result<u64> {
-        self.listener
-            .try_wait(|_| {})
-            .map_err(transport("drain", self.bell.topic()))
+        let mut n = 0;
+        for l in &self.listeners {
+            n += l
+                .try_wait(|_| {})
+                .map_err(transport("drain", self.bell.topic()))?;
+        }
+        Ok(n)
     }
 }
 

@@ -83,6 +83,10 @@ pub struct Plan {
     /// A resumed run: the global step of the state in `actor-<id>.ckpt` each actor id starts
     /// from (`alfd-actor --restore-step`); none: a fresh actor.
     pub restore_actors: Vec<Option<u64>>,
+    /// Take actors from other hosts too (`--listen`): a hub on this endpoint (see
+    /// `alfd_bridge`). Such a run has no per-actor episode shares: every actor plays until the
+    /// run's limit is reached.
+    pub listen: Option<alfd_bridge::Endpoint>,
 }
 
 impl Plan {
@@ -274,6 +278,11 @@ struct Launcher<'a, 'w> {
     last_control: Instant,
     bar: indicatif::ProgressBar,
     rate: RateMeter,
+    /// The bridge to other hosts (`--listen`), once the learner is up.
+    hub: Option<alfd_bridge::Hub>,
+    /// Remote hosts that joined, and that left or dropped.
+    remote_joins: u32,
+    remote_losses: u32,
 }
 
 impl<'a, 'w> Launcher<'a, 'w> {
@@ -289,7 +298,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         let (csv, earlier) = open_episodes(&plan.run_dir, plan.resume)?;
         let demos_before = earlier.last().map_or(0, |r| r.1);
         let all_returns: Vec<f64> = earlier.iter().map(|r| r.0).collect();
-        let quota = plan.cfg.episode_limit().map(|n| {
+        let quota = plan.cfg.episode_limit().filter(|_| plan.listen.is_none()).map(|n| {
             shares(
                 u64::from(n).saturating_sub(all_returns.len() as u64),
                 plan.actors,
@@ -339,6 +348,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
             last_control: Instant::now(),
             bar,
             rate: RateMeter::default(),
+            hub: None,
+            remote_joins: 0,
+            remote_losses: 0,
         })
     }
 
@@ -367,6 +379,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
             );
         }
         self.running_since = Instant::now();
+        if let Some(endpoint) = &self.plan.listen {
+            self.hub = Some(self.start_hub(endpoint)?);
+        }
         let first = self.plan.first_incarnation();
         for id in 0..self.plan.actors as u16 {
             if self.episodes_left(id) != Some(0) {
@@ -391,10 +406,56 @@ impl<'a, 'w> Launcher<'a, 'w> {
         Ok(self.summary(interrupted))
     }
 
+    fn start_hub(&self, endpoint: &alfd_bridge::Endpoint) -> anyhow::Result<alfd_bridge::Hub> {
+        let read = |name: &str| {
+            std::fs::read_to_string(self.plan.run_dir.join(name))
+                .with_context(|| format!("cannot read {name} of the run"))
+        };
+        alfd_bridge::Hub::start(alfd_bridge::HubOptions {
+            endpoint: endpoint.clone(),
+            run_id: self.plan.run_id.clone(),
+            local_actors: self.plan.actors,
+            first_incarnation: self.plan.first_incarnation(),
+            config_toml: read("config.toml")?,
+            runtime_toml: read(RUNTIME_FILE)?,
+            query_timeout: self.plan.runtime.query_timeout(),
+        })
+        .with_context(|| format!("cannot listen on {endpoint} for remote actors"))
+    }
+
+    /// Takes in joins and departures of remote hosts. A host that left (its link dropped, its
+    /// process died) took its actors with it: like crashed actors, their ids are free again and
+    /// a host that joins gets them with new incarnations; the learner's credit book takes a new
+    /// incarnation as a new actor.
+    fn check_hub(&mut self) {
+        let Some(hub) = &self.hub else { return };
+        for event in hub.events() {
+            match event {
+                alfd_bridge::HubEvent::Joined {
+                    join_id,
+                    host,
+                    actors,
+                } => {
+                    self.remote_joins += 1;
+                    info!(%host, %join_id, ?actors, "remote actors joined");
+                }
+                alfd_bridge::HubEvent::Left { join_id, actors } => {
+                    if self.control.command != command::SHUTDOWN {
+                        self.remote_losses += 1;
+                        warn!(%join_id, ?actors, "a remote host left or its link dropped: its actors are gone");
+                    } else {
+                        info!(%join_id, ?actors, "remote actors stopped");
+                    }
+                }
+            }
+        }
+    }
+
     /// Waits for news (at most 100 ms), takes in progress, keeps the heartbeat going.
     fn tick(&mut self) -> anyhow::Result<Wake> {
         let wake = self.waiter.wait(Duration::from_millis(100))?;
         self.drain_progress()?;
+        self.check_hub();
         if self.last_control.elapsed() >= CONTROL_PERIOD {
             self.publish_control()?;
         }
@@ -527,8 +588,13 @@ impl<'a, 'w> Launcher<'a, 'w> {
             self.returns.iter().sum::<f64>() / self.returns.len() as f64
         };
         let (sps, ups) = self.rate.rates();
+        let remote = self
+            .hub
+            .as_ref()
+            .map(|h| format!("  remote actors {}", h.remote_actors()))
+            .unwrap_or_default();
         self.bar.set_message(format!(
-            "return {mean:.1} (last 20)  demos {}/{}  {sps:.0} steps/s  {ups:.0} updates/s",
+            "return {mean:.1} (last 20)  demos {}/{}  {sps:.0} steps/s  {ups:.0} updates/s{remote}",
             u64::from(self.demos_used).max(self.demos_answered),
             self.plan.cfg.budget()
         ));
@@ -805,9 +871,12 @@ impl<'a, 'w> Launcher<'a, 'w> {
         self.publish_control()?;
         let deadline = Instant::now() + Duration::from_secs(30);
         let mut failures = Vec::new();
-        while !self.procs.is_empty() && Instant::now() < deadline {
+        // Remote actors hear the shutdown through the hub; their hosts leave when they stopped.
+        let remote = |l: &Self| l.hub.as_ref().map_or(0, |h| h.remote_actors());
+        while (!self.procs.is_empty() || remote(self) > 0) && Instant::now() < deadline {
             let wake = self.waiter.wait(Duration::from_millis(50))?;
             self.drain_progress()?;
+            self.check_hub();
             if self.last_control.elapsed() >= CONTROL_PERIOD {
                 self.publish_control()?;
             }
@@ -835,6 +904,17 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 "{} did not stop within 30 s and was killed",
                 p.name
             ));
+        }
+        if remote(self) > 0 {
+            warn!(
+                actors = remote(self),
+                "remote actors did not leave within 30 s; the run ends without them"
+            );
+        }
+        if let Some(hub) = self.hub.take() {
+            if let Err(e) = hub.stop() {
+                warn!("the hub: {e}");
+            }
         }
         self.stop_all();
         self.drain_progress()?;
