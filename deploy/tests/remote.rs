@@ -147,8 +147,7 @@ fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
     // ...until its host dies at once (its process and the link with it).
     let pid = join.child().id().to_string();
     assert!(Command::new("kill").args(["-KILL", &pid]).status().unwrap().success());
-    let _ = join.child().wait();
-    drop(join);
+    let _ = join.0.take().expect("running").wait();
     // The run goes on with its local actor.
     let at_kill = rows(&out).len();
     wait_until("local episodes after the loss", &mut run, &|| {

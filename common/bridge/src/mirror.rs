@@ -45,15 +45,24 @@ pub fn join(
     wait: Duration,
     schema: u32,
 ) -> Result<Remote> {
-    let session = zenoh::open(endpoint.connect_config()?)
-        .wait()
-        .map_err(|e| BridgeError::Zenoh(format!("cannot connect to {endpoint}: {e}")))?;
     let no_run = || BridgeError::NoRun {
         endpoint: endpoint.to_string(),
         waited_ms: wait.as_millis() as u64,
     };
-    let payload = frame::encode(schema, &request)?;
     let started = Instant::now();
+    // The run may not listen yet (its hub starts once its learner is up): try again until the
+    // deadline.
+    let session = loop {
+        match zenoh::open(endpoint.connect_config()?).wait() {
+            Ok(s) => break s,
+            Err(e) if started.elapsed() >= wait => {
+                debug!("cannot connect to {endpoint}: {e}");
+                return Err(no_run());
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(250)),
+        }
+    };
+    let payload = frame::encode(schema, &request)?;
     // The link may take a moment to come up: ask again until the deadline.
     let reply = loop {
         let replies = session
