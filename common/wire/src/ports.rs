@@ -457,6 +457,34 @@ mod tests {
     use crate::*;
 
     #[test]
+    fn a_bridge_forwards_a_message_under_its_senders_header_and_refuses_another_schema() {
+        with_run("forward", |run| {
+            let bridge = wire(run, Role::Bridge, 0);
+            let launcher = wire(run, Role::Launcher, 0);
+            let rx = launcher.progress_receiver().unwrap();
+            let mut tx = bridge.progress_sender().unwrap();
+            // As a remote actor 7 sent it, its 41st progress message.
+            let mut p = Progress::default();
+            p.header = Header {
+                schema: SCHEMA_VERSION,
+                role: Role::Actor as u16,
+                id: 7,
+                seq: 41,
+            };
+            tx.forward(p).unwrap();
+            let got = rx.receive().unwrap().unwrap();
+            assert_eq!(got.header, p.header, "the header arrives as the actor wrote it");
+            assert_eq!(got.header.sender(), "actor-7");
+            p.header.schema = SCHEMA_VERSION + 1;
+            assert!(matches!(
+                tx.forward(p),
+                Err(WireError::SchemaMismatch { theirs, .. }) if theirs == SCHEMA_VERSION + 1
+            ));
+            assert!(rx.receive().unwrap().is_none(), "nothing of the other schema went out");
+        });
+    }
+
+    #[test]
     fn transitions_arrive_in_order_with_header_and_flags() {
         with_run("transitions", |run| {
             let actor = wire(run, Role::Actor, 3);

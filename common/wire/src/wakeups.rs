@@ -238,6 +238,37 @@ mod tests {
         });
     }
 
+    #[test]
+    fn a_bridge_waits_on_several_doorbells_at_once() {
+        with_run("doorbells", |run| {
+            let bridge = wire(run, Role::Bridge, 0);
+            let other = wire(run, Role::Actor, 2);
+            let waiter = bridge
+                .waiter_on(&[Doorbell::Bridge, Doorbell::Actor(2), Doorbell::Actor(5)])
+                .unwrap();
+            assert_eq!(
+                waiter.wait(Duration::from_millis(20)).unwrap(),
+                Wake::Timeout
+            );
+            other.bell(Doorbell::Learner).unwrap().ring().unwrap();
+            assert_eq!(
+                waiter.wait(Duration::from_millis(20)).unwrap(),
+                Wake::Timeout,
+                "a doorbell it does not wait on"
+            );
+            for bell in [Doorbell::Actor(5), Doorbell::Bridge, Doorbell::Actor(2)] {
+                other.bell(bell).unwrap().ring().unwrap();
+                assert_eq!(waiter.wait(Duration::from_secs(5)).unwrap(), Wake::Rang);
+                assert_eq!(
+                    waiter.wait(Duration::from_millis(20)).unwrap(),
+                    Wake::Timeout,
+                    "the ring of {bell:?} was consumed"
+                );
+            }
+            assert!(bridge.waiter_on(&[]).is_err());
+        });
+    }
+
     /// Sends `signal` to one thread of this process (`tid`), with the `kill` command.
     fn signal_thread(signal: &str, tid: &str) {
         let ok = std::process::Command::new("kill")
