@@ -103,7 +103,10 @@ const FORBIDDEN_PATHS: &[(&[&str], &str)] = &[
     (&["std", "env"], "environment variables"),
     (&["tokio"], "an async runtime"),
     (&["iceoryx2"], "the transport (only alfd-wire knows it)"),
-    (&["zenoh"], "the transport across hosts (only alfd-bridge knows it)"),
+    (
+        &["zenoh"],
+        "the transport across hosts (only alfd-bridge knows it)",
+    ),
     (&["tracing_subscriber"], "a log sink"),
 ];
 
@@ -490,7 +493,9 @@ impl Graph {
 }
 
 fn is_transport_or_log_sink(package: &str) -> bool {
-    package.starts_with("iceoryx2") || package.starts_with("zenoh") || package == "tracing-subscriber"
+    package.starts_with("iceoryx2")
+        || package.starts_with("zenoh")
+        || package == "tracing-subscriber"
 }
 
 #[test]
@@ -535,7 +540,11 @@ fn the_dependency_graph_keeps_its_shape() {
         .map(|id| g.name(id))
         .filter(|m| g.direct(m).iter().any(|d| d.starts_with("zenoh")))
         .collect();
-    assert_eq!(users, ["alfd-bridge"], "workspace members depending on zenoh");
+    assert_eq!(
+        users,
+        ["alfd-bridge"],
+        "workspace members depending on zenoh"
+    );
 
     // Dependencies inside the workspace point one way: common <- wire <- harness <- binaries.
     let inside = |name: &str| -> BTreeSet<&str> {

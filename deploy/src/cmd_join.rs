@@ -37,8 +37,8 @@ pub struct JoinArgs {
 }
 
 pub fn run(args: JoinArgs) -> anyhow::Result<()> {
-    let endpoint =
-        alfd_bridge::Endpoint::parse(&args.connect).map_err(|e| usage(format!("--connect: {e}")))?;
+    let endpoint = alfd_bridge::Endpoint::parse(&args.connect)
+        .map_err(|e| usage(format!("--connect: {e}")))?;
     if !(1..=MAX_ACTORS).contains(&args.actors) {
         return Err(usage(format!(
             "--actors must be in 1..={MAX_ACTORS}, got {}",
@@ -69,21 +69,25 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
         Duration::from_secs(args.wait_s.max(1)),
         schema,
     )
-        .map_err(|e| {
-            if e.is_bad_input() {
-                usage(e.to_string())
-            } else {
-                anyhow::Error::new(e)
-            }
-        })?;
+    .map_err(|e| {
+        if e.is_bad_input() {
+            usage(e.to_string())
+        } else {
+            anyhow::Error::new(e)
+        }
+    })?;
     let joined = remote.joined.clone();
-    let dir = args.dir.clone().unwrap_or_else(|| {
-        PathBuf::from("runs").join(format!("join-{}-{pid}", joined.run_id))
-    });
-    std::fs::create_dir_all(&dir)
-        .with_context(|| format!("cannot create {}", dir.display()))?;
+    let dir = args
+        .dir
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("runs").join(format!("join-{}-{pid}", joined.run_id)));
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     crate::cmd_local::write(&dir, "config.toml", joined.config_toml.as_bytes())?;
-    crate::cmd_local::write(&dir, alfd_harness::RUNTIME_FILE, joined.runtime_toml.as_bytes())?;
+    crate::cmd_local::write(
+        &dir,
+        alfd_harness::RUNTIME_FILE,
+        joined.runtime_toml.as_bytes(),
+    )?;
     // This host's copy of the run: a run id (so an iceoryx2 prefix) of its own.
     let secs = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -96,7 +100,11 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
         "connect": endpoint.to_string(),
         "actors": joined.actors,
     });
-    crate::cmd_local::write(&dir, "join.json", serde_json::to_string_pretty(&record)?.as_bytes())?;
+    crate::cmd_local::write(
+        &dir,
+        "join.json",
+        serde_json::to_string_pretty(&record)?.as_bytes(),
+    )?;
     let result = {
         let mirror = alfd_bridge::Mirror::start(remote, &mirror_id)
             .context("cannot start this host's mirror of the run")?;
@@ -180,7 +188,10 @@ fn host_actors(
                         info!(actor = id, "stopped");
                     } else {
                         warn!(actor = id, "exited: {status}");
-                        failed.push(format!("actor-{id} ({status}; see {})", dir.join(format!("actor-{id}.log")).display()));
+                        failed.push(format!(
+                            "actor-{id} ({status}; see {})",
+                            dir.join(format!("actor-{id}.log")).display()
+                        ));
                     }
                 }
             }
@@ -196,7 +207,9 @@ fn host_actors(
             warn!("{why}: stopping the actors here");
             stopping = Some(why);
             for (_, c) in &actors {
-                let _ = Command::new("kill").args(["-TERM", &c.id().to_string()]).status();
+                let _ = Command::new("kill")
+                    .args(["-TERM", &c.id().to_string()])
+                    .status();
             }
         }
     }

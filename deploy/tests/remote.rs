@@ -76,7 +76,12 @@ fn two_remote_actors_over_zenoh_play_a_run_to_its_end_within_the_budget() {
     );
     // A host built from other sources is refused by name, with exit code 2, and joins nothing.
     let other = alfd()
-        .args(["join", "--connect", &format!("tcp/127.0.0.1:{port}"), "--actors=1"])
+        .args([
+            "join",
+            "--connect",
+            &format!("tcp/127.0.0.1:{port}"),
+            "--actors=1",
+        ])
         .arg(format!("--dir={}", remote.join("other").display()))
         .env("ALFD_SCHEMA_VERSION_OVERRIDE", "999")
         .output()
@@ -105,7 +110,10 @@ fn two_remote_actors_over_zenoh_play_a_run_to_its_end_within_the_budget() {
     assert_eq!(demos.len(), 10);
     assert_eq!(s["demos"], 10);
     let queries: u32 = rows.iter().map(|r| r[5].parse::<u32>().unwrap()).sum();
-    assert_eq!(queries, 10, "every demonstration was used by a remote actor");
+    assert_eq!(
+        queries, 10,
+        "every demonstration was used by a remote actor"
+    );
     assert_eq!(rows.last().unwrap()[3], "10", "demos_used");
     // The actors' logs are on their host, not on the learner's.
     let join_dir = remote.join("join");
@@ -115,7 +123,11 @@ fn two_remote_actors_over_zenoh_play_a_run_to_its_end_within_the_budget() {
     }
     // Both hosts cleaned up their iceoryx2 files.
     for id in [run_id(&out), mirror_id(&join_dir)] {
-        assert_eq!(wire::leftover_files(&id), Vec::<std::path::PathBuf>::new(), "{id}");
+        assert_eq!(
+            wire::leftover_files(&id),
+            Vec::<std::path::PathBuf>::new(),
+            "{id}"
+        );
     }
 }
 
@@ -128,7 +140,12 @@ fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
     let mut run = spawn_run(
         &out,
         1,
-        &[&listen, "episodes=100000", "budget.total=20", "query.mode=first"],
+        &[
+            &listen,
+            "episodes=100000",
+            "budget.total=20",
+            "query.mode=first",
+        ],
     );
     let remote_rows = |out: &Path| rows(out).iter().filter(|r| r[8] == "1").count();
     let wait_until = |what: &str, run: &mut Background, ok: &dyn Fn() -> bool| {
@@ -137,7 +154,10 @@ fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
             if let Some(status) = run.child().try_wait().unwrap() {
                 panic!("the run ended ({status}) before {what}");
             }
-            assert!(start.elapsed() < Duration::from_secs(60), "no {what} in 60 s");
+            assert!(
+                start.elapsed() < Duration::from_secs(60),
+                "no {what} in 60 s"
+            );
             std::thread::sleep(Duration::from_millis(50));
         }
     };
@@ -146,7 +166,11 @@ fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
     wait_until("remote episodes", &mut run, &|| remote_rows(&out) >= 5);
     // ...until its host dies at once (its process and the link with it).
     let pid = join.child().id().to_string();
-    assert!(Command::new("kill").args(["-KILL", &pid]).status().unwrap().success());
+    assert!(Command::new("kill")
+        .args(["-KILL", &pid])
+        .status()
+        .unwrap()
+        .success());
     let _ = join.0.take().expect("running").wait();
     // The run goes on with its local actor.
     let at_kill = rows(&out).len();
@@ -171,8 +195,15 @@ fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
     let s = summary(&out);
     assert_eq!(s["interrupted"], true);
     let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
-    assert!(demos.len() <= 20, "{} demonstrations, budget 20", demos.len());
-    assert_eq!(wire::leftover_files(&run_id(&out)), Vec::<std::path::PathBuf>::new());
+    assert!(
+        demos.len() <= 20,
+        "{} demonstrations, budget 20",
+        demos.len()
+    );
+    assert_eq!(
+        wire::leftover_files(&run_id(&out)),
+        Vec::<std::path::PathBuf>::new()
+    );
     // The killed host left its mirror's files behind (nobody was there to remove them): the
     // next `alfd clean` removes them, as it does for any dead run.
     // Its orphaned actor exits on its own first (it sees its parent gone).
@@ -182,7 +213,10 @@ fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
         let _ = wire::clean_run(&dead);
         std::thread::sleep(Duration::from_millis(200));
     }
-    assert_eq!(wire::leftover_files(&dead), Vec::<std::path::PathBuf>::new());
+    assert_eq!(
+        wire::leftover_files(&dead),
+        Vec::<std::path::PathBuf>::new()
+    );
 }
 
 #[test]
@@ -199,7 +233,11 @@ fn bad_endpoints_and_actor_counts_are_refused_with_exit_code_2() {
     ] {
         let o = alfd()
             .args(&args)
-            .arg(format!("--{}={}", if args[0] == "run" { "out" } else { "dir" }, out.join("x").display()))
+            .arg(format!(
+                "--{}={}",
+                if args[0] == "run" { "out" } else { "dir" },
+                out.join("x").display()
+            ))
             .output()
             .unwrap();
         assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));

@@ -159,7 +159,9 @@ impl Hub {
             let post = post.clone();
             session
                 .declare_subscriber(keys::up(&opts.run_id))
-                .callback(move |sample| post.send(Mail::Frame(sample.payload().to_bytes().into_owned())))
+                .callback(move |sample| {
+                    post.send(Mail::Frame(sample.payload().to_bytes().into_owned()))
+                })
                 .background()
                 .wait()
                 .map_err(zenoh_error)?
@@ -218,7 +220,9 @@ impl Hub {
     fn halt(&mut self) -> Result<()> {
         self.stop.store(true, Ordering::Relaxed);
         let r = match self.thread.take() {
-            Some(t) => t.join().unwrap_or_else(|_| Err(BridgeError::Zenoh("the hub panicked".into()))),
+            Some(t) => t
+                .join()
+                .unwrap_or_else(|_| Err(BridgeError::Zenoh("the hub panicked".into()))),
             None => Ok(()),
         };
         let _ = self.session.close().wait();
@@ -317,9 +321,14 @@ fn forward(
         while let Ok(mail) = inbox.mail.try_recv() {
             let b = match mail {
                 Mail::Joined => {
-                    for f in [&newest.control, &newest.credits, &newest.weights, &newest.model]
-                        .into_iter()
-                        .flatten()
+                    for f in [
+                        &newest.control,
+                        &newest.credits,
+                        &newest.weights,
+                        &newest.model,
+                    ]
+                    .into_iter()
+                    .flatten()
                     {
                         put(f)?;
                     }

@@ -155,7 +155,16 @@ impl Mirror {
             std::thread::Builder::new()
                 .name("mirror".to_owned())
                 .spawn(move || {
-                    let r = forward(&mirror_run_id, &ids, inbox, &up, &stop, &heard, epoch, ready_tx);
+                    let r = forward(
+                        &mirror_run_id,
+                        &ids,
+                        inbox,
+                        &up,
+                        &stop,
+                        &heard,
+                        epoch,
+                        ready_tx,
+                    );
                     if let Err(e) = &r {
                         warn!("the mirror stopped: {e}");
                     }
@@ -185,7 +194,11 @@ impl Mirror {
     pub fn silence(&self) -> Option<Duration> {
         match self.heard.load(Ordering::Relaxed) {
             0 => None,
-            ms => Some(self.epoch.elapsed().saturating_sub(Duration::from_millis(ms))),
+            ms => Some(
+                self.epoch
+                    .elapsed()
+                    .saturating_sub(Duration::from_millis(ms)),
+            ),
         }
     }
 

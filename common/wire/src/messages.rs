@@ -102,7 +102,9 @@ impl fmt::Display for Process {
 /// What every message starts with: the schema version, the sender, and the sender's sequence
 /// number on that service (0, 1, 2, ...).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.Header")]
 pub struct Header {
     pub schema: u32,
@@ -157,7 +159,9 @@ pub mod flags {
 
 /// One environment step as it travels from an actor to the learner.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.TransitionRecord")]
 pub struct TransitionRecord {
     pub state: [f32; MAX_OBS_DIM],
@@ -173,7 +177,9 @@ pub struct TransitionRecord {
 
 /// Up to [`TRANSITIONS_PER_BATCH`] consecutive steps of one actor.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.TransitionBatch")]
 pub struct TransitionBatch {
     pub header: Header,
@@ -379,7 +385,9 @@ impl TransitionBatch {
 
 /// The learner's grants to all actors, and its global counters.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.Credits")]
 pub struct Credits {
     pub header: Header,
@@ -419,7 +427,9 @@ impl Credits {
 
 /// User header of the `weights` slice.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.WeightsHeader")]
 pub struct WeightsHeader {
     pub header: Header,
@@ -432,7 +442,9 @@ pub struct WeightsHeader {
 
 /// User header of the `demo-model` slice (postcard bytes of the fitted model).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.DemoModelHeader")]
 pub struct DemoModelHeader {
     pub header: Header,
@@ -457,7 +469,9 @@ impl DemoModelHeader {
 
 /// An actor asks the expert for the action at `state`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.QueryRequest")]
 pub struct QueryRequest {
     pub header: Header,
@@ -526,7 +540,9 @@ pub mod outcome {
 
 /// The expert's answer.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.QueryResponse")]
 pub struct QueryResponse {
     pub header: Header,
@@ -591,7 +607,9 @@ unsafe impl ZeroCopySend for Episode {
 /// Progress and metrics, from every process to the launcher. An episode message carries the
 /// core's [`EpisodeRecord`] as the actor recorded it; the sender is `header.id`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.Progress")]
 pub struct Progress {
     pub header: Header,
@@ -638,7 +656,9 @@ pub mod command {
 /// The launcher's word to every process. Published with history 1 and republished periodically,
 /// so a late process gets it; it doubles as the launcher's heartbeat.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.Control")]
 pub struct Control {
     pub header: Header,

@@ -473,14 +473,20 @@ mod tests {
             };
             tx.forward(p).unwrap();
             let got = rx.receive().unwrap().unwrap();
-            assert_eq!(got.header, p.header, "the header arrives as the actor wrote it");
+            assert_eq!(
+                got.header, p.header,
+                "the header arrives as the actor wrote it"
+            );
             assert_eq!(got.header.sender(), "actor-7");
             p.header.schema = SCHEMA_VERSION + 1;
             assert!(matches!(
                 tx.forward(p),
                 Err(WireError::SchemaMismatch { theirs, .. }) if theirs == SCHEMA_VERSION + 1
             ));
-            assert!(rx.receive().unwrap().is_none(), "nothing of the other schema went out");
+            assert!(
+                rx.receive().unwrap().is_none(),
+                "nothing of the other schema went out"
+            );
         });
     }
 

@@ -180,7 +180,9 @@ fn bridges(
     run_id: &str,
     mirror_id: &str,
 ) -> anyhow::Result<(alfd_bridge::Hub, alfd_bridge::Mirror)> {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")?
+        .local_addr()?
+        .port();
     let endpoint = alfd_bridge::Endpoint::parse(&format!("tcp/127.0.0.1:{port}"))?;
     let hub = alfd_bridge::Hub::start(alfd_bridge::HubOptions {
         endpoint: endpoint.clone(),

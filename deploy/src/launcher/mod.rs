@@ -298,12 +298,16 @@ impl<'a, 'w> Launcher<'a, 'w> {
         let (csv, earlier) = open_episodes(&plan.run_dir, plan.resume)?;
         let demos_before = earlier.last().map_or(0, |r| r.1);
         let all_returns: Vec<f64> = earlier.iter().map(|r| r.0).collect();
-        let quota = plan.cfg.episode_limit().filter(|_| plan.listen.is_none()).map(|n| {
-            shares(
-                u64::from(n).saturating_sub(all_returns.len() as u64),
-                plan.actors,
-            )
-        });
+        let quota = plan
+            .cfg
+            .episode_limit()
+            .filter(|_| plan.listen.is_none())
+            .map(|n| {
+                shares(
+                    u64::from(n).saturating_sub(all_returns.len() as u64),
+                    plan.actors,
+                )
+            });
         let bar = if plan.progress {
             // Episodes when the run has an episode limit, else environment steps.
             let bar = indicatif::ProgressBar::new(match plan.cfg.episode_limit() {
@@ -866,7 +870,12 @@ impl<'a, 'w> Launcher<'a, 'w> {
 
     /// Tells every process to stop and waits for them (the learner saves its weights).
     fn shutdown(&mut self) -> anyhow::Result<()> {
-        info!(episodes = self.recorded, "stopping the run");
+        info!(
+            episodes = self.recorded,
+            remote_joins = self.remote_joins,
+            remote_losses = self.remote_losses,
+            "stopping the run"
+        );
         self.control.command = command::SHUTDOWN;
         self.publish_control()?;
         let deadline = Instant::now() + Duration::from_secs(30);
