@@ -15,6 +15,9 @@ const MAGIC: [u8; 4] = *b"alfz";
 
 /// One message between the learner's host (the hub) and a remote host (a mirror). The wire's
 /// messages travel whole, headers included: sender, sequence number, schema version.
+// A frame lives only between its arrival and its encoding or forwarding, one at a time: its
+// size does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Frame {
     // --- up: a remote host → the learner's host -----------------------------------------------

@@ -155,7 +155,7 @@ impl Hub {
             .map_err(zenoh_error)?;
 
         // What remote hosts send.
-        let up = {
+        {
             let post = post.clone();
             session
                 .declare_subscriber(keys::up(&opts.run_id))
@@ -164,9 +164,8 @@ impl Hub {
                 })
                 .background()
                 .wait()
-                .map_err(zenoh_error)?
-        };
-        let _ = up;
+                .map_err(zenoh_error)?;
+        }
         let down = session
             .declare_publisher(keys::down(&opts.run_id))
             .congestion_control(CongestionControl::Block)

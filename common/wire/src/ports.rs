@@ -464,12 +464,14 @@ mod tests {
             let rx = launcher.progress_receiver().unwrap();
             let mut tx = bridge.progress_sender().unwrap();
             // As a remote actor 7 sent it, its 41st progress message.
-            let mut p = Progress::default();
-            p.header = Header {
-                schema: SCHEMA_VERSION,
-                role: Role::Actor as u16,
-                id: 7,
-                seq: 41,
+            let mut p = Progress {
+                header: Header {
+                    schema: SCHEMA_VERSION,
+                    role: Role::Actor as u16,
+                    id: 7,
+                    seq: 41,
+                },
+                ..Progress::default()
             };
             tx.forward(p).unwrap();
             let got = rx.receive().unwrap().unwrap();
