@@ -56,6 +56,7 @@ use tracing::{debug, info, warn};
 use crate::expert_lifecycle::{Action, Exit, ExpertLifecycle};
 
 mod children;
+mod remote;
 
 use children::{describe, last_error, pin, proc_binary, RateMeter};
 
@@ -83,9 +84,8 @@ pub struct Plan {
     /// A resumed run: the global step of the state in `actor-<id>.ckpt` each actor id starts
     /// from (`alfd-actor --restore-step`); none: a fresh actor.
     pub restore_actors: Vec<Option<u64>>,
-    /// Take actors from other hosts too (`--listen`): a hub on this endpoint (see
-    /// `alfd_bridge`). Such a run has no per-actor episode shares: every actor plays until the
-    /// run's limit is reached.
+    /// Take actors from other hosts too (`--listen`, see `alfd_bridge` and `remote.rs`); such a
+    /// run has no per-actor episode shares: every actor plays to the run's limit.
     pub listen: Option<alfd_bridge::Endpoint>,
 }
 
@@ -280,7 +280,7 @@ struct Launcher<'a, 'w> {
     rate: RateMeter,
     /// The bridge to other hosts (`--listen`), once the learner is up.
     hub: Option<alfd_bridge::Hub>,
-    /// Remote hosts that joined, and that left or dropped.
+    /// Remote hosts that joined, and that left or dropped (their links).
     remote_joins: u32,
     remote_losses: u32,
 }
@@ -408,51 +408,6 @@ impl<'a, 'w> Launcher<'a, 'w> {
         self.shutdown()?;
         self.bar.finish_and_clear();
         Ok(self.summary(interrupted))
-    }
-
-    fn start_hub(&self, endpoint: &alfd_bridge::Endpoint) -> anyhow::Result<alfd_bridge::Hub> {
-        let read = |name: &str| {
-            std::fs::read_to_string(self.plan.run_dir.join(name))
-                .with_context(|| format!("cannot read {name} of the run"))
-        };
-        alfd_bridge::Hub::start(alfd_bridge::HubOptions {
-            endpoint: endpoint.clone(),
-            run_id: self.plan.run_id.clone(),
-            local_actors: self.plan.actors,
-            first_incarnation: self.plan.first_incarnation(),
-            config_toml: read("config.toml")?,
-            runtime_toml: read(RUNTIME_FILE)?,
-            query_timeout: self.plan.runtime.query_timeout(),
-        })
-        .with_context(|| format!("cannot listen on {endpoint} for remote actors"))
-    }
-
-    /// Takes in joins and departures of remote hosts. A host that left (its link dropped, its
-    /// process died) took its actors with it: like crashed actors, their ids are free again and
-    /// a host that joins gets them with new incarnations; the learner's credit book takes a new
-    /// incarnation as a new actor.
-    fn check_hub(&mut self) {
-        let Some(hub) = &self.hub else { return };
-        for event in hub.events() {
-            match event {
-                alfd_bridge::HubEvent::Joined {
-                    join_id,
-                    host,
-                    actors,
-                } => {
-                    self.remote_joins += 1;
-                    info!(%host, %join_id, ?actors, "remote actors joined");
-                }
-                alfd_bridge::HubEvent::Left { join_id, actors } => {
-                    if self.control.command != command::SHUTDOWN {
-                        self.remote_losses += 1;
-                        warn!(%join_id, ?actors, "a remote host left or its link dropped: its actors are gone");
-                    } else {
-                        info!(%join_id, ?actors, "remote actors stopped");
-                    }
-                }
-            }
-        }
     }
 
     /// Waits for news (at most 100 ms), takes in progress, keeps the heartbeat going.
@@ -915,10 +870,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             ));
         }
         if remote(self) > 0 {
-            warn!(
-                actors = remote(self),
-                "remote actors did not leave within 30 s; the run ends without them"
-            );
+            warn!("remote actors did not leave within 30 s; the run ends without them");
         }
         if let Some(hub) = self.hub.take() {
             if let Err(e) = hub.stop() {
