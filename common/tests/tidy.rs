@@ -1,6 +1,7 @@
 //! Checks of the workspace's own habits (after rust-analyzer's tidy): every Rust file says what
 //! it is for, the core does no I/O, and the dependency graph keeps its shape (the core reaches
-//! neither iceoryx2 nor tracing-subscriber; only `alfd-wire` depends on iceoryx2), read from
+//! neither iceoryx2, zenoh nor tracing-subscriber; only `alfd-wire` depends on iceoryx2, only
+//! `alfd-bridge` on zenoh), read from
 //! `cargo metadata`.
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -102,6 +103,10 @@ const FORBIDDEN_PATHS: &[(&[&str], &str)] = &[
     (&["std", "env"], "environment variables"),
     (&["tokio"], "an async runtime"),
     (&["iceoryx2"], "the transport (only alfd-wire knows it)"),
+    (
+        &["zenoh"],
+        "the transport across hosts (only alfd-bridge knows it)",
+    ),
     (&["tracing_subscriber"], "a log sink"),
 ];
 
@@ -488,7 +493,9 @@ impl Graph {
 }
 
 fn is_transport_or_log_sink(package: &str) -> bool {
-    package.starts_with("iceoryx2") || package == "tracing-subscriber"
+    package.starts_with("iceoryx2")
+        || package.starts_with("zenoh")
+        || package == "tracing-subscriber"
 }
 
 #[test]
@@ -526,6 +533,18 @@ fn the_dependency_graph_keeps_its_shape() {
         ["alfd-wire"],
         "workspace members depending on iceoryx2"
     );
+    // Only alfd-bridge depends on zenoh directly, and on iceoryx2 only through alfd-wire.
+    let users: Vec<&str> = g
+        .members
+        .iter()
+        .map(|id| g.name(id))
+        .filter(|m| g.direct(m).iter().any(|d| d.starts_with("zenoh")))
+        .collect();
+    assert_eq!(
+        users,
+        ["alfd-bridge"],
+        "workspace members depending on zenoh"
+    );
 
     // Dependencies inside the workspace point one way: common <- wire <- harness <- binaries.
     let inside = |name: &str| -> BTreeSet<&str> {
@@ -542,4 +561,5 @@ fn the_dependency_graph_keeps_its_shape() {
         "{:?}",
         inside("alfd-harness")
     );
+    assert_eq!(inside("alfd-bridge"), BTreeSet::from(["alfd-wire"]));
 }

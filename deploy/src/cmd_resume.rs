@@ -154,6 +154,7 @@ fn resume_multi_process(
         resume: true,
         launches: info.launches.saturating_add(1),
         restore_actors,
+        listen: None,
     };
     tracing::info!(
         previous_run_id = %info.run_id,

@@ -22,9 +22,13 @@ pub struct RunArgs {
     /// (deploy/configs/recommended/cartpole.toml).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Number of actor processes.
+    /// Number of actor processes on this host (0 with --listen: all actors are remote).
     #[arg(long, default_value_t = 2)]
     pub actors: usize,
+    /// Also take actors from other hosts: listen on tcp/ADDR:PORT for `alfd join --connect`
+    /// (zenoh). Remote actors get the free actor ids above this host's.
+    #[arg(long, value_name = "tcp/ADDR:PORT")]
+    pub listen: Option<String>,
     /// Override a config value, e.g. `--set budget.total=20` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
@@ -95,9 +99,21 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             .map_err(|e| usage(e.to_string()))?;
         None
     };
-    if !(1..=MAX_ACTORS).contains(&args.actors) {
+    let listen = args
+        .listen
+        .as_deref()
+        .map(alfd_bridge::Endpoint::parse)
+        .transpose()
+        .map_err(|e| usage(format!("--listen: {e}")))?;
+    let least = usize::from(listen.is_none());
+    if !(least..=MAX_ACTORS).contains(&args.actors) {
         return Err(usage(format!(
-            "--actors must be in 1..={MAX_ACTORS}, got {}",
+            "--actors must be in {least}..={MAX_ACTORS}{}, got {}",
+            if listen.is_none() {
+                " (0 only with --listen)"
+            } else {
+                ""
+            },
             args.actors
         )));
     }
@@ -144,6 +160,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         resume: false,
         launches: 1,
         restore_actors: Vec::new(),
+        listen,
     };
     finish(&plan, output)
 }

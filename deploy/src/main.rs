@@ -7,6 +7,7 @@ mod cmd_demo_model;
 mod cmd_demo_model_policy;
 mod cmd_env;
 mod cmd_expert;
+mod cmd_join;
 mod cmd_local;
 mod cmd_resume;
 mod cmd_run;
@@ -40,6 +41,8 @@ enum Command {
     Clean(cmd_clean::CleanArgs),
     /// Run an experiment as separate processes: learner, expert and N actors over iceoryx2.
     Run(cmd_run::RunArgs),
+    /// Actors on this host for a run on another (`alfd run --listen`), over zenoh.
+    Join(cmd_join::JoinArgs),
     /// Replace the expert of a live run (make before break).
     SwapExpert(cmd_run::SwapArgs),
     /// Environments: roll out CartPole from a state, show a CliffWalk map.
@@ -68,6 +71,7 @@ fn main() {
         Command::Resume(a) => cmd_resume::run(a),
         Command::Clean(a) => cmd_clean::run(a),
         Command::Run(a) => cmd_run::run(a),
+        Command::Join(a) => cmd_join::run(a),
         Command::SwapExpert(a) => cmd_run::swap(a),
         Command::Env(a) => cmd_env::run(a),
         Command::Expert(a) => cmd_expert::run(a),

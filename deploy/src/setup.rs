@@ -18,7 +18,10 @@ pub fn init_logging() {
                 .with_writer(std::io::stderr)
                 .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr())),
         )
-        .with(alfd_harness::log_filter("warn"))
+        // zenoh warns of every failed connection attempt; its errors are enough.
+        .with(alfd_harness::log_filter(
+            "warn,zenoh=error,zenoh_transport=error,zenoh_link_tcp=error",
+        ))
         .try_init();
 }
 

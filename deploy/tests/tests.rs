@@ -4,6 +4,7 @@ mod cli;
 mod faults;
 mod golden;
 mod gymnasium;
+mod remote;
 mod report;
 mod runtime;
 mod shards;

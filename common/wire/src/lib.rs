@@ -22,6 +22,10 @@
 //! `launcher`, `actor-<id>`), and a process with nothing to do blocks on its own doorbell in a
 //! WaitSet, so nothing spins when idle.
 //!
+//! Across hosts (`alfd-bridge`), a bridge stands in for the processes of the other host: it waits
+//! on several doorbells at once ([`Wire::waiter_on`], its own `doorbell/bridge` among them) and
+//! passes messages on under their sender's header ([`Sender::forward`]).
+//!
 //! # Credits (the replay-ratio throttle)
 //! The learner makes `U` updates per environment step it receives. Every transition an actor
 //! sends carries a per-actor sequence number; the learner processes transitions in order and

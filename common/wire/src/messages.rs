@@ -44,6 +44,8 @@ pub enum Role {
     Actor = 4,
     /// Benchmarks, monitors, the `swap-expert` command.
     Tool = 5,
+    /// A bridge between a run's iceoryx2 services and zenoh (`alfd run --listen`, `alfd join`).
+    Bridge = 6,
 }
 
 impl Role {
@@ -54,6 +56,7 @@ impl Role {
             3 => Role::Expert,
             4 => Role::Actor,
             5 => Role::Tool,
+            6 => Role::Bridge,
             _ => return None,
         })
     }
@@ -65,6 +68,7 @@ impl Role {
             Role::Expert => "expert",
             Role::Actor => "actor",
             Role::Tool => "tool",
+            Role::Bridge => "bridge",
         }
     }
 }
@@ -98,7 +102,9 @@ impl fmt::Display for Process {
 /// What every message starts with: the schema version, the sender, and the sender's sequence
 /// number on that service (0, 1, 2, ...).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.Header")]
 pub struct Header {
     pub schema: u32,
@@ -153,7 +159,9 @@ pub mod flags {
 
 /// One environment step as it travels from an actor to the learner.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.TransitionRecord")]
 pub struct TransitionRecord {
     pub state: [f32; MAX_OBS_DIM],
@@ -169,7 +177,9 @@ pub struct TransitionRecord {
 
 /// Up to [`TRANSITIONS_PER_BATCH`] consecutive steps of one actor.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.TransitionBatch")]
 pub struct TransitionBatch {
     pub header: Header,
@@ -375,7 +385,9 @@ impl TransitionBatch {
 
 /// The learner's grants to all actors, and its global counters.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.Credits")]
 pub struct Credits {
     pub header: Header,
@@ -415,7 +427,9 @@ impl Credits {
 
 /// User header of the `weights` slice.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.WeightsHeader")]
 pub struct WeightsHeader {
     pub header: Header,
@@ -428,7 +442,9 @@ pub struct WeightsHeader {
 
 /// User header of the `demo-model` slice (postcard bytes of the fitted model).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.DemoModelHeader")]
 pub struct DemoModelHeader {
     pub header: Header,
@@ -453,7 +469,9 @@ impl DemoModelHeader {
 
 /// An actor asks the expert for the action at `state`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.QueryRequest")]
 pub struct QueryRequest {
     pub header: Header,
@@ -522,7 +540,9 @@ pub mod outcome {
 
 /// The expert's answer.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.QueryResponse")]
 pub struct QueryResponse {
     pub header: Header,
@@ -568,7 +588,7 @@ pub mod process_state {
 
 /// An [`EpisodeRecord`] as a payload: the core's record, byte for byte.
 #[repr(transparent)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Episode(pub EpisodeRecord);
 
 // SAFETY: `EpisodeRecord` is `repr(C)` and holds only `f64`, `u64`, `u32` and `u16` fields (any bit pattern, NaN included, is a value): no
@@ -587,7 +607,9 @@ unsafe impl ZeroCopySend for Episode {
 /// Progress and metrics, from every process to the launcher. An episode message carries the
 /// core's [`EpisodeRecord`] as the actor recorded it; the sender is `header.id`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.Progress")]
 pub struct Progress {
     pub header: Header,
@@ -634,7 +656,9 @@ pub mod command {
 /// The launcher's word to every process. Published with history 1 and republished periodically,
 /// so a late process gets it; it doubles as the launcher's heartbeat.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize,
+)]
 #[type_name("alfd.Control")]
 pub struct Control {
     pub header: Header,

@@ -42,6 +42,16 @@ impl<T: Message> Sender<'_, T> {
         Ok(seq)
     }
 
+    /// Sends `msg` as it is, its header (sender, sequence number) untouched: a bridge passes on
+    /// what another process sent. The schema version is checked like a received message's.
+    pub fn forward(&mut self, msg: T) -> Result<()> {
+        self.wire.check(T::SERVICE, msg.header())?;
+        self.port
+            .send_copy(msg)
+            .map_err(transport("send on", T::SERVICE))?;
+        Ok(())
+    }
+
     /// Delivers the history to subscribers that connected since the last send.
     pub fn update_connections(&self) -> Result<()> {
         self.port
@@ -105,6 +115,21 @@ impl fmt::Debug for WeightsSender<'_> {
 }
 
 impl WeightsSender<'_> {
+    /// Publishes weights another process published, under their header as it is (a bridge).
+    pub fn forward(&mut self, header: WeightsHeader, weights: &[f32]) -> Result<()> {
+        self.wire.check("weights", &header.header)?;
+        let mut sample = self
+            .port
+            .loan_slice_uninit(weights.len())
+            .map_err(transport("loan on", "weights"))?;
+        *sample.user_header_mut() = header;
+        sample
+            .write_from_slice(weights)
+            .send()
+            .map_err(transport("send on", "weights"))?;
+        Ok(())
+    }
+
     /// Publishes `weights` as version `version`.
     pub fn publish(
         &mut self,
@@ -188,6 +213,23 @@ impl fmt::Debug for DemoModelSender<'_> {
 }
 
 impl DemoModelSender<'_> {
+    /// Publishes a model another process published, under its header as it is (a bridge).
+    pub fn forward(&mut self, header: DemoModelHeader, bytes: &[u8]) -> Result<()> {
+        self.wire.check("demo-model", &header.header)?;
+        let mut sample = self
+            .port
+            .loan_slice_uninit(bytes.len().max(1))
+            .map_err(transport("loan on", "demo-model"))?;
+        *sample.user_header_mut() = header;
+        let sample = if bytes.is_empty() {
+            sample.write_from_slice(&[0u8])
+        } else {
+            sample.write_from_slice(bytes)
+        };
+        sample.send().map_err(transport("send on", "demo-model"))?;
+        Ok(())
+    }
+
     /// Publishes `bytes` (the model, serialized) under `header` (whose `header` and `len` are
     /// filled in here).
     pub fn publish(&mut self, mut header: DemoModelHeader, bytes: &[u8]) -> Result<()> {
@@ -413,6 +455,42 @@ mod tests {
 
     use crate::test_support::{transition, wire, with_run};
     use crate::*;
+
+    #[test]
+    fn a_bridge_forwards_a_message_under_its_senders_header_and_refuses_another_schema() {
+        with_run("forward", |run| {
+            let bridge = wire(run, Role::Bridge, 0);
+            let launcher = wire(run, Role::Launcher, 0);
+            let rx = launcher.progress_receiver().unwrap();
+            let mut tx = bridge.progress_sender().unwrap();
+            // As a remote actor 7 sent it, its 41st progress message.
+            let mut p = Progress {
+                header: Header {
+                    schema: SCHEMA_VERSION,
+                    role: Role::Actor as u16,
+                    id: 7,
+                    seq: 41,
+                },
+                ..Progress::default()
+            };
+            tx.forward(p).unwrap();
+            let got = rx.receive().unwrap().unwrap();
+            assert_eq!(
+                got.header, p.header,
+                "the header arrives as the actor wrote it"
+            );
+            assert_eq!(got.header.sender(), "actor-7");
+            p.header.schema = SCHEMA_VERSION + 1;
+            assert!(matches!(
+                tx.forward(p),
+                Err(WireError::SchemaMismatch { theirs, .. }) if theirs == SCHEMA_VERSION + 1
+            ));
+            assert!(
+                rx.receive().unwrap().is_none(),
+                "nothing of the other schema went out"
+            );
+        });
+    }
 
     #[test]
     fn transitions_arrive_in_order_with_header_and_flags() {

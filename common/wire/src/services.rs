@@ -113,6 +113,16 @@ impl Wire {
         ServiceName::new(&name).map_err(transport("name service", name.clone()))
     }
 
+    /// The run this wire belongs to.
+    pub fn run_id(&self) -> &str {
+        &self.run_id
+    }
+
+    /// The schema version this process speaks.
+    pub fn schema(&self) -> u32 {
+        self.schema
+    }
+
     pub(crate) fn header(&self, seq: u64) -> Header {
         Header {
             schema: self.schema,
@@ -497,17 +507,31 @@ impl Wire {
 
     /// Waits on `bell` (the process's own doorbell).
     pub fn waiter(&self, bell: Doorbell) -> Result<Waiter> {
-        let listener = self
-            .doorbell_service(bell)?
-            .listener_builder()
-            .create()
-            .map_err(transport("create a listener on", bell.topic()))?;
+        self.waiter_on(&[bell])
+    }
+
+    /// Waits on any of `bells` (a bridge stands in for several processes). At least one bell.
+    pub fn waiter_on(&self, bells: &[Doorbell]) -> Result<Waiter> {
+        let bell = *bells.first().ok_or(WireError::OutOfRange {
+            what: "doorbells to wait on",
+            value: 0,
+            expected: "at least one",
+        })?;
+        let listeners = bells
+            .iter()
+            .map(|b| {
+                self.doorbell_service(*b)?
+                    .listener_builder()
+                    .create()
+                    .map_err(transport("create a listener on", b.topic()))
+            })
+            .collect::<Result<Vec<_>>>()?;
         let waitset = WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
             .create::<Transport>()
             .map_err(transport("create a waitset for", bell.topic()))?;
         Ok(Waiter {
-            listener,
+            listeners,
             waitset,
             bell,
         })

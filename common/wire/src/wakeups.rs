@@ -23,6 +23,8 @@ pub enum Doorbell {
     /// its answer is there.
     Actor(u16),
     Launcher,
+    /// The bridge of a run across hosts: rung when something arrived over zenoh.
+    Bridge,
 }
 
 impl Doorbell {
@@ -32,6 +34,7 @@ impl Doorbell {
             Doorbell::Expert => "doorbell/expert".to_owned(),
             Doorbell::Actor(id) => format!("doorbell/actor-{id}"),
             Doorbell::Launcher => "doorbell/launcher".to_owned(),
+            Doorbell::Bridge => "doorbell/bridge".to_owned(),
         }
     }
 }
@@ -111,9 +114,9 @@ pub enum Wake {
     Signal,
 }
 
-/// A process's own doorbell, and a WaitSet to block on it.
+/// A process's own doorbell (a bridge's: several), and a WaitSet to block on it.
 pub struct Waiter {
-    pub(crate) listener: Listener<Transport>,
+    pub(crate) listeners: Vec<Listener<Transport>>,
     pub(crate) waitset: WaitSet<Transport>,
     pub(crate) bell: Doorbell,
 }
@@ -136,9 +139,11 @@ impl Waiter {
         let deadline = Instant::now() + timeout;
         let mut rang = false;
         {
-            let _guard = self
-                .waitset
-                .attach_notification(&self.listener)
+            let _guards = self
+                .listeners
+                .iter()
+                .map(|l| self.waitset.attach_notification(l))
+                .collect::<std::result::Result<Vec<_>, _>>()
                 .map_err(transport("attach to a waitset", self.bell.topic()))?;
             for _ in 0..MAX_INTERRUPTED_CHECKS {
                 let left = deadline.saturating_duration_since(Instant::now());
@@ -176,9 +181,13 @@ impl Waiter {
 
     /// Consumes pending rings without blocking; returns how many there were.
     fn drain(&self) -> Result<u64> {
-        self.listener
-            .try_wait(|_| {})
-            .map_err(transport("drain", self.bell.topic()))
+        let mut n = 0;
+        for l in &self.listeners {
+            n += l
+                .try_wait(|_| {})
+                .map_err(transport("drain", self.bell.topic()))?;
+        }
+        Ok(n)
     }
 }
 
@@ -226,6 +235,37 @@ mod tests {
             });
             assert_eq!(waiter.wait(Duration::from_secs(10)).unwrap(), Wake::Rang);
             t.join().unwrap();
+        });
+    }
+
+    #[test]
+    fn a_bridge_waits_on_several_doorbells_at_once() {
+        with_run("doorbells", |run| {
+            let bridge = wire(run, Role::Bridge, 0);
+            let other = wire(run, Role::Actor, 2);
+            let waiter = bridge
+                .waiter_on(&[Doorbell::Bridge, Doorbell::Actor(2), Doorbell::Actor(5)])
+                .unwrap();
+            assert_eq!(
+                waiter.wait(Duration::from_millis(20)).unwrap(),
+                Wake::Timeout
+            );
+            other.bell(Doorbell::Learner).unwrap().ring().unwrap();
+            assert_eq!(
+                waiter.wait(Duration::from_millis(20)).unwrap(),
+                Wake::Timeout,
+                "a doorbell it does not wait on"
+            );
+            for bell in [Doorbell::Actor(5), Doorbell::Bridge, Doorbell::Actor(2)] {
+                other.bell(bell).unwrap().ring().unwrap();
+                assert_eq!(waiter.wait(Duration::from_secs(5)).unwrap(), Wake::Rang);
+                assert_eq!(
+                    waiter.wait(Duration::from_millis(20)).unwrap(),
+                    Wake::Timeout,
+                    "the ring of {bell:?} was consumed"
+                );
+            }
+            assert!(bridge.waiter_on(&[]).is_err());
         });
     }
 

@@ -3,6 +3,11 @@
 //! as the actor and the expert do), transitions per second from an actor to the learner under the
 //! credit protocol, and the latency of a weight broadcast of the K = 2 network (4,740 `f32`).
 //!
+//! With `--zenoh`, the query round trip (blocking) and the transitions go across hosts as a run
+//! across hosts does, on loopback: the actor side in a mirror (its own run id), the expert or
+//! learner side behind a hub, the two bridges (`alfd_bridge`) in this process, joined over
+//! zenoh TCP on 127.0.0.1.
+//!
 //! Prints one JSON object; `BENCHMARKS.md` records the numbers with the machine.
 
 use std::process::{Child, Command};
@@ -55,21 +60,31 @@ fn main() -> anyhow::Result<()> {
         let bench = Bench::from_name(args.get(2).context("peer needs a benchmark")?)?;
         let run_id = args.get(3).context("peer needs a run id")?;
         let n: usize = args.get(4).context("peer needs a count")?.parse()?;
-        return peer(bench, run_id, n);
+        let ring = args.get(5).map(String::as_str) == Some("ring");
+        return peer(bench, run_id, n, ring);
     }
+    let zenoh = args.get(1).map(String::as_str) == Some("--zenoh");
     let scale: f64 = std::env::var("ALFD_BENCH_SCALE")
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(1.0);
     let n = |base: f64| ((base * scale) as usize).max(100);
     let mut out = serde_json::Map::new();
-    for (bench, count) in [
-        (Bench::QueryPoll, n(50_000.0)),
-        (Bench::QueryBlock, n(5_000.0)),
-        (Bench::Transitions, n(3_000_000.0)),
-        (Bench::Weights, n(10_000.0)),
-    ] {
-        let result = measure(bench, count)?;
+    let benches = if zenoh {
+        vec![
+            (Bench::QueryBlock, n(2_000.0)),
+            (Bench::Transitions, n(1_000_000.0)),
+        ]
+    } else {
+        vec![
+            (Bench::QueryPoll, n(50_000.0)),
+            (Bench::QueryBlock, n(5_000.0)),
+            (Bench::Transitions, n(3_000_000.0)),
+            (Bench::Weights, n(10_000.0)),
+        ]
+    };
+    for (bench, count) in benches {
+        let result = measure(bench, count, zenoh)?;
         eprintln!("{}: {result}", bench.name());
         out.insert(bench.name().to_owned(), result);
     }
@@ -78,10 +93,23 @@ fn main() -> anyhow::Result<()> {
 }
 
 /// Runs one benchmark: this process is the actor side (or the subscriber), the peer the other.
-fn measure(bench: Bench, n: usize) -> anyhow::Result<serde_json::Value> {
+/// Across hosts (`zenoh`), the actor side is in a mirror: this process's for the query, the
+/// peer's for the transitions.
+fn measure(bench: Bench, n: usize, zenoh: bool) -> anyhow::Result<serde_json::Value> {
     let run_id = format!("bench-{}-{}", std::process::id(), bench.name());
+    let mirror_id = format!("{run_id}-m");
     let result = {
         let me = Wire::connect(&run_id, Process::new(Role::Launcher, 0), SCHEMA_VERSION)?;
+        let bridges = if zenoh {
+            Some(bridges(&run_id, &mirror_id)?)
+        } else {
+            None
+        };
+        let peer_run = if zenoh && bench == Bench::Transitions {
+            &mirror_id
+        } else {
+            &run_id
+        };
         let mut control = me.control_sender()?;
         control.send(Control {
             command: command::RUN,
@@ -89,7 +117,8 @@ fn measure(bench: Bench, n: usize) -> anyhow::Result<serde_json::Value> {
         })?;
         let progress = me.progress_receiver()?;
         let mut child = Command::new(std::env::current_exe()?)
-            .args(["peer", bench.name(), &run_id, &n.to_string()])
+            .args(["peer", bench.name(), peer_run, &n.to_string()])
+            .args(zenoh.then_some("ring"))
             .spawn()
             .context("cannot start the peer")?;
         // The peer reports once its ports exist.
@@ -108,10 +137,19 @@ fn measure(bench: Bench, n: usize) -> anyhow::Result<serde_json::Value> {
             }
             std::thread::sleep(Duration::from_millis(5));
         }
+        let actor_side = if zenoh {
+            Some(Wire::connect(
+                &mirror_id,
+                Process::new(Role::Actor, 0),
+                SCHEMA_VERSION,
+            )?)
+        } else {
+            None
+        };
         let result = match bench {
             Bench::QueryPoll => query(&me, n, false)?,
-            Bench::QueryBlock => query(&me, n, true)?,
-            Bench::Transitions => transitions(&me, n)?,
+            Bench::QueryBlock => query(actor_side.as_ref().unwrap_or(&me), n, true)?,
+            Bench::Transitions => transitions(&me, n, zenoh)?,
             Bench::Weights => weights(&me, n)?,
         };
         control.send(Control {
@@ -122,10 +160,51 @@ fn measure(bench: Bench, n: usize) -> anyhow::Result<serde_json::Value> {
             me.bell(bell)?.ring()?;
         }
         wait_child(&mut child)?;
+        drop(actor_side);
+        if let Some((hub, mirror)) = bridges {
+            mirror.stop()?;
+            hub.stop()?;
+        }
         result
     };
     wire::close_run(&run_id)?;
+    if zenoh {
+        wire::close_run(&mirror_id)?;
+    }
     Ok(result)
+}
+
+/// A hub on run `run_id` listening on a free port of 127.0.0.1, and a mirror of it as run
+/// `mirror_id`, joined for one actor (id 0, incarnation 1).
+fn bridges(
+    run_id: &str,
+    mirror_id: &str,
+) -> anyhow::Result<(alfd_bridge::Hub, alfd_bridge::Mirror)> {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")?
+        .local_addr()?
+        .port();
+    let endpoint = alfd_bridge::Endpoint::parse(&format!("tcp/127.0.0.1:{port}"))?;
+    let hub = alfd_bridge::Hub::start(alfd_bridge::HubOptions {
+        endpoint: endpoint.clone(),
+        run_id: run_id.to_owned(),
+        local_actors: 0,
+        first_incarnation: 1,
+        config_toml: String::new(),
+        runtime_toml: String::new(),
+        query_timeout: Duration::from_secs(1),
+    })?;
+    let remote = alfd_bridge::join(
+        &endpoint,
+        alfd_bridge::JoinRequest {
+            join_id: format!("bench-{}", std::process::id()),
+            host: "bench".to_owned(),
+            actors: 1,
+        },
+        Duration::from_secs(10),
+        SCHEMA_VERSION,
+    )?;
+    let mirror = alfd_bridge::Mirror::start(remote, mirror_id)?;
+    Ok((hub, mirror))
 }
 
 fn wait_child(child: &mut Child) -> anyhow::Result<()> {
@@ -193,10 +272,13 @@ fn query(me: &Wire, n: usize, block: bool) -> anyhow::Result<serde_json::Value> 
     Ok(percentiles(ns))
 }
 
-/// Transitions from the peer (an actor) under the credit protocol (window 64), learner side.
-fn transitions(me: &Wire, n: usize) -> anyhow::Result<serde_json::Value> {
+/// Transitions from the peer (an actor) under the credit protocol (window 64), learner side;
+/// `ring`: the actor's doorbell is rung after each grant, as the learner rings an actor waiting
+/// for credits (a hub sleeps until then).
+fn transitions(me: &Wire, n: usize, ring: bool) -> anyhow::Result<serde_json::Value> {
     let rx = me.transitions_receiver()?;
     let mut credits = me.credits_sender()?;
+    let actor = me.bell(Doorbell::Actor(0))?;
     let window = wire::MAX_CREDIT_WINDOW;
     let mut received = 0u64;
     let mut c = Credits::default();
@@ -211,6 +293,9 @@ fn transitions(me: &Wire, n: usize) -> anyhow::Result<serde_json::Value> {
             c.received[0] = received;
             c.granted[0] = received + window;
             credits.send(c)?;
+            if ring {
+                actor.ring()?;
+            }
         }
     }
     let secs = start.map_or(f64::NAN, |s| s.elapsed().as_secs_f64());
@@ -251,8 +336,9 @@ fn unix_ns() -> u64 {
         .map_or(0, |d| d.as_nanos() as u64)
 }
 
-/// The other process of a benchmark.
-fn peer(bench: Bench, run_id: &str, n: usize) -> anyhow::Result<()> {
+/// The other process of a benchmark; `ring`: the actor rings the learner's doorbell after each
+/// batch, as `alfd-actor` does (a bridge sleeps until then).
+fn peer(bench: Bench, run_id: &str, n: usize, ring: bool) -> anyhow::Result<()> {
     let role = match bench {
         Bench::QueryPoll | Bench::QueryBlock => Process::new(Role::Expert, 1),
         Bench::Transitions => Process::new(Role::Actor, 0),
@@ -300,6 +386,7 @@ fn peer(bench: Bench, run_id: &str, n: usize) -> anyhow::Result<()> {
         Bench::Transitions => {
             let mut tx = me.transitions_sender()?;
             let credits = me.credits_receiver()?;
+            let learner = me.bell(Doorbell::Learner)?;
             progress.send(ready)?;
             let t = Transition {
                 state: vec![0.1, 0.2, 0.3, 0.4],
@@ -323,6 +410,9 @@ fn peer(bench: Bench, run_id: &str, n: usize) -> anyhow::Result<()> {
                         b.push(&t)?;
                     }
                     tx.send(b)?;
+                    if ring {
+                        learner.ring()?;
+                    }
                     sent += TRANSITIONS_PER_BATCH as u64;
                 }
                 since_poll += 1;

@@ -56,6 +56,7 @@ use tracing::{debug, info, warn};
 use crate::expert_lifecycle::{Action, Exit, ExpertLifecycle};
 
 mod children;
+mod remote;
 
 use children::{describe, last_error, pin, proc_binary, RateMeter};
 
@@ -83,6 +84,9 @@ pub struct Plan {
     /// A resumed run: the global step of the state in `actor-<id>.ckpt` each actor id starts
     /// from (`alfd-actor --restore-step`); none: a fresh actor.
     pub restore_actors: Vec<Option<u64>>,
+    /// Take actors from other hosts too (`--listen`, see `alfd_bridge` and `remote.rs`); such a
+    /// run has no per-actor episode shares: every actor plays to the run's limit.
+    pub listen: Option<alfd_bridge::Endpoint>,
 }
 
 impl Plan {
@@ -274,6 +278,11 @@ struct Launcher<'a, 'w> {
     last_control: Instant,
     bar: indicatif::ProgressBar,
     rate: RateMeter,
+    /// The bridge to other hosts (`--listen`), once the learner is up.
+    hub: Option<alfd_bridge::Hub>,
+    /// Remote hosts that joined, and that left or dropped (their links).
+    remote_joins: u32,
+    remote_losses: u32,
 }
 
 impl<'a, 'w> Launcher<'a, 'w> {
@@ -289,12 +298,16 @@ impl<'a, 'w> Launcher<'a, 'w> {
         let (csv, earlier) = open_episodes(&plan.run_dir, plan.resume)?;
         let demos_before = earlier.last().map_or(0, |r| r.1);
         let all_returns: Vec<f64> = earlier.iter().map(|r| r.0).collect();
-        let quota = plan.cfg.episode_limit().map(|n| {
-            shares(
-                u64::from(n).saturating_sub(all_returns.len() as u64),
-                plan.actors,
-            )
-        });
+        let quota = plan
+            .cfg
+            .episode_limit()
+            .filter(|_| plan.listen.is_none())
+            .map(|n| {
+                shares(
+                    u64::from(n).saturating_sub(all_returns.len() as u64),
+                    plan.actors,
+                )
+            });
         let bar = if plan.progress {
             // Episodes when the run has an episode limit, else environment steps.
             let bar = indicatif::ProgressBar::new(match plan.cfg.episode_limit() {
@@ -339,6 +352,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
             last_control: Instant::now(),
             bar,
             rate: RateMeter::default(),
+            hub: None,
+            remote_joins: 0,
+            remote_losses: 0,
         })
     }
 
@@ -367,6 +383,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
             );
         }
         self.running_since = Instant::now();
+        if let Some(endpoint) = &self.plan.listen {
+            self.hub = Some(self.start_hub(endpoint)?);
+        }
         let first = self.plan.first_incarnation();
         for id in 0..self.plan.actors as u16 {
             if self.episodes_left(id) != Some(0) {
@@ -395,6 +414,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
     fn tick(&mut self) -> anyhow::Result<Wake> {
         let wake = self.waiter.wait(Duration::from_millis(100))?;
         self.drain_progress()?;
+        self.check_hub();
         if self.last_control.elapsed() >= CONTROL_PERIOD {
             self.publish_control()?;
         }
@@ -527,8 +547,13 @@ impl<'a, 'w> Launcher<'a, 'w> {
             self.returns.iter().sum::<f64>() / self.returns.len() as f64
         };
         let (sps, ups) = self.rate.rates();
+        let remote = self
+            .hub
+            .as_ref()
+            .map(|h| format!("  remote actors {}", h.remote_actors()))
+            .unwrap_or_default();
         self.bar.set_message(format!(
-            "return {mean:.1} (last 20)  demos {}/{}  {sps:.0} steps/s  {ups:.0} updates/s",
+            "return {mean:.1} (last 20)  demos {}/{}  {sps:.0} steps/s  {ups:.0} updates/s{remote}",
             u64::from(self.demos_used).max(self.demos_answered),
             self.plan.cfg.budget()
         ));
@@ -800,14 +825,22 @@ impl<'a, 'w> Launcher<'a, 'w> {
 
     /// Tells every process to stop and waits for them (the learner saves its weights).
     fn shutdown(&mut self) -> anyhow::Result<()> {
-        info!(episodes = self.recorded, "stopping the run");
+        info!(
+            episodes = self.recorded,
+            remote_joins = self.remote_joins,
+            remote_losses = self.remote_losses,
+            "stopping the run"
+        );
         self.control.command = command::SHUTDOWN;
         self.publish_control()?;
         let deadline = Instant::now() + Duration::from_secs(30);
         let mut failures = Vec::new();
-        while !self.procs.is_empty() && Instant::now() < deadline {
+        // Remote actors hear the shutdown through the hub; their hosts leave when they stopped.
+        let remote = |l: &Self| l.hub.as_ref().map_or(0, |h| h.remote_actors());
+        while (!self.procs.is_empty() || remote(self) > 0) && Instant::now() < deadline {
             let wake = self.waiter.wait(Duration::from_millis(50))?;
             self.drain_progress()?;
+            self.check_hub();
             if self.last_control.elapsed() >= CONTROL_PERIOD {
                 self.publish_control()?;
             }
@@ -835,6 +868,14 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 "{} did not stop within 30 s and was killed",
                 p.name
             ));
+        }
+        if remote(self) > 0 {
+            warn!("remote actors did not leave within 30 s; the run ends without them");
+        }
+        if let Some(hub) = self.hub.take() {
+            if let Err(e) = hub.stop() {
+                warn!("the hub: {e}");
+            }
         }
         self.stop_all();
         self.drain_progress()?;

@@ -1,0 +1,59 @@
+//! Runs across hosts: a bridge between a run's iceoryx2 services and zenoh.
+//!
+//! iceoryx2 is shared memory, so every process of a run sits on one host. To put actors on
+//! other hosts, the learner's host runs a [`Hub`] (`alfd run --listen tcp/ADDR:PORT`) and each
+//! other host a [`Mirror`] (`alfd join --connect tcp/ADDR:PORT --actors N`): a local copy of the
+//! run's services under a run id of its own, in which the actor processes run unchanged. The
+//! two bridges carry every message whole over zenoh ([`Frame`]: the wire's own message with its
+//! header, sender, sequence number and schema version, behind the frame's schema version).
+//!
+//! # Keys of one run
+//! | key                          | what                                               |
+//! |------------------------------|----------------------------------------------------|
+//! | `alfd/<run>/join`            | queryable: a remote host asks for actor ids        |
+//! | `alfd/<run>/up`              | remote hosts → hub: transitions, progress, queries |
+//! | `alfd/<run>/down`            | hub → remote hosts: credits, weights, model, control, answers |
+//! | `alfd/<run>/hub`             | liveliness: the hub                                |
+//! | `alfd/<run>/member/<join>`   | liveliness: a joined host (gone = its actors crashed) |
+//!
+//! One run id is one key prefix, so two runs never see each other's messages.
+
+mod endpoint;
+mod error;
+mod frame;
+mod hub;
+mod inbox;
+mod mirror;
+mod roster;
+
+use std::time::Duration;
+
+pub use endpoint::Endpoint;
+pub use error::{BridgeError, Result};
+pub use frame::{decode, encode, Frame};
+pub use hub::{Hub, HubEvent, HubOptions};
+pub use mirror::{join, Mirror, Remote};
+pub use roster::{JoinReply, JoinRequest, Joined, Roster};
+
+/// The longest a bridge sleeps between two looks at what this host published (the learner's
+/// weights and credits ring nobody); rings wake it sooner.
+pub(crate) const TICK: Duration = Duration::from_millis(5);
+
+/// The zenoh keys of a run.
+pub(crate) mod keys {
+    pub fn join(run: &str) -> String {
+        format!("alfd/{run}/join")
+    }
+    pub fn up(run: &str) -> String {
+        format!("alfd/{run}/up")
+    }
+    pub fn down(run: &str) -> String {
+        format!("alfd/{run}/down")
+    }
+    pub fn hub(run: &str) -> String {
+        format!("alfd/{run}/hub")
+    }
+    pub fn member(run: &str, join: &str) -> String {
+        format!("alfd/{run}/member/{join}")
+    }
+}

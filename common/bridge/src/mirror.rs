@@ -1,0 +1,381 @@
+//! The remote host's side of a run across hosts (`alfd join`): asking the run for actor ids, and
+//! the mirror, a local copy of the run's iceoryx2 services (its own run id, so its own prefix)
+//! that the actors started here use unchanged. The mirror's bridge plays the learner, the expert
+//! and the launcher for them: what they send goes to the learner's host over zenoh, what comes
+//! back is published here under the sender's own header.
+
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use alfd_wire::{
+    ActorBells, Doorbell, IncomingQuery, Process, Role, Wake, Wire, WireError, SCHEMA_VERSION,
+};
+use tracing::{debug, info, warn};
+use zenoh::qos::CongestionControl;
+use zenoh::Wait as _;
+
+use crate::endpoint::Endpoint;
+use crate::error::{zenoh_error, BridgeError, Result};
+use crate::frame::{self, Frame};
+use crate::inbox::{inbox, Mail};
+use crate::roster::{JoinReply, JoinRequest, Joined};
+use crate::{keys, TICK};
+
+/// A remote host's connection to a run: the zenoh session and the run's answer to the join.
+pub struct Remote {
+    session: zenoh::Session,
+    pub joined: Joined,
+    join_id: String,
+}
+
+impl std::fmt::Debug for Remote {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Remote({})", self.joined.run_id)
+    }
+}
+
+/// Connects to `endpoint` and asks the run listening there for `actors` actor ids, speaking
+/// schema version `schema` (normally [`SCHEMA_VERSION`]; a run of another version refuses).
+pub fn join(
+    endpoint: &Endpoint,
+    request: JoinRequest,
+    wait: Duration,
+    schema: u32,
+) -> Result<Remote> {
+    let no_run = || BridgeError::NoRun {
+        endpoint: endpoint.to_string(),
+        waited_ms: wait.as_millis() as u64,
+    };
+    let started = Instant::now();
+    // The run may not listen yet (its hub starts once its learner is up): try again until the
+    // deadline.
+    let session = loop {
+        match zenoh::open(endpoint.connect_config()?).wait() {
+            Ok(s) => break s,
+            Err(e) if started.elapsed() >= wait => {
+                debug!("cannot connect to {endpoint}: {e}");
+                return Err(no_run());
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(250)),
+        }
+    };
+    let payload = frame::encode(schema, &request)?;
+    // The link may take a moment to come up: ask again until the deadline.
+    let reply = loop {
+        let replies = session
+            .get(keys::join("*"))
+            .payload(payload.clone())
+            .timeout(Duration::from_secs(2).min(wait))
+            .wait()
+            .map_err(zenoh_error)?;
+        let mut got = Vec::new();
+        while let Ok(r) = replies.recv() {
+            if let Ok(s) = r.result() {
+                got.push(s.payload().to_bytes().into_owned());
+            }
+        }
+        match got.len() {
+            0 if started.elapsed() < wait => std::thread::sleep(Duration::from_millis(200)),
+            0 => return Err(no_run()),
+            1 => break got.remove(0),
+            n => {
+                return Err(BridgeError::Refused(format!(
+                    "{n} runs answered at {endpoint}; give each run its own port"
+                )))
+            }
+        }
+    };
+    match frame::decode::<JoinReply>(schema, &reply)? {
+        JoinReply::Refused(why) => Err(BridgeError::Refused(why)),
+        JoinReply::Joined(joined) => {
+            info!(run_id = %joined.run_id, actors = ?joined.actors, "joined");
+            Ok(Remote {
+                session,
+                joined,
+                join_id: request.join_id,
+            })
+        }
+    }
+}
+
+/// A running mirror; stop it with [`Mirror::stop`] (or drop it).
+pub struct Mirror {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<Result<()>>>,
+    /// Milliseconds since `epoch` when the learner's host was last heard of (its control
+    /// messages, every `alfd_wire::CONTROL_PERIOD`).
+    heard: Arc<AtomicU64>,
+    epoch: Instant,
+    _token: Option<zenoh::liveliness::LivelinessToken>,
+    _down: zenoh::pubsub::Subscriber<()>,
+    session: zenoh::Session,
+}
+
+impl std::fmt::Debug for Mirror {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Mirror")
+    }
+}
+
+impl Mirror {
+    /// Starts the mirror of `remote`'s run as local run `mirror_run_id`, then announces this host
+    /// to the hub (which sends it the newest of everything).
+    pub fn start(remote: Remote, mirror_run_id: &str) -> Result<Self> {
+        let Remote {
+            session,
+            joined,
+            join_id,
+        } = remote;
+        let (post, inbox) = inbox(mirror_run_id, 1);
+        let down = {
+            let post = post.clone();
+            session
+                .declare_subscriber(keys::down(&joined.run_id))
+                .callback(move |s| post.send(Mail::Frame(s.payload().to_bytes().into_owned())))
+                .wait()
+                .map_err(zenoh_error)?
+        };
+        let up = session
+            .declare_publisher(keys::up(&joined.run_id))
+            .congestion_control(CongestionControl::Block)
+            .wait()
+            .map_err(zenoh_error)?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let heard = Arc::new(AtomicU64::new(0));
+        let epoch = Instant::now();
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let thread = {
+            let stop = Arc::clone(&stop);
+            let heard = Arc::clone(&heard);
+            let mirror_run_id = mirror_run_id.to_owned();
+            let ids: Vec<u16> = joined.actors.iter().map(|a| a.0).collect();
+            std::thread::Builder::new()
+                .name("mirror".to_owned())
+                .spawn(move || {
+                    let r = forward(
+                        &mirror_run_id,
+                        &ids,
+                        inbox,
+                        &up,
+                        &stop,
+                        &heard,
+                        epoch,
+                        ready_tx,
+                    );
+                    if let Err(e) = &r {
+                        warn!("the mirror stopped: {e}");
+                    }
+                    r
+                })
+                .expect("a thread starts")
+        };
+        // The mirror's services exist before the hub is told this host is up.
+        let _ = ready_rx.recv_timeout(Duration::from_secs(10));
+        let token = session
+            .liveliness()
+            .declare_token(keys::member(&joined.run_id, &join_id))
+            .wait()
+            .map_err(zenoh_error)?;
+        Ok(Self {
+            stop,
+            thread: Some(thread),
+            heard,
+            epoch,
+            _token: Some(token),
+            _down: down,
+            session,
+        })
+    }
+
+    /// How long since the learner's host was last heard of (`None`: never yet).
+    pub fn silence(&self) -> Option<Duration> {
+        match self.heard.load(Ordering::Relaxed) {
+            0 => None,
+            ms => Some(
+                self.epoch
+                    .elapsed()
+                    .saturating_sub(Duration::from_millis(ms)),
+            ),
+        }
+    }
+
+    /// Whether the mirror's thread ended (an error, said in the log).
+    pub fn ended(&self) -> bool {
+        self.thread.as_ref().is_none_or(|t| t.is_finished())
+    }
+
+    /// Stops forwarding, leaves the run (the token goes) and closes the session.
+    pub fn stop(mut self) -> Result<()> {
+        self.halt()
+    }
+
+    fn halt(&mut self) -> Result<()> {
+        self.stop.store(true, Ordering::Relaxed);
+        let r = match self.thread.take() {
+            Some(t) => t
+                .join()
+                .unwrap_or_else(|_| Err(BridgeError::Zenoh("the mirror panicked".into()))),
+            None => Ok(()),
+        };
+        if let Some(t) = self._token.take() {
+            let _ = t.undeclare().wait();
+        }
+        let _ = self.session.close().wait();
+        r
+    }
+}
+
+impl Drop for Mirror {
+    fn drop(&mut self) {
+        let _ = self.halt();
+    }
+}
+
+/// The mirror's thread: blocks on the doorbells the local actors ring (the learner's, the
+/// expert's, the launcher's) and its own (zenoh delivered something).
+#[allow(clippy::too_many_arguments)]
+fn forward(
+    run_id: &str,
+    ids: &[u16],
+    inbox: crate::inbox::Inbox,
+    up: &zenoh::pubsub::Publisher<'static>,
+    stop: &AtomicBool,
+    heard: &AtomicU64,
+    epoch: Instant,
+    ready: std::sync::mpsc::Sender<()>,
+) -> Result<()> {
+    let wire = Wire::connect(run_id, Process::new(Role::Bridge, 0), SCHEMA_VERSION)?;
+    let waiter = wire.waiter_on(&[
+        Doorbell::Bridge,
+        Doorbell::Learner,
+        Doorbell::Expert,
+        Doorbell::Launcher,
+    ])?;
+    let transitions = wire.transitions_receiver()?;
+    let progress = wire.progress_receiver()?;
+    let queries = wire.query_server()?;
+    let mut credits = wire.credits_sender()?;
+    let mut control = wire.control_sender()?;
+    let mut model = wire.demo_model_sender()?;
+    let mut weights = None;
+    let mut bells = ActorBells::new(&wire);
+    let mut held: HashMap<u32, IncomingQuery<'_>> = HashMap::new();
+    let mut refused = 0u64;
+    let put = |f: &Frame| -> Result<()> {
+        up.put(frame::encode(SCHEMA_VERSION, f)?)
+            .wait()
+            .map_err(zenoh_error)
+    };
+    let _ = ready.send(());
+    while !stop.load(Ordering::Relaxed) {
+        if waiter.wait(TICK * 4)? == Wake::Signal {
+            // `alfd join` handles the signal; this thread goes on until told to stop.
+            std::thread::sleep(TICK);
+        }
+        // Down: from the learner's host to the actors here.
+        while let Ok(mail) = inbox.mail.try_recv() {
+            let Mail::Frame(b) = mail else { continue };
+            let f = match frame::decode::<Frame>(SCHEMA_VERSION, &b) {
+                Ok(f) => f,
+                Err(e) => {
+                    refused += 1;
+                    if refused.is_power_of_two() {
+                        warn!(refused, "frame from the learner's host dropped: {e}");
+                    }
+                    continue;
+                }
+            };
+            let done = match f {
+                Frame::Credits(c) => credits.forward(c).map(|_| true),
+                Frame::Control(c) => {
+                    heard.store(
+                        (epoch.elapsed().as_millis() as u64).max(1),
+                        Ordering::Relaxed,
+                    );
+                    control.forward(c).map(|_| true)
+                }
+                Frame::Weights(h, params) => {
+                    if weights.is_none() {
+                        weights = Some(wire.weights_sender(params.len())?);
+                    }
+                    weights
+                        .as_mut()
+                        .expect("created")
+                        .forward(h, &params)
+                        .map(|_| false)
+                }
+                Frame::DemoModel(h, bytes) => model.forward(h, &bytes).map(|_| false),
+                Frame::Answer(r) => {
+                    let Some(q) = held.remove(&r.actor) else {
+                        continue;
+                    };
+                    if q.request().header.seq != r.request_seq {
+                        // An answer to an older query of this actor: keep waiting for this one.
+                        held.insert(r.actor, q);
+                        continue;
+                    }
+                    q.answer(r)?;
+                    if let Ok(id) = u16::try_from(r.actor) {
+                        bells.ring(id)?;
+                    }
+                    continue;
+                }
+                other => {
+                    debug!(service = other.service(), "an up frame came down; dropped");
+                    continue;
+                }
+            };
+            match done {
+                // Credits and control wake the actors that may wait for them.
+                Ok(true) => {
+                    for &id in ids {
+                        bells.ring(id)?;
+                    }
+                }
+                Ok(false) => {}
+                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
+                Err(e) => return Err(e.into()),
+            }
+        }
+        // Up: what the actors here sent.
+        loop {
+            match transitions.receive() {
+                Ok(Some(b)) => put(&Frame::Transitions(b))?,
+                Ok(None) => break,
+                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
+                Err(e) => return Err(e.into()),
+            }
+        }
+        loop {
+            match progress.receive() {
+                Ok(Some(p)) => put(&Frame::Progress(p))?,
+                Ok(None) => break,
+                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
+                Err(e) => return Err(e.into()),
+            }
+        }
+        loop {
+            match queries.receive() {
+                Ok(Some(q)) => {
+                    put(&Frame::Query(*q.request()))?;
+                    held.insert(q.request().actor, q);
+                }
+                Ok(None) => break,
+                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
+                Err(e) => return Err(e.into()),
+            }
+        }
+        held.retain(|_, q| q.is_connected());
+        // Actors that started since the last publication get the newest of each (history 1).
+        credits.update_connections()?;
+        control.update_connections()?;
+        model.update_connections()?;
+        if let Some(w) = &weights {
+            w.update_connections()?;
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,173 @@
+//! The join protocol as a pure state machine: which actor ids the remote hosts hold, and which
+//! incarnation each gets. The launcher owns the ids below `local` (its own actors); remote hosts
+//! get free ids above them, the lowest first; an id given up (a host left or its link dropped) is
+//! given again with a new incarnation, so the learner's credit book sees a new actor process, as
+//! after a crash on one host.
+
+use alfd_wire::MAX_ACTORS;
+use serde::{Deserialize, Serialize};
+
+/// What `alfd join` asks for.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct JoinRequest {
+    /// Names this joining process, unique across hosts (host name, pid, time).
+    pub join_id: String,
+    pub host: String,
+    pub actors: u16,
+}
+
+/// What the run answers.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum JoinReply {
+    Joined(Joined),
+    Refused(String),
+}
+
+/// A granted join: the run, and what the remote host needs to start its actors.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Joined {
+    pub run_id: String,
+    /// (actor id, incarnation) of each actor to start.
+    pub actors: Vec<(u16, u64)>,
+    /// `config.toml` and `runtime.toml` of the run, as the launcher wrote them.
+    pub config_toml: String,
+    pub runtime_toml: String,
+}
+
+/// Who holds which actor id.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Roster {
+    local: usize,
+    first_incarnation: u64,
+    /// Per id: the join holding it.
+    holders: Vec<Option<String>>,
+    /// Per id: the incarnation the next holder gets.
+    next_incarnation: Vec<u64>,
+}
+
+impl Roster {
+    /// A run with `local` actors of its own, whose actors' incarnations start at
+    /// `first_incarnation`.
+    pub fn new(local: usize, first_incarnation: u64) -> Self {
+        Self {
+            local: local.min(MAX_ACTORS),
+            first_incarnation,
+            holders: vec![None; MAX_ACTORS],
+            next_incarnation: vec![first_incarnation; MAX_ACTORS],
+        }
+    }
+
+    /// Gives `request.actors` free ids to `request.join_id`. Asking again with the same join id
+    /// (its reply was lost) gets the same ids.
+    pub fn join(&mut self, request: &JoinRequest) -> Result<Vec<(u16, u64)>, String> {
+        let held = self.held_by(&request.join_id);
+        if !held.is_empty() {
+            return Ok(held);
+        }
+        if request.actors == 0 {
+            return Err("a join brings at least one actor (--actors 1 or more)".to_owned());
+        }
+        let free: Vec<usize> = (self.local..MAX_ACTORS)
+            .filter(|&i| self.holders[i].is_none())
+            .collect();
+        let n = usize::from(request.actors);
+        if free.len() < n {
+            return Err(format!(
+                "{n} actors asked for, but only {} of the run's {MAX_ACTORS} actor ids are free \
+                 ({} local, {} remote)",
+                free.len(),
+                self.local,
+                self.remote()
+            ));
+        }
+        Ok(free[..n]
+            .iter()
+            .map(|&i| {
+                self.holders[i] = Some(request.join_id.clone());
+                let inc = self.next_incarnation[i];
+                self.next_incarnation[i] += 1;
+                (i as u16, inc)
+            })
+            .collect())
+    }
+
+    /// `join_id` left (or its link dropped): its ids are free again; returns them.
+    pub fn leave(&mut self, join_id: &str) -> Vec<u16> {
+        let mut freed = Vec::new();
+        for (i, h) in self.holders.iter_mut().enumerate() {
+            if h.as_deref() == Some(join_id) {
+                *h = None;
+                freed.push(i as u16);
+            }
+        }
+        freed
+    }
+
+    /// (id, incarnation) of the actors `join_id` holds.
+    fn held_by(&self, join_id: &str) -> Vec<(u16, u64)> {
+        (0..MAX_ACTORS)
+            .filter(|&i| self.holders[i].as_deref() == Some(join_id))
+            .map(|i| (i as u16, self.next_incarnation[i] - 1))
+            .collect()
+    }
+
+    /// Actor ids held by remote hosts now.
+    pub fn remote(&self) -> usize {
+        self.holders.iter().flatten().count()
+    }
+
+    /// Whether actor `id` is held by a remote host now.
+    pub fn is_remote(&self, id: u16) -> bool {
+        self.holders
+            .get(usize::from(id))
+            .is_some_and(|h| h.is_some())
+    }
+
+    /// The first incarnation of this launch's actors.
+    pub fn first_incarnation(&self) -> u64 {
+        self.first_incarnation
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ask(id: &str, actors: u16) -> JoinRequest {
+        JoinRequest {
+            join_id: id.to_owned(),
+            host: "h".to_owned(),
+            actors,
+        }
+    }
+
+    #[test]
+    fn remote_actors_get_free_ids_above_the_local_ones_and_new_incarnations_on_rejoin() {
+        let mut r = Roster::new(2, 1);
+        assert_eq!(r.join(&ask("a", 2)).unwrap(), vec![(2, 1), (3, 1)]);
+        // A lost reply: asking again gets the same ids, not more.
+        assert_eq!(r.join(&ask("a", 2)).unwrap(), vec![(2, 1), (3, 1)]);
+        assert_eq!(r.join(&ask("b", 1)).unwrap(), vec![(4, 1)]);
+        assert_eq!(r.remote(), 3);
+        assert!(r.is_remote(3) && !r.is_remote(1) && !r.is_remote(5));
+        // "a" drops: its ids come back, with the next incarnation.
+        assert_eq!(r.leave("a"), vec![2, 3]);
+        assert_eq!(r.leave("a"), Vec::<u16>::new());
+        assert_eq!(r.remote(), 1);
+        assert_eq!(r.join(&ask("a2", 3)).unwrap(), vec![(2, 2), (3, 2), (5, 1)]);
+    }
+
+    #[test]
+    fn a_join_beyond_the_free_ids_or_of_no_actor_is_refused_by_number() {
+        let mut r = Roster::new(14, 1_000_001);
+        let e = r.join(&ask("a", 3)).unwrap_err();
+        assert!(e.contains("3 actors asked for, but only 2"), "{e}");
+        assert_eq!(r.remote(), 0, "a refused join holds nothing");
+        assert_eq!(
+            r.join(&ask("a", 2)).unwrap(),
+            vec![(14, 1_000_001), (15, 1_000_001)]
+        );
+        assert!(r.join(&ask("z", 0)).unwrap_err().contains("at least one"));
+        assert_eq!(r.first_incarnation(), 1_000_001);
+    }
+}

@@ -1,0 +1,250 @@
+//! Runs across hosts over zenoh on 127.0.0.1: the learner, the launcher and the expert as one
+//! "host" (`alfd run --listen`), actors as another (`alfd join`), sharing nothing but the zenoh
+//! link: their own run ids (so iceoryx2 prefixes), working directories and homes.
+
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use alfd_wire as wire;
+
+use crate::runtime::{rows, run_id, spawn_run, summary};
+use crate::support::{alfd, text, timed, tmp, Background};
+
+/// A free TCP port on 127.0.0.1 (the OS's choice, released at once).
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// `alfd join` with `actors` actors, as another host: its own working directory and home.
+fn spawn_join(port: u16, actors: usize, dir: &Path) -> Background {
+    Background(Some(
+        alfd()
+            .args(["join", "--connect", &format!("tcp/127.0.0.1:{port}")])
+            .arg(format!("--actors={actors}"))
+            .arg(format!("--dir={}", dir.join("join").display()))
+            .current_dir(dir)
+            .env("HOME", dir)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("alfd join runs"),
+    ))
+}
+
+/// Waits (at most `secs`) for a background process to end, and returns its output.
+fn finish(mut p: Background, secs: u64) -> Output {
+    let start = Instant::now();
+    while p.child().try_wait().unwrap().is_none() {
+        assert!(
+            start.elapsed() < Duration::from_secs(secs),
+            "still running after {secs} s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let child: Child = p.0.take().unwrap();
+    child.wait_with_output().unwrap()
+}
+
+/// The mirror's run id recorded by `alfd join` in `join.json`.
+fn mirror_id(join_dir: &Path) -> String {
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(join_dir.join("join.json")).unwrap())
+            .unwrap();
+    v["mirror_run_id"].as_str().unwrap().to_owned()
+}
+
+#[test]
+fn two_remote_actors_over_zenoh_play_a_run_to_its_end_within_the_budget() {
+    let _time = timed!();
+    let (out, remote) = (tmp("remote-run"), tmp("remote-host"));
+    let port = free_port();
+    let listen = format!("--listen=tcp/127.0.0.1:{port}");
+    let run = spawn_run(
+        &out,
+        0,
+        &[
+            &listen,
+            "episodes=150",
+            "budget.total=10",
+            "query.mode=first",
+        ],
+    );
+    // A host built from other sources is refused by name, with exit code 2, and joins nothing.
+    let other = alfd()
+        .args([
+            "join",
+            "--connect",
+            &format!("tcp/127.0.0.1:{port}"),
+            "--actors=1",
+        ])
+        .arg(format!("--dir={}", remote.join("other").display()))
+        .env("ALFD_SCHEMA_VERSION_OVERRIDE", "999")
+        .output()
+        .unwrap();
+    assert_eq!(other.status.code(), Some(2), "{}", text(&other));
+    assert!(
+        String::from_utf8_lossy(&other.stderr).contains("schema version"),
+        "{}",
+        text(&other)
+    );
+    let join = spawn_join(port, 2, &remote);
+    let o = finish(run, 120);
+    assert!(o.status.success(), "{}", text(&o));
+    let j = finish(join, 60);
+    assert!(j.status.success(), "{}", text(&j));
+
+    let s = summary(&out);
+    assert_eq!(s["episodes"], 150);
+    let rows = rows(&out);
+    assert_eq!(rows.len(), 150);
+    // With no local actor, the remote ones got ids 0 and 1, and both played.
+    assert!(rows.iter().all(|r| r[8] == "0" || r[8] == "1"));
+    assert!(rows.iter().any(|r| r[8] == "0") && rows.iter().any(|r| r[8] == "1"));
+    // The budget holds across hosts, and every demonstration written was used by an actor.
+    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    assert_eq!(demos.len(), 10);
+    assert_eq!(s["demos"], 10);
+    let queries: u32 = rows.iter().map(|r| r[5].parse::<u32>().unwrap()).sum();
+    assert_eq!(
+        queries, 10,
+        "every demonstration was used by a remote actor"
+    );
+    assert_eq!(rows.last().unwrap()[3], "10", "demos_used");
+    // The actors' logs are on their host, not on the learner's.
+    let join_dir = remote.join("join");
+    for log in ["actor-0.log", "actor-1.log"] {
+        assert!(join_dir.join(log).is_file(), "{log} missing");
+        assert!(!out.join(log).exists(), "{log} on the learner's host");
+    }
+    // Both hosts cleaned up their iceoryx2 files.
+    for id in [run_id(&out), mirror_id(&join_dir)] {
+        assert_eq!(
+            wire::leftover_files(&id),
+            Vec::<std::path::PathBuf>::new(),
+            "{id}"
+        );
+    }
+}
+
+#[test]
+fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
+    let _time = timed!();
+    let (out, first, second) = (tmp("remote-drop"), tmp("remote-a"), tmp("remote-b"));
+    let port = free_port();
+    let listen = format!("--listen=tcp/127.0.0.1:{port}");
+    let mut run = spawn_run(
+        &out,
+        1,
+        &[
+            &listen,
+            "episodes=100000",
+            "budget.total=20",
+            "query.mode=first",
+        ],
+    );
+    let remote_rows = |out: &Path| rows(out).iter().filter(|r| r[8] == "1").count();
+    let wait_until = |what: &str, run: &mut Background, ok: &dyn Fn() -> bool| {
+        let start = Instant::now();
+        while !ok() {
+            if let Some(status) = run.child().try_wait().unwrap() {
+                panic!("the run ended ({status}) before {what}");
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(60),
+                "no {what} in 60 s"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    };
+    // A remote actor (id 1, above the local actor 0) plays...
+    let mut join = spawn_join(port, 1, &first);
+    wait_until("remote episodes", &mut run, &|| remote_rows(&out) >= 5);
+    // ...until its host dies at once (its process and the link with it).
+    let pid = join.child().id().to_string();
+    assert!(Command::new("kill")
+        .args(["-KILL", &pid])
+        .status()
+        .unwrap()
+        .success());
+    let _ = join.0.take().expect("running").wait();
+    // The run goes on with its local actor.
+    let at_kill = rows(&out).len();
+    wait_until("local episodes after the loss", &mut run, &|| {
+        rows(&out).len() >= at_kill + 20
+    });
+    // A host joining again gets the free id 1 (a new incarnation) and plays on.
+    let remote_before = remote_rows(&out);
+    let rejoin = spawn_join(port, 1, &second);
+    wait_until("episodes of the rejoined host", &mut run, &|| {
+        remote_rows(&out) >= remote_before + 5
+    });
+    let o = crate::runtime::interrupt(run);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("link dropped"),
+        "the launcher reports the lost host: {}",
+        text(&o)
+    );
+    let j = finish(rejoin, 60);
+    assert!(j.status.success(), "{}", text(&j));
+    let s = summary(&out);
+    assert_eq!(s["interrupted"], true);
+    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    assert!(
+        demos.len() <= 20,
+        "{} demonstrations, budget 20",
+        demos.len()
+    );
+    assert_eq!(
+        wire::leftover_files(&run_id(&out)),
+        Vec::<std::path::PathBuf>::new()
+    );
+    // The killed host left its mirror's files behind (nobody was there to remove them): the
+    // next `alfd clean` removes them, as it does for any dead run.
+    // Its orphaned actor exits on its own first (it sees its parent gone).
+    let dead = mirror_id(&first.join("join"));
+    let start = Instant::now();
+    while !wire::leftover_files(&dead).is_empty() && start.elapsed() < Duration::from_secs(30) {
+        let _ = wire::clean_run(&dead);
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    assert_eq!(
+        wire::leftover_files(&dead),
+        Vec::<std::path::PathBuf>::new()
+    );
+}
+
+#[test]
+fn bad_endpoints_and_actor_counts_are_refused_with_exit_code_2() {
+    let _time = timed!();
+    let out = tmp("remote-bad");
+    for args in [
+        vec!["join", "--connect", "127.0.0.1:7447"],
+        vec!["join", "--connect", "udp/127.0.0.1:7447"],
+        vec!["join", "--connect", "tcp/127.0.0.1:0"],
+        vec!["join", "--connect", "tcp/127.0.0.1:7447", "--actors=0"],
+        vec!["run", "--actors=0"],
+        vec!["run", "--listen", "tcp/no-such-host.invalid:7447"],
+    ] {
+        let o = alfd()
+            .args(&args)
+            .arg(format!(
+                "--{}={}",
+                if args[0] == "run" { "out" } else { "dir" },
+                out.join("x").display()
+            ))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("--connect") || err.contains("--listen") || err.contains("--actors"),
+            "{args:?}: the error names the flag: {err}"
+        );
+    }
+}
