@@ -140,6 +140,10 @@ pub fn cliffwalk(cfg: &ExperimentConfig) -> anyhow::Result<CliffWalk> {
 /// The config's demonstrator exists: a built-in one for its environment, or a well-formed
 /// external one (`python:MODULE:FUNCTION`, `sb3:ALGO:PATH`), which the expert process starts.
 pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
+    if cfg.expert.name == alfd_expert::human::HUMAN {
+        // A person answers on a web page: any environment, any number of actions.
+        return Ok(());
+    }
     if alfd_expert::registry::external_policy(&cfg.expert.name).is_some() {
         return alfd_expert::registry::check_external(&cfg.expert.name)
             .map_err(|e| usage(e.to_string()));
