@@ -4,6 +4,7 @@ mod cli;
 mod faults;
 mod golden;
 mod gymnasium;
+mod human;
 mod report;
 mod runtime;
 mod shards;

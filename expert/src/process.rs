@@ -135,7 +135,10 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         let url = page.url();
         info!(url = %url, "the human expert's page is served");
         alfd_harness::write_atomically(
-            &args.process.run_dir.join(human::human_page_file(args.generation)),
+            &args
+                .process
+                .run_dir
+                .join(human::human_page_file(args.generation)),
             format!("{url}\n").as_bytes(),
         )?;
         Some(page)
@@ -361,7 +364,12 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                         response.action = action as u32;
                         response.demo_index = record.index;
                         response.budget_left = core.budget().remaining();
-                        info!(index = record.index, actor = shown.actor, action, "the person answered");
+                        info!(
+                            index = record.index,
+                            actor = shown.actor,
+                            action,
+                            "the person answered"
+                        );
                         publish_model(&mut model_tx, &core, args.generation, &name)?;
                         query.answer(response)?;
                         ring_actor(&mut actors, shown.actor)?;

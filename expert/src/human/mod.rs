@@ -256,7 +256,10 @@ fn decide(shared: &Shared, decision: Decision) -> Response {
     if !waits {
         return refuse(
             StatusCode::CONFLICT,
-            format!("query {} is not waiting (answered, declined or given up)", decision.id),
+            format!(
+                "query {} is not waiting (answered, declined or given up)",
+                decision.id
+            ),
         );
     }
     let sent = shared
