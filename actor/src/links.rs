@@ -319,6 +319,8 @@ enum Answer {
     Timeout,
     /// The expert (a person) declined: the actor acts on its own; no budget was spent.
     Declined,
+    /// No expert holds the query any more and no answer came: the actor acts on its own.
+    Dropped,
 }
 
 impl<'s, 'w> WireExpert<'s, 'w> {
@@ -413,13 +415,23 @@ impl<'s, 'w> WireExpert<'s, 'w> {
             self.timeout
         };
         let deadline = Instant::now() + timeout;
+        let answer = |r: QueryResponse| match r.outcome {
+            outcome::ANSWERED => Answer::Demo(r),
+            outcome::DECLINED => Answer::Declined,
+            _ => Answer::BudgetExhausted,
+        };
         loop {
             if let Some(r) = pending.poll().map_err(LoopError::link)? {
-                return Ok(match r.outcome {
-                    outcome::ANSWERED => Answer::Demo(r),
-                    outcome::DECLINED => Answer::Declined,
-                    _ => Answer::BudgetExhausted,
-                });
+                return Ok(answer(r));
+            }
+            if !pending.held() {
+                // No expert holds the query any more (it stopped, or stood by): an answer sent
+                // just before is taken, else nothing will come (a person's expert swapped out
+                // would otherwise keep the actor waiting minutes).
+                if let Some(r) = pending.poll().map_err(LoopError::link)? {
+                    return Ok(answer(r));
+                }
+                return Ok(Answer::Dropped);
             }
             let now = Instant::now();
             if now >= deadline {
@@ -463,6 +475,10 @@ impl<O: AsRef<[f32]>> ExpertClient<O> for WireExpert<'_, '_> {
                 Ok(None)
             }
             Answer::NoExpert | Answer::Declined => Ok(None),
+            Answer::Dropped => {
+                debug!("the expert let the query go unanswered; acting alone");
+                Ok(None)
+            }
             Answer::Timeout => {
                 self.timeouts += 1;
                 warn!(

@@ -422,3 +422,94 @@ fn in_chromium_the_cliffwalk_page_shows_the_grid_and_takes_an_arrow_key() {
     assert_eq!(s["buttons"][0], "up (0)");
     assert!(shot.is_file());
 }
+
+#[test]
+fn swap_expert_goes_from_a_built_in_expert_to_a_person_and_back() {
+    let _time = timed!();
+    let out = tmp("human-swap");
+    let demos = || alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap_or_default();
+    // CartPole's built-in expert, asked on every step (a budget that lasts).
+    let mut run = Background(Some(
+        alfd()
+            .args(["run", "--quiet", "--actors=1", "--query-timeout-ms=5000"])
+            .arg(format!("--out={}", out.display()))
+            .arg(format!(
+                "--config={}",
+                cartpole_config(&out, 100_000, 1_000_000).display()
+            ))
+            .args(["--set", "expert.model=none"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
+    let swap = |to: &str, generation: u64| {
+        let o = alfd()
+            .args(["swap-expert", "--run"])
+            .arg(&*out)
+            .args(["--expert", to])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", text(&o));
+        let r: Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(
+            (r["ok"].as_bool(), r["generation"].as_u64()),
+            (Some(true), Some(generation))
+        );
+    };
+    crate::runtime::wait_until(&mut run, "built-in demonstrations", || demos().len() >= 10);
+    swap("human", 2);
+    let url = std::fs::read_to_string(out.join("human-page-2.txt")).unwrap();
+    let addr = url
+        .trim()
+        .trim_start_matches("http://")
+        .trim_end_matches('/')
+        .to_owned();
+    // The person answers one query (a query the actor asked before the person's model reached
+    // it may be given up at its short timeout: then the next one is answered).
+    loop {
+        let s = until(&addr, "a query", |s| {
+            s["active"] == true && s["waiting"] == 1
+        });
+        let id = s["query"]["id"].as_u64().unwrap();
+        let (code, _) = http(
+            &addr,
+            "POST",
+            "/answer",
+            Some(&format!("{{\"id\":{id},\"action\":0}}")),
+        );
+        let s = until(&addr, "the answer taken or the query gone", |s| {
+            s["answered"] == 1 || s["query"]["id"].as_u64() != Some(id)
+        });
+        if code == 202 && s["answered"] == 1 {
+            break;
+        }
+    }
+    // The actor now waits on the person again; a swap away releases it at once.
+    until(&addr, "the next query", |s| s["waiting"] == 1);
+    swap("cartpole-perfect", 3);
+    let before = demos().len();
+    crate::runtime::wait_until(&mut run, "built-in demonstrations again", || {
+        demos().len() >= before + 10
+    });
+    let o = crate::runtime::interrupt(run);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    let demos = demos();
+    let segments: Vec<&str> =
+        demos
+            .iter()
+            .map(|d| d.expert.as_str())
+            .fold(Vec::new(), |mut v, e| {
+                if v.last() != Some(&e) {
+                    v.push(e);
+                }
+                v
+            });
+    assert_eq!(segments, ["cartpole-perfect", "human", "cartpole-perfect"]);
+    let human: Vec<_> = demos.iter().filter(|d| d.expert == "human").collect();
+    assert_eq!((human.len(), human[0].action), (1, 0));
+    for (i, d) in demos.iter().enumerate() {
+        assert_eq!(d.index as usize, i, "no demonstration lost or repeated");
+    }
+    assert_eq!(crate::runtime::summary(&out)["demos"], demos.len());
+}
