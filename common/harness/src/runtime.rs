@@ -211,6 +211,24 @@ mod tests {
             let e = with(field, "0").unwrap_err().to_string();
             assert!(e.contains(&format!("`{field}` must be at least 1")), "{e}");
         }
+        // A person gets minutes; a file of before that field gets the default.
+        assert_eq!(d.query_timeout_for("human"), Duration::from_secs(300));
+        assert_eq!(
+            d.query_timeout_for("cartpole-perfect"),
+            Duration::from_secs(1)
+        );
+        let e = with("human_query_timeout_ms", "0").unwrap_err().to_string();
+        assert!(
+            e.contains("`human_query_timeout_ms` must be at least 1"),
+            "{e}"
+        );
+        let older: String = d
+            .to_toml()
+            .lines()
+            .filter(|l| !l.starts_with("human_"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        assert_eq!(RuntimeConfig::from_toml(&older).unwrap(), d);
         let e = RuntimeConfig::from_toml("window = 4\nwindows = 3").unwrap_err();
         assert!(e.to_string().contains("windows"), "{e}");
         let e = RuntimeConfig::from_toml("window = \"big\"").unwrap_err();

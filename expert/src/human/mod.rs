@@ -299,3 +299,46 @@ async fn decline(State(shared): State<Arc<Shared>>, Json(body): Json<DeclineBody
         },
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn actions_are_labelled_by_environment_and_numbered_otherwise() {
+        assert_eq!(action_labels("cartpole", 2), ["push left", "push right"]);
+        assert_eq!(action_labels("cliffwalk", 4)[3], "left");
+        assert_eq!(
+            action_labels("gymnasium", 3),
+            ["action 0", "action 1", "action 2"]
+        );
+        // Another number of actions than the environment's usual: numbered.
+        assert_eq!(action_labels("cartpole", 3)[0], "action 0");
+    }
+
+    #[test]
+    fn a_port_in_use_is_refused_naming_it() {
+        let held = std::net::TcpListener::bind((Ipv4Addr::LOCALHOST, 0)).unwrap();
+        let port = held.local_addr().unwrap().port();
+        let state = PageState {
+            env: "cartpole".into(),
+            actions: action_labels("cartpole", 2),
+            active: false,
+            budget_total: 1,
+            budget_left: 1,
+            demos: 0,
+            waiting: 0,
+            query: None,
+            answered: 0,
+            declined: 0,
+            version: 0,
+        };
+        let e = HumanPage::start(port, state).unwrap_err().to_string();
+        assert!(
+            e.starts_with(&format!(
+                "cannot serve the human expert's page on 127.0.0.1:{port}"
+            )),
+            "{e}"
+        );
+    }
+}
