@@ -137,6 +137,17 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     })?;
     // Fail before starting anything if the expert is unknown.
     setup::check_demonstrator(&cfg)?;
+    if cfg.expert.name == alfd_expert::human::HUMAN && args.human_port != 0 {
+        // The page's port, taken by something else: said now, not by the expert at start-up.
+        std::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, args.human_port)).map_err(
+            |e| {
+                usage(format!(
+                    "--human-port {}: cannot serve the human expert's page on 127.0.0.1:{}: {e}",
+                    args.human_port, args.human_port
+                ))
+            },
+        )?;
+    }
     let run_id = launcher::new_run_id();
     let run_dir = args
         .out

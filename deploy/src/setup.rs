@@ -154,6 +154,12 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
 pub fn neural_demonstrator(
     cfg: &ExperimentConfig,
 ) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>> {
+    if cfg.expert.name == alfd_expert::human::HUMAN {
+        return Err(usage(
+            "the human expert (a person on a web page) answers in `alfd run` and `alfd \
+             swap-expert` only: its page is served by the expert process",
+        ));
+    }
     alfd_expert::registry::for_env(cfg.env.name, &cfg.expert.name).map_err(|e| usage(e.to_string()))
 }
 

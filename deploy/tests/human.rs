@@ -513,3 +513,40 @@ fn swap_expert_goes_from_a_built_in_expert_to_a_person_and_back() {
     }
     assert_eq!(crate::runtime::summary(&out)["demos"], demos.len());
 }
+
+#[test]
+fn a_human_page_port_in_use_is_refused_with_exit_code_2() {
+    let _time = timed!();
+    let out = tmp("human-port");
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = held.local_addr().unwrap().port();
+    let o = alfd()
+        .args(["run", "--quiet", "--expert=human"])
+        .arg(format!("--human-port={port}"))
+        .arg(format!(
+            "--config={}",
+            cartpole_config(&out, 1, 1).display()
+        ))
+        .arg(format!("--out={}", out.join("run").display()))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains(&format!(
+            "--human-port {port}: cannot serve the human expert's page"
+        )),
+        "{stderr}"
+    );
+    // `alfd local` has no expert process to serve the page: said so.
+    let o = alfd()
+        .args(["local", "--set=expert.name=human"])
+        .arg(format!(
+            "--config={}",
+            cartpole_config(&out, 1, 1).display()
+        ))
+        .arg(format!("--out={}", out.join("local").display()))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+}
