@@ -252,7 +252,7 @@ fn browser_driver() -> Result<PathBuf, String> {
     let dir = repo().join("deploy/tests/browser");
     if !dir.join("node_modules/playwright-core").is_dir() {
         let status = Command::new("npm")
-            .args(["install", "--no-audit", "--no-fund", "--silent"])
+            .args(["ci", "--no-audit", "--no-fund", "--silent"])
             .current_dir(&dir)
             .status()
             .map_err(|e| format!("npm cannot run: {e}"))?;
