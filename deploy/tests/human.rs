@@ -247,8 +247,11 @@ fn chromium() -> Option<PathBuf> {
 }
 
 /// Playwright (`playwright-core`, pinned in deploy/tests/browser/package.json), installed with
-/// npm on first use; `None` (and why) if node or npm is missing.
+/// `npm ci` on first use; the error says why it cannot be.
 fn browser_driver() -> Result<PathBuf, String> {
+    // One install at a time (the browser tests run in parallel).
+    static INSTALL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one = INSTALL.lock().unwrap_or_else(|e| e.into_inner());
     let dir = repo().join("deploy/tests/browser");
     if !dir.join("node_modules/playwright-core").is_dir() {
         let status = Command::new("npm")
