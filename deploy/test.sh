@@ -44,4 +44,9 @@ cargo build --release --workspace --locked
 # The Python side (the Gymnasium adapter's .venv/, deploy/python/requirements.txt): installed here
 # the way alfd installs it on first use, so that no test waits on it (a no-op once installed).
 bash deploy/python/setup-venv.sh >/dev/null
+# The human page's browser test: Debian's Chromium (apt-get install -y chromium) driven by
+# Playwright (deploy/tests/browser/package.json, pinned), installed with npm here as the test would.
+if [ -x /usr/bin/chromium ] && [ ! -d deploy/tests/browser/node_modules/playwright-core ]; then
+  (cd deploy/tests/browser && npm ci --no-audit --no-fund --silent)
+fi
 cargo test --release --workspace --locked

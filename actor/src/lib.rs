@@ -99,7 +99,8 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         cfg.budget(),
         schedule,
         runtime.query_timeout(),
-    )?;
+    )?
+    .with_human_timeout(runtime.query_timeout_for(alfd_harness::HUMAN_EXPERT));
     // A restored actor continues where its checkpoint stands (the weights come from the learner,
     // restored from the checkpoint that pairs with this one).
     let run_dir = &args.process.run_dir;

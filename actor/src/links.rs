@@ -300,6 +300,9 @@ pub struct WireExpert<'s, 'w> {
     model_bytes: Vec<u8>,
     view: ExpertView,
     timeout: Duration,
+    /// The timeout while a person is the expert (the newest model's header names the expert).
+    human_timeout: Duration,
+    human_active: bool,
     /// `Some` when the config shapes the reward.
     schedule: Option<ShapingSchedule>,
     pub timeouts: u64,
@@ -314,6 +317,10 @@ enum Answer {
     NoExpert,
     /// The expert did not answer in time: the actor acted on its own.
     Timeout,
+    /// The expert (a person) declined: the actor acts on its own; no budget was spent.
+    Declined,
+    /// No expert holds the query any more and no answer came: the actor acts on its own.
+    Dropped,
 }
 
 impl<'s, 'w> WireExpert<'s, 'w> {
@@ -340,9 +347,17 @@ impl<'s, 'w> WireExpert<'s, 'w> {
                 last_demo_step: 0,
             },
             timeout,
+            human_timeout: timeout,
+            human_active: false,
             schedule,
             timeouts: 0,
         })
+    }
+
+    /// Waits `timeout` for the answer while a person is the expert.
+    pub fn with_human_timeout(mut self, timeout: Duration) -> Self {
+        self.human_timeout = timeout;
+        self
     }
 
     /// What this actor knows of the expert, for its checkpoint.
@@ -375,6 +390,7 @@ impl<'s, 'w> WireExpert<'s, 'w> {
             v.last_demo_step = h.last_demo_step;
             v.budget_left = h.budget_left;
             v.demos = v.demos.max(u64::from(h.demos));
+            self.human_active = h.expert_name() == alfd_harness::HUMAN_EXPERT;
             debug!(version = h.version, demos = h.demos, "demonstration model");
         }
         Ok(())
@@ -390,13 +406,32 @@ impl<'s, 'w> WireExpert<'s, 'w> {
             return Ok(Answer::NoExpert);
         }
         self.expert.ring().map_err(LoopError::link)?;
-        let deadline = Instant::now() + self.timeout;
+        // The expert publishes its model (its name in the header) when it becomes active: a
+        // person just swapped in gets the person's timeout from the first query on.
+        self.take_model()?;
+        let timeout = if self.human_active {
+            self.human_timeout
+        } else {
+            self.timeout
+        };
+        let deadline = Instant::now() + timeout;
+        let answer = |r: QueryResponse| match r.outcome {
+            outcome::ANSWERED => Answer::Demo(r),
+            outcome::DECLINED => Answer::Declined,
+            _ => Answer::BudgetExhausted,
+        };
         loop {
             if let Some(r) = pending.poll().map_err(LoopError::link)? {
-                return Ok(match r.outcome {
-                    outcome::ANSWERED => Answer::Demo(r),
-                    _ => Answer::BudgetExhausted,
-                });
+                return Ok(answer(r));
+            }
+            if !pending.held() {
+                // No expert holds the query any more (it stopped, or stood by): an answer sent
+                // just before is taken, else nothing will come (a person's expert swapped out
+                // would otherwise keep the actor waiting minutes).
+                if let Some(r) = pending.poll().map_err(LoopError::link)? {
+                    return Ok(answer(r));
+                }
+                return Ok(Answer::Dropped);
             }
             let now = Instant::now();
             if now >= deadline {
@@ -439,7 +474,11 @@ impl<O: AsRef<[f32]>> ExpertClient<O> for WireExpert<'_, '_> {
                 self.view.budget_left = 0;
                 Ok(None)
             }
-            Answer::NoExpert => Ok(None),
+            Answer::NoExpert | Answer::Declined => Ok(None),
+            Answer::Dropped => {
+                debug!("the expert let the query go unanswered; acting alone");
+                Ok(None)
+            }
             Answer::Timeout => {
                 self.timeouts += 1;
                 warn!(

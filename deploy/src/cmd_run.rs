@@ -48,6 +48,18 @@ pub struct RunArgs {
     /// Milliseconds an actor waits for the expert's answer before acting on its own.
     #[arg(long, default_value_t = 1000)]
     pub query_timeout_ms: u64,
+    /// The demonstrator, by name (`alfd expert list`, `python:MODULE:FUNCTION`, `sb3:ALGO:PATH`,
+    /// or `human`: a person answers on a web page); default the config's `expert.name`.
+    #[arg(long)]
+    pub expert: Option<String>,
+    /// Milliseconds an actor waits for a person's answer (`--expert human`) before acting on its
+    /// own.
+    #[arg(long, default_value_t = alfd_harness::DEFAULT_HUMAN_QUERY_TIMEOUT_MS)]
+    pub human_query_timeout_ms: u64,
+    /// The port of the human expert's page on 127.0.0.1 (0: a free port; the address is
+    /// printed, and kept in RUN_DIR/human-page-<generation>.txt).
+    #[arg(long, default_value_t = 0)]
+    pub human_port: u16,
     /// The learner publishes its weights every this many updates.
     #[arg(long, default_value_t = 1)]
     pub weights_every: u64,
@@ -66,10 +78,13 @@ pub struct RunArgs {
 }
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
-    let cfg = match &args.config {
+    let mut cfg = match &args.config {
         Some(path) => setup::load_config(path, &args.set)?,
         None => setup::parse_config(DEFAULT_CONFIG, &args.set, "the default config")?,
     };
+    if let Some(expert) = &args.expert {
+        cfg.expert.name = expert.clone();
+    }
     if cfg.agent.kind.is_tabular() {
         return Err(usage(
             "`alfd run` runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
@@ -120,6 +135,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let runtime = RuntimeConfig {
         window: args.window,
         query_timeout_ms: args.query_timeout_ms,
+        human_query_timeout_ms: args.human_query_timeout_ms,
+        human_port: args.human_port,
         weights_every: args.weights_every,
         checkpoint_every: args.checkpoint_every,
         env_spec,
@@ -136,6 +153,17 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     })?;
     // Fail before starting anything if the expert is unknown.
     setup::check_demonstrator(&cfg)?;
+    if cfg.expert.name == alfd_expert::human::HUMAN && args.human_port != 0 {
+        // The page's port, taken by something else: said now, not by the expert at start-up.
+        std::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, args.human_port)).map_err(
+            |e| {
+                usage(format!(
+                    "--human-port {}: cannot serve the human expert's page on 127.0.0.1:{}: {e}",
+                    args.human_port, args.human_port
+                ))
+            },
+        )?;
+    }
     let run_id = launcher::new_run_id();
     let run_dir = args
         .out

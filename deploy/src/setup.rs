@@ -143,6 +143,10 @@ pub fn cliffwalk(cfg: &ExperimentConfig) -> anyhow::Result<CliffWalk> {
 /// The config's demonstrator exists: a built-in one for its environment, or a well-formed
 /// external one (`python:MODULE:FUNCTION`, `sb3:ALGO:PATH`), which the expert process starts.
 pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
+    if cfg.expert.name == alfd_expert::human::HUMAN {
+        // A person answers on a web page: any environment, any number of actions.
+        return Ok(());
+    }
     if alfd_expert::registry::external_policy(&cfg.expert.name).is_some() {
         return alfd_expert::registry::check_external(&cfg.expert.name)
             .map_err(|e| usage(e.to_string()));
@@ -153,6 +157,12 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
 pub fn neural_demonstrator(
     cfg: &ExperimentConfig,
 ) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>> {
+    if cfg.expert.name == alfd_expert::human::HUMAN {
+        return Err(usage(
+            "the human expert (a person on a web page) answers in `alfd run` and `alfd \
+             swap-expert` only: its page is served by the expert process",
+        ));
+    }
     alfd_expert::registry::for_env(cfg.env.name, &cfg.expert.name).map_err(|e| usage(e.to_string()))
 }
 

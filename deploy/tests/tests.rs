@@ -5,6 +5,7 @@ mod faults;
 mod golden;
 mod gymnasium;
 mod remote;
+mod human;
 mod report;
 mod runtime;
 mod shards;

@@ -3,6 +3,7 @@
 //! (and the single-process runner) loads by name.
 
 pub mod demo_log;
+pub mod human;
 mod process;
 pub mod registry;
 pub mod scripted;

@@ -8,6 +8,7 @@
 //! one has exited, reading `demos.jsonl` back at that moment. So at most one expert ever spends
 //! budget, and none spends it twice.
 
+use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use alfd_common::agent::{Demonstrator, ExpertCore};
@@ -16,12 +17,13 @@ use alfd_harness::python::Adapter;
 use alfd_harness::{BadInput, ProcessArgs, Session};
 use alfd_wire::{
     name_to_bytes, outcome, process_state, progress_kind, ActorBells, DemoModelHeader, Doorbell,
-    Process, Progress, QueryResponse, RemoteDemonstrator, Role, WireError,
+    IncomingQuery, Process, Progress, QueryResponse, RemoteDemonstrator, Role, WireError,
 };
 use anyhow::Context as _;
 use tracing::{debug, info};
 
 use crate::demo_log::{self, DemoLog};
+use crate::human::{self, HumanPage, PageState, ShownQuery, HUMAN};
 use crate::registry;
 
 /// `alfd-expert`: the expert process of a run (started by `alfd run` and `alfd swap-expert`).
@@ -80,8 +82,10 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         }
         None => None,
     };
+    let human = name == HUMAN;
     let mut builtin = match adapter {
         Some(_) => None,
+        None if human => None,
         None => Some(registry::for_env(cfg.env.name, &name).map_err(|e| BadInput(e.to_string()))?),
     };
     let demos_path = args.process.run_dir.join("demos.jsonl");
@@ -109,6 +113,42 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let mut progress = wire.progress_sender()?;
 
     let mut core = expert_core(cfg, actions);
+    // A person as the expert: the page is up from the start (standing by until active).
+    let page = if human {
+        let page = HumanPage::start(
+            runtime.human_port,
+            PageState {
+                env: cfg.env.name.to_string(),
+                actions: human::action_labels(cfg.env.name.as_str(), actions),
+                active: false,
+                budget_total: core.budget().total(),
+                budget_left: core.budget().remaining(),
+                demos: core.budget().used(),
+                waiting: 0,
+                query: None,
+                answered: 0,
+                declined: 0,
+                version: 0,
+            },
+        )
+        .map_err(|e| BadInput(e.to_string()))?;
+        let url = page.url();
+        info!(url = %url, "the human expert's page is served");
+        alfd_harness::write_atomically(
+            &args
+                .process
+                .run_dir
+                .join(human::human_page_file(args.generation)),
+            format!("{url}\n").as_bytes(),
+        )?;
+        Some(page)
+    } else {
+        None
+    };
+    // Queries waiting for the person, oldest first, with the page's number for each.
+    let mut waiting: VecDeque<(ShownQuery, IncomingQuery<'_>)> = VecDeque::new();
+    let mut next_shown = 0u64;
+    let (mut declined, mut person_answered) = (0u64, 0u64);
     let mut log: Option<DemoLog> = None;
     let mut mode = Mode::Standby;
     let pid = std::process::id();
@@ -162,6 +202,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             );
         } else if !should_be_active && mode == Mode::Active {
             info!("no longer the active expert: standing by");
+            release(&mut waiting, &mut actors, args.generation, &name)?;
             mode = Mode::Standby;
             log = None;
             status(&mut progress, process_state::STANDBY, &core)?;
@@ -178,7 +219,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 }
                 Err(e) => return Err(e.into()),
             };
-            let (Mode::Active, Some(log)) = (mode, log.as_mut()) else {
+            let (Mode::Active, Some(_)) = (mode, log.as_ref()) else {
                 debug!("standing by: query left unanswered");
                 continue;
             };
@@ -197,6 +238,18 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                     continue;
                 }
             };
+            if page.is_some() && !core.budget().is_exhausted() {
+                // For the person: shown on the page, answered when they decide.
+                next_shown += 1;
+                let shown = ShownQuery {
+                    id: next_shown,
+                    actor: request.actor,
+                    step: request.global_step,
+                    state: state.to_vec(),
+                };
+                waiting.push_back((shown, query));
+                continue;
+            }
             let step = request.global_step.max(core.last_demo_step());
             let mut response = QueryResponse {
                 expert: u32::from(args.generation),
@@ -206,6 +259,8 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             };
             let answer = match (builtin.as_mut(), external.as_mut()) {
                 (Some(d), _) => core.answer(d.as_mut(), state, step, &name),
+                // A person with no budget left: not asked.
+                (None, None) if human => None,
                 // No budget, no question to the external demonstrator.
                 (None, Some(_)) if core.budget().is_exhausted() => None,
                 (None, Some(remote)) => match remote.act(state, runtime.query_timeout()) {
@@ -222,8 +277,9 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                         continue;
                     }
                 },
-                (None, None) => unreachable!("an expert is built-in or external"),
+                (None, None) => unreachable!("an expert is built-in, external or human"),
             };
+            let log = log.as_mut().expect("active with a log");
             match answer {
                 Some(action) => {
                     let record = core
@@ -259,6 +315,100 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 }
             }
         }
+        if let Some(page) = &page {
+            // The actors that gave up waiting (their timeout) are no longer shown.
+            waiting.retain(|(_, q)| {
+                let wanted = q.is_connected();
+                if !wanted {
+                    abandoned += 1;
+                }
+                wanted
+            });
+            for decision in page.decisions() {
+                let Some(i) = waiting.iter().position(|(s, _)| s.id == decision.id) else {
+                    continue;
+                };
+                let (shown, query) = waiting.remove(i).expect("position is in range");
+                let (Mode::Active, Some(log)) = (mode, log.as_mut()) else {
+                    continue;
+                };
+                let step = shown.step.max(core.last_demo_step());
+                let mut response = QueryResponse {
+                    expert: u32::from(args.generation),
+                    budget_total: core.budget().total(),
+                    expert_name: name_to_bytes(&name),
+                    ..QueryResponse::default()
+                };
+                let answer = match decision.action {
+                    None => {
+                        // Declined: the actor acts on its own, no budget is spent and nothing
+                        // is recorded.
+                        response.outcome = outcome::DECLINED;
+                        response.budget_left = core.budget().remaining();
+                        query.answer(response)?;
+                        ring_actor(&mut actors, shown.actor)?;
+                        declined += 1;
+                        info!(actor = shown.actor, "the person declined a query");
+                        continue;
+                    }
+                    Some(action) => core.answer(&mut Given(action), &shown.state, step, &name),
+                };
+                match answer {
+                    Some(action) => {
+                        let record = core
+                            .demos()
+                            .last()
+                            .expect("answer recorded a demonstration");
+                        log.append(record)?;
+                        response.outcome = outcome::ANSWERED;
+                        response.action = action as u32;
+                        response.demo_index = record.index;
+                        response.budget_left = core.budget().remaining();
+                        info!(
+                            index = record.index,
+                            actor = shown.actor,
+                            action,
+                            "the person answered"
+                        );
+                        publish_model(&mut model_tx, &core, args.generation, &name)?;
+                        query.answer(response)?;
+                        ring_actor(&mut actors, shown.actor)?;
+                        answered += 1;
+                        person_answered += 1;
+                    }
+                    None => {
+                        response.outcome = outcome::BUDGET_EXHAUSTED;
+                        query.answer(response)?;
+                        ring_actor(&mut actors, shown.actor)?;
+                        refused += 1;
+                    }
+                }
+            }
+            if core.budget().is_exhausted() {
+                // Nothing more to ask the person: the rest act on their own.
+                for (shown, query) in waiting.drain(..) {
+                    query.answer(QueryResponse {
+                        outcome: outcome::BUDGET_EXHAUSTED,
+                        expert: u32::from(args.generation),
+                        budget_total: core.budget().total(),
+                        expert_name: name_to_bytes(&name),
+                        ..QueryResponse::default()
+                    })?;
+                    ring_actor(&mut actors, shown.actor)?;
+                    refused += 1;
+                }
+            }
+            let shown: Vec<ShownQuery> = waiting.iter().map(|(s, _)| s.clone()).collect();
+            page.set_waiting(&shown);
+            page.update(|s| {
+                s.active = mode == Mode::Active;
+                s.budget_left = core.budget().remaining();
+                s.budget_total = core.budget().total();
+                s.demos = core.budget().used();
+                s.answered = person_answered;
+                s.declined = declined;
+            });
+        }
         if last_status.elapsed() >= Duration::from_millis(500) {
             let state = if mode == Mode::Active {
                 process_state::RUNNING
@@ -274,16 +424,39 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             break stop.0;
         }
     };
+    // Actors waiting for the person act on their own now rather than at their timeout.
+    release(&mut waiting, &mut actors, args.generation, &name)?;
     info!(
         reason = stop_reason,
         answered,
         refused,
         abandoned,
+        declined,
         demos = core.budget().used(),
         "expert stopping"
     );
     status(&mut progress, process_state::EXITING, &core)?;
     launcher.ring()?;
+    Ok(())
+}
+
+/// Answers every query still waiting for the person with "declined" (the actor acts on its
+/// own; no budget is spent): this expert stops answering.
+fn release(
+    waiting: &mut VecDeque<(ShownQuery, IncomingQuery<'_>)>,
+    actors: &mut ActorBells<'_>,
+    generation: u16,
+    name: &str,
+) -> anyhow::Result<()> {
+    for (shown, query) in waiting.drain(..) {
+        query.answer(QueryResponse {
+            outcome: outcome::DECLINED,
+            expert: u32::from(generation),
+            expert_name: name_to_bytes(name),
+            ..QueryResponse::default()
+        })?;
+        ring_actor(actors, shown.actor)?;
+    }
     Ok(())
 }
 

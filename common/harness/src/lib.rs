@@ -14,7 +14,10 @@ mod startup;
 
 pub use fs::{load_checkpoint, save_checkpoint, test_dir, write_atomically};
 pub use process::{check_wire_limits, exit_code, main, BadInput, ProcessArgs, Setup};
-pub use runtime::{RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY, RUNTIME_FILE};
+pub use runtime::{
+    RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY, DEFAULT_HUMAN_QUERY_TIMEOUT_MS,
+    HUMAN_EXPERT, RUNTIME_FILE,
+};
 pub use session::{Session, SessionError, LAUNCHER_SILENCE, STOP_REQUESTED, TERMINATION_SIGNAL};
 pub use startup::{
     init_process_logging, log_filter, portable_kernels_from_env, schema_version_from_env,

@@ -27,6 +27,14 @@ pub struct RuntimeConfig {
     pub window: u64,
     /// Milliseconds an actor waits for the expert's answer before acting on its own.
     pub query_timeout_ms: u64,
+    /// Milliseconds an actor waits for the answer when a person is the expert (`human`): a
+    /// person needs minutes, not a second. Default 5 minutes.
+    #[serde(default = "default_human_query_timeout_ms")]
+    pub human_query_timeout_ms: u64,
+    /// The port of the human expert's page on 127.0.0.1 (0: any free port; the address is in
+    /// the expert's log and in `RUN_DIR/human-page.txt`).
+    #[serde(default)]
+    pub human_port: u16,
     /// Seconds a process waits for the launcher's first word and for the learner's first weights.
     pub handshake_timeout_s: u64,
     /// The learner publishes its weights every this many updates.
@@ -47,6 +55,16 @@ pub struct RuntimeConfig {
 /// with a full 10,000-transition buffer costs well under 5% of the learner's time at this period).
 pub const DEFAULT_CHECKPOINT_EVERY: u64 = 10_000;
 
+/// The name of the human expert (`--expert human`).
+pub const HUMAN_EXPERT: &str = "human";
+
+/// The default of [`RuntimeConfig::human_query_timeout_ms`]: 5 minutes.
+pub const DEFAULT_HUMAN_QUERY_TIMEOUT_MS: u64 = 300_000;
+
+fn default_human_query_timeout_ms() -> u64 {
+    DEFAULT_HUMAN_QUERY_TIMEOUT_MS
+}
+
 fn default_checkpoint_every() -> u64 {
     DEFAULT_CHECKPOINT_EVERY
 }
@@ -56,6 +74,8 @@ impl Default for RuntimeConfig {
         Self {
             window: 32,
             query_timeout_ms: 1000,
+            human_query_timeout_ms: DEFAULT_HUMAN_QUERY_TIMEOUT_MS,
+            human_port: 0,
             handshake_timeout_s: 20,
             weights_every: 1,
             checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
@@ -106,6 +126,11 @@ impl RuntimeConfig {
                 MAX_QUERY_TIMEOUT_MS,
             ),
             (
+                "human_query_timeout_ms",
+                self.human_query_timeout_ms,
+                MAX_QUERY_TIMEOUT_MS,
+            ),
+            (
                 "handshake_timeout_s",
                 self.handshake_timeout_s,
                 MAX_HANDSHAKE_TIMEOUT_S,
@@ -133,6 +158,16 @@ impl RuntimeConfig {
 
     pub fn query_timeout(&self) -> Duration {
         Duration::from_millis(self.query_timeout_ms)
+    }
+
+    /// How long an actor waits for the answer of the expert named `expert` (a person gets
+    /// [`RuntimeConfig::human_query_timeout_ms`]).
+    pub fn query_timeout_for(&self, expert: &str) -> Duration {
+        if expert == HUMAN_EXPERT {
+            Duration::from_millis(self.human_query_timeout_ms)
+        } else {
+            self.query_timeout()
+        }
     }
 
     pub fn handshake_timeout(&self) -> Duration {
@@ -176,6 +211,24 @@ mod tests {
             let e = with(field, "0").unwrap_err().to_string();
             assert!(e.contains(&format!("`{field}` must be at least 1")), "{e}");
         }
+        // A person gets minutes; a file of before that field gets the default.
+        assert_eq!(d.query_timeout_for("human"), Duration::from_secs(300));
+        assert_eq!(
+            d.query_timeout_for("cartpole-perfect"),
+            Duration::from_secs(1)
+        );
+        let e = with("human_query_timeout_ms", "0").unwrap_err().to_string();
+        assert!(
+            e.contains("`human_query_timeout_ms` must be at least 1"),
+            "{e}"
+        );
+        let older: String = d
+            .to_toml()
+            .lines()
+            .filter(|l| !l.starts_with("human_"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        assert_eq!(RuntimeConfig::from_toml(&older).unwrap(), d);
         let e = RuntimeConfig::from_toml("window = 4\nwindows = 3").unwrap_err();
         assert!(e.to_string().contains("windows"), "{e}");
         let e = RuntimeConfig::from_toml("window = \"big\"").unwrap_err();

@@ -536,6 +536,8 @@ pub mod outcome {
     pub const ANSWERED: u32 = 1;
     /// The budget is spent: no demonstration, act on your own.
     pub const BUDGET_EXHAUSTED: u32 = 2;
+    /// The expert (a person) declined to answer: act on your own; no budget was spent.
+    pub const DECLINED: u32 = 3;
 }
 
 /// The expert's answer.

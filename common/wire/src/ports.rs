@@ -374,6 +374,12 @@ impl PendingQuery<'_> {
         Ok(None)
     }
 
+    /// Whether an expert still holds the request: false once every expert that received it has
+    /// answered it or let it go (an expert standing by, one that stopped), and when none did.
+    pub fn held(&self) -> bool {
+        self.pending.is_connected()
+    }
+
     #[cfg(test)]
     pub(crate) fn duplicates(&self) -> u32 {
         self.duplicates

@@ -283,6 +283,8 @@ struct Launcher<'a, 'w> {
     /// Remote hosts that joined, and that left or dropped (their links).
     remote_joins: u32,
     remote_losses: u32,
+    /// The newest expert generation whose human page's address was printed.
+    human_page_shown: u16,
 }
 
 impl<'a, 'w> Launcher<'a, 'w> {
@@ -355,6 +357,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             hub: None,
             remote_joins: 0,
             remote_losses: 0,
+            human_page_shown: 0,
         })
     }
 
@@ -463,6 +466,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
                         self.demos_answered = self.demos_answered.max(p.demos);
                     }
                     let now = Instant::now();
+                    if p.state == process_state::STANDBY {
+                        self.show_human_page(p.header.id);
+                    }
                     let actions = match p.state {
                         process_state::STANDBY => self.experts.standby(p.header.id, now),
                         process_state::RUNNING => self.experts.running(p.header.id, now),
@@ -472,6 +478,26 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 }
                 _ => {}
             }
+        }
+    }
+
+    /// Prints the address of a human expert's page (once per generation), as the expert wrote
+    /// it in the run directory before reporting `standby`.
+    fn show_human_page(&mut self, generation: u16) {
+        if generation <= self.human_page_shown {
+            return;
+        }
+        let file = self
+            .plan
+            .run_dir
+            .join(alfd_expert::human::human_page_file(generation));
+        if let Ok(url) = std::fs::read_to_string(&file) {
+            self.human_page_shown = generation;
+            let url = url.trim().to_owned();
+            info!(url = %url, generation, "human expert's page");
+            self.bar.suspend(|| {
+                eprintln!("you are the expert: answer the queries at {url}");
+            });
         }
     }
 

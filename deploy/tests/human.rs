@@ -1,0 +1,555 @@
+//! A person as the expert (issue 12, item 3): `alfd run --expert human` serves a page on
+//! 127.0.0.1; these tests act as the person, over HTTP from Rust and in Debian's Chromium driven
+//! by Playwright (`deploy/tests/browser/`, installed with npm by the test itself).
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use alfd_expert::human::{action_labels, HumanPage, PageState, ShownQuery};
+use serde_json::Value;
+
+use crate::support::{alfd, repo, text, timed, tmp, Background};
+
+/// A CartPole config answered by a person: queries on the first steps, `budget` of them.
+fn cartpole_config(dir: &Path, budget: u32, episodes: u32) -> PathBuf {
+    let config = dir.join("human.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "seed = 3\nepisodes = {episodes}\n[env]\nname = \"cartpole\"\nmax_episode_steps = 20\n\
+             [agent]\nkind = \"bdqn\"\nbatch_size = 16\n[query]\nmode = \"first\"\n\
+             [budget]\ntotal = {budget}\n[expert]\nname = \"cartpole-perfect\"\nmodel = \"krr\"\n"
+        ),
+    )
+    .unwrap();
+    config
+}
+
+/// Starts `alfd run --expert human` on a free port; returns the run and the page's address
+/// (`127.0.0.1:PORT`), as the expert wrote it in the run directory.
+fn start_run(config: &Path, run_dir: &Path, actors: usize) -> (Background, String) {
+    let mut run = Background(Some(
+        alfd()
+            .args(["run", "--quiet", "--expert=human", "--human-port=0"])
+            .arg(format!("--actors={actors}"))
+            .arg(format!("--config={}", config.display()))
+            .arg(format!("--out={}", run_dir.display()))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
+    let file = run_dir.join("human-page-1.txt");
+    let start = Instant::now();
+    loop {
+        if let Ok(url) = std::fs::read_to_string(&file) {
+            let url = url.trim().to_owned();
+            let addr = url
+                .strip_prefix("http://")
+                .and_then(|u| u.strip_suffix('/'))
+                .unwrap_or_else(|| panic!("not an address: {url}"))
+                .to_owned();
+            return (run, addr);
+        }
+        if let Ok(Some(status)) = run.child().try_wait() {
+            panic!("alfd run exited ({status}) before serving the page");
+        }
+        assert!(start.elapsed() < Duration::from_secs(120), "no page");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// One HTTP/1.1 request; the status and the body.
+fn http(addr: &str, method: &str, path: &str, body: Option<&str>) -> (u16, String) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    let body = body.unwrap_or("");
+    write!(
+        s,
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\
+         Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        body.len()
+    )
+    .unwrap();
+    let mut out = String::new();
+    s.read_to_string(&mut out).unwrap();
+    let (head, body) = out.split_once("\r\n\r\n").unwrap();
+    let status = head.split(' ').nth(1).unwrap().parse().unwrap();
+    (status, body.to_owned())
+}
+
+fn state(addr: &str) -> Value {
+    let (status, body) = http(addr, "GET", "/state", None);
+    assert_eq!(status, 200, "{body}");
+    serde_json::from_str(&body).unwrap()
+}
+
+/// Polls the page's state until `ok` holds.
+fn until(addr: &str, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
+    let start = Instant::now();
+    loop {
+        let s = state(addr);
+        if ok(&s) {
+            return s;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "never {what}: {s}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The first server-sent event of `GET /events`, parsed.
+fn first_event(addr: &str) -> Value {
+    let mut s = TcpStream::connect(addr).unwrap();
+    write!(
+        s,
+        "GET /events HTTP/1.1\r\nHost: {addr}\r\nAccept: text/event-stream\r\n\r\n"
+    )
+    .unwrap();
+    let mut lines = BufReader::new(s).lines();
+    let head = lines.next().unwrap().unwrap();
+    assert!(head.contains(" 200 "), "{head}");
+    for line in lines {
+        let line = line.unwrap();
+        if let Some(data) = line.strip_prefix("data: ") {
+            return serde_json::from_str(data).unwrap();
+        }
+    }
+    panic!("the event stream ended without an event");
+}
+
+#[test]
+fn a_person_answers_and_declines_over_http_and_only_answers_spend_budget() {
+    let _time = timed!();
+    let out = tmp("human-http");
+    let config = cartpole_config(&out, 2, 4);
+    let run_dir = out.join("run");
+    let (mut run, addr) = start_run(&config, &run_dir, 2);
+
+    // The page itself, and its live state as events.
+    let (status, page) = http(&addr, "GET", "/", None);
+    assert!(status == 200 && page.contains("EventSource"), "{page}");
+    let event = first_event(&addr);
+    assert_eq!(event["env"], "cartpole");
+    assert_eq!(
+        event["actions"],
+        serde_json::json!(["push left", "push right"])
+    );
+
+    // Both actors ask on their first step and wait for the person (minutes by default).
+    let s = until(&addr, "two queries waiting", |s| {
+        s["active"] == true && s["waiting"] == 2
+    });
+    assert_eq!(
+        (s["budget_left"].as_u64(), s["budget_total"].as_u64()),
+        (Some(2), Some(2))
+    );
+    let first = s["query"]["id"].as_u64().unwrap();
+    assert_eq!(s["query"]["state"].as_array().unwrap().len(), 4);
+
+    // A bad answer is refused with a reason, and changes nothing.
+    let (code, body) = http(
+        &addr,
+        "POST",
+        "/answer",
+        Some(&format!("{{\"id\":{first},\"action\":2}}")),
+    );
+    assert_eq!(code, 400, "{body}");
+    assert!(body.contains("not one of the 2 actions"), "{body}");
+    let (code, _) = http(&addr, "POST", "/decline", Some("{\"id\":999}"));
+    assert_eq!(code, 409);
+
+    // Declined: no budget spent, nothing written; that actor asks again (its next step).
+    let (code, body) = http(
+        &addr,
+        "POST",
+        "/decline",
+        Some(&format!("{{\"id\":{first}}}")),
+    );
+    assert_eq!(code, 202, "{body}");
+    let s = until(&addr, "the decline taken", |s| {
+        s["declined"] == 1 && s["waiting"] == 2
+    });
+    assert_eq!(s["budget_left"], 2);
+    assert_eq!(s["demos"], 0);
+    assert_eq!(
+        std::fs::read_to_string(run_dir.join("demos.jsonl")).unwrap_or_default(),
+        ""
+    );
+
+    // Two answers: each a demonstration in demos.jsonl with the person's action and name.
+    let mut given = Vec::new();
+    for (n, action) in [(1u64, 0u64), (2, 1)] {
+        let s = until(&addr, "a query to answer", |s| {
+            s["query"]["id"]
+                .as_u64()
+                .is_some_and(|id| !given.iter().any(|(g, _, _)| *g == id) && id != first)
+        });
+        let q = s["query"].clone();
+        let id = q["id"].as_u64().unwrap();
+        let (code, body) = http(
+            &addr,
+            "POST",
+            "/answer",
+            Some(&format!("{{\"id\":{id},\"action\":{action}}}")),
+        );
+        assert_eq!(code, 202, "{body}");
+        given.push((id, action, q["state"].clone()));
+        until(&addr, "the answer taken", |s| s["answered"] == n);
+    }
+    // The budget is spent: the other queries are answered "budget exhausted", the run ends.
+    let child = run.0.take().unwrap();
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains(&format!(
+            "you are the expert: answer the queries at http://{addr}/"
+        )),
+        "{stderr}"
+    );
+    let demos = alfd_expert::demo_log::read(&run_dir.join("demos.jsonl")).unwrap();
+    assert_eq!(demos.len(), 2);
+    for (d, (_, action, shown)) in demos.iter().zip(&given) {
+        assert_eq!(d.expert, "human");
+        assert_eq!(d.action as u64, *action);
+        let shown: Vec<f64> = shown
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(d.state.len(), 4);
+        for (a, b) in d.state.iter().zip(&shown) {
+            assert!((a - b).abs() < 1e-6, "{:?} vs {shown:?}", d.state);
+        }
+    }
+    // The actors got the answers (not timeouts): the demonstrations are theirs in the summary.
+    let summary = crate::runtime::summary(&run_dir);
+    assert_eq!(summary["demos"], 2, "{summary}");
+    for a in 0..2 {
+        let log = std::fs::read_to_string(run_dir.join(format!("actor-{a}.log"))).unwrap();
+        assert!(!log.contains("did not answer in time"), "{log}");
+    }
+    crate::runtime::check_run_dir(&run_dir, 2);
+}
+
+/// Chromium from Debian's packages, if installed.
+fn chromium() -> Option<PathBuf> {
+    let p = PathBuf::from(
+        std::env::var_os("ALFD_CHROMIUM").unwrap_or_else(|| "/usr/bin/chromium".into()),
+    );
+    p.is_file().then_some(p)
+}
+
+/// Playwright (`playwright-core`, pinned in deploy/tests/browser/package.json), installed with
+/// `npm ci` on first use; the error says why it cannot be.
+fn browser_driver() -> Result<PathBuf, String> {
+    // One install at a time (the browser tests run in parallel).
+    static INSTALL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one = INSTALL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = repo().join("deploy/tests/browser");
+    if !dir.join("node_modules/playwright-core").is_dir() {
+        let status = Command::new("npm")
+            .args(["ci", "--no-audit", "--no-fund", "--silent"])
+            .current_dir(&dir)
+            .status()
+            .map_err(|e| format!("npm cannot run: {e}"))?;
+        if !status.success() {
+            return Err(format!("npm install failed ({status})"));
+        }
+    }
+    Ok(dir.join("drive.mjs"))
+}
+
+/// The browser and its driver; `None` only when Chromium is not installed (said loudly).
+fn browser() -> Option<PathBuf> {
+    if chromium().is_none() {
+        eprintln!(
+            "\n*** SKIPPED: no Chromium at /usr/bin/chromium (apt-get install -y chromium, or set \
+             ALFD_CHROMIUM); the human page's browser test did not run ***\n"
+        );
+        return None;
+    }
+    Some(browser_driver().unwrap_or_else(|e| panic!("the browser driver: {e}")))
+}
+
+/// Where a screenshot goes: `docs/` with `ALFD_UPDATE_SCREENSHOTS=1`, else `dir`.
+fn screenshot(dir: &Path, name: &str) -> PathBuf {
+    if std::env::var_os("ALFD_UPDATE_SCREENSHOTS").is_some() {
+        repo().join("docs").join(name)
+    } else {
+        dir.join(name)
+    }
+}
+
+/// Runs the driver over the page at `url`; its JSON report.
+fn drive(driver: &Path, url: &str, shot: &Path, steps: &[&str]) -> std::process::Child {
+    Command::new("node")
+        .arg(driver)
+        .arg(url)
+        .arg(shot)
+        .args(steps)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("node runs")
+}
+
+fn report(o: &std::process::Output) -> Value {
+    assert!(o.status.success(), "{}", text(o));
+    serde_json::from_str(String::from_utf8_lossy(&o.stdout).trim()).unwrap()
+}
+
+#[test]
+fn in_chromium_a_person_sees_cartpole_declines_one_query_and_clicks_an_action() {
+    let _time = timed!();
+    let Some(driver) = browser() else { return };
+    let out = tmp("human-browser");
+    let config = cartpole_config(&out, 1, 2);
+    let run_dir = out.join("run");
+    let (run, addr) = start_run(&config, &run_dir, 1);
+    let shot = screenshot(&out, "human-cartpole.png");
+    let o = drive(
+        &driver,
+        &format!("http://{addr}/"),
+        &shot,
+        &["decline", "click:1"],
+    )
+    .wait_with_output()
+    .unwrap();
+    let r = report(&o);
+    let seen = r["seen"].as_array().unwrap();
+    // The browser saw the cart and the pole, the budget and the queries waiting.
+    for s in seen {
+        assert_eq!(s["pole"], true, "{s}");
+        assert_eq!(s["waiting"], "1", "{s}");
+        assert_eq!(s["budget"], "1 / 1", "{s}");
+        assert!(
+            s["status"].as_str().unwrap().contains("actor 0 asks"),
+            "{s}"
+        );
+    }
+    assert!(shot.is_file());
+    let mut child = run;
+    let o = child.0.take().unwrap().wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    // The decline spent nothing; the click is the one demonstration, with the person's name.
+    let demos = alfd_expert::demo_log::read(&run_dir.join("demos.jsonl")).unwrap();
+    assert_eq!(demos.len(), 1);
+    assert_eq!((demos[0].action, demos[0].expert.as_str()), (1, "human"));
+    let clicked: Vec<f64> = seen[1]["state"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(demos[0]
+        .state
+        .iter()
+        .zip(&clicked)
+        .all(|(a, b)| (a - b).abs() < 1e-6));
+    assert_eq!(r["after"]["declined"], 1);
+    assert_eq!(crate::runtime::summary(&run_dir)["demos"], 1);
+}
+
+#[test]
+fn in_chromium_the_cliffwalk_page_shows_the_grid_and_takes_an_arrow_key() {
+    let _time = timed!();
+    let Some(driver) = browser() else { return };
+    let out = tmp("human-cliffwalk");
+    // The page alone (`alfd run` plays vector environments): the expert process's page as it
+    // shows a CliffWalk state: the agent just above the cliff, third column.
+    let page = HumanPage::start(
+        0,
+        PageState {
+            env: "cliffwalk".into(),
+            actions: action_labels("cliffwalk", 4),
+            active: true,
+            budget_total: 10,
+            budget_left: 7,
+            demos: 3,
+            waiting: 0,
+            query: None,
+            answered: 0,
+            declined: 0,
+            version: 0,
+        },
+    )
+    .unwrap();
+    let query = ShownQuery {
+        id: 1,
+        actor: 0,
+        step: 42,
+        state: vec![26.0],
+    };
+    page.set_waiting(&[
+        query.clone(),
+        ShownQuery {
+            id: 2,
+            ..query.clone()
+        },
+    ]);
+    let shot = screenshot(&out, "human-cliffwalk.png");
+    let mut node = drive(&driver, &page.url(), &shot, &["key:ArrowUp"]);
+    let mut decisions = Vec::new();
+    while node.try_wait().unwrap().is_none() {
+        for d in page.decisions() {
+            decisions.push(d);
+            page.set_waiting(&[ShownQuery {
+                id: 2,
+                ..query.clone()
+            }]);
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let r = report(&node.wait_with_output().unwrap());
+    assert_eq!(
+        decisions,
+        vec![alfd_expert::human::Decision {
+            id: 1,
+            action: Some(0)
+        }]
+    );
+    let s = &r["seen"][0];
+    assert_eq!(
+        (s["agent"].as_bool(), s["pole"].as_bool()),
+        (Some(true), Some(false))
+    );
+    assert_eq!(s["budget"], "7 / 10");
+    assert_eq!(s["waiting"], "2");
+    assert_eq!(s["buttons"][0], "up (0)");
+    assert!(shot.is_file());
+}
+
+#[test]
+fn swap_expert_goes_from_a_built_in_expert_to_a_person_and_back() {
+    let _time = timed!();
+    let out = tmp("human-swap");
+    let demos = || alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap_or_default();
+    // CartPole's built-in expert, asked on every step (a budget that lasts).
+    let mut run = Background(Some(
+        alfd()
+            .args(["run", "--quiet", "--actors=1", "--query-timeout-ms=5000"])
+            .arg(format!("--out={}", out.display()))
+            .arg(format!(
+                "--config={}",
+                cartpole_config(&out, 100_000, 1_000_000).display()
+            ))
+            .args(["--set", "expert.model=none"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
+    let swap = |to: &str, generation: u64| {
+        let o = alfd()
+            .args(["swap-expert", "--run"])
+            .arg(&*out)
+            .args(["--expert", to])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", text(&o));
+        let r: Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(
+            (r["ok"].as_bool(), r["generation"].as_u64()),
+            (Some(true), Some(generation))
+        );
+    };
+    crate::runtime::wait_until(&mut run, "built-in demonstrations", || demos().len() >= 10);
+    swap("human", 2);
+    let url = std::fs::read_to_string(out.join("human-page-2.txt")).unwrap();
+    let addr = url
+        .trim()
+        .trim_start_matches("http://")
+        .trim_end_matches('/')
+        .to_owned();
+    // The person answers one query (a query the actor asked before the person's model reached
+    // it may be given up at its short timeout: then the next one is answered).
+    loop {
+        let s = until(&addr, "a query", |s| {
+            s["active"] == true && s["waiting"] == 1
+        });
+        let id = s["query"]["id"].as_u64().unwrap();
+        let (code, _) = http(
+            &addr,
+            "POST",
+            "/answer",
+            Some(&format!("{{\"id\":{id},\"action\":0}}")),
+        );
+        let s = until(&addr, "the answer taken or the query gone", |s| {
+            s["answered"] == 1 || s["query"]["id"].as_u64() != Some(id)
+        });
+        if code == 202 && s["answered"] == 1 {
+            break;
+        }
+    }
+    // The actor now waits on the person again; a swap away releases it at once.
+    until(&addr, "the next query", |s| s["waiting"] == 1);
+    swap("cartpole-perfect", 3);
+    let before = demos().len();
+    crate::runtime::wait_until(&mut run, "built-in demonstrations again", || {
+        demos().len() >= before + 10
+    });
+    let o = crate::runtime::interrupt(run);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    let demos = demos();
+    let segments: Vec<&str> =
+        demos
+            .iter()
+            .map(|d| d.expert.as_str())
+            .fold(Vec::new(), |mut v, e| {
+                if v.last() != Some(&e) {
+                    v.push(e);
+                }
+                v
+            });
+    assert_eq!(segments, ["cartpole-perfect", "human", "cartpole-perfect"]);
+    let human: Vec<_> = demos.iter().filter(|d| d.expert == "human").collect();
+    assert_eq!((human.len(), human[0].action), (1, 0));
+    for (i, d) in demos.iter().enumerate() {
+        assert_eq!(d.index as usize, i, "no demonstration lost or repeated");
+    }
+    assert_eq!(crate::runtime::summary(&out)["demos"], demos.len());
+}
+
+#[test]
+fn a_human_page_port_in_use_is_refused_with_exit_code_2() {
+    let _time = timed!();
+    let out = tmp("human-port");
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = held.local_addr().unwrap().port();
+    let o = alfd()
+        .args(["run", "--quiet", "--expert=human"])
+        .arg(format!("--human-port={port}"))
+        .arg(format!(
+            "--config={}",
+            cartpole_config(&out, 1, 1).display()
+        ))
+        .arg(format!("--out={}", out.join("run").display()))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains(&format!(
+            "--human-port {port}: cannot serve the human expert's page"
+        )),
+        "{stderr}"
+    );
+    // `alfd local` has no expert process to serve the page: said so.
+    let o = alfd()
+        .args(["local", "--set=expert.name=human"])
+        .arg(format!(
+            "--config={}",
+            cartpole_config(&out, 1, 1).display()
+        ))
+        .arg(format!("--out={}", out.join("local").display()))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+}
