@@ -41,9 +41,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use alfd_common::config::ExperimentConfig;
-use alfd_common::record::{
-    mean_return_last_50, EpisodeRecord, RunSummary, RuntimeSummary, CSV_HEADER,
-};
+use alfd_common::record::{mean_return_last_50, EpisodeRecord, RunSummary, RuntimeSummary};
 use alfd_harness::{RuntimeConfig, RUNTIME_FILE};
 use alfd_wire::{
     self as wire, command, process_state, progress_kind, ActorBells, Bell, Control, Doorbell,
@@ -56,7 +54,10 @@ use tracing::{debug, info, warn};
 use crate::expert_lifecycle::{Action, Exit, ExpertLifecycle};
 
 mod children;
+mod episodes;
 mod remote;
+
+use episodes::{open_episodes, shares};
 
 use children::{describe, last_error, pin, proc_binary, RateMeter};
 
@@ -965,60 +966,4 @@ pub fn read_run_info(run_dir: &Path) -> anyhow::Result<RunInfo> {
     let text = std::fs::read_to_string(&path)
         .with_context(|| format!("{} is not a run directory (no run.json)", run_dir.display()))?;
     serde_json::from_str(&text).with_context(|| format!("malformed {}", path.display()))
-}
-
-/// `episodes` split among `actors`: the first `episodes % actors` play one more.
-fn shares(episodes: u64, actors: usize) -> [u32; alfd_wire::MAX_ACTORS] {
-    let mut q = [0u32; alfd_wire::MAX_ACTORS];
-    let actors = actors.clamp(1, alfd_wire::MAX_ACTORS) as u64;
-    for (i, share) in q.iter_mut().enumerate().take(actors as usize) {
-        let n = episodes / actors + u64::from((i as u64) < episodes % actors);
-        *share = u32::try_from(n).unwrap_or(u32::MAX);
-    }
-    q
-}
-
-/// `RUN_DIR/episodes.csv` opened for this launcher, and the (return, demonstrations used) of
-/// the rows already in it: a new run creates it with its header; a resumed run appends to it,
-/// after dropping a last line cut short by a crash.
-fn open_episodes(run_dir: &Path, resume: bool) -> anyhow::Result<(File, Vec<(f64, u32)>)> {
-    let path = run_dir.join("episodes.csv");
-    if !resume {
-        let mut csv = File::create(&path).context("cannot create episodes.csv")?;
-        writeln!(csv, "{CSV_HEADER}")?;
-        return Ok((csv, Vec::new()));
-    }
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("cannot read {}", path.display()))?;
-    let whole = text.rfind('\n').map_or(0, |i| i + 1);
-    let mut rows = Vec::new();
-    for (n, line) in text[..whole].lines().enumerate() {
-        if n == 0 {
-            anyhow::ensure!(
-                line == CSV_HEADER,
-                "{} has another header than this alfd writes",
-                path.display()
-            );
-            continue;
-        }
-        let fields: Vec<&str> = line.split(',').collect();
-        let parsed = (
-            fields.get(1).and_then(|f| f.parse::<f64>().ok()),
-            fields.get(3).and_then(|f| f.parse::<u32>().ok()),
-        );
-        let (Some(ret), Some(demos)) = parsed else {
-            anyhow::bail!("{} line {}: not an episode row", path.display(), n + 1);
-        };
-        rows.push((ret, demos));
-    }
-    anyhow::ensure!(whole > 0, "{} has no header", path.display());
-    let csv = std::fs::OpenOptions::new()
-        .write(true)
-        .open(&path)
-        .with_context(|| format!("cannot open {}", path.display()))?;
-    csv.set_len(whole as u64)?;
-    let mut csv = csv;
-    use std::io::Seek as _;
-    csv.seek(std::io::SeekFrom::End(0))?;
-    Ok((csv, rows))
 }
