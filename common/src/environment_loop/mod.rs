@@ -34,10 +34,18 @@ pub struct Stop(pub &'static str);
 /// What can go wrong in the loop: the environment refused a step, or a transport failed.
 #[derive(Debug, thiserror::Error)]
 pub enum LoopError {
+    /// Its message is the environment's (not also given as the source, so that `{:#}` does not
+    /// print it twice).
     #[error("environment: {0}")]
-    Env(#[from] EnvError),
+    Env(EnvError),
     #[error(transparent)]
     Link(Box<dyn std::error::Error + Send + Sync>),
+}
+
+impl From<EnvError> for LoopError {
+    fn from(e: EnvError) -> Self {
+        Self::Env(e)
+    }
 }
 
 impl LoopError {
