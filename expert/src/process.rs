@@ -282,28 +282,21 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             let log = log.as_mut().expect("active with a log");
             match answer {
                 Some(action) => {
-                    let record = core
-                        .demos()
-                        .last()
-                        .expect("answer recorded a demonstration");
-                    // On disk before the answer goes out: no demonstration is ever lost.
-                    log.append(record)?;
-                    response.outcome = outcome::ANSWERED;
-                    response.action = action as u32;
-                    response.demo_index = record.index;
-                    response.budget_left = core.budget().remaining();
-                    debug!(
-                        index = record.index,
-                        actor = request.actor,
+                    let index = send_demonstration(
+                        Answering {
+                            core: &core,
+                            log,
+                            model_tx: &mut model_tx,
+                            actors: &mut actors,
+                            generation: args.generation,
+                            name: &name,
+                        },
+                        query,
+                        response,
+                        request.actor,
                         action,
-                        step,
-                        "demonstration"
-                    );
-                    // The model refitted with this demonstration goes out first, so the actor
-                    // shapes the step it asked about with it (as in one process).
-                    publish_model(&mut model_tx, &core, args.generation, &name)?;
-                    query.answer(response)?;
-                    ring_actor(&mut actors, request.actor)?;
+                    )?;
+                    debug!(index, actor = request.actor, action, step, "demonstration");
                     answered += 1;
                 }
                 None => {
@@ -355,24 +348,21 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
                 };
                 match answer {
                     Some(action) => {
-                        let record = core
-                            .demos()
-                            .last()
-                            .expect("answer recorded a demonstration");
-                        log.append(record)?;
-                        response.outcome = outcome::ANSWERED;
-                        response.action = action as u32;
-                        response.demo_index = record.index;
-                        response.budget_left = core.budget().remaining();
-                        info!(
-                            index = record.index,
-                            actor = shown.actor,
+                        let index = send_demonstration(
+                            Answering {
+                                core: &core,
+                                log,
+                                model_tx: &mut model_tx,
+                                actors: &mut actors,
+                                generation: args.generation,
+                                name: &name,
+                            },
+                            query,
+                            response,
+                            shown.actor,
                             action,
-                            "the person answered"
-                        );
-                        publish_model(&mut model_tx, &core, args.generation, &name)?;
-                        query.answer(response)?;
-                        ring_actor(&mut actors, shown.actor)?;
+                        )?;
+                        info!(index, actor = shown.actor, action, "the person answered");
                         answered += 1;
                         person_answered += 1;
                     }
@@ -474,6 +464,43 @@ impl Demonstrator<[f32]> for Given {
 /// budget and the step of the last demonstration.
 /// Rings the doorbell of the actor that asked (an id beyond `u16` has none: it is not truncated
 /// onto another actor's).
+/// What answering a query with a demonstration needs of the expert process.
+struct Answering<'a, 'w> {
+    core: &'a ExpertCore,
+    log: &'a mut DemoLog,
+    model_tx: &'a mut alfd_wire::DemoModelSender<'w>,
+    actors: &'a mut ActorBells<'w>,
+    generation: u16,
+    name: &'a str,
+}
+
+/// Answers `query` of `actor` with `action`, the demonstration `core` has just recorded, in the
+/// one order every expert kind keeps: on disk first (no demonstration is ever lost), then the
+/// model refitted with it (so the actor shapes the step it asked about with it, as in one
+/// process), then the answer and the actor's doorbell. Returns the demonstration's index.
+fn send_demonstration(
+    a: Answering<'_, '_>,
+    query: IncomingQuery<'_>,
+    mut response: QueryResponse,
+    actor: u32,
+    action: usize,
+) -> anyhow::Result<u32> {
+    let record = a
+        .core
+        .demos()
+        .last()
+        .expect("answer recorded a demonstration");
+    a.log.append(record)?;
+    response.outcome = outcome::ANSWERED;
+    response.action = action as u32;
+    response.demo_index = record.index;
+    response.budget_left = a.core.budget().remaining();
+    publish_model(a.model_tx, a.core, a.generation, a.name)?;
+    query.answer(response)?;
+    ring_actor(a.actors, actor)?;
+    Ok(record.index)
+}
+
 fn ring_actor(actors: &mut ActorBells<'_>, actor: u32) -> anyhow::Result<()> {
     if let Ok(id) = u16::try_from(actor) {
         actors.ring(id)?;
