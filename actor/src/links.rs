@@ -190,9 +190,9 @@ impl Adder for WireAdder<'_, '_> {
         Ok(ControlFlow::Continue(()))
     }
 
-    fn add(&mut self, transition: Transition, truncated: bool) -> Result<()> {
+    fn add(&mut self, transition: Transition, episode_end: bool) -> Result<()> {
         self.batch.push(&transition).map_err(LoopError::link)?;
-        if transition.terminated || truncated {
+        if episode_end {
             self.batch.mark_episode_end();
         }
         self.next_seq += 1;

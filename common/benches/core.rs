@@ -34,6 +34,7 @@ fn replay(rng: &mut alfd_common::rng::Rng) -> ReplayBuffer {
                 .map(|_| if rng.random::<bool>() { 1.0 } else { 0.0 })
                 .collect(),
             demo: false,
+            horizon: 1,
         };
         buffer.push(&t);
     }

@@ -46,6 +46,7 @@ fn main() {
             terminated: rng.random::<f32>() < 0.05,
             mask: vec![1.0, if rng.random::<bool>() { 1.0 } else { 0.0 }],
             demo: false,
+            horizon: 1,
         });
     }
     let mut batch = Batch::default();

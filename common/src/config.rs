@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 mod validate;
 
-pub use validate::{MAX_BATCH_SIZE, MAX_HIDDEN, MAX_QUEUE_LEN, MAX_REPLAY_CAPACITY};
+pub use validate::{MAX_BATCH_SIZE, MAX_HIDDEN, MAX_N_STEP, MAX_QUEUE_LEN, MAX_REPLAY_CAPACITY};
 
 /// A config that cannot be used, with the field (or TOML line) at fault.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -357,6 +357,18 @@ pub struct AgentConfig {
     /// Neural: the length of that anneal, in stored transitions (environment steps).
     #[serde(default, skip_serializing_if = "is_zero_u64")]
     pub learning_rate_anneal_steps: u64,
+    /// Neural: n-step returns (Rainbow's, and DQfD's n-step loss): a stored transition carries
+    /// the discounted sum of up to `n_step` rewards and the state after them, and its target
+    /// bootstraps with `gamma^n`; fewer at an episode's end (1: one-step TD, the paper's).
+    #[serde(default = "default_n_step", skip_serializing_if = "is_one_u32")]
+    pub n_step: u32,
+}
+
+fn default_n_step() -> u32 {
+    1
+}
+fn is_one_u32(v: &u32) -> bool {
+    *v == 1
 }
 
 /// A linear learning-rate anneal: `start` at 0 stored transitions, `end` from `steps` on.

@@ -19,6 +19,10 @@ pub struct Transition {
     pub mask: Vec<f32>,
     /// The action came from the expert.
     pub demo: bool,
+    /// Environment steps from `state` to `next_state`: 1 for a one-step transition; n for an
+    /// n-step one, whose `reward` is the discounted sum `Σ_{i<n} γ^i r_i` of the n rewards and
+    /// whose target bootstraps with `γ^n` (see [`crate::n_step`]).
+    pub horizon: u8,
 }
 
 /// A sampled mini-batch in flat, row-major arrays, ready for the network.
@@ -37,6 +41,8 @@ pub struct Batch {
     pub masks: Vec<f32>,
     /// 1.0 where the transition is a demonstration (empty: none known).
     pub demos: Vec<f32>,
+    /// Each transition's [`Transition::horizon`] (empty: all one-step).
+    pub horizons: Vec<u8>,
 }
 
 /// Fixed-capacity ring buffer in structure-of-arrays layout.
@@ -54,6 +60,7 @@ pub struct ReplayBuffer {
     terminated: Vec<f32>,
     masks: Vec<f32>,
     demo: Vec<bool>,
+    horizons: Vec<u8>,
     /// The slots holding demonstrations, in no particular order.
     demo_slots: Vec<usize>,
 }
@@ -74,6 +81,7 @@ impl ReplayBuffer {
             terminated: vec![0.0; capacity],
             masks: vec![0.0; capacity * heads],
             demo: vec![false; capacity],
+            horizons: vec![1; capacity],
             demo_slots: Vec::new(),
         }
     }
@@ -91,6 +99,7 @@ impl ReplayBuffer {
             self.heads,
             "mask has the wrong number of heads"
         );
+        assert!(t.horizon >= 1, "a transition spans at least one step");
         let i = self.next;
         let d = self.obs_dim;
         self.states[i * d..(i + 1) * d].copy_from_slice(&t.state);
@@ -112,6 +121,7 @@ impl ReplayBuffer {
             self.demo_slots.push(i);
         }
         self.demo[i] = t.demo;
+        self.horizons[i] = t.horizon;
         self.next = (self.next + 1) % self.capacity;
         self.len = (self.len + 1).min(self.capacity);
     }
@@ -138,6 +148,7 @@ impl ReplayBuffer {
             && other.terminated.len() == self.terminated.len()
             && other.masks.len() == self.masks.len()
             && other.demo.len() == self.demo.len()
+            && other.horizons.len() == self.horizons.len()
             && other.demo_slots.iter().all(|&i| i < c)
     }
 
@@ -179,6 +190,7 @@ impl ReplayBuffer {
         batch.terminated.clear();
         batch.masks.clear();
         batch.demos.clear();
+        batch.horizons.clear();
         let from_demos = if self.demo_slots.is_empty() {
             0
         } else {
@@ -203,6 +215,7 @@ impl ReplayBuffer {
                 .masks
                 .extend_from_slice(&self.masks[i * h..(i + 1) * h]);
             batch.demos.push(if self.demo[i] { 1.0 } else { 0.0 });
+            batch.horizons.push(self.horizons[i]);
         }
     }
 }
@@ -220,6 +233,7 @@ mod tests {
             terminated: x > 5.0,
             mask: vec![1.0, 0.0],
             demo,
+            horizon: 1,
         }
     }
 

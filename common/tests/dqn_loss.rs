@@ -40,6 +40,7 @@ pub(crate) fn random_batch(size: usize, heads: usize, actions: usize, rng: &mut 
         terminated,
         masks,
         demos: vec![],
+        horizons: vec![],
     }
 }
 

@@ -1,6 +1,6 @@
 //! The learner's options beside the paper's loss: MSE, Double DQN targets, DQfD's large-margin
 //! loss, gradient clipping, Polyak target updates, `learning_starts`, demonstrations sampled more
-//! often. Each is checked against an f64 recomputation (and its gradient against central finite
+//! often, n-step targets. Each is checked against an f64 recomputation (and its gradient against central finite
 //! differences of it) or a hand-computed case.
 
 use alfd_common::agent::NeuralLearner;
@@ -51,8 +51,10 @@ fn loss64(
                     .map(|c| h(&qt, c))
                     .fold(f64::NEG_INFINITY, f64::max)
             };
+            // An h-step transition bootstraps with gamma^h.
+            let horizon = b.horizons.get(i).map_or(1, |&h| i32::from(h));
             let y = f64::from(b.rewards[i])
-                + f64::from(cfg.gamma) * (1.0 - f64::from(b.terminated[i])) * next;
+                + f64::from(cfg.gamma).powi(horizon) * (1.0 - f64::from(b.terminated[i])) * next;
             let td = h(&q, a) - y;
             total += m * match cfg.loss {
                 TdLoss::Huber if td.abs() < 1.0 => 0.5 * td * td,
@@ -71,6 +73,11 @@ fn loss64(
 }
 
 fn check_against_f64(cfg: TdConfig) {
+    check_against_f64_with(cfg, vec![]);
+}
+
+/// As [`check_against_f64`], the batch's transitions with these horizons (empty: one-step).
+fn check_against_f64_with(cfg: TdConfig, horizons: Vec<u8>) {
     let (hidden, heads, actions) = (8, 2, 3);
     let mut rng = seeded(77);
     let online = Mlp::new(OBS, hidden, heads, actions, &mut rng);
@@ -79,6 +86,7 @@ fn check_against_f64(cfg: TdConfig) {
     batch.demos = (0..batch.size)
         .map(|i| if i % 3 == 0 { 1.0 } else { 0.0 })
         .collect();
+    batch.horizons = horizons;
     let mut scratch = TrainScratch::default();
     let loss = loss_and_grads_with(&online, &target, &batch, &cfg, &mut scratch);
     let grads: Vec<f32> = scratch.grads().expect("gradients").tensors().concat();
@@ -135,6 +143,57 @@ fn each_loss_option_matches_an_f64_recomputation_and_finite_differences() {
 }
 
 #[test]
+fn n_step_targets_bootstrap_with_gamma_to_the_horizon() {
+    // Horizons 1 to 5 across the batch, with and without Double DQN and the margin loss.
+    let horizons: Vec<u8> = (0..24).map(|i| (i % 5 + 1) as u8).collect();
+    check_against_f64_with(TdConfig::dqn(0.9), horizons.clone());
+    check_against_f64_with(
+        TdConfig {
+            loss: TdLoss::Mse,
+            double: true,
+            margin_weight: 1.0,
+            margin: 0.8,
+            ..TdConfig::dqn(0.9)
+        },
+        horizons,
+    );
+    // By hand: one head, one action, Q = 0 online and 10 in the target; reward 1 over 3 steps
+    // with gamma 0.5: y = 1 + 0.125 * 10 = 2.25, huber(0 - 2.25) = 1.75; one step: y = 6,
+    // huber = 5.5.
+    let mut params = Params::zeros(OBS, 4, 1);
+    params.bh.as_mut_slice().copy_from_slice(&[10.0]);
+    let target = Mlp::from_params(params, 1, 1).unwrap();
+    let online = Mlp::from_params(Params::zeros(OBS, 4, 1), 1, 1).unwrap();
+    let batch = |h: Vec<u8>| Batch {
+        size: 1,
+        obs_dim: OBS,
+        heads: 1,
+        states: vec![0.0; OBS],
+        actions: vec![0],
+        rewards: vec![1.0],
+        next_states: vec![0.0; OBS],
+        terminated: vec![0.0],
+        masks: vec![1.0],
+        demos: vec![],
+        horizons: h,
+    };
+    let mut scratch = TrainScratch::default();
+    let cfg = TdConfig::dqn(0.5);
+    assert_eq!(
+        loss_and_grads_with(&online, &target, &batch(vec![3]), &cfg, &mut scratch),
+        1.75
+    );
+    assert_eq!(
+        loss_and_grads_with(&online, &target, &batch(vec![1]), &cfg, &mut scratch),
+        5.5
+    );
+    assert_eq!(
+        loss_and_grads_with(&online, &target, &batch(vec![]), &cfg, &mut scratch),
+        5.5
+    );
+}
+
+#[test]
 fn the_margin_loss_is_zero_when_the_demonstrated_action_wins_by_the_margin() {
     // One head, two actions, hand-set output bias: Q(s, ·) = (2.0, 0.5) for every state.
     let mut params = Params::zeros(OBS, 4, 2);
@@ -151,6 +210,7 @@ fn the_margin_loss_is_zero_when_the_demonstrated_action_wins_by_the_margin() {
         terminated: vec![1.0],
         masks: vec![1.0],
         demos: vec![1.0],
+        horizons: vec![],
     };
     let cfg = TdConfig {
         margin_weight: 1.0,
@@ -220,6 +280,7 @@ fn step(x: f32, demo: bool) -> Transition {
         terminated: false,
         mask: vec![1.0, 1.0],
         demo,
+        horizon: 1,
     }
 }
 
@@ -268,6 +329,8 @@ fn config_refuses_options_out_of_range_naming_the_field() {
     bad("loss = \"l1\"", "loss");
     bad("learning_rate_end = -0.1", "agent.learning_rate_end");
     bad("learning_rate_end = nan", "agent.learning_rate_end");
+    bad("n_step = 0", "agent.n_step");
+    bad("n_step = 101", "agent.n_step");
 }
 
 #[test]

@@ -233,6 +233,7 @@ fn a_learner_snapshot_round_trips_and_refuses_another_shape() {
             terminated: step.terminated,
             mask: vec![1.0, 0.0],
             demo: i % 5 == 0,
+            horizon: 1,
         };
         learner.learn(&t);
         obs = if step.done() {

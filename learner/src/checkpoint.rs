@@ -69,6 +69,7 @@ mod tests {
                 terminated: i == 19,
                 mask: vec![1.0, 0.0],
                 demo: i == 3,
+                horizon: 1,
             });
         }
         l
@@ -103,6 +104,7 @@ mod tests {
             terminated: false,
             mask: vec![1.0, 1.0],
             demo: false,
+            horizon: 1,
         };
         for _ in 0..5 {
             assert_eq!(a.learn(&t), b.learn(&t));
@@ -148,6 +150,7 @@ mod tests {
                 terminated: i % 200 == 199,
                 mask: vec![1.0, 0.0],
                 demo: i < 100,
+                horizon: 1,
             });
         }
         let tmp = test_dir("learner-ckpt-cost");

@@ -230,6 +230,7 @@ mod tests {
                 terminated: false,
                 mask: vec![1.0, 1.0],
                 demo: false,
+                horizon: 1,
             };
             b.push(&t).unwrap();
         }

@@ -37,6 +37,7 @@ pub struct NeuralActor {
     probs: Vec<f64>,
     weights_version: u64,
     gamma: f64,
+    n_step: u32,
     shaping_kind: ShapingKind,
 }
 
@@ -69,6 +70,7 @@ impl NeuralActor {
             probs: vec![0.0; actions],
             weights_version: 0,
             gamma: agent.gamma,
+            n_step: agent.n_step,
             shaping_kind,
         }
     }
@@ -151,6 +153,11 @@ impl NeuralActor {
         self.gamma
     }
 
+    /// The n of the n-step transitions this actor hands on (`agent.n_step`).
+    pub fn n_step(&self) -> u32 {
+        self.n_step
+    }
+
     /// The potential `Φ(s, a) = λ p(a|s)` of potential-based shaping.
     pub fn potential(obs: &[f32], action: usize, model: &DemoModel, lambda: f64) -> f64 {
         let s: Vec<f64> = obs.iter().map(|&x| f64::from(x)).collect();
@@ -198,6 +205,7 @@ impl NeuralActor {
             terminated,
             mask,
             demo,
+            horizon: 1,
         }
     }
 }

@@ -12,6 +12,8 @@ pub const MAX_BATCH_SIZE: usize = 8192;
 pub const MAX_HIDDEN: usize = 1024;
 /// The largest `query.queue_len` (L_q; the paper's is 1000).
 pub const MAX_QUEUE_LEN: usize = 100_000;
+/// The longest n-step return `agent.n_step` may ask for.
+pub const MAX_N_STEP: u32 = 100;
 
 /// `value` in `1..=max`, else an error naming `field`.
 fn in_range(field: &'static str, value: usize, max: usize) -> Result<()> {
@@ -231,6 +233,18 @@ impl ExperimentConfig {
             return Err(invalid(
                 "agent.learning_rate_anneal_steps",
                 "has no effect without agent.learning_rate_end",
+            ));
+        }
+        if !(1..=MAX_N_STEP).contains(&a.n_step) {
+            return Err(invalid(
+                "agent.n_step",
+                format!("must be in [1, {MAX_N_STEP}], got {}", a.n_step),
+            ));
+        }
+        if a.n_step > 1 && a.kind.is_tabular() {
+            return Err(invalid(
+                "agent.n_step",
+                "applies to the neural agents (dqn, bdqn); the tabular ones learn one step at a time",
             ));
         }
         for (field, v) in [

@@ -145,7 +145,7 @@ pub struct LocalAdder<'h> {
 }
 
 impl Adder for LocalAdder<'_> {
-    fn add(&mut self, transition: Transition, _truncated: bool) -> Result<()> {
+    fn add(&mut self, transition: Transition, _episode_end: bool) -> Result<()> {
         self.handle.learner.borrow_mut().learn(&transition);
         Ok(())
     }

@@ -23,6 +23,7 @@ use std::ops::ControlFlow;
 use crate::agent::{Decision, NeuralActor};
 use crate::demo_model::DemoModel;
 use crate::env::{Env, EnvError, Step};
+use crate::n_step::NStep;
 use crate::record::EpisodeRecord;
 use crate::replay::Transition;
 use crate::shaping::{potential_bonus, ShapingKind};
@@ -117,8 +118,9 @@ pub trait Adder {
     fn reserve(&mut self) -> Result<ControlFlow<Stop>> {
         Ok(ControlFlow::Continue(()))
     }
-    /// Hands one transition on (`truncated`: the step limit ended the episode there).
-    fn add(&mut self, transition: Transition, truncated: bool) -> Result<()>;
+    /// Hands one transition on (`episode_end`: the last of its episode, which ended there,
+    /// terminated or truncated).
+    fn add(&mut self, transition: Transition, episode_end: bool) -> Result<()>;
     /// The episode is over.
     fn end_episode(&mut self) -> Result<()> {
         Ok(())
@@ -140,7 +142,8 @@ pub trait VariableSource {
 ///
 /// With potential-based shaping a transition's bonus `γΦ(s',a') − Φ(s,a)` needs the next action
 /// `a'`, so each transition waits for the next step before it goes to the adder (the last one of
-/// an episode goes at once, with `Φ = 0` after it).
+/// an episode goes at once, with `Φ = 0` after it). With `agent.n_step > 1` the transitions then
+/// pass through [`NStep`] on their way to the adder.
 #[derive(Debug)]
 pub struct GenericActor<A, V> {
     pub core: NeuralActor,
@@ -148,15 +151,31 @@ pub struct GenericActor<A, V> {
     pub variables: V,
     /// Potential shaping: the last transition and its potential `Φ(s,a)`.
     pending: Option<(Transition, f64)>,
+    /// n-step returns (`None`: one-step transitions go to the adder as they are).
+    n_step: Option<NStep>,
 }
 
 impl<A: Adder, V: VariableSource> GenericActor<A, V> {
     pub fn new(core: NeuralActor, adder: A, variables: V) -> Self {
+        let n_step = (core.n_step() > 1).then(|| NStep::new(core.n_step(), core.gamma()));
         Self {
             core,
             adder,
             variables,
             pending: None,
+            n_step,
+        }
+    }
+
+    /// Hands `t` on to the adder, through the n-step window if there is one (`episode_end`: the
+    /// last transition of its episode).
+    fn emit(&mut self, t: Transition, episode_end: bool) -> Result<()> {
+        match &mut self.n_step {
+            None => self.adder.add(t, episode_end),
+            Some(window) => {
+                let adder = &mut self.adder;
+                window.push(t, episode_end, |t, end| adder.add(t, end))
+            }
         }
     }
 
@@ -177,11 +196,11 @@ impl<A: Adder, V: VariableSource> GenericActor<A, V> {
         });
         if let Some((mut prev, phi_prev)) = self.pending.take() {
             prev.reward = (f64::from(prev.reward) + potential_bonus(gamma, phi, phi_prev)) as f32;
-            self.adder.add(prev, false)?;
+            self.emit(prev, false)?;
         }
         if step.done() {
             t.reward = (f64::from(t.reward) + potential_bonus(gamma, 0.0, phi)) as f32;
-            self.adder.add(t, step.truncated)
+            self.emit(t, true)
         } else {
             self.pending = Some((t, phi));
             Ok(())
@@ -232,12 +251,17 @@ impl<A: Adder, V: VariableSource> Actor<Vec<f32>> for GenericActor<A, V> {
         if potential {
             self.add_with_potential(t, obs, action, step, shaping)?;
         } else {
-            self.adder.add(t, step.truncated)?;
+            self.emit(t, step.done())?;
         }
         Ok(shaping.is_some())
     }
 
     fn end_episode(&mut self) -> Result<()> {
+        if let Some(window) = &mut self.n_step {
+            // Empty unless the episode stopped in its middle (its last steps go nowhere).
+            window.clear();
+        }
+        self.pending = None;
         self.adder.end_episode()
     }
 }
@@ -447,8 +471,12 @@ mod tests {
     }
 
     fn actor(kind: &str) -> NeuralActor {
+        actor_with(kind, "")
+    }
+
+    fn actor_with(kind: &str, agent: &str) -> NeuralActor {
         let text = format!(
-            "seed = 0\nepisodes = 1\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"dqn\"\ngamma = 0.9\n[shaping]\nkind = \"{kind}\"\n"
+            "seed = 0\nepisodes = 1\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"dqn\"\ngamma = 0.9\n{agent}[shaping]\nkind = \"{kind}\"\n"
         );
         let cfg = ExperimentConfig::from_toml(&text).unwrap();
         NeuralActor::new(
@@ -501,5 +529,36 @@ mod tests {
             .unwrap();
         assert_eq!(p.adder.0.len(), 1);
         assert!(p.adder.0[0].0.reward > 1.0, "eq. 4 adds a positive bonus");
+    }
+
+    #[test]
+    fn with_n_step_the_adder_gets_n_step_transitions_and_the_tail_at_the_end() {
+        // Four steps of reward 1, the fourth terminal, n = 3, γ = 0.9.
+        let mut out = Recorder::default();
+        let mut a = GenericActor::new(actor_with("paper", "n_step = 3\n"), &mut out, Fixed);
+        for x in 0..4 {
+            let s = vec![x as f32; 4];
+            a.observe(&s, 0, &step(x as f32 + 1.0, x == 3), false, None)
+                .unwrap();
+            let waited = if x == 3 { 4 } else { (x as usize).saturating_sub(1) };
+            assert_eq!(a.adder.0.len(), waited, "after step {x}");
+        }
+        let got: Vec<(f32, f32, u8, bool, bool)> = a
+            .adder
+            .0
+            .iter()
+            .map(|(t, end)| (t.state[0], t.reward, t.horizon, t.terminated, *end))
+            .collect();
+        let r3 = (1.0 + 0.9 + 0.81f64) as f32;
+        assert_eq!(
+            got,
+            vec![
+                (0.0, r3, 3, false, false),
+                (1.0, r3, 3, true, false),
+                (2.0, 1.9, 2, true, false),
+                (3.0, 1.0, 1, true, true),
+            ]
+        );
+        assert_eq!(a.adder.0[0].0.next_state, vec![3.0; 4]);
     }
 }

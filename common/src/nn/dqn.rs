@@ -25,6 +25,10 @@
 //!   `a != a_E`, 0 otherwise;
 //! - `max_grad_norm`: the gradient scaled to at most this global L2 norm (PyTorch's
 //!   `clip_grad_norm_`) before Adam's step.
+//!
+//! A batch of n-step transitions (`Batch::horizons`, see [`crate::n_step`]) bootstraps transition
+//! `i` with `gamma^h_i` instead of `gamma`; its reward is already the discounted sum of the `h_i`
+//! rewards.
 
 use nalgebra::DMatrix;
 
@@ -281,7 +285,10 @@ fn td_loss(
     let mut loss = 0.0f64;
     for i in 0..n {
         let a = batch.actions[i] as usize;
-        let bootstrap = gamma_bootstrap(cfg.gamma, batch.terminated[i]);
+        let bootstrap = match batch.horizons.get(i) {
+            Some(&h) if h > 1 => gamma_bootstrap(gamma_power(cfg.gamma, h), batch.terminated[i]),
+            _ => gamma_bootstrap(cfg.gamma, batch.terminated[i]),
+        };
         let demo = margin_on && batch.demos[i] != 0.0;
         for k in 0..heads {
             let mask = batch.masks[i * heads + k];
@@ -331,6 +338,13 @@ fn td_loss(
     (loss / n as f64) as f32
 }
 
+/// `gamma^h` for an h-step transition, multiplied out in f64 (no libm: the same bits on every
+/// machine).
+fn gamma_power(gamma: f32, h: u8) -> f32 {
+    let g = f64::from(gamma);
+    (0..h).fold(1.0f64, |p, _| p * g) as f32
+}
+
 /// `gamma * (1 - terminated)`.
 #[inline]
 fn gamma_bootstrap(gamma: f32, terminated: f32) -> f32 {
@@ -350,5 +364,14 @@ mod tests {
         assert_eq!(huber(1.0), 0.5);
         assert_eq!(huber_grad(0.25), 0.25);
         assert_eq!(huber_grad(-7.0), -1.0);
+    }
+
+    #[test]
+    fn an_n_step_target_bootstraps_with_gamma_to_the_n() {
+        assert_eq!(gamma_power(0.5, 1), 0.5);
+        assert_eq!(gamma_power(0.5, 3), 0.125);
+        let g = f64::from(0.99f32);
+        assert_eq!(gamma_power(0.99, 5), (g * g * g * g * g) as f32);
+        assert_ne!(gamma_power(0.99, 5), 0.99);
     }
 }

@@ -10,7 +10,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use crate::error::{Result, WireError};
 
 /// The version of the messages below. Bump it whenever a message changes.
-pub const SCHEMA_VERSION: u32 = 3;
+pub const SCHEMA_VERSION: u32 = 4;
 /// Actors per run (the credit table has one slot per actor id).
 pub const MAX_ACTORS: usize = 16;
 /// Largest observation a transition or a query can carry.
@@ -155,6 +155,17 @@ pub mod flags {
     /// The last step of an episode (terminated or truncated): where the learner may checkpoint
     /// in step with the actors (see `alfd_common::checkpoint::Cadence`).
     pub const EPISODE_END: u32 = 8;
+    /// Bits 16-23 hold the transition's horizon minus one (0 for a one-step transition; see
+    /// `alfd_common::n_step`).
+    pub const HORIZON_SHIFT: u32 = 16;
+    /// The horizon's bits, after shifting.
+    pub const HORIZON_MASK: u32 = 0xff;
+}
+
+/// The horizon a record's `flags` give (1 to 256; [`TransitionBatch::check`] refuses more than
+/// `agent.n_step` allows).
+fn horizon_of(bits: u32) -> u32 {
+    ((bits >> flags::HORIZON_SHIFT) & flags::HORIZON_MASK) + 1
 }
 
 /// One environment step as it travels from an actor to the learner.
@@ -299,6 +310,16 @@ impl TransitionBatch {
                 "below the environment's number of actions",
             );
         }
+        if let Some(r) = self.records[..self.len()]
+            .iter()
+            .find(|r| horizon_of(r.flags) > alfd_common::config::MAX_N_STEP)
+        {
+            return range(
+                "transition horizon",
+                u64::from(horizon_of(r.flags)),
+                "at most agent.n_step's limit",
+            );
+        }
         Ok(())
     }
 
@@ -335,7 +356,8 @@ impl TransitionBatch {
         r.action = t.action;
         r.reward = t.reward;
         r.flags = (if t.terminated { flags::TERMINATED } else { 0 })
-            | (if t.demo { flags::DEMO } else { 0 });
+            | (if t.demo { flags::DEMO } else { 0 })
+            | (u32::from(t.horizon.max(1) - 1) << flags::HORIZON_SHIFT);
         self.len += 1;
         Ok(())
     }
@@ -358,6 +380,7 @@ impl TransitionBatch {
             terminated: r.flags & flags::TERMINATED != 0,
             mask: r.mask[..h].to_vec(),
             demo: r.flags & flags::DEMO != 0,
+            horizon: horizon_of(r.flags).min(u32::from(u8::MAX)) as u8,
         })
     }
 
@@ -869,6 +892,7 @@ mod tests {
                         terminated: k % 2 == 0,
                         mask: vec![1.0; heads],
                         demo: k % 3 == 0,
+                        horizon: (k % 7 + 1) as u8,
                     };
                     b.push(&t).unwrap();
                     sent.push(t);
@@ -880,6 +904,7 @@ mod tests {
                     prop_assert_eq!(g.state.len(), s.state.len());
                     prop_assert_eq!(g.action, s.action);
                     prop_assert_eq!((g.terminated, g.demo), (s.terminated, s.demo));
+                    prop_assert_eq!(g.horizon, s.horizon);
                 }
             }
 

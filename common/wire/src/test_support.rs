@@ -41,5 +41,6 @@ pub(crate) fn transition(x: f32, demo: bool, terminated: bool) -> Transition {
         terminated,
         mask: vec![1.0, 0.0],
         demo,
+        horizon: 1,
     }
 }

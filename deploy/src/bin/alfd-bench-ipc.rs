@@ -396,6 +396,7 @@ fn peer(bench: Bench, run_id: &str, n: usize, ring: bool) -> anyhow::Result<()> 
                 terminated: false,
                 mask: vec![1.0, 0.0],
                 demo: false,
+                horizon: 1,
             };
             let mut sent = 0u64;
             let mut granted = 0u64;
