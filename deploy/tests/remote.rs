@@ -225,6 +225,65 @@ fn an_expert_on_another_host_answers_every_query_and_its_demonstrations_are_writ
 }
 
 #[test]
+fn alfd_swap_expert_swaps_away_from_a_remote_expert_and_its_host_leaves() {
+    let _time = timed!();
+    let (out, expert_host) = (tmp("remote-swap"), tmp("remote-swap-host"));
+    let port = free_port();
+    let listen = format!("--listen=tcp/127.0.0.1:{port}");
+    let run = spawn_run(
+        &out,
+        1,
+        &[
+            &listen,
+            "episodes=100000",
+            "budget.total=1000",
+            "query.mode=first",
+        ],
+    );
+    let expert = spawn_expert_join(port, "cartpole-200", &expert_host);
+    let log = expert_host.join("join").join("expert-2.log");
+    let start = Instant::now();
+    while !std::fs::read_to_string(&log).is_ok_and(|t| t.contains("answering queries")) {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no remote expert"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Back to an expert on the learner's host, make before break.
+    let swap = alfd()
+        .args(["swap-expert", "--run"])
+        .arg(&out)
+        .args(["--expert", "cartpole-perfect"])
+        .output()
+        .unwrap();
+    assert!(swap.status.success(), "{}", text(&swap));
+    // The remote host's expert was replaced: `alfd join --expert` ends, successfully.
+    let e = finish(expert, 60);
+    assert!(e.status.success(), "{}", text(&e));
+    let o = crate::runtime::interrupt(run);
+    let s = summary(&out);
+    assert_eq!(s["expert_swaps"], 2, "{}", text(&o));
+    // Every demonstration on the learner's host, in order (read checks the indices): the run's
+    // first expert's, then the remote expert's, then only the local one's again.
+    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let names: Vec<&str> = demos.iter().map(|d| d.expert.as_str()).collect();
+    let mut runs: Vec<&str> = names.clone();
+    runs.dedup();
+    assert!(
+        matches!(
+            runs.as_slice(),
+            ["cartpole-200"]
+                | ["cartpole-perfect", "cartpole-200"]
+                | ["cartpole-200", "cartpole-perfect"]
+                | ["cartpole-perfect", "cartpole-200", "cartpole-perfect"]
+        ),
+        "{runs:?}"
+    );
+    assert!(demos.len() <= 1000);
+}
+
+#[test]
 fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
     let _time = timed!();
     let (out, first, second) = (tmp("remote-drop"), tmp("remote-a"), tmp("remote-b"));
