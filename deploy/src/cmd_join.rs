@@ -1,7 +1,10 @@
-//! `alfd join`: actors on this host for a run on another (`alfd run --listen`). It asks the run
-//! for actor ids, starts a mirror of the run's services here (see `alfd_bridge`), and the actor
-//! processes, unchanged, against the mirror; it ends when they have stopped: at the run's end,
-//! on Ctrl-C, or when the link to the learner's host is lost.
+//! `alfd join`: actors on this host for a run on another (`alfd run --listen`), and/or the run's
+//! expert (`--expert NAME`). It asks the run for actor ids, starts a mirror of the run's
+//! services here (see `alfd_bridge`), and the actor processes, unchanged, against the mirror;
+//! with `--expert` also an expert host (a second local copy of the run's services), where it
+//! starts `alfd-expert` when the run's launcher says so (a make-before-break swap to this
+//! host's expert) and reports its exit. It ends when its processes have stopped: at the run's
+//! end, on Ctrl-C, when this host's expert was replaced, or when the link is lost.
 
 use std::os::unix::process::CommandExt as _;
 use std::path::PathBuf;
@@ -24,9 +27,14 @@ pub struct JoinArgs {
     /// The learner's host: the endpoint its `alfd run --listen` listens on.
     #[arg(long, value_name = "tcp/ADDR:PORT")]
     pub connect: String,
-    /// Actor processes to start on this host (1..=16; the run gives them free actor ids).
-    #[arg(long, default_value_t = 1)]
-    pub actors: usize,
+    /// Actor processes to start on this host (0..=16; the run gives them free actor ids).
+    /// Default 1, or 0 with `--expert`.
+    #[arg(long)]
+    pub actors: Option<usize>,
+    /// Serve the run's expert from this host: the demonstrator, by name (`alfd expert list`,
+    /// or `python:MODULE:FUNCTION`). The run swaps to it, make before break.
+    #[arg(long, value_name = "NAME")]
+    pub expert: Option<String>,
     /// Where this host keeps its actors' logs and checkpoints; default
     /// `runs/join-<run id>-<pid>`.
     #[arg(long)]
@@ -39,19 +47,25 @@ pub struct JoinArgs {
 pub fn run(args: JoinArgs) -> anyhow::Result<()> {
     let endpoint = alfd_bridge::Endpoint::parse(&args.connect)
         .map_err(|e| usage(format!("--connect: {e}")))?;
-    if !(1..=MAX_ACTORS).contains(&args.actors) {
+    let actors = args
+        .actors
+        .unwrap_or(if args.expert.is_some() { 0 } else { 1 });
+    if actors > MAX_ACTORS || (actors == 0 && args.expert.is_none()) {
         return Err(usage(format!(
-            "--actors must be in 1..={MAX_ACTORS}, got {}",
-            args.actors
+            "--actors must be in 1..={MAX_ACTORS} (0 only with --expert), got {actors}"
         )));
     }
+    if args.expert.as_deref().is_some_and(|e| e.trim().is_empty()) {
+        return Err(usage("--expert: an empty name"));
+    }
     let bin_dir = launcher::bin_dir()?;
-    let actor_bin = bin_dir.join("alfd-actor");
-    anyhow::ensure!(
-        actor_bin.is_file(),
-        "alfd-actor not found in {} (build every binary: `cargo build --release`)",
-        bin_dir.display()
-    );
+    for bin in ["alfd-actor", "alfd-expert"] {
+        anyhow::ensure!(
+            bin_dir.join(bin).is_file(),
+            "{bin} not found in {} (build every binary: `cargo build --release`)",
+            bin_dir.display()
+        );
+    }
     let host = hostname();
     let pid = std::process::id();
     let nanos = std::time::SystemTime::now()
@@ -60,7 +74,8 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
     let request = alfd_bridge::JoinRequest {
         join_id: format!("{host}-{pid}-{nanos}"),
         host: host.clone(),
-        actors: args.actors as u16,
+        actors: actors as u16,
+        expert: args.expert.clone(),
     };
     let schema = alfd_harness::schema_version_from_env().map_err(usage)?;
     let remote = alfd_bridge::join(
@@ -93,10 +108,15 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
     let mirror_id = format!("j{secs}-{pid}");
+    // The expert's copy of the run, apart from the actors' (their queries go through the
+    // learner's host, where its demonstrations are written first).
+    let expert_host_id = format!("k{secs}-{pid}");
     // How to find this host's part of the run afterwards (`alfd clean` takes the mirror's id).
     let record = serde_json::json!({
         "run_id": joined.run_id,
         "mirror_run_id": mirror_id,
+        "expert_host_run_id": args.expert.as_ref().map(|_| &expert_host_id),
+        "expert": args.expert,
         "connect": endpoint.to_string(),
         "actors": joined.actors,
     });
@@ -106,118 +126,265 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
         serde_json::to_string_pretty(&record)?.as_bytes(),
     )?;
     let result = {
-        let mirror = alfd_bridge::Mirror::start(remote, &mirror_id)
-            .context("cannot start this host's mirror of the run")?;
-        let wire = Wire::connect(&mirror_id, Process::new(Role::Tool, 0), SCHEMA_VERSION)
-            .context("cannot create this host's iceoryx2 node")?;
-        let r = host_actors(&mirror, &wire, &joined, &dir, &actor_bin, &mirror_id);
+        let expert_host = match &args.expert {
+            Some(_) => Some(
+                alfd_bridge::ExpertHost::start(&remote, &expert_host_id, &dir, actors == 0)
+                    .context("cannot start this host's copy of the run for its expert")?,
+            ),
+            None => None,
+        };
+        // The actors' mirror (it announces this host); without actors, the connection stays.
+        let (mirror, _remote) = if actors > 0 {
+            let m = alfd_bridge::Mirror::start(remote, &mirror_id)
+                .context("cannot start this host's mirror of the run")?;
+            (Some(m), None)
+        } else {
+            (None, Some(remote))
+        };
+        let wire = Wire::connect(
+            if actors > 0 {
+                &mirror_id
+            } else {
+                &expert_host_id
+            },
+            Process::new(Role::Tool, 0),
+            SCHEMA_VERSION,
+        )
+        .context("cannot create this host's iceoryx2 node")?;
+        let host = Host {
+            mirror: mirror.as_ref(),
+            expert_host: expert_host.as_ref(),
+            wire: &wire,
+            joined: &joined,
+            dir: &dir,
+            bin_dir: &bin_dir,
+            mirror_id: &mirror_id,
+            expert_host_id: &expert_host_id,
+        };
+        let r = host.run();
         drop(wire);
-        if let Err(e) = mirror.stop() {
-            warn!("the mirror: {e}");
+        if let Some(e) = expert_host {
+            if let Err(e) = e.stop() {
+                warn!("the expert host: {e}");
+            }
+        }
+        if let Some(m) = mirror {
+            if let Err(e) = m.stop() {
+                warn!("the mirror: {e}");
+            }
         }
         r
     };
-    if let Err(e) = alfd_wire::close_run(&mirror_id) {
-        warn!("cannot close this host's iceoryx2 resources: {e}");
+    for id in [&mirror_id, &expert_host_id] {
+        if let Err(e) = alfd_wire::close_run(id) {
+            warn!("cannot close this host's iceoryx2 resources: {e}");
+        }
     }
     result
 }
 
-/// Starts the actors once the run's control message came through, and waits for them.
-fn host_actors(
-    mirror: &alfd_bridge::Mirror,
-    wire: &Wire,
-    joined: &alfd_bridge::Joined,
-    dir: &std::path::Path,
-    actor_bin: &std::path::Path,
-    mirror_id: &str,
-) -> anyhow::Result<()> {
-    let deadline = Instant::now() + Duration::from_secs(20);
-    while mirror.silence().is_none() {
-        anyhow::ensure!(
-            Instant::now() < deadline && !mirror.ended(),
-            "no word from the run {} through the link within 20 s",
-            joined.run_id
-        );
-        if wire.termination_requested() {
-            bail!("interrupted before the actors started");
-        }
-        std::thread::sleep(Duration::from_millis(20));
+/// This host's part of a run: its bridges and where its processes go.
+struct Host<'a> {
+    mirror: Option<&'a alfd_bridge::Mirror>,
+    expert_host: Option<&'a alfd_bridge::ExpertHost>,
+    wire: &'a Wire,
+    joined: &'a alfd_bridge::Joined,
+    dir: &'a std::path::Path,
+    bin_dir: &'a std::path::Path,
+    mirror_id: &'a str,
+    expert_host_id: &'a str,
+}
+
+impl Host<'_> {
+    /// How long since the learner's host was last heard of through either bridge.
+    fn silence(&self) -> Option<Duration> {
+        [
+            self.mirror.and_then(|m| m.silence()),
+            self.expert_host.and_then(|e| e.silence()),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
     }
-    let mut actors: Vec<(u16, Child)> = Vec::new();
-    for &(id, incarnation) in &joined.actors {
-        let log_path = dir.join(format!("actor-{id}.log"));
+
+    fn ended(&self) -> bool {
+        self.mirror.is_some_and(|m| m.ended()) || self.expert_host.is_some_and(|e| e.ended())
+    }
+
+    fn start(&self, bin: &str, name: &str, args: &[String]) -> anyhow::Result<Child> {
+        let log_path = self.dir.join(format!("{name}.log"));
         let log = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
             .open(&log_path)
             .with_context(|| format!("cannot open {}", log_path.display()))?;
-        let child = Command::new(actor_bin)
-            .args([
-                format!("--actor-id={id}"),
-                format!("--incarnation={incarnation}"),
-                format!("--run-id={mirror_id}"),
-                format!("--run-dir={}", dir.display()),
-            ])
+        Command::new(self.bin_dir.join(bin))
+            .args(args)
+            .arg(format!("--run-dir={}", self.dir.display()))
             .stdin(Stdio::null())
             .stdout(log.try_clone()?)
             .stderr(log)
             .process_group(0)
             .spawn()
-            .context("cannot start alfd-actor")?;
-        info!(actor = id, incarnation, pid = child.id(), "started");
-        actors.push((id, child));
+            .with_context(|| format!("cannot start {bin}"))
     }
-    eprintln!(
-        "joined run {}: actors {:?} here (logs in {})",
-        joined.run_id,
-        joined.actors.iter().map(|a| a.0).collect::<Vec<_>>(),
-        dir.display()
-    );
-    let mut failed = Vec::new();
-    let mut stopping: Option<&str> = None;
-    while !actors.is_empty() {
-        std::thread::sleep(Duration::from_millis(50));
-        let mut i = 0;
-        while i < actors.len() {
-            match actors[i].1.try_wait()? {
-                None => i += 1,
-                Some(status) => {
-                    let (id, _) = actors.remove(i);
-                    if status.success() {
-                        info!(actor = id, "stopped");
-                    } else {
-                        warn!(actor = id, "exited: {status}");
-                        failed.push(format!(
-                            "actor-{id} ({status}; see {})",
-                            dir.join(format!("actor-{id}.log")).display()
-                        ));
+
+    /// Starts the actors once the run's control message came through, the expert when the run
+    /// says so, and waits for them.
+    fn run(&self) -> anyhow::Result<()> {
+        let joined = self.joined;
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while self.silence().is_none() {
+            anyhow::ensure!(
+                Instant::now() < deadline && !self.ended(),
+                "no word from the run {} through the link within 20 s",
+                joined.run_id
+            );
+            if self.wire.termination_requested() {
+                bail!("interrupted before the actors started");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let mut actors: Vec<(u16, Child)> = Vec::new();
+        for &(id, incarnation) in &joined.actors {
+            let child = self.start(
+                "alfd-actor",
+                &format!("actor-{id}"),
+                &[
+                    format!("--actor-id={id}"),
+                    format!("--incarnation={incarnation}"),
+                    format!("--run-id={}", self.mirror_id),
+                ],
+            )?;
+            info!(actor = id, incarnation, pid = child.id(), "started");
+            actors.push((id, child));
+        }
+        if !actors.is_empty() {
+            eprintln!(
+                "joined run {}: actors {:?} here (logs in {})",
+                joined.run_id,
+                joined.actors.iter().map(|a| a.0).collect::<Vec<_>>(),
+                self.dir.display()
+            );
+        }
+        // This host's expert: the generation running here, and whether one ever ran.
+        let mut expert: Option<(u16, Child)> = None;
+        let mut served = false;
+        let mut failed = Vec::new();
+        let mut stopping: Option<String> = None;
+        let mut signalled = false;
+        loop {
+            std::thread::sleep(Duration::from_millis(50));
+            let mut i = 0;
+            while i < actors.len() {
+                match actors[i].1.try_wait()? {
+                    None => i += 1,
+                    Some(status) => {
+                        let (id, _) = actors.remove(i);
+                        if status.success() {
+                            info!(actor = id, "stopped");
+                        } else {
+                            warn!(actor = id, "exited: {status}");
+                            failed.push(format!(
+                                "actor-{id} ({status}; see {})",
+                                self.dir.join(format!("actor-{id}.log")).display()
+                            ));
+                        }
                     }
                 }
             }
-        }
-        let why = if wire.termination_requested() {
-            Some("interrupted")
-        } else if mirror.ended() || mirror.silence().is_some_and(|s| s >= LINK_SILENCE) {
-            Some("lost the link to the learner's host")
-        } else {
-            None
-        };
-        if let (Some(why), None) = (why, stopping) {
-            warn!("{why}: stopping the actors here");
-            stopping = Some(why);
-            for (_, c) in &actors {
-                let _ = Command::new("kill")
-                    .args(["-TERM", &c.id().to_string()])
-                    .status();
+            if let Some((generation, child)) = &mut expert {
+                if let Some(status) = child.try_wait()? {
+                    let generation = *generation;
+                    let how = crate::launcher::describe_status(status);
+                    info!(generation, "this host's expert {how}");
+                    if let Some(e) = self.expert_host {
+                        e.exited(generation, how, status.code());
+                    }
+                    expert = None;
+                }
+            }
+            for order in self.expert_host.map(|e| e.orders()).unwrap_or_default() {
+                match order {
+                    alfd_bridge::ExpertHostOrder::Start { .. } if stopping.is_some() => {}
+                    alfd_bridge::ExpertHostOrder::Start { generation, name } => {
+                        if let Some((_, mut old)) = expert.take() {
+                            let _ = old.kill();
+                            let _ = old.wait();
+                        }
+                        let child = self.start(
+                            "alfd-expert",
+                            &format!("expert-{generation}"),
+                            &[
+                                format!("--generation={generation}"),
+                                format!("--expert={name}"),
+                                format!("--run-id={}", self.expert_host_id),
+                            ],
+                        )?;
+                        info!(generation, expert = %name, pid = child.id(), "expert started");
+                        eprintln!(
+                            "serving as the expert of run {} ({name}, generation {generation}; \
+                             log in {})",
+                            joined.run_id,
+                            self.dir.join(format!("expert-{generation}.log")).display()
+                        );
+                        expert = Some((generation, child));
+                        served = true;
+                    }
+                    alfd_bridge::ExpertHostOrder::Kill { generation } => {
+                        if let Some((g, child)) = &mut expert {
+                            if *g == generation {
+                                warn!(generation, "the run kills this host's expert");
+                                let _ = child.kill();
+                            }
+                        }
+                    }
+                    alfd_bridge::ExpertHostOrder::Refused(why) => {
+                        stopping.get_or_insert_with(|| format!("refused: {why}"));
+                    }
+                }
+            }
+            let why = if self.wire.termination_requested() {
+                Some("interrupted".to_owned())
+            } else if self.ended() || self.silence().is_some_and(|s| s >= LINK_SILENCE) {
+                Some("lost the link to the learner's host".to_owned())
+            } else {
+                None
+            };
+            if let (Some(why), None) = (why, &stopping) {
+                warn!("{why}: stopping the processes here");
+                stopping = Some(why);
+            }
+            if stopping.is_some() && !signalled {
+                signalled = true;
+                let pids = actors
+                    .iter()
+                    .map(|a| &a.1)
+                    .chain(expert.as_ref().map(|e| &e.1));
+                for c in pids {
+                    let _ = Command::new("kill")
+                        .args(["-TERM", &c.id().to_string()])
+                        .status();
+                }
+            }
+            // Done when nothing runs here and nothing more will: the actors stopped, and this
+            // host's expert served and stopped (or none was asked for).
+            let expert_done = self.expert_host.is_none() || (served && expert.is_none());
+            if actors.is_empty() && expert.is_none() && (expert_done || stopping.is_some()) {
+                break;
             }
         }
+        if let Some(why) = stopping {
+            if let Some(refusal) = why.strip_prefix("refused: ") {
+                return Err(usage(format!(
+                    "the run does not take this host's expert: {refusal}"
+                )));
+            }
+            bail!("{why}");
+        }
+        anyhow::ensure!(failed.is_empty(), "{}", failed.join("; "));
+        Ok(())
     }
-    if let Some(why) = stopping {
-        bail!("{why}");
-    }
-    anyhow::ensure!(failed.is_empty(), "{}", failed.join("; "));
-    Ok(())
 }
 
 /// This host's name, as a zenoh key chunk (letters, digits, `-`).

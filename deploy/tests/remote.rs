@@ -36,6 +36,22 @@ fn spawn_join(port: u16, actors: usize, dir: &Path) -> Background {
     ))
 }
 
+/// `alfd join` serving the run's expert `name` (no actors), as another host.
+fn spawn_expert_join(port: u16, name: &str, dir: &Path) -> Background {
+    Background(Some(
+        alfd()
+            .args(["join", "--connect", &format!("tcp/127.0.0.1:{port}")])
+            .arg(format!("--expert={name}"))
+            .arg(format!("--dir={}", dir.join("join").display()))
+            .current_dir(dir)
+            .env("HOME", dir)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("alfd join runs"),
+    ))
+}
+
 /// Waits (at most `secs`) for a background process to end, and returns its output.
 fn finish(mut p: Background, secs: u64) -> Output {
     let start = Instant::now();
@@ -129,6 +145,142 @@ fn two_remote_actors_over_zenoh_play_a_run_to_its_end_within_the_budget() {
             "{id}"
         );
     }
+}
+
+#[test]
+fn an_expert_on_another_host_answers_every_query_and_its_demonstrations_are_written_here() {
+    let _time = timed!();
+    let (out, expert_host, actor_host) = (
+        tmp("remote-expert"),
+        tmp("remote-expert-host"),
+        tmp("remote-actor-host"),
+    );
+    let port = free_port();
+    let listen = format!("--listen=tcp/127.0.0.1:{port}");
+    let run = spawn_run(
+        &out,
+        0,
+        &[
+            &listen,
+            "episodes=120",
+            "budget.total=12",
+            "query.mode=first",
+        ],
+    );
+    // The run starts with its own expert (cartpole-perfect, local); a host joins as its expert,
+    // and the run swaps to it (make before break) before any actor plays.
+    let expert = spawn_expert_join(port, "cartpole-200", &expert_host);
+    let log = expert_host.join("join").join("expert-2.log");
+    let start = Instant::now();
+    while !std::fs::read_to_string(&log).is_ok_and(|t| t.contains("answering queries")) {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "the remote expert is not active after 60 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let actors = spawn_join(port, 2, &actor_host);
+    let o = finish(run, 120);
+    assert!(o.status.success(), "{}", text(&o));
+    let a = finish(actors, 60);
+    assert!(a.status.success(), "{}", text(&a));
+    let e = finish(expert, 60);
+    assert!(e.status.success(), "{}", text(&e));
+
+    let s = summary(&out);
+    assert_eq!(s["episodes"], 120);
+    assert_eq!(s["expert_swaps"], 1);
+    let rows = rows(&out);
+    // Every demonstration is on the learner's host, each from the remote expert, within the
+    // budget, and each was used by an actor (none lost, none counted twice).
+    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    assert_eq!(demos.len(), 12);
+    assert!(
+        demos.iter().all(|d| d.expert == "cartpole-200"),
+        "{:?}",
+        demos.iter().map(|d| &d.expert).collect::<Vec<_>>()
+    );
+    assert_eq!(s["demos"], 12);
+    let queries: u32 = rows.iter().map(|r| r[5].parse::<u32>().unwrap()).sum();
+    assert_eq!(queries, 12, "every demonstration was used by an actor");
+    assert_eq!(rows.last().unwrap()[3], "12", "demos_used");
+    // The remote expert's own copy holds the same demonstrations.
+    let there = alfd_expert::demo_log::read(&expert_host.join("join").join("demos.jsonl")).unwrap();
+    assert_eq!(there, demos);
+    let joined: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(expert_host.join("join").join("join.json")).unwrap(),
+    )
+    .unwrap();
+    for id in [
+        run_id(&out),
+        mirror_id(&actor_host.join("join")),
+        joined["expert_host_run_id"].as_str().unwrap().to_owned(),
+    ] {
+        assert_eq!(
+            wire::leftover_files(&id),
+            Vec::<std::path::PathBuf>::new(),
+            "{id}"
+        );
+    }
+}
+
+#[test]
+fn alfd_swap_expert_swaps_away_from_a_remote_expert_and_its_host_leaves() {
+    let _time = timed!();
+    let (out, expert_host) = (tmp("remote-swap"), tmp("remote-swap-host"));
+    let port = free_port();
+    let listen = format!("--listen=tcp/127.0.0.1:{port}");
+    let run = spawn_run(
+        &out,
+        1,
+        &[
+            &listen,
+            "episodes=100000",
+            "budget.total=1000",
+            "query.mode=first",
+        ],
+    );
+    let expert = spawn_expert_join(port, "cartpole-200", &expert_host);
+    let log = expert_host.join("join").join("expert-2.log");
+    let start = Instant::now();
+    while !std::fs::read_to_string(&log).is_ok_and(|t| t.contains("answering queries")) {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no remote expert"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Back to an expert on the learner's host, make before break.
+    let swap = alfd()
+        .args(["swap-expert", "--run"])
+        .arg(&out)
+        .args(["--expert", "cartpole-perfect"])
+        .output()
+        .unwrap();
+    assert!(swap.status.success(), "{}", text(&swap));
+    // The remote host's expert was replaced: `alfd join --expert` ends, successfully.
+    let e = finish(expert, 60);
+    assert!(e.status.success(), "{}", text(&e));
+    let o = crate::runtime::interrupt(run);
+    let s = summary(&out);
+    assert_eq!(s["expert_swaps"], 2, "{}", text(&o));
+    // Every demonstration on the learner's host, in order (read checks the indices): the run's
+    // first expert's, then the remote expert's, then only the local one's again.
+    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let names: Vec<&str> = demos.iter().map(|d| d.expert.as_str()).collect();
+    let mut runs: Vec<&str> = names.clone();
+    runs.dedup();
+    assert!(
+        matches!(
+            runs.as_slice(),
+            ["cartpole-200"]
+                | ["cartpole-perfect", "cartpole-200"]
+                | ["cartpole-200", "cartpole-perfect"]
+                | ["cartpole-perfect", "cartpole-200", "cartpole-perfect"]
+        ),
+        "{runs:?}"
+    );
+    assert!(demos.len() <= 1000);
 }
 
 #[test]

@@ -21,6 +21,8 @@ pub enum BridgeError {
     NoRun { endpoint: String, waited_ms: u64 },
     #[error("the run refused to be joined: {0}")]
     Refused(String),
+    #[error("{0}")]
+    Demos(String),
     #[error(transparent)]
     Wire(#[from] alfd_wire::WireError),
 }

@@ -32,6 +32,39 @@ pub enum Frame {
     Control(Control),
     /// The expert's answer to [`Frame::Query`] (`request_seq` and `actor` as the actor asked).
     Answer(QueryResponse),
+    // --- an expert on a remote host (`alfd join --expert`) -------------------------------------
+    /// Down: the hub's orders to the joined hosts' experts.
+    Order(ExpertOrder),
+    /// Down: `RUN_DIR/demos.jsonl` as it is when `generation` is made active, sent before the
+    /// control message that makes it active, so that it reads the run's demonstrations back.
+    DemoLog {
+        generation: u16,
+        text: String,
+    },
+    /// Up: a remote expert's answer (`request_seq` and `actor` as the hub asked), with its
+    /// demonstration as the line the expert appended to its `demos.jsonl` when it is one.
+    ExpertAnswer(QueryResponse, Option<String>),
+    /// Up: the remote expert of `generation` ended (after every answer it sent).
+    ExpertExited {
+        generation: u16,
+        how: String,
+        code: Option<i32>,
+    },
+}
+
+/// What the learner's host tells a joined host about its expert.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ExpertOrder {
+    /// Start `alfd-expert` as `generation` with demonstrator `name` (the host `join_id`).
+    Start {
+        join_id: String,
+        generation: u16,
+        name: String,
+    },
+    /// Kill the expert of `generation` (it did not come up or leave in time).
+    Kill { generation: u16 },
+    /// The run does not take the expert of `join_id` now: `why`.
+    Refuse { join_id: String, why: String },
 }
 
 impl Frame {
@@ -45,6 +78,9 @@ impl Frame {
             Frame::Weights(..) => "weights",
             Frame::DemoModel(..) => "demo-model",
             Frame::Control(_) => "control",
+            Frame::Order(_) | Frame::ExpertExited { .. } => "expert-order",
+            Frame::DemoLog { .. } => "demos",
+            Frame::ExpertAnswer(..) => "query",
         }
     }
 }

@@ -5,15 +5,16 @@
 //! services under the actors' own headers; what they need (credits, weights, the demonstration
 //! model, control, answers) goes out over zenoh as it is published here.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use alfd_wire::{
-    Doorbell, PendingQuery, Process, QueryClient, Role, Sender, TransitionBatch, Wake, Wire,
-    WireError, MAX_ACTORS, SCHEMA_VERSION,
+    Doorbell, IncomingQuery, PendingQuery, Process, QueryClient, Role, Sender, TransitionBatch,
+    Wake, Wire, WireError, MAX_ACTORS, SCHEMA_VERSION,
 };
 use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
@@ -22,8 +23,8 @@ use zenoh::Wait as _;
 
 use crate::endpoint::Endpoint;
 use crate::error::{zenoh_error, BridgeError, Result};
-use crate::frame::{self, Frame};
-use crate::inbox::{inbox, Mail};
+use crate::frame::{self, ExpertOrder, Frame};
+use crate::inbox::{inbox, Mail, Post};
 use crate::roster::{JoinReply, JoinRequest, Joined, Roster};
 use crate::{keys, TICK};
 
@@ -39,6 +40,9 @@ pub struct HubOptions {
     pub runtime_toml: String,
     /// A remote query not answered within this long is dropped (the actor gave up already).
     pub query_timeout: Duration,
+    /// `RUN_DIR/demos.jsonl`: a remote expert's demonstrations are written here before they
+    /// are answered.
+    pub demos_path: PathBuf,
 }
 
 /// What the launcher hears from the hub.
@@ -48,9 +52,22 @@ pub enum HubEvent {
         join_id: String,
         host: String,
         actors: Vec<(u16, u64)>,
+        /// The demonstrator it offers to serve as the run's expert.
+        expert: Option<String>,
     },
-    /// A remote host left or its link dropped: its actors are gone, as if they had crashed.
-    Left { join_id: String, actors: Vec<u16> },
+    /// A remote host left or its link dropped: its actors (and its expert) are gone, as if
+    /// they had crashed.
+    Left {
+        join_id: String,
+        actors: Vec<u16>,
+        expert: bool,
+    },
+    /// A remote expert process ended; every answer it sent before was taken in.
+    ExpertExited {
+        generation: u16,
+        how: String,
+        code: Option<i32>,
+    },
 }
 
 /// A running hub; stop it with [`Hub::stop`] (or drop it).
@@ -58,6 +75,7 @@ pub struct Hub {
     roster: Arc<Mutex<Roster>>,
     events: mpsc::Receiver<HubEvent>,
     stop: Arc<AtomicBool>,
+    post: Post,
     thread: Option<JoinHandle<Result<()>>>,
     _queryable: zenoh::query::Queryable<()>,
     _members: zenoh::pubsub::Subscriber<()>,
@@ -108,6 +126,7 @@ impl Hub {
                             join_id: r.join_id.clone(),
                             host: r.host.clone(),
                             actors: j.actors.clone(),
+                            expert: r.expert.clone(),
                         });
                     }
                     match frame::encode(SCHEMA_VERSION, &reply) {
@@ -125,6 +144,7 @@ impl Hub {
         let members = {
             let roster = Arc::clone(&roster);
             let post = post.clone();
+            let events_tx = events_tx.clone();
             let prefix = keys::member(&opts.run_id, "");
             session
                 .liveliness()
@@ -138,9 +158,13 @@ impl Hub {
                             post.send(Mail::Joined);
                         }
                         SampleKind::Delete => {
-                            let actors = roster.lock().expect("roster").leave(&join_id);
-                            if !actors.is_empty() {
-                                let _ = events_tx.send(HubEvent::Left { join_id, actors });
+                            let left = roster.lock().expect("roster").leave(&join_id);
+                            if !left.actors.is_empty() || left.expert {
+                                let _ = events_tx.send(HubEvent::Left {
+                                    join_id,
+                                    actors: left.actors,
+                                    expert: left.expert,
+                                });
                             }
                         }
                     }
@@ -175,10 +199,11 @@ impl Hub {
         let thread = {
             let stop = Arc::clone(&stop);
             let opts = opts.clone();
+            let events_tx = events_tx.clone();
             std::thread::Builder::new()
                 .name("hub".to_owned())
                 .spawn(move || {
-                    let r = forward(&opts, &inbox, &down, &stop);
+                    let r = forward(&opts, &inbox, &down, &stop, &events_tx);
                     if let Err(e) = &r {
                         warn!("the hub stopped: {e}");
                     }
@@ -186,13 +211,12 @@ impl Hub {
                 })
                 .expect("a thread starts")
         };
-        // The join events come from the queryable's answers too.
-        let _ = post;
         info!(endpoint = %opts.endpoint, "listening for remote hosts");
         Ok(Self {
             roster,
             events,
             stop,
+            post,
             thread: Some(thread),
             _queryable: queryable,
             _members: members,
@@ -204,6 +228,12 @@ impl Hub {
     /// Joins and departures since the last call.
     pub fn events(&self) -> Vec<HubEvent> {
         self.events.try_iter().collect()
+    }
+
+    /// Sends `order` to the remote hosts (again to each host that joins later, so an order
+    /// given before the host's mirror listened still reaches it).
+    pub fn order(&self, order: ExpertOrder) {
+        self.post.send(Mail::Order(order));
     }
 
     /// Actor ids held by remote hosts now.
@@ -278,6 +308,8 @@ struct Newest {
     weights: Option<Vec<u8>>,
     model: Option<Vec<u8>>,
     control: Option<Vec<u8>>,
+    /// Orders to remote experts, in the order given.
+    orders: Vec<Vec<u8>>,
 }
 
 /// The hub's thread: blocks on its doorbells (its own, rung when zenoh delivered something, and
@@ -287,6 +319,7 @@ fn forward(
     inbox: &crate::inbox::Inbox,
     down: &zenoh::pubsub::Publisher<'static>,
     stop: &AtomicBool,
+    events: &mpsc::Sender<HubEvent>,
 ) -> Result<()> {
     let wire = Wire::connect(&opts.run_id, Process::new(Role::Bridge, 0), SCHEMA_VERSION)?;
     let mut bells = vec![Doorbell::Bridge];
@@ -305,6 +338,14 @@ fn forward(
     let mut transitions: HashMap<u32, Sender<'_, TransitionBatch>> = HashMap::new();
     let mut clients: HashMap<u32, QueryClient<'_>> = HashMap::new();
     let mut pending: HashMap<u32, (PendingQuery<'_>, u64, Instant)> = HashMap::new();
+    // A remote expert's side on this host: the hub serves the queries while it is active, and
+    // publishes its model here.
+    let server = wire.query_server()?;
+    let mut held: HashMap<u32, IncomingQuery<'_>> = HashMap::new();
+    let mut remote_model = None;
+    let mut remote_experts: HashSet<u16> = HashSet::new();
+    let mut active = 0u32;
+    let mut actor_bells = alfd_wire::ActorBells::new(&wire);
     let mut newest = Newest::default();
     let mut params = Vec::new();
     let mut bytes = Vec::new();
@@ -328,11 +369,22 @@ fn forward(
                     ]
                     .into_iter()
                     .flatten()
+                    .chain(&newest.orders)
                     {
                         put(f)?;
                     }
                     continue;
                 }
+                Mail::Order(order) => {
+                    if let ExpertOrder::Start { generation, .. } = &order {
+                        remote_experts.insert(*generation);
+                    }
+                    let f = frame::encode(SCHEMA_VERSION, &Frame::Order(order))?;
+                    put(&f)?;
+                    newest.orders.push(f);
+                    continue;
+                }
+                Mail::Exited { .. } => continue,
                 Mail::Frame(b) => b,
             };
             let f = match frame::decode::<Frame>(SCHEMA_VERSION, &b) {
@@ -368,6 +420,47 @@ fn forward(
                     pending.insert(q.actor, (ask, q.header.seq, Instant::now()));
                     Ok(expert.ring())
                 }
+                Frame::DemoModel(h, b) if remote_experts.contains(&(h.expert as u16)) => {
+                    let tx = match &mut remote_model {
+                        Some(tx) => tx,
+                        None => remote_model.insert(wire.demo_model_sender()?),
+                    };
+                    tx.forward(h, &b).map(|_| Ok(0))
+                }
+                Frame::ExpertAnswer(r, demo) => {
+                    // On disk here before any actor sees it: no link loss can lose it.
+                    if let Some(line) = demo {
+                        if let Err(e) = crate::demos::append(&opts.demos_path, r.demo_index, &line)
+                        {
+                            warn!("a remote expert's demonstration refused: {e}; not answered");
+                            continue;
+                        }
+                    }
+                    let Some(q) = held.remove(&r.actor) else {
+                        continue;
+                    };
+                    if q.request().header.seq != r.request_seq {
+                        held.insert(r.actor, q);
+                        continue;
+                    }
+                    let actor = r.actor;
+                    q.answer(r).map(|_| {
+                        u16::try_from(actor).map_or(Ok(0), |id| actor_bells.ring(id).map(|()| 0))
+                    })
+                }
+                Frame::ExpertExited {
+                    generation,
+                    how,
+                    code,
+                } => {
+                    remote_experts.remove(&generation);
+                    let _ = events.send(HubEvent::ExpertExited {
+                        generation,
+                        how,
+                        code,
+                    });
+                    launcher.ring().map(Ok)
+                }
                 other => {
                     debug!(service = other.service(), "a down frame came up; dropped");
                     continue;
@@ -381,6 +474,21 @@ fn forward(
                 Err(e) => return Err(e.into()),
             }
         }
+        // Queries to a remote expert: held here while it is active, the others let go (this
+        // host's expert answers them).
+        loop {
+            match server.receive() {
+                Ok(Some(q)) if remote_experts.contains(&(active as u16)) => {
+                    put(&frame::encode(SCHEMA_VERSION, &Frame::Query(*q.request()))?)?;
+                    held.insert(q.request().actor, q);
+                }
+                Ok(Some(_)) => {}
+                Ok(None) => break,
+                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
+                Err(e) => return Err(e.into()),
+            }
+        }
+        held.retain(|_, q| q.is_connected());
         // Down: what this host publishes, to every remote host.
         if let Some(c) = credits.latest()? {
             let f = frame::encode(SCHEMA_VERSION, &Frame::Credits(c))?;
@@ -398,9 +506,30 @@ fn forward(
             newest.model = Some(f);
         }
         if let Some(c) = control.latest()? {
+            if c.active_expert != active {
+                active = c.active_expert;
+                let generation = active as u16;
+                if remote_experts.contains(&generation) {
+                    // Every expert before it has exited and all its answers are written: the
+                    // remote expert reads this back when it becomes active.
+                    let text = crate::demos::read(&opts.demos_path)?;
+                    info!(
+                        generation,
+                        bytes = text.len(),
+                        "demos.jsonl to the remote expert"
+                    );
+                    put(&frame::encode(
+                        SCHEMA_VERSION,
+                        &Frame::DemoLog { generation, text },
+                    )?)?;
+                }
+            }
             let f = frame::encode(SCHEMA_VERSION, &Frame::Control(c))?;
             put(&f)?;
             newest.control = Some(f);
+        }
+        if let Some(tx) = &remote_model {
+            tx.update_connections()?;
         }
         let mut answered = Vec::new();
         for (actor, (p, seq, asked)) in pending.iter_mut() {

@@ -18,6 +18,14 @@ pub(crate) enum Mail {
     Frame(Vec<u8>),
     /// A remote host joined: the hub sends it the newest of every down service again.
     Joined,
+    /// The launcher's order to a remote expert (the hub sends it down).
+    Order(crate::frame::ExpertOrder),
+    /// `alfd join`: the expert process here ended (the mirror sends it up after its answers).
+    Exited {
+        generation: u16,
+        how: String,
+        code: Option<i32>,
+    },
 }
 
 /// The sending side, cloned into zenoh's callbacks.

@@ -12,14 +12,20 @@
 //! |------------------------------|----------------------------------------------------|
 //! | `alfd/<run>/join`            | queryable: a remote host asks for actor ids        |
 //! | `alfd/<run>/up`              | remote hosts → hub: transitions, progress, queries |
-//! | `alfd/<run>/down`            | hub → remote hosts: credits, weights, model, control, answers |
+//! | `alfd/<run>/down`            | hub → remote hosts: credits, weights, model, control, answers; to a remote expert: orders, queries, `demos.jsonl` |
 //! | `alfd/<run>/hub`             | liveliness: the hub                                |
 //! | `alfd/<run>/member/<join>`   | liveliness: a joined host (gone = its actors crashed) |
 //!
+//! A remote host may also serve the run's expert (`alfd join --expert NAME`, an [`ExpertHost`]):
+//! its answers come up with their demonstrations, which the hub writes to the run's
+//! `demos.jsonl` before any actor sees them.
+//!
 //! One run id is one key prefix, so two runs never see each other's messages.
 
+mod demos;
 mod endpoint;
 mod error;
+mod expert_host;
 mod frame;
 mod hub;
 mod inbox;
@@ -30,10 +36,11 @@ use std::time::Duration;
 
 pub use endpoint::Endpoint;
 pub use error::{BridgeError, Result};
-pub use frame::{decode, encode, Frame};
+pub use expert_host::{ExpertHost, ExpertHostOrder};
+pub use frame::{decode, encode, ExpertOrder, Frame};
 pub use hub::{Hub, HubEvent, HubOptions};
 pub use mirror::{join, Mirror, Remote};
-pub use roster::{JoinReply, JoinRequest, Joined, Roster};
+pub use roster::{JoinReply, JoinRequest, Joined, Left, Roster};
 
 /// The longest a bridge sleeps between two looks at what this host published (the learner's
 /// weights and credits ring nobody); rings wake it sooner.

@@ -31,6 +31,18 @@ pub struct Remote {
     join_id: String,
 }
 
+impl Remote {
+    /// The zenoh session to the learner's host.
+    pub(crate) fn session(&self) -> &zenoh::Session {
+        &self.session
+    }
+
+    /// This host's join id.
+    pub(crate) fn join_id(&self) -> &str {
+        &self.join_id
+    }
+}
+
 impl std::fmt::Debug for Remote {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "Remote({})", self.joined.run_id)

@@ -14,6 +14,16 @@ pub struct JoinRequest {
     pub join_id: String,
     pub host: String,
     pub actors: u16,
+    /// The demonstrator this host serves as the run's expert (`alfd join --expert NAME`).
+    pub expert: Option<String>,
+}
+
+/// What a host that left took with it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Left {
+    pub actors: Vec<u16>,
+    /// Whether it served an expert.
+    pub expert: bool,
 }
 
 /// What the run answers.
@@ -43,6 +53,8 @@ pub struct Roster {
     holders: Vec<Option<String>>,
     /// Per id: the incarnation the next holder gets.
     next_incarnation: Vec<u64>,
+    /// The joins that serve an expert.
+    experts: Vec<String>,
 }
 
 impl Roster {
@@ -54,18 +66,28 @@ impl Roster {
             first_incarnation,
             holders: vec![None; MAX_ACTORS],
             next_incarnation: vec![first_incarnation; MAX_ACTORS],
+            experts: Vec::new(),
         }
     }
 
-    /// Gives `request.actors` free ids to `request.join_id`. Asking again with the same join id
-    /// (its reply was lost) gets the same ids.
+    /// Gives `request.actors` free ids to `request.join_id` (and takes note of its expert).
+    /// Asking again with the same join id (its reply was lost) gets the same ids.
     pub fn join(&mut self, request: &JoinRequest) -> Result<Vec<(u16, u64)>, String> {
         let held = self.held_by(&request.join_id);
-        if !held.is_empty() {
+        if !held.is_empty() || self.experts.contains(&request.join_id) {
             return Ok(held);
         }
-        if request.actors == 0 {
-            return Err("a join brings at least one actor (--actors 1 or more)".to_owned());
+        if request.actors == 0 && request.expert.is_none() {
+            return Err(
+                "a join brings at least one actor or an expert (--actors 1 or more, or --expert)"
+                    .to_owned(),
+            );
+        }
+        if request.expert.is_some() && !self.experts.is_empty() {
+            return Err(format!(
+                "another host ({}) serves an expert already; one remote expert at a time",
+                self.experts[0]
+            ));
         }
         let free: Vec<usize> = (self.local..MAX_ACTORS)
             .filter(|&i| self.holders[i].is_none())
@@ -80,6 +102,9 @@ impl Roster {
                 self.remote()
             ));
         }
+        if request.expert.is_some() {
+            self.experts.push(request.join_id.clone());
+        }
         Ok(free[..n]
             .iter()
             .map(|&i| {
@@ -91,16 +116,20 @@ impl Roster {
             .collect())
     }
 
-    /// `join_id` left (or its link dropped): its ids are free again; returns them.
-    pub fn leave(&mut self, join_id: &str) -> Vec<u16> {
-        let mut freed = Vec::new();
+    /// `join_id` left (or its link dropped): its ids are free again, and its expert gone;
+    /// returns what it held.
+    pub fn leave(&mut self, join_id: &str) -> Left {
+        let mut left = Left::default();
         for (i, h) in self.holders.iter_mut().enumerate() {
             if h.as_deref() == Some(join_id) {
                 *h = None;
-                freed.push(i as u16);
+                left.actors.push(i as u16);
             }
         }
-        freed
+        let before = self.experts.len();
+        self.experts.retain(|j| j != join_id);
+        left.expert = self.experts.len() < before;
+        left
     }
 
     /// (id, incarnation) of the actors `join_id` holds.
@@ -138,7 +167,42 @@ mod tests {
             join_id: id.to_owned(),
             host: "h".to_owned(),
             actors,
+            expert: None,
         }
+    }
+
+    fn expert(id: &str, actors: u16) -> JoinRequest {
+        JoinRequest {
+            expert: Some("cartpole-200".to_owned()),
+            ..ask(id, actors)
+        }
+    }
+
+    #[test]
+    fn a_host_may_serve_the_expert_with_or_without_actors_one_at_a_time() {
+        let mut r = Roster::new(1, 1);
+        assert_eq!(r.join(&expert("e", 0)).unwrap(), vec![]);
+        // Asked again (a lost reply): the same answer, not a second expert.
+        assert_eq!(r.join(&expert("e", 0)).unwrap(), vec![]);
+        let e = r.join(&expert("f", 2)).unwrap_err();
+        assert!(e.contains("serves an expert already"), "{e}");
+        assert_eq!(r.remote(), 0, "a refused join holds nothing");
+        assert_eq!(
+            r.leave("e"),
+            Left {
+                actors: vec![],
+                expert: true
+            }
+        );
+        assert_eq!(r.join(&expert("f", 2)).unwrap(), vec![(1, 1), (2, 1)]);
+        assert_eq!(
+            r.leave("f"),
+            Left {
+                actors: vec![1, 2],
+                expert: true
+            }
+        );
+        assert_eq!(r.leave("f"), Left::default());
     }
 
     #[test]
@@ -151,8 +215,8 @@ mod tests {
         assert_eq!(r.remote(), 3);
         assert!(r.is_remote(3) && !r.is_remote(1) && !r.is_remote(5));
         // "a" drops: its ids come back, with the next incarnation.
-        assert_eq!(r.leave("a"), vec![2, 3]);
-        assert_eq!(r.leave("a"), Vec::<u16>::new());
+        assert_eq!(r.leave("a").actors, vec![2, 3]);
+        assert_eq!(r.leave("a"), Left::default());
         assert_eq!(r.remote(), 1);
         assert_eq!(r.join(&ask("a2", 3)).unwrap(), vec![(2, 2), (3, 2), (5, 1)]);
     }
@@ -167,7 +231,10 @@ mod tests {
             r.join(&ask("a", 2)).unwrap(),
             vec![(14, 1_000_001), (15, 1_000_001)]
         );
-        assert!(r.join(&ask("z", 0)).unwrap_err().contains("at least one"));
+        assert!(r
+            .join(&ask("z", 0))
+            .unwrap_err()
+            .contains("at least one actor or an expert"));
         assert_eq!(r.first_incarnation(), 1_000_001);
     }
 }

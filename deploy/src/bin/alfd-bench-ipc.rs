@@ -192,6 +192,8 @@ fn bridges(
         config_toml: String::new(),
         runtime_toml: String::new(),
         query_timeout: Duration::from_secs(1),
+        // No remote expert in the benchmark: nothing is written there.
+        demos_path: std::env::temp_dir().join(format!("alfd-bench-{run_id}-demos.jsonl")),
     })?;
     let remote = alfd_bridge::join(
         &endpoint,
@@ -199,6 +201,7 @@ fn bridges(
             join_id: format!("bench-{}", std::process::id()),
             host: "bench".to_owned(),
             actors: 1,
+            expert: None,
         },
         Duration::from_secs(10),
         SCHEMA_VERSION,

@@ -44,7 +44,7 @@ pub(super) fn proc_binary(kind: &Kind, name: &str) -> String {
 }
 
 /// "exited with status 1", "was killed by signal 9".
-pub(super) fn describe(status: ExitStatus) -> String {
+pub(crate) fn describe(status: ExitStatus) -> String {
     use std::os::unix::process::ExitStatusExt as _;
     match (status.code(), status.signal()) {
         (Some(c), _) => format!("exited with status {c}"),

@@ -59,6 +59,7 @@ mod remote;
 
 use episodes::{open_episodes, shares};
 
+pub(crate) use children::describe as describe_status;
 use children::{describe, last_error, pin, proc_binary, RateMeter};
 
 /// Everything a launch needs.
@@ -284,6 +285,8 @@ struct Launcher<'a, 'w> {
     /// Remote hosts that joined, and that left or dropped (their links).
     remote_joins: u32,
     remote_losses: u32,
+    /// Expert generations served by remote hosts (`alfd join --expert`).
+    remote_experts: remote::RemoteExperts,
     /// The newest expert generation whose human page's address was printed.
     human_page_shown: u16,
 }
@@ -358,6 +361,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             hub: None,
             remote_joins: 0,
             remote_losses: 0,
+            remote_experts: remote::RemoteExperts::default(),
             human_page_shown: 0,
         })
     }
@@ -418,7 +422,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
     fn tick(&mut self) -> anyhow::Result<Wake> {
         let wake = self.waiter.wait(Duration::from_millis(100))?;
         self.drain_progress()?;
-        self.check_hub();
+        self.check_hub()?;
         if self.last_control.elapsed() >= CONTROL_PERIOD {
             self.publish_control()?;
         }
@@ -745,12 +749,16 @@ impl<'a, 'w> Launcher<'a, 'w> {
             debug!(?action, "expert lifecycle");
             match action {
                 Action::Spawn { generation, name } => {
+                    if self.spawn_remote_expert(generation, &name) {
+                        continue;
+                    }
                     if generation > 1 {
                         info!(generation, expert = %name, "starting a new expert generation");
                     }
                     self.spawn(Kind::Expert { generation, name })?;
                 }
                 Action::Kill { generation } => {
+                    self.kill_remote_expert(generation);
                     for p in &mut self.procs {
                         if matches!(&p.kind, Kind::Expert { generation: g, .. } if *g == generation)
                         {
@@ -773,6 +781,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 } => {
                     if ok {
                         info!(generation, expert = %request.expert, "expert swapped");
+                    }
+                    if self.answer_remote_expert(&request, ok, &message) {
+                        continue;
                     }
                     self.respond(request, ok, message, from, generation)?;
                 }
@@ -867,7 +878,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         while (!self.procs.is_empty() || remote(self) > 0) && Instant::now() < deadline {
             let wake = self.waiter.wait(Duration::from_millis(50))?;
             self.drain_progress()?;
-            self.check_hub();
+            self.check_hub()?;
             if self.last_control.elapsed() >= CONTROL_PERIOD {
                 self.publish_control()?;
             }
