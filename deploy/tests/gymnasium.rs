@@ -466,8 +466,11 @@ fn an_adapter_killed_with_sigkill_takes_its_actor_down_and_both_are_restarted() 
             .unwrap(),
     ));
     crate::runtime::wait_rows(&out, 5, &mut run);
-    let adapter = crate::runtime::find_process("python", &["env", "--name=env-0"])
-        .or_else(|| crate::runtime::find_process("python3", &["env", "--name=env-0"]))
+    // This run's adapter, not another test's (they run at the same time, each with an env-0).
+    let run_arg = format!("--run-id={}", crate::runtime::run_id(&out));
+    let mine = ["env", "--name=env-0", run_arg.as_str()];
+    let adapter = crate::runtime::find_process("python", &mine)
+        .or_else(|| crate::runtime::find_process("python3", &mine))
         .expect("actor 0's adapter runs");
     crate::runtime::signal("KILL", adapter);
     // Actor 0 stops at its next step, naming the adapter; the launcher restarts it, and the new
