@@ -11,6 +11,7 @@
 use nalgebra::{DMatrix, DVector};
 use rand::Rng as _;
 
+use super::dots::{self, dot, dot4};
 use super::gemm::{gemm, thin, wide, Epi, MatRef};
 use super::{torch_shapes, NnError, Params, Result};
 use crate::rng::Rng;
@@ -450,7 +451,7 @@ fn matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: MatRef<'_>, epi: Epi<'_>)
 }
 
 /// `out = a^T * b` (overwritten), `a` and `b` with the same number of rows (the batch). Thin
-/// products become dot products of contiguous columns.
+/// products become dot products of contiguous columns ([`dots::tr_dots`]).
 #[inline(always)]
 fn tr_matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &DMatrix<f32>, pack: &mut Vec<f32>) {
     let (m, k) = a.shape();
@@ -468,42 +469,13 @@ fn tr_matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &DMatrix<f32>, pack: &
         );
         return;
     }
-    if m == 0 {
-        out.as_mut_slice().fill(0.0);
-        return;
-    }
-    let a = a.as_slice();
-    for (out_col, b_col) in out
-        .as_mut_slice()
-        .chunks_exact_mut(k.max(1))
-        .zip(b.as_slice().chunks_exact(m))
-    {
-        // Four columns of `a` against the same column of `b`.
-        let mut outs = out_col.chunks_exact_mut(4);
-        let mut blocks = a.chunks_exact(4 * m);
-        for (o, block) in (&mut outs).zip(&mut blocks) {
-            let (a0, rest) = block.split_at(m);
-            let (a1, rest) = rest.split_at(m);
-            let (a2, a3) = rest.split_at(m);
-            o.copy_from_slice(&dot4([a0, a1, a2, a3], b_col));
-        }
-        for (o, a_col) in outs
-            .into_remainder()
-            .iter_mut()
-            .zip(blocks.remainder().chunks_exact(m))
-        {
-            *o = dot(a_col, b_col);
-        }
-    }
+    dots::tr_dots((m, k, n), a.as_slice(), b.as_slice(), out.as_mut_slice());
 }
 
 /// `out[j] = sum_i m[(i, j)]`.
 #[inline(always)]
 fn column_sums(m: &DMatrix<f32>, out: &mut DVector<f32>) {
-    let rows = m.nrows();
-    for (o, col) in out.iter_mut().zip(m.as_slice().chunks_exact(rows.max(1))) {
-        *o = sum(col);
-    }
+    dots::column_sums(m.nrows(), m.as_slice(), out.as_mut_slice());
 }
 
 /// One dense layer for one input: `out[o] = b[o] + w[:, o] . x`, with ReLU if asked; `w` is
@@ -535,78 +507,6 @@ fn dense_one(w: &DMatrix<f32>, b: &DVector<f32>, x: &[f32], out: &mut [f32], rel
     {
         *o = finish(dot(col, x) + bias);
     }
-}
-
-/// Four dot products with the same `x`.
-#[inline(always)]
-fn dot4(w: [&[f32]; 4], x: &[f32]) -> [f32; 4] {
-    let n = x.len();
-    let full = n - n % 8;
-    let mut acc = [[0.0f32; 8]; 4];
-    let mut i = 0;
-    while i < full {
-        let xs = lanes(&x[i..i + 8]);
-        for (acc, w) in acc.iter_mut().zip(&w) {
-            let ws = lanes(&w[i..i + 8]);
-            for ((s, w), x) in acc.iter_mut().zip(ws).zip(xs) {
-                *s += w * x;
-            }
-        }
-        i += 8;
-    }
-    let mut out = [0.0f32; 4];
-    for ((o, a), w) in out.iter_mut().zip(&acc).zip(&w) {
-        let t: f32 = w[full..n].iter().zip(&x[full..]).map(|(w, x)| w * x).sum();
-        *o = ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])) + t;
-    }
-    out
-}
-
-/// Eight values as an array, so that the compiler sees the length.
-#[inline(always)]
-fn lanes(v: &[f32]) -> [f32; 8] {
-    let mut out = [0.0f32; 8];
-    out.copy_from_slice(v);
-    out
-}
-
-/// Dot product with sixteen independent accumulators, so that it vectorises and the additions
-/// do not wait on one another.
-#[inline(always)]
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 16];
-    let ca = a.chunks_exact(16);
-    let cb = b.chunks_exact(16);
-    let tail: f32 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for ((s, &x), &y) in acc.iter_mut().zip(x).zip(y) {
-            *s += x * y;
-        }
-    }
-    let mut half = [0.0f32; 8];
-    for (h, (&lo, &hi)) in half.iter_mut().zip(acc[..8].iter().zip(&acc[8..])) {
-        *h = lo + hi;
-    }
-    ((half[0] + half[4]) + (half[1] + half[5])) + ((half[2] + half[6]) + (half[3] + half[7])) + tail
-}
-
-/// Sum with eight independent accumulators, so that it vectorises.
-#[inline(always)]
-fn sum(a: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let chunks = a.chunks_exact(8);
-    let tail: f32 = chunks.remainder().iter().sum();
-    for x in chunks {
-        for (s, &x) in acc.iter_mut().zip(x) {
-            *s += x;
-        }
-    }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
 #[cfg(test)]
@@ -717,8 +617,8 @@ mod tests {
     #[test]
     fn dot_and_sum_handle_tails() {
         let a: Vec<f32> = (0..13).map(|i| i as f32).collect();
-        assert_eq!(sum(&a), 78.0);
+        assert_eq!(dots::sum(&a), 78.0);
         assert_eq!(dot(&a, &a), (0..13).map(|i| (i * i) as f32).sum::<f32>());
-        assert_eq!(sum(&[]), 0.0);
+        assert_eq!(dots::sum(&[]), 0.0);
     }
 }

@@ -15,6 +15,7 @@
 //! before `heads`.
 
 mod adam;
+mod dots;
 pub mod dqn;
 mod gemm;
 mod io;
