@@ -215,7 +215,7 @@ impl Mlp {
     /// Copies the parameters of `other` (same dimensions) without allocating: the target
     /// network's update.
     pub fn copy_params_from(&mut self, other: &Mlp) -> Result<()> {
-        if self.params.shapes() != other.params.shapes() || self.heads != other.heads {
+        if self.params.dims() != other.params.dims() || self.heads != other.heads {
             return Err(NnError::Dims(format!(
                 "cannot copy a network of shapes {:?} ({} heads) into one of shapes {:?} ({} heads)",
                 other.params.shapes(),
@@ -241,7 +241,7 @@ impl Mlp {
         if tau >= 1.0 {
             return self.copy_params_from(other);
         }
-        if self.params.shapes() != other.params.shapes() || self.heads != other.heads {
+        if self.params.dims() != other.params.dims() || self.heads != other.heads {
             return Err(NnError::Dims(
                 "cannot average networks of different shapes".to_owned(),
             ));
@@ -353,7 +353,7 @@ impl Mlp {
             cache.q.shape(),
             "dL/dQ must have the shape of the Q-values"
         );
-        if grads.shapes() != self.params.shapes() {
+        if grads.dims() != self.params.dims() {
             *grads = self.params.zeros_like();
         }
         let p = &self.params;

@@ -119,6 +119,12 @@ impl Params {
         self.wh.ncols()
     }
 
+    /// `(obs_dim, hidden, outputs)`: equal exactly when [`Params::shapes`] are, without
+    /// allocating.
+    pub(crate) fn dims(&self) -> (usize, usize, usize) {
+        (self.obs_dim(), self.hidden(), self.outputs())
+    }
+
     /// The PyTorch shapes (`[out, in]` for weights) in the order of [`PARAM_NAMES`].
     pub fn shapes(&self) -> [Vec<usize>; 6] {
         torch_shapes(self.obs_dim(), self.hidden(), self.outputs())
