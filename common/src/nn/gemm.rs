@@ -6,11 +6,14 @@
 //! software FMA) gives them again, slower, instead of the different roundings of a multiply and
 //! an add.
 //!
-//! With AVX2 and FMA (detected at run time) a block of 16 rows by 4 columns of `C` stays in
+//! With AVX2 and FMA (detected at run time) a block of 16 rows by 6 columns of `C` stays in
 //! registers over the whole `k` loop; the rows are contiguous (column-major `A`, packed first when
 //! it is a transposed view), the elements of `B` are broadcast. Vectorising over rows leaves each
 //! element's order of operations as the scalar loop's, so the tails and the fallback give the
-//! same bits.
+//! same bits. The layers' bias, ReLU and ReLU's backward mask are applied as a block is stored
+//! ([`Epi`]), with the operations and order of the separate passes they replace. The thin
+//! products ([`thin`]: a dimension of 5 or less) use the same blocks with a rounded multiply and
+//! an add in place of each fused multiply-add: the order of the axpys they were before.
 
 /// A matrix as a slice and strides: element `(i, j)` is `data[i * rs + j * cs]`.
 #[derive(Debug, Clone, Copy)]

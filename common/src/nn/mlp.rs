@@ -5,8 +5,9 @@
 //! Batched activations are nalgebra matrices of shape `(batch, features)`, one sample per row;
 //! with the weights stored as `(in, out)` (see the module docs of [`crate::nn`]) a layer is
 //! `Z = A W^T + b = A * w + b`. The 64x64 products go to [`super::gemm`] (a fixed order of fused
-//! multiply-adds, the same on every CPU); the thin ones (4 inputs, K*A outputs) become dot
-//! products or axpys over contiguous columns.
+//! multiply-adds, the same on every CPU), the bias and ReLU added as they end; the thin ones
+//! (4 inputs, K*A outputs) keep the order of axpys ([`super::gemm::thin`]) or of dot products
+//! over contiguous columns ([`super::dots`]).
 
 use nalgebra::{DMatrix, DVector};
 use rand::Rng as _;
