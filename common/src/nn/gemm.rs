@@ -226,7 +226,7 @@ fn thin_portable(
             let out = &mut c[i + j * m];
             let mut y = epi.start(*out, j);
             for p in 0..k {
-                y = y + b.at(p, j) * a[i + p * m];
+                y += b.at(p, j) * a[i + p * m];
             }
             *out = epi.finish(y, i, j, m);
         }
