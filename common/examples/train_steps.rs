@@ -1,7 +1,7 @@
 //! `cargo run --release -p alfd-common --example train_steps -- N`: N train steps of the
 //! benchmark's shape (K = 2, A = 2, batch 64, hidden 64 unless a second argument says), for
 //! `perf stat -e cycles:u` (CPU cycles per step do not depend on what else the machine runs, as
-//! wall-clock time does). Prints the steps, the seconds and the last loss. `-- peak N`: N rounds
+//! wall-clock time does). Prints the steps, the seconds, the last loss and a hash of the weights. `-- peak N`: N rounds
 //! of the FMA peak probe instead (192 flops a round).
 
 use alfd_common::nn::{train_step, Adam, Mlp, TrainScratch};
@@ -56,8 +56,13 @@ fn main() {
     for _ in 0..steps {
         loss = train_step(&mut online, &target, &mut adam, &batch, 0.99, &mut scratch);
     }
-    println!(
-        "{steps} train steps (hidden {hidden}) in {:.3} s; last loss {loss}",
-        t.elapsed().as_secs_f64()
-    );
+    let secs = t.elapsed().as_secs_f64();
+    // FNV-1a over the weights' bits: a kernel change that keeps the numbers keeps this.
+    let hash = online
+        .params_flat()
+        .iter()
+        .fold(0xcbf2_9ce4_8422_2325u64, |h, v| {
+            (h ^ u64::from(v.to_bits())).wrapping_mul(0x0100_0000_01b3)
+        });
+    println!("{steps} train steps (hidden {hidden}) in {secs:.3} s; last loss {loss}; weights {hash:016x}");
 }

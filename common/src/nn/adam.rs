@@ -113,15 +113,17 @@ impl Adam {
     ///
     /// Panics if `grads` does not have the shapes of `net`'s parameters.
     pub fn step(&mut self, net: &mut Mlp, grads: &Params) {
-        assert_eq!(
+        assert!(
+            grads.dims() == self.m.dims(),
+            "gradients do not have the optimiser's shapes: {:?} and {:?}",
             grads.shapes(),
-            self.m.shapes(),
-            "gradients do not have the optimiser's shapes"
+            self.m.shapes()
         );
-        assert_eq!(
+        assert!(
+            net.params.dims() == self.m.dims(),
+            "network does not have the optimiser's shapes: {:?} and {:?}",
             net.params.shapes(),
-            self.m.shapes(),
-            "network does not have the optimiser's shapes"
+            self.m.shapes()
         );
         self.step += 1;
         let c = &self.config;

@@ -6,11 +6,14 @@
 //! software FMA) gives them again, slower, instead of the different roundings of a multiply and
 //! an add.
 //!
-//! With AVX2 and FMA (detected at run time) a block of 16 rows by 4 columns of `C` stays in
+//! With AVX2 and FMA (detected at run time) a block of 16 rows by 6 columns of `C` stays in
 //! registers over the whole `k` loop; the rows are contiguous (column-major `A`, packed first when
 //! it is a transposed view), the elements of `B` are broadcast. Vectorising over rows leaves each
 //! element's order of operations as the scalar loop's, so the tails and the fallback give the
-//! same bits.
+//! same bits. The layers' bias, ReLU and ReLU's backward mask are applied as a block is stored
+//! ([`Epi`]), with the operations and order of the separate passes they replace. The thin
+//! products ([`thin`]: a dimension of 5 or less) use the same blocks with a rounded multiply and
+//! an add in place of each fused multiply-add: the order of the axpys they were before.
 
 /// A matrix as a slice and strides: element `(i, j)` is `data[i * rs + j * cs]`.
 #[derive(Debug, Clone, Copy)]
@@ -27,21 +30,86 @@ impl MatRef<'_> {
     }
 }
 
-/// `c = a b + beta c`, `a` of shape `(m, k)`, `b` of shape `(k, n)`, `c` column-major `(m, n)`
-/// with leading dimension `m`; `beta` is 0 (then `c` is not read) or 1. `pack` is scratch space
-/// for `a` when its rows are not contiguous.
+/// What becomes of an element's products, `acc`, at `(i, j)` of `C` (column-major, leading
+/// dimension `m`). In [`gemm`], `acc` is the fused sum from zero and then:
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Epi<'a> {
+    /// `c = acc` (`beta = 0`: `c` is not read).
+    Set,
+    /// `c = acc + c` (`beta = 1`).
+    #[cfg_attr(not(test), allow(dead_code))]
+    Add,
+    /// `c = acc + bias[j]`, then `max(c, 0)` if the flag says so: the same numbers as filling
+    /// `c` with the bias, [`Epi::Add`], then a ReLU pass.
+    Bias(&'a [f32], bool),
+    /// `c = acc` where `h[i + j m] > 0`, else `0`: [`Epi::Set`] then ReLU's backward mask.
+    Mask(&'a [f32]),
+}
+
+impl Epi<'_> {
+    fn check(&self, m: usize, n: usize) {
+        match self {
+            Epi::Bias(bias, _) => assert!(bias.len() >= n, "bias is too short"),
+            Epi::Mask(h) => assert!(h.len() >= m * n, "mask is too short"),
+            Epi::Set | Epi::Add => {}
+        }
+    }
+
+    /// Where a sum of products starts in [`thin`]: `0`, `c` or the bias.
+    #[inline(always)]
+    fn start(&self, c: f32, j: usize) -> f32 {
+        match self {
+            Epi::Set | Epi::Mask(_) => 0.0,
+            Epi::Add => c,
+            Epi::Bias(bias, _) => bias[j],
+        }
+    }
+
+    /// The last step of [`thin`] (the ReLU or its mask).
+    #[inline(always)]
+    fn finish(&self, y: f32, i: usize, j: usize, m: usize) -> f32 {
+        match self {
+            // `y.max(0.0)` as it compiles on x86 (`maxps y, 0`), spelt out: 0 for a NaN and -0.
+            Epi::Bias(_, true) => {
+                if y > 0.0 {
+                    y
+                } else {
+                    0.0
+                }
+            }
+            Epi::Mask(h) if h[i + j * m] > 0.0 => y,
+            Epi::Mask(_) => 0.0,
+            _ => y,
+        }
+    }
+
+    /// The end of [`gemm`]'s element: `acc` plus `c` or the bias, then the ReLU or its mask.
+    #[inline(always)]
+    fn fused(&self, acc: f32, c: f32, i: usize, j: usize, m: usize) -> f32 {
+        let y = match self {
+            Epi::Set | Epi::Mask(_) => acc,
+            Epi::Add => acc + c,
+            Epi::Bias(bias, _) => acc + bias[j],
+        };
+        self.finish(y, i, j, m)
+    }
+}
+
+/// `c = a b + beta c` and the other endings of [`Epi`], `a` of shape `(m, k)`, `b` of shape
+/// `(k, n)`, `c` column-major `(m, n)` with leading dimension `m`. `pack` is scratch space for
+/// `a` when its rows are not contiguous.
 ///
-/// Panics if a slice is too short for its shape or `beta` is neither 0 nor 1.
+/// Panics if a slice is too short for its shape.
 pub(crate) fn gemm(
     (m, k, n): (usize, usize, usize),
     a: MatRef<'_>,
     b: MatRef<'_>,
-    beta: f32,
+    epi: Epi<'_>,
     c: &mut [f32],
     pack: &mut Vec<f32>,
 ) {
-    assert!(beta == 0.0 || beta == 1.0, "beta must be 0 or 1");
     assert!(c.len() >= m * n, "c is too short");
+    epi.check(m, n);
     if m == 0 || n == 0 {
         return;
     }
@@ -63,7 +131,7 @@ pub(crate) fn gemm(
         #[cfg(target_arch = "x86_64")]
         if a.cs == 1 && x86::available() {
             x86::pack_transposed(a, (m, k), pack);
-            return gemm_packed((m, k, n), pack, b, beta, c);
+            return gemm_packed((m, k, n), pack, b, epi, c);
         }
         for (p, col) in pack.chunks_exact_mut(m).enumerate() {
             let src = &a.data[p * a.cs..];
@@ -73,7 +141,7 @@ pub(crate) fn gemm(
         }
         pack
     };
-    gemm_packed((m, k, n), a_cols, b, beta, c);
+    gemm_packed((m, k, n), a_cols, b, epi, c);
 }
 
 /// [`gemm`] once `a` is column-major with contiguous columns.
@@ -81,15 +149,97 @@ fn gemm_packed(
     (m, k, n): (usize, usize, usize),
     a: &[f32],
     b: MatRef<'_>,
-    beta: f32,
+    epi: Epi<'_>,
     c: &mut [f32],
 ) {
     #[cfg(target_arch = "x86_64")]
     if x86::available() {
-        x86::gemm((m, k, n), a, b, beta, c);
+        x86::gemm::<true>((m, k, n), a, b, epi, c);
         return;
     }
-    gemm_scalar((m, k, n), a, b, beta, c, 0, 0);
+    gemm_portable((m, k, n), a, b, epi, c);
+}
+
+/// [`gemm_packed`] one element at a time.
+fn gemm_portable(
+    (m, k, n): (usize, usize, usize),
+    a: &[f32],
+    b: MatRef<'_>,
+    epi: Epi<'_>,
+    c: &mut [f32],
+) {
+    for j in 0..n {
+        for i in 0..m {
+            let mut acc = 0.0f32;
+            for p in 0..k {
+                acc = a[i + p * m].mul_add(b.at(p, j), acc);
+            }
+            let out = &mut c[i + j * m];
+            *out = epi.fused(acc, *out, i, j, m);
+        }
+    }
+}
+
+/// The thin products' order (a dimension of 5 or less; see `nn::mlp`): every element of `C`
+/// starts where [`Epi::start`] says (`0`, `c` or the bias) and adds the products one by one,
+/// `y = y + b[p][j] * a[i][p]` over `p` in order, each product rounded (no fused multiply-add),
+/// then the ReLU or its mask. `a` is column-major `(m, k)` with leading dimension `m`.
+///
+/// Panics if a slice is too short for its shape.
+pub(crate) fn thin(
+    (m, k, n): (usize, usize, usize),
+    a: &[f32],
+    b: MatRef<'_>,
+    epi: Epi<'_>,
+    c: &mut [f32],
+) {
+    assert!(c.len() >= m * n, "c is too short");
+    epi.check(m, n);
+    if m == 0 || n == 0 {
+        return;
+    }
+    if k > 0 {
+        assert!(a.len() >= m * k, "a is too short");
+        assert!(
+            b.data.len() > (k - 1) * b.rs + (n - 1) * b.cs,
+            "b is too short"
+        );
+    }
+    #[cfg(target_arch = "x86_64")]
+    if x86::available() {
+        x86::gemm::<false>((m, k, n), a, b, epi, c);
+        return;
+    }
+    thin_portable((m, k, n), a, b, epi, c);
+}
+
+/// [`thin`] one element at a time.
+fn thin_portable(
+    (m, k, n): (usize, usize, usize),
+    a: &[f32],
+    b: MatRef<'_>,
+    epi: Epi<'_>,
+    c: &mut [f32],
+) {
+    for j in 0..n {
+        for i in 0..m {
+            let out = &mut c[i + j * m];
+            let mut y = epi.start(*out, j);
+            for p in 0..k {
+                y += b.at(p, j) * a[i + p * m];
+            }
+            *out = epi.finish(y, i, j, m);
+        }
+    }
+}
+
+/// Whether the AVX2+FMA kernels run (the CPU has them and the portable ones were not asked for).
+pub(crate) fn simd() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if x86::available() {
+        return true;
+    }
+    false
 }
 
 /// Set by [`use_portable_kernels`].
@@ -128,29 +278,6 @@ pub(crate) fn wide<R>(f: impl FnOnce() -> R) -> R {
     f()
 }
 
-/// The reference order for rows `i0..m` of columns `j0..n` (all of `C` from `(0, 0)`).
-#[inline(always)]
-fn gemm_scalar(
-    (m, k, n): (usize, usize, usize),
-    a: &[f32],
-    b: MatRef<'_>,
-    beta: f32,
-    c: &mut [f32],
-    i0: usize,
-    j0: usize,
-) {
-    for j in j0..n {
-        for i in i0..m {
-            let mut acc = 0.0f32;
-            for p in 0..k {
-                acc = a[i + p * m].mul_add(b.at(p, j), acc);
-            }
-            let out = &mut c[i + j * m];
-            *out = if beta == 0.0 { acc } else { acc + *out };
-        }
-    }
-}
-
 /// The AVX2+FMA kernels: the only unsafe code of the core (the intrinsics' loads and stores,
 /// and calling functions compiled for features that were checked at run time).
 #[cfg(target_arch = "x86_64")]
@@ -159,7 +286,7 @@ mod x86 {
     use std::arch::x86_64::*;
     use std::sync::OnceLock;
 
-    use super::MatRef;
+    use super::{Epi, MatRef};
 
     /// Whether the CPU has AVX2 and FMA and the portable kernels were not asked for
     /// ([`super::use_portable_kernels`]).
@@ -172,20 +299,71 @@ mod x86 {
             })
     }
 
-    /// `pack[i + p m] = a(i, p)` for `a` whose rows are contiguous (`a.cs == 1`): the source read
-    /// row by row, written with raw pointers (the transposition of the weight gradients' operand).
+    /// `pack[i + p m] = a(i, p)` for `a` whose rows are contiguous (`a.cs == 1`): the
+    /// transposition of the weight gradients' operand, by blocks of 8 x 8 in registers, the
+    /// edges one by one.
     pub(super) fn pack_transposed(a: MatRef<'_>, (m, k): (usize, usize), pack: &mut [f32]) {
-        assert!(a.cs == 1 && pack.len() >= m * k);
+        assert!(available() && a.cs == 1 && pack.len() >= m * k);
         if m == 0 || k == 0 {
             return;
         }
         assert!(a.data.len() >= (m - 1) * a.rs + k);
+        // SAFETY: the CPU has AVX2 (asserted); the lengths are checked above.
+        unsafe { pack_transposed_avx2(a, (m, k), pack) }
+    }
+
+    /// # Safety
+    /// The CPU has AVX2; `a.data` holds rows `0..m` of `k` values at stride `a.rs`, `pack`
+    /// holds `m * k` values.
+    #[target_feature(enable = "avx2")]
+    unsafe fn pack_transposed_avx2(a: MatRef<'_>, (m, k): (usize, usize), pack: &mut [f32]) {
+        let src = a.data.as_ptr();
         let out = pack.as_mut_ptr();
+        let (m8, k8) = (m - m % 8, k - k % 8);
+        for i in (0..m8).step_by(8) {
+            for p in (0..k8).step_by(8) {
+                // SAFETY: rows i..i + 8 <= m, values p..p + 8 <= k of each; the columns
+                // p..p + 8 of `pack` hold rows i..i + 8 (i + 8 <= m).
+                unsafe {
+                    let r: [__m256; 8] =
+                        std::array::from_fn(|q| _mm256_loadu_ps(src.add((i + q) * a.rs + p)));
+                    let t0 = _mm256_unpacklo_ps(r[0], r[1]);
+                    let t1 = _mm256_unpackhi_ps(r[0], r[1]);
+                    let t2 = _mm256_unpacklo_ps(r[2], r[3]);
+                    let t3 = _mm256_unpackhi_ps(r[2], r[3]);
+                    let t4 = _mm256_unpacklo_ps(r[4], r[5]);
+                    let t5 = _mm256_unpackhi_ps(r[4], r[5]);
+                    let t6 = _mm256_unpacklo_ps(r[6], r[7]);
+                    let t7 = _mm256_unpackhi_ps(r[6], r[7]);
+                    let s0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+                    let s1 = _mm256_shuffle_ps::<0xEE>(t0, t2);
+                    let s2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+                    let s3 = _mm256_shuffle_ps::<0xEE>(t1, t3);
+                    let s4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+                    let s5 = _mm256_shuffle_ps::<0xEE>(t4, t6);
+                    let s6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+                    let s7 = _mm256_shuffle_ps::<0xEE>(t5, t7);
+                    let cols = [
+                        _mm256_permute2f128_ps::<0x20>(s0, s4),
+                        _mm256_permute2f128_ps::<0x20>(s1, s5),
+                        _mm256_permute2f128_ps::<0x20>(s2, s6),
+                        _mm256_permute2f128_ps::<0x20>(s3, s7),
+                        _mm256_permute2f128_ps::<0x31>(s0, s4),
+                        _mm256_permute2f128_ps::<0x31>(s1, s5),
+                        _mm256_permute2f128_ps::<0x31>(s2, s6),
+                        _mm256_permute2f128_ps::<0x31>(s3, s7),
+                    ];
+                    for (q, col) in cols.into_iter().enumerate() {
+                        _mm256_storeu_ps(out.add(i + (p + q) * m), col);
+                    }
+                }
+            }
+        }
         for i in 0..m {
-            let row = &a.data[i * a.rs..i * a.rs + k];
-            for (p, &v) in row.iter().enumerate() {
-                // SAFETY: i < m and p < k, so i + p m < m k <= pack.len().
-                unsafe { *out.add(i + p * m) = v };
+            let ps = if i < m8 { k8..k } else { 0..k };
+            for p in ps {
+                // SAFETY: i < m and p < k.
+                unsafe { *out.add(i + p * m) = *src.add(i * a.rs + p) };
             }
         }
     }
@@ -230,74 +408,63 @@ mod x86 {
         out.iter().sum()
     }
 
-    /// [`gemm_avx2_fma`] once [`available`] said yes.
-    pub(super) fn gemm(
+    /// [`gemm_avx2_fma`] once [`available`] said yes: [`super::gemm`]'s order when `FMA`,
+    /// [`super::thin`]'s when not.
+    pub(super) fn gemm<const FMA: bool>(
         mkn: (usize, usize, usize),
         a: &[f32],
         b: MatRef<'_>,
-        beta: f32,
+        epi: Epi<'_>,
         c: &mut [f32],
     ) {
         assert!(available());
         // SAFETY: the CPU has AVX2 and FMA (asserted); the caller checked the shapes.
-        unsafe { gemm_avx2_fma(mkn, a, b, beta, c) }
+        unsafe { gemm_avx2_fma::<FMA>(mkn, a, b, epi, c) }
     }
 
-    /// `C` with AVX2 and FMA: blocks of 6 columns (then 4), and in each, blocks of 16 rows
+    /// `C` with AVX2 and FMA: blocks of 6 columns (then fewer), and in each, blocks of 16 rows
     /// (then 8), all accumulated in registers over the whole `k` loop, the elements of `B`
-    /// broadcast from where they are; the remaining rows and columns element by element, in the
-    /// same order.
+    /// broadcast from where they are; the last 1-7 rows under a mask, in the same order.
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn gemm_avx2_fma(
+    unsafe fn gemm_avx2_fma<const FMA: bool>(
         (m, k, n): (usize, usize, usize),
         a: &[f32],
         b: MatRef<'_>,
-        beta: f32,
+        epi: Epi<'_>,
         c: &mut [f32],
     ) {
-        // Blocks of 6 columns (the last one narrower), and in each, blocks of 16 rows, then 8,
-        // then the last 1-7 rows under a mask.
+        macro_rules! widths {
+            ($v:literal, $masked:literal, $i:expr, $width:expr, $j:expr, $last:expr) => {
+                match $width {
+                    6 => block::<$v, 6, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+                    5 => block::<$v, 5, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+                    4 => block::<$v, 4, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+                    3 => block::<$v, 3, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+                    2 => block::<$v, 2, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+                    _ => block::<$v, 1, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+                }
+            };
+        }
         let mut j = 0;
         while j < n {
             let width = (n - j).min(6);
             let mut i = 0;
             // SAFETY: every block reads rows i..i + 8 V (<= m, or fewer under the mask) of the k
             // columns of `a` (m * k values), elements (p, j..j + width) of `b` (p < k,
-            // j + width <= n: within `b`'s slice, as `gemm` checked), and writes `c`'s rows
-            // i..i + 8 V (or the masked ones) of those columns.
+            // j + width <= n: within `b`'s slice, as the caller checked), the same elements
+            // of `c` and of a mask (m * n values, checked), `bias[j..j + width]` (n values,
+            // checked), and writes `c`'s rows i..i + 8 V (or the masked ones) of those columns.
             unsafe {
                 while i + 16 <= m {
-                    match width {
-                        6 => block::<2, 6, false>(m, k, a, b, beta, c, i, j, 8),
-                        5 => block::<2, 5, false>(m, k, a, b, beta, c, i, j, 8),
-                        4 => block::<2, 4, false>(m, k, a, b, beta, c, i, j, 8),
-                        3 => block::<2, 3, false>(m, k, a, b, beta, c, i, j, 8),
-                        2 => block::<2, 2, false>(m, k, a, b, beta, c, i, j, 8),
-                        _ => block::<2, 1, false>(m, k, a, b, beta, c, i, j, 8),
-                    }
+                    widths!(2, false, i, width, j, 8);
                     i += 16;
                 }
                 while i + 8 <= m {
-                    match width {
-                        6 => block::<1, 6, false>(m, k, a, b, beta, c, i, j, 8),
-                        5 => block::<1, 5, false>(m, k, a, b, beta, c, i, j, 8),
-                        4 => block::<1, 4, false>(m, k, a, b, beta, c, i, j, 8),
-                        3 => block::<1, 3, false>(m, k, a, b, beta, c, i, j, 8),
-                        2 => block::<1, 2, false>(m, k, a, b, beta, c, i, j, 8),
-                        _ => block::<1, 1, false>(m, k, a, b, beta, c, i, j, 8),
-                    }
+                    widths!(1, false, i, width, j, 8);
                     i += 8;
                 }
                 if i < m {
-                    let rows = m - i;
-                    match width {
-                        6 => block::<1, 6, true>(m, k, a, b, beta, c, i, j, rows),
-                        5 => block::<1, 5, true>(m, k, a, b, beta, c, i, j, rows),
-                        4 => block::<1, 4, true>(m, k, a, b, beta, c, i, j, rows),
-                        3 => block::<1, 3, true>(m, k, a, b, beta, c, i, j, rows),
-                        2 => block::<1, 2, true>(m, k, a, b, beta, c, i, j, rows),
-                        _ => block::<1, 1, true>(m, k, a, b, beta, c, i, j, rows),
-                    }
+                    widths!(1, true, i, width, j, m - i);
                 }
             }
             j += width;
@@ -305,19 +472,22 @@ mod x86 {
     }
 
     /// Rows `i..i + 8 (V - 1) + last` of columns `j..j + W`: the last vector of rows holds
-    /// `last` (1-8) rows, loaded and stored under a mask when `MASKED`.
+    /// `last` (1-8) rows, loaded and stored under a mask when `MASKED`. With `FMA`, each
+    /// element is `fma`'d from zero and then ends as [`Epi::fused`]; without, it starts at
+    /// [`Epi::start`], adds rounded products and ends as [`Epi::finish`].
     ///
     /// # Safety
     /// The CPU has AVX2 and FMA; `i + 8 (V - 1) + last <= m`; `a` holds `m * k` values; `b`
-    /// holds element `(k - 1, j + W - 1)` and every one before; `c` holds `m * (j + W)` values.
+    /// holds element `(k - 1, j + W - 1)` and every one before; `c` (and a mask) hold
+    /// `m * (j + W)` values, a bias `j + W`.
     #[target_feature(enable = "avx2,fma")]
     #[allow(clippy::too_many_arguments)]
-    unsafe fn block<const V: usize, const W: usize, const MASKED: bool>(
+    unsafe fn block<const V: usize, const W: usize, const MASKED: bool, const FMA: bool>(
         m: usize,
         k: usize,
         a: &[f32],
         b: MatRef<'_>,
-        beta: f32,
+        epi: Epi<'_>,
         c: &mut [f32],
         i: usize,
         j: usize,
@@ -335,7 +505,25 @@ mod x86 {
                 _mm256_loadu_ps(ptr)
             }
         };
+        let c = c.as_mut_ptr();
+        let at = |q: usize, v: usize| i + 8 * v + (j + q) * m;
+        let bias = |q: usize| match epi {
+            Epi::Bias(bias, _) => _mm256_broadcast_ss(&bias[j + q]),
+            _ => _mm256_setzero_ps(),
+        };
         let mut acc = [[_mm256_setzero_ps(); V]; W];
+        if !FMA {
+            // The sum starts at `c` or the bias.
+            for (q, acc) in acc.iter_mut().enumerate() {
+                for (v, x) in acc.iter_mut().enumerate() {
+                    *x = match epi {
+                        Epi::Add => load(c.add(at(q, v)), v),
+                        Epi::Bias(..) => bias(q),
+                        Epi::Set | Epi::Mask(_) => _mm256_setzero_ps(),
+                    };
+                }
+            }
+        }
         let a = a.as_ptr().add(i);
         let b_cols: [*const f32; W] = std::array::from_fn(|q| b.data.as_ptr().add((j + q) * b.cs));
         for p in 0..k {
@@ -347,18 +535,36 @@ mod x86 {
             for (acc, b_col) in acc.iter_mut().zip(b_cols) {
                 let bb = _mm256_broadcast_ss(&*b_col.add(p * b.rs));
                 for v in 0..V {
-                    acc[v] = _mm256_fmadd_ps(av[v], bb, acc[v]);
+                    acc[v] = if FMA {
+                        _mm256_fmadd_ps(av[v], bb, acc[v])
+                    } else {
+                        _mm256_add_ps(acc[v], _mm256_mul_ps(bb, av[v]))
+                    };
                 }
             }
         }
-        let c = c.as_mut_ptr();
+        let zero = _mm256_setzero_ps();
         for (q, acc) in acc.iter().enumerate() {
             for (v, &x) in acc.iter().enumerate() {
-                let out = c.add(i + 8 * v + (j + q) * m);
-                let x = if beta == 0.0 {
-                    x
+                let out = c.add(at(q, v));
+                let x = if FMA {
+                    match epi {
+                        Epi::Set | Epi::Mask(_) => x,
+                        Epi::Add => _mm256_add_ps(x, load(out, v)),
+                        Epi::Bias(..) => _mm256_add_ps(x, bias(q)),
+                    }
                 } else {
-                    _mm256_add_ps(x, load(out, v))
+                    x
+                };
+                let x = match epi {
+                    // `max` returns its second operand (0) for a NaN and for -0: `f32::max(y, 0)`
+                    // as it compiles on x86, and `Epi::finish`.
+                    Epi::Bias(_, true) => _mm256_max_ps(x, zero),
+                    Epi::Mask(h) => {
+                        let h = load(h.as_ptr().add(at(q, v)), v);
+                        _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(h, zero), x)
+                    }
+                    _ => x,
                 };
                 if MASKED && v + 1 == V {
                     _mm256_maskstore_ps(out, mask, x);
@@ -375,14 +581,16 @@ mod tests {
     use super::*;
     use rand::Rng as _;
 
-    /// The reference: one element at a time, `acc = fma(a, b, acc)` over `k` in order.
+    /// The reference of [`gemm`]: one element at a time, `acc = fma(a, b, acc)` over `k` in
+    /// order from zero, then the ending.
     fn reference(
         (m, k, n): (usize, usize, usize),
         a: MatRef<'_>,
         b: MatRef<'_>,
-        beta: f32,
+        epi: Epi<'_>,
         c: &[f32],
     ) -> Vec<f32> {
+        let relu = |y: f32| if y > 0.0 { y } else { 0.0 };
         let mut out = c.to_vec();
         for j in 0..n {
             for i in 0..m {
@@ -390,14 +598,65 @@ mod tests {
                 for p in 0..k {
                     acc = a.at(i, p).mul_add(b.at(p, j), acc);
                 }
-                out[i + j * m] = if beta == 0.0 { acc } else { acc + c[i + j * m] };
+                out[i + j * m] = match epi {
+                    Epi::Set => acc,
+                    Epi::Add => acc + c[i + j * m],
+                    Epi::Bias(bias, false) => acc + bias[j],
+                    Epi::Bias(bias, true) => relu(acc + bias[j]),
+                    Epi::Mask(h) => {
+                        if h[i + j * m] > 0.0 {
+                            acc
+                        } else {
+                            0.0
+                        }
+                    }
+                };
             }
         }
         out
     }
 
+    /// The reference of [`thin`]: from the start value, `y += b * a` in order (as `nn::mlp`'s
+    /// axpys did), then the ReLU (a pass of `max(y, 0)`) or its mask.
+    fn reference_thin(
+        (m, k, n): (usize, usize, usize),
+        a: &[f32],
+        b: MatRef<'_>,
+        epi: Epi<'_>,
+        c: &[f32],
+    ) -> Vec<f32> {
+        let mut out = c.to_vec();
+        for j in 0..n {
+            for i in 0..m {
+                let mut y = match epi {
+                    Epi::Set | Epi::Mask(_) => 0.0,
+                    Epi::Add => c[i + j * m],
+                    Epi::Bias(bias, _) => bias[j],
+                };
+                for p in 0..k {
+                    y += b.at(p, j) * a[i + p * m];
+                }
+                out[i + j * m] = y;
+            }
+        }
+        match epi {
+            Epi::Bias(_, true) => wide(|| out.iter_mut().for_each(|v| *v = v.max(0.0))),
+            Epi::Mask(h) => {
+                for (v, &h) in out.iter_mut().zip(h) {
+                    *v = if h > 0.0 { *v } else { 0.0 };
+                }
+            }
+            _ => {}
+        }
+        out
+    }
+
+    fn same_bits(x: &[f32], y: &[f32]) -> bool {
+        x.len() == y.len() && x.iter().zip(y).all(|(x, y)| x.to_bits() == y.to_bits())
+    }
+
     #[test]
-    fn every_shape_and_layout_gives_the_reference_order_to_the_bit() {
+    fn every_shape_layout_and_ending_gives_the_reference_order_to_the_bit() {
         let mut rng = crate::rng::seeded(11);
         let mut rand =
             |len: usize| -> Vec<f32> { (0..len).map(|_| rng.random_range(-1.0f32..1.0)).collect() };
@@ -405,6 +664,7 @@ mod tests {
         for (m, k, n) in [
             (64, 64, 64),
             (64, 4, 64),
+            (64, 64, 4),
             (17, 9, 5),
             (33, 64, 7),
             (8, 1, 4),
@@ -413,8 +673,32 @@ mod tests {
             (128, 64, 128),
             (1, 3, 1),
             (5, 0, 3),
+            (5, 4, 16),
+            (23, 17, 13),
         ] {
             let (a_data, b_data, c0) = (rand(m * k), rand(k * n), rand(m * n));
+            // Exact zeros of both signs and a NaN where the endings look.
+            let mut bias = rand(n);
+            bias[0] = -0.0;
+            if n > 2 {
+                bias[1] = f32::NAN;
+                bias[2] = 0.0;
+            }
+            let mut h = rand(m * n);
+            for (x, v) in h
+                .iter_mut()
+                .step_by(3)
+                .zip([0.0, -0.0, f32::NAN].iter().cycle())
+            {
+                *x = *v;
+            }
+            let endings = [
+                Epi::Set,
+                Epi::Add,
+                Epi::Bias(&bias, false),
+                Epi::Bias(&bias, true),
+                Epi::Mask(&h),
+            ];
             // `a` column-major or as a transposed view; `b` column-major or transposed.
             let a_layouts = [(1, m), (k, 1)];
             let b_layouts = [(1, k), (n, 1)];
@@ -430,18 +714,26 @@ mod tests {
                         rs: brs,
                         cs: bcs,
                     };
-                    for beta in [0.0, 1.0] {
+                    for epi in endings {
+                        let what =
+                            format!("{m}x{k}x{n}, a ({ars}, {acs}), b ({brs}, {bcs}), {epi:?}");
+                        let expected = reference((m, k, n), a, b, epi, &c0);
                         let mut c = c0.clone();
-                        gemm((m, k, n), a, b, beta, &mut c, &mut pack);
-                        let expected = reference((m, k, n), a, b, beta, &c0);
-                        let same = c
-                            .iter()
-                            .zip(&expected)
-                            .all(|(x, y)| x.to_bits() == y.to_bits());
-                        assert!(
-                            same,
-                            "{m}x{k}x{n}, a ({ars}, {acs}), b ({brs}, {bcs}), beta {beta}"
-                        );
+                        gemm((m, k, n), a, b, epi, &mut c, &mut pack);
+                        assert!(same_bits(&c, &expected), "gemm {what}");
+                        if ars != 1 {
+                            continue;
+                        }
+                        let mut c = c0.clone();
+                        gemm_portable((m, k, n), a.data, b, epi, &mut c);
+                        assert!(same_bits(&c, &expected), "portable gemm {what}");
+                        let expected = reference_thin((m, k, n), a.data, b, epi, &c0);
+                        let mut c = c0.clone();
+                        thin((m, k, n), a.data, b, epi, &mut c);
+                        assert!(same_bits(&c, &expected), "thin {what}");
+                        let mut c = c0.clone();
+                        thin_portable((m, k, n), a.data, b, epi, &mut c);
+                        assert!(same_bits(&c, &expected), "portable thin {what}");
                     }
                 }
             }

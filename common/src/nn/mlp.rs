@@ -5,13 +5,15 @@
 //! Batched activations are nalgebra matrices of shape `(batch, features)`, one sample per row;
 //! with the weights stored as `(in, out)` (see the module docs of [`crate::nn`]) a layer is
 //! `Z = A W^T + b = A * w + b`. The 64x64 products go to [`super::gemm`] (a fixed order of fused
-//! multiply-adds, the same on every CPU); the thin ones (4 inputs, K*A outputs) become dot
-//! products or axpys over contiguous columns.
+//! multiply-adds, the same on every CPU), the bias and ReLU added as they end; the thin ones
+//! (4 inputs, K*A outputs) keep the order of axpys ([`super::gemm::thin`]) or of dot products
+//! over contiguous columns ([`super::dots`]).
 
 use nalgebra::{DMatrix, DVector};
 use rand::Rng as _;
 
-use super::gemm::{gemm, wide, MatRef};
+use super::dots::{self, dot, dot4};
+use super::gemm::{gemm, thin, wide, Epi, MatRef};
 use super::{torch_shapes, NnError, Params, Result};
 use crate::rng::Rng;
 
@@ -214,7 +216,7 @@ impl Mlp {
     /// Copies the parameters of `other` (same dimensions) without allocating: the target
     /// network's update.
     pub fn copy_params_from(&mut self, other: &Mlp) -> Result<()> {
-        if self.params.shapes() != other.params.shapes() || self.heads != other.heads {
+        if self.params.dims() != other.params.dims() || self.heads != other.heads {
             return Err(NnError::Dims(format!(
                 "cannot copy a network of shapes {:?} ({} heads) into one of shapes {:?} ({} heads)",
                 other.params.shapes(),
@@ -240,7 +242,7 @@ impl Mlp {
         if tau >= 1.0 {
             return self.copy_params_from(other);
         }
-        if self.params.shapes() != other.params.shapes() || self.heads != other.heads {
+        if self.params.dims() != other.params.dims() || self.heads != other.heads {
             return Err(NnError::Dims(
                 "cannot average networks of different shapes".to_owned(),
             ));
@@ -306,9 +308,10 @@ impl Mlp {
         );
         let batch = states.len() / d;
         cache.ensure(batch, d, self.hidden(), self.outputs());
+        let x = cache.x.as_mut_slice();
         for (j, row) in states.chunks_exact(d).enumerate() {
             for (i, &v) in row.iter().enumerate() {
-                cache.x[(j, i)] = v;
+                x[j + i * batch] = v;
             }
         }
         let p = &self.params;
@@ -316,11 +319,25 @@ impl Mlp {
         wide(
             #[inline(always)]
             || {
-                linear(&mut cache.h0, &cache.x, &p.w0, &p.b0);
-                relu(&mut cache.h0);
-                linear(&mut cache.h1, &cache.h0, &p.w1, &p.b1);
-                relu(&mut cache.h1);
-                linear(&mut cache.q, &cache.h1, &p.wh, &p.bh);
+                // Each product ends with its bias (and ReLU) added in registers.
+                matmul(
+                    &mut cache.h0,
+                    &cache.x,
+                    view(&p.w0),
+                    Epi::Bias(p.b0.as_slice(), true),
+                );
+                matmul(
+                    &mut cache.h1,
+                    &cache.h0,
+                    view(&p.w1),
+                    Epi::Bias(p.b1.as_slice(), true),
+                );
+                matmul(
+                    &mut cache.q,
+                    &cache.h1,
+                    view(&p.wh),
+                    Epi::Bias(p.bh.as_slice(), false),
+                );
             },
         );
     }
@@ -337,7 +354,7 @@ impl Mlp {
             cache.q.shape(),
             "dL/dQ must have the shape of the Q-values"
         );
-        if grads.shapes() != self.params.shapes() {
+        if grads.dims() != self.params.dims() {
             *grads = self.params.zeros_like();
         }
         let p = &self.params;
@@ -349,13 +366,22 @@ impl Mlp {
                 // Output layer: Q = h1 * wh + bh.
                 tr_matmul(&mut grads.wh, &c.h1, dq, &mut c.pack);
                 column_sums(dq, &mut grads.bh);
-                matmul(&mut c.dz1, dq, transposed(&p.wh), 0.0);
-                relu_backward(&mut c.dz1, &c.h1);
+                // ReLU's backward (PyTorch's `threshold_backward`) as the product ends.
+                matmul(
+                    &mut c.dz1,
+                    dq,
+                    transposed(&p.wh),
+                    Epi::Mask(c.h1.as_slice()),
+                );
                 // torso.1: h1 = relu(h0 * w1 + b1).
                 tr_matmul(&mut grads.w1, &c.h0, &c.dz1, &mut c.pack);
                 column_sums(&c.dz1, &mut grads.b1);
-                matmul(&mut c.dz0, &c.dz1, transposed(&p.w1), 0.0);
-                relu_backward(&mut c.dz0, &c.h0);
+                matmul(
+                    &mut c.dz0,
+                    &c.dz1,
+                    transposed(&p.w1),
+                    Epi::Mask(c.h0.as_slice()),
+                );
                 // torso.0: h0 = relu(x * w0 + b0).
                 tr_matmul(&mut grads.w0, &c.x, &c.dz0, &mut c.pack);
                 column_sums(&c.dz0, &mut grads.b0);
@@ -398,78 +424,35 @@ fn transposed(m: &DMatrix<f32>) -> MatRef<'_> {
     }
 }
 
-/// `out = input * w + b` (b broadcast over rows).
-#[inline(always)]
-fn linear(out: &mut DMatrix<f32>, input: &DMatrix<f32>, w: &DMatrix<f32>, b: &DVector<f32>) {
-    let rows = out.nrows().max(1);
-    for (col, &bias) in out.as_mut_slice().chunks_exact_mut(rows).zip(b.iter()) {
-        col.fill(bias);
-    }
-    matmul(out, input, view(w), 1.0);
-}
-
 /// Below this, a dimension is "thin": products whose dimensions all exceed it go to
-/// [`super::gemm`] (the bound at which nalgebra handed them to matrixmultiply, whose results
-/// that kernel keeps), the others are done here.
+/// [`super::gemm::gemm`] (the bound at which nalgebra handed them to matrixmultiply, whose results
+/// that kernel keeps), the others to [`super::gemm::thin`] (the order of the axpys this module
+/// did before).
 const THIN: usize = 5;
 
-/// `out = beta * out + a * b`, `b` of shape `(a.ncols(), out.ncols())`. Products whose dimensions
-/// all exceed [`THIN`] go to [`super::gemm`]; thin ones become axpys over the contiguous columns
-/// of `a`, which vectorise.
+/// `out = a * b`, ended as `epi` says (plus the bias, ReLU, ReLU's mask), `b` of shape
+/// `(a.ncols(), out.ncols())`.
 #[inline(always)]
-fn matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: MatRef<'_>, beta: f32) {
+fn matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: MatRef<'_>, epi: Epi<'_>) {
     let (m, k) = a.shape();
     let n = out.ncols();
     debug_assert_eq!(out.nrows(), m);
     if m > THIN && k > THIN && n > THIN {
-        if beta != 0.0 && beta != 1.0 {
-            for v in out.as_mut_slice() {
-                *v *= beta;
-            }
-        }
-        let beta = if beta == 0.0 { 0.0 } else { 1.0 };
         gemm(
             (m, k, n),
             view(a),
             b,
-            beta,
+            epi,
             out.as_mut_slice(),
             &mut Vec::new(),
         );
-        return;
-    }
-    if beta == 0.0 {
-        out.as_mut_slice().fill(0.0);
-    } else if beta != 1.0 {
-        for v in out.as_mut_slice() {
-            *v *= beta;
-        }
-    }
-    if m == 0 {
-        return;
-    }
-    let a = a.as_slice();
-    for (j, out_col) in out.as_mut_slice().chunks_exact_mut(m).enumerate() {
-        // Four columns of `a` per pass over the output column.
-        let mut blocks = a.chunks_exact(4 * m);
-        let mut p = 0;
-        for block in &mut blocks {
-            let (a0, rest) = block.split_at(m);
-            let (a1, rest) = rest.split_at(m);
-            let (a2, a3) = rest.split_at(m);
-            let s = [b.at(p, j), b.at(p + 1, j), b.at(p + 2, j), b.at(p + 3, j)];
-            axpy4(out_col, s, [a0, a1, a2, a3]);
-            p += 4;
-        }
-        for a_col in blocks.remainder().chunks_exact(m) {
-            axpy(out_col, b.at(p, j), a_col);
-            p += 1;
-        }
+    } else {
+        thin((m, k, n), a.as_slice(), b, epi, out.as_mut_slice());
     }
 }
 
 /// `out = a^T * b` (overwritten), `a` and `b` with the same number of rows (the batch). Thin
-/// products become dot products of contiguous columns.
+/// products become dot products of contiguous columns ([`dots::tr_dots`]).
 #[inline(always)]
 fn tr_matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &DMatrix<f32>, pack: &mut Vec<f32>) {
     let (m, k) = a.shape();
@@ -481,81 +464,19 @@ fn tr_matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &DMatrix<f32>, pack: &
             (k, m, n),
             transposed(a),
             view(b),
-            0.0,
+            Epi::Set,
             out.as_mut_slice(),
             pack,
         );
         return;
     }
-    if m == 0 {
-        out.as_mut_slice().fill(0.0);
-        return;
-    }
-    let a = a.as_slice();
-    for (out_col, b_col) in out
-        .as_mut_slice()
-        .chunks_exact_mut(k.max(1))
-        .zip(b.as_slice().chunks_exact(m))
-    {
-        // Four columns of `a` against the same column of `b`.
-        let mut outs = out_col.chunks_exact_mut(4);
-        let mut blocks = a.chunks_exact(4 * m);
-        for (o, block) in (&mut outs).zip(&mut blocks) {
-            let (a0, rest) = block.split_at(m);
-            let (a1, rest) = rest.split_at(m);
-            let (a2, a3) = rest.split_at(m);
-            o.copy_from_slice(&dot4([a0, a1, a2, a3], b_col));
-        }
-        for (o, a_col) in outs
-            .into_remainder()
-            .iter_mut()
-            .zip(blocks.remainder().chunks_exact(m))
-        {
-            *o = dot(a_col, b_col);
-        }
-    }
-}
-
-/// `y += s[0] * x[0] + s[1] * x[1] + s[2] * x[2] + s[3] * x[3]`, added left to right as four
-/// [`axpy`]s would.
-#[inline(always)]
-fn axpy4(y: &mut [f32], s: [f32; 4], x: [&[f32]; 4]) {
-    for ((((y, &a), &b), &c), &d) in y.iter_mut().zip(x[0]).zip(x[1]).zip(x[2]).zip(x[3]) {
-        *y = *y + s[0] * a + s[1] * b + s[2] * c + s[3] * d;
-    }
-}
-
-/// `y += alpha * x`.
-#[inline(always)]
-fn axpy(y: &mut [f32], alpha: f32, x: &[f32]) {
-    for (y, &x) in y.iter_mut().zip(x) {
-        *y += alpha * x;
-    }
-}
-
-#[inline(always)]
-fn relu(m: &mut DMatrix<f32>) {
-    for v in m.as_mut_slice() {
-        *v = v.max(0.0);
-    }
-}
-
-/// Zeroes the gradient where the ReLU output is not positive (as PyTorch's `threshold_backward`).
-#[inline(always)]
-fn relu_backward(grad: &mut DMatrix<f32>, out: &DMatrix<f32>) {
-    // A select rather than a conditional store, so that it vectorises without branches.
-    for (g, &h) in grad.as_mut_slice().iter_mut().zip(out.as_slice()) {
-        *g = if h > 0.0 { *g } else { 0.0 };
-    }
+    dots::tr_dots((m, k, n), a.as_slice(), b.as_slice(), out.as_mut_slice());
 }
 
 /// `out[j] = sum_i m[(i, j)]`.
 #[inline(always)]
 fn column_sums(m: &DMatrix<f32>, out: &mut DVector<f32>) {
-    let rows = m.nrows();
-    for (o, col) in out.iter_mut().zip(m.as_slice().chunks_exact(rows.max(1))) {
-        *o = sum(col);
-    }
+    dots::column_sums(m.nrows(), m.as_slice(), out.as_mut_slice());
 }
 
 /// One dense layer for one input: `out[o] = b[o] + w[:, o] . x`, with ReLU if asked; `w` is
@@ -587,78 +508,6 @@ fn dense_one(w: &DMatrix<f32>, b: &DVector<f32>, x: &[f32], out: &mut [f32], rel
     {
         *o = finish(dot(col, x) + bias);
     }
-}
-
-/// Four dot products with the same `x`.
-#[inline(always)]
-fn dot4(w: [&[f32]; 4], x: &[f32]) -> [f32; 4] {
-    let n = x.len();
-    let full = n - n % 8;
-    let mut acc = [[0.0f32; 8]; 4];
-    let mut i = 0;
-    while i < full {
-        let xs = lanes(&x[i..i + 8]);
-        for (acc, w) in acc.iter_mut().zip(&w) {
-            let ws = lanes(&w[i..i + 8]);
-            for ((s, w), x) in acc.iter_mut().zip(ws).zip(xs) {
-                *s += w * x;
-            }
-        }
-        i += 8;
-    }
-    let mut out = [0.0f32; 4];
-    for ((o, a), w) in out.iter_mut().zip(&acc).zip(&w) {
-        let t: f32 = w[full..n].iter().zip(&x[full..]).map(|(w, x)| w * x).sum();
-        *o = ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7])) + t;
-    }
-    out
-}
-
-/// Eight values as an array, so that the compiler sees the length.
-#[inline(always)]
-fn lanes(v: &[f32]) -> [f32; 8] {
-    let mut out = [0.0f32; 8];
-    out.copy_from_slice(v);
-    out
-}
-
-/// Dot product with sixteen independent accumulators, so that it vectorises and the additions
-/// do not wait on one another.
-#[inline(always)]
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 16];
-    let ca = a.chunks_exact(16);
-    let cb = b.chunks_exact(16);
-    let tail: f32 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for ((s, &x), &y) in acc.iter_mut().zip(x).zip(y) {
-            *s += x * y;
-        }
-    }
-    let mut half = [0.0f32; 8];
-    for (h, (&lo, &hi)) in half.iter_mut().zip(acc[..8].iter().zip(&acc[8..])) {
-        *h = lo + hi;
-    }
-    ((half[0] + half[4]) + (half[1] + half[5])) + ((half[2] + half[6]) + (half[3] + half[7])) + tail
-}
-
-/// Sum with eight independent accumulators, so that it vectorises.
-#[inline(always)]
-fn sum(a: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let chunks = a.chunks_exact(8);
-    let tail: f32 = chunks.remainder().iter().sum();
-    for x in chunks {
-        for (s, &x) in acc.iter_mut().zip(x) {
-            *s += x;
-        }
-    }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
 #[cfg(test)]
@@ -746,12 +595,12 @@ mod tests {
             let a = rand(m, k);
             let b = rand(k, n);
             let mut out = rand(m, n);
-            let expected = &a * &b + &out * 0.5;
-            matmul(&mut out, &a, view(&b), 0.5);
+            let expected = &a * &b + &out;
+            matmul(&mut out, &a, view(&b), Epi::Add);
             assert!((out - &expected).abs().max() < 1e-5, "matmul {m}x{k}x{n}");
             let bt = b.transpose();
             let mut out = rand(m, n);
-            matmul(&mut out, &a, transposed(&bt), 0.0);
+            matmul(&mut out, &a, transposed(&bt), Epi::Set);
             assert!(
                 (out - &a * &b).abs().max() < 1e-5,
                 "matmul by a view {m}x{k}x{n}"
@@ -769,8 +618,8 @@ mod tests {
     #[test]
     fn dot_and_sum_handle_tails() {
         let a: Vec<f32> = (0..13).map(|i| i as f32).collect();
-        assert_eq!(sum(&a), 78.0);
+        assert_eq!(dots::sum(&a), 78.0);
         assert_eq!(dot(&a, &a), (0..13).map(|i| (i * i) as f32).sum::<f32>());
-        assert_eq!(sum(&[]), 0.0);
+        assert_eq!(dots::sum(&[]), 0.0);
     }
 }

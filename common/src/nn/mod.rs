@@ -15,6 +15,7 @@
 //! before `heads`.
 
 mod adam;
+mod dots;
 pub mod dqn;
 mod gemm;
 mod io;
@@ -116,6 +117,12 @@ impl Params {
     /// `K * A`.
     pub fn outputs(&self) -> usize {
         self.wh.ncols()
+    }
+
+    /// `(obs_dim, hidden, outputs)`: equal exactly when [`Params::shapes`] are, without
+    /// allocating.
+    pub(crate) fn dims(&self) -> (usize, usize, usize) {
+        (self.obs_dim(), self.hidden(), self.outputs())
     }
 
     /// The PyTorch shapes (`[out, in]` for weights) in the order of [`PARAM_NAMES`].
