@@ -249,7 +249,7 @@ fn forward(
                     });
                     continue;
                 }
-                Mail::Joined | Mail::Order(_) => continue,
+                Mail::Joined | Mail::Order(_) | Mail::Left(_) => continue,
             };
             let f = match frame::decode::<Frame>(SCHEMA_VERSION, &b) {
                 Ok(f) => f,

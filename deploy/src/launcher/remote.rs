@@ -135,8 +135,19 @@ impl Launcher<'_, '_> {
         } else {
             info!("remote expert-{generation} {}", exit.how);
         }
-        let actions = self.experts.exited(generation, &exit, Instant::now());
+        // Restarted here under the same name if it can be; else the run goes on without it.
+        let actions = self.experts.lost(generation, &exit, Instant::now());
         self.apply(actions)
+    }
+
+    /// The replacement of a lost remote expert cannot serve here: the run goes on, the actors
+    /// act on their own (their queries cost nothing while no expert is active).
+    pub(super) fn no_expert(&self, generation: u16, message: &str) {
+        warn!(
+            "{message}; see {}. The run goes on without an expert: the actors act on their \
+             own (a host may offer one with `alfd join --expert`, or `alfd swap-expert`)",
+            self.log_of(&format!("expert-{generation}"))
+        );
     }
 
     /// A `Spawn` of the lifecycle while a remote host's offer is taken: the host starts it.
