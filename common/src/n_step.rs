@@ -194,7 +194,10 @@ mod tests {
     fn one_step_hands_every_transition_on_at_once_unchanged() {
         let steps = [step(0.0, 0.3, false, false), step(1.0, 0.7, true, true)];
         let out = run(1, &steps, &[false, true]);
-        assert_eq!(out, vec![(steps[0].clone(), false), (steps[1].clone(), true)]);
+        assert_eq!(
+            out,
+            vec![(steps[0].clone(), false), (steps[1].clone(), true)]
+        );
     }
 
     #[test]

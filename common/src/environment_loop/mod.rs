@@ -540,7 +540,11 @@ mod tests {
             let s = vec![x as f32; 4];
             a.observe(&s, 0, &step(x as f32 + 1.0, x == 3), false, None)
                 .unwrap();
-            let waited = if x == 3 { 4 } else { (x as usize).saturating_sub(1) };
+            let waited = if x == 3 {
+                4
+            } else {
+                (x as usize).saturating_sub(1)
+            };
             assert_eq!(a.adder.0.len(), waited, "after step {x}");
         }
         let got: Vec<(f32, f32, u8, bool, bool)> = a
