@@ -616,3 +616,67 @@ fn a_remote_python_expert_lost_with_its_host_leaves_the_run_going_without_an_exp
     );
     clean_dead_host(&expert_host_id(&expert_host.join("join")));
 }
+
+#[test]
+fn a_remote_actor_killed_with_sigkill_is_restarted_by_its_host_with_a_new_incarnation() {
+    let _time = timed!();
+    let (out, remote) = (tmp("remote-actor-kill"), tmp("remote-actor-kill-host"));
+    let port = free_port();
+    let listen = format!("--listen=tcp/127.0.0.1:{port}");
+    // The run's only actor is remote (id 0): once it is killed, nobody plays until its host
+    // restarts it, so the run can end only with the restarted actor's episodes.
+    let episodes = 300;
+    let mut run = spawn_run(
+        &out,
+        0,
+        &[
+            &listen,
+            &format!("episodes={episodes}"),
+            "env.max_episode_steps=100",
+            "budget.total=20",
+            "query.mode=first",
+        ],
+    );
+    let join = spawn_join(port, 1, &remote);
+    crate::runtime::wait_until(&mut run, "5 remote episodes", || rows(&out).len() >= 5);
+    let mirror = format!("--run-id={}", mirror_id(&remote.join("join")));
+    let pid = crate::runtime::find_process("alfd-actor", &[&mirror, "--actor-id=0"])
+        .expect("the remote actor runs");
+    crate::runtime::signal("KILL", pid);
+    let at_kill = rows(&out).len();
+    assert!(at_kill < episodes, "the run ended before the kill");
+    // Its host restarts it with a new incarnation; it plays the run to its end.
+    let (o, s) = crate::runtime::finished(run, &out, episodes);
+    let j = finish(join, 60);
+    assert!(j.status.success(), "{}", text(&j));
+    assert_eq!(s["actor_restarts"].as_u64(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("its host restarts it"), "{err}");
+    let log = std::fs::read_to_string(remote.join("join").join("actor-0.log")).unwrap();
+    assert!(
+        log.contains("incarnation=1") && log.contains("incarnation=2"),
+        "the restarted actor is incarnation 2: {log}"
+    );
+    let rows = rows(&out);
+    assert!(
+        rows[at_kill..].iter().all(|r| r[8] == "0"),
+        "every episode after the kill is the restarted actor's"
+    );
+    assert!(rows.len() - at_kill >= 1);
+    // The budget holds, and every demonstration written was used.
+    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    assert!(
+        demos.len() <= 20,
+        "{} demonstrations, budget 20",
+        demos.len()
+    );
+    assert_eq!(s["demos"].as_u64(), Some(demos.len() as u64));
+    assert_eq!(s["demos_used"].as_u64(), Some(demos.len() as u64));
+    for id in [run_id(&out), mirror_id(&remote.join("join"))] {
+        assert_eq!(
+            wire::leftover_files(&id),
+            Vec::<std::path::PathBuf>::new(),
+            "{id}"
+        );
+    }
+}

@@ -25,7 +25,7 @@ use crate::endpoint::Endpoint;
 use crate::error::{zenoh_error, BridgeError, Result};
 use crate::frame::{self, ExpertOrder, Frame};
 use crate::inbox::{inbox, Mail, Post};
-use crate::roster::{JoinReply, JoinRequest, Joined, Roster};
+use crate::roster::{JoinReply, JoinRequest, Joined, RestartReply, RestartRequest, Roster};
 use crate::{keys, TICK};
 
 /// What the hub needs to know of the run.
@@ -36,6 +36,8 @@ pub struct HubOptions {
     /// Actors the launcher starts itself (ids below this are never given to remote hosts).
     pub local_actors: usize,
     pub first_incarnation: u64,
+    /// Restarts allowed per remote actor (`alfd run --max-restarts`).
+    pub max_restarts: u32,
     pub config_toml: String,
     pub runtime_toml: String,
     /// A remote query not answered within this long is dropped (the actor gave up already).
@@ -62,6 +64,12 @@ pub enum HubEvent {
         actors: Vec<u16>,
         expert: bool,
     },
+    /// A remote actor crashed and its host restarts it as `incarnation`.
+    Restarted {
+        join_id: String,
+        actor: u16,
+        incarnation: u64,
+    },
     /// A remote expert process ended; every answer it sent before was taken in.
     ExpertExited {
         generation: u16,
@@ -78,6 +86,7 @@ pub struct Hub {
     post: Post,
     thread: Option<JoinHandle<Result<()>>>,
     _queryable: zenoh::query::Queryable<()>,
+    _restarts: zenoh::query::Queryable<()>,
     _members: zenoh::pubsub::Subscriber<()>,
     _token: zenoh::liveliness::LivelinessToken,
     session: zenoh::Session,
@@ -99,6 +108,7 @@ impl Hub {
         let roster = Arc::new(Mutex::new(Roster::new(
             opts.local_actors,
             opts.first_incarnation,
+            opts.max_restarts,
         )));
         let (events_tx, events) = mpsc::channel();
         let (post, inbox) = inbox(&opts.run_id, 1);
@@ -134,6 +144,45 @@ impl Hub {
                             let _ = query.reply(query.key_expr().clone(), bytes).wait();
                         }
                         Err(e) => warn!("cannot answer a join: {e}"),
+                    }
+                })
+                .wait()
+                .map_err(zenoh_error)?
+        };
+
+        // Restarts: a remote host's actor crashed, and the host asks for a new incarnation.
+        let restarts = {
+            let roster = Arc::clone(&roster);
+            let events_tx = events_tx.clone();
+            session
+                .declare_queryable(keys::restart(&opts.run_id))
+                .callback(move |query| {
+                    let request = query
+                        .payload()
+                        .map(|p| frame::decode::<RestartRequest>(SCHEMA_VERSION, &p.to_bytes()));
+                    let reply = match request {
+                        Some(Ok(r)) => match roster.lock().expect("roster").restart(&r.join_id, r.actor) {
+                            Ok(incarnation) => {
+                                let _ = events_tx.send(HubEvent::Restarted {
+                                    join_id: r.join_id,
+                                    actor: r.actor,
+                                    incarnation,
+                                });
+                                RestartReply::Restart(incarnation)
+                            }
+                            Err(why) => {
+                                warn!(join_id = %r.join_id, actor = r.actor, "restart refused: {why}");
+                                RestartReply::Refused(why)
+                            }
+                        },
+                        Some(Err(e)) => RestartReply::Refused(e.to_string()),
+                        None => RestartReply::Refused("a restart without a request".to_owned()),
+                    };
+                    match frame::encode(SCHEMA_VERSION, &reply) {
+                        Ok(bytes) => {
+                            let _ = query.reply(query.key_expr().clone(), bytes).wait();
+                        }
+                        Err(e) => warn!("cannot answer a restart: {e}"),
                     }
                 })
                 .wait()
@@ -220,6 +269,7 @@ impl Hub {
             post,
             thread: Some(thread),
             _queryable: queryable,
+            _restarts: restarts,
             _members: members,
             _token: token,
             session,

@@ -41,6 +41,7 @@ impl Launcher<'_, '_> {
             run_id: self.plan.run_id.clone(),
             local_actors: self.plan.actors,
             first_incarnation: self.plan.first_incarnation(),
+            max_restarts: self.plan.max_restarts,
             config_toml: read("config.toml")?,
             runtime_toml: read(RUNTIME_FILE)?,
             query_timeout: self.plan.runtime.query_timeout(),
@@ -101,6 +102,15 @@ impl Launcher<'_, '_> {
                         let how = "was lost with its host (it left or the link dropped)";
                         self.remote_expert_exited(generation, how.to_owned(), None, running)?;
                     }
+                }
+                alfd_bridge::HubEvent::Restarted {
+                    join_id,
+                    actor,
+                    incarnation,
+                } => {
+                    // Counted as the launcher's own actors' restarts are.
+                    self.restarts += 1;
+                    warn!(%join_id, actor, incarnation, "a remote actor died; its host restarts it");
                 }
                 alfd_bridge::HubEvent::ExpertExited {
                     generation,
