@@ -4,7 +4,9 @@
 //! with `--expert` also an expert host (a second local copy of the run's services), where it
 //! starts `alfd-expert` when the run's launcher says so (a make-before-break swap to this
 //! host's expert) and reports its exit. It ends when its processes have stopped: at the run's
-//! end, on Ctrl-C, when this host's expert was replaced, or when the link is lost.
+//! end, on Ctrl-C, when this host's expert was replaced, or when the link is lost. An actor that
+//! crashes is restarted with a new incarnation the run gives it (at most the run's
+//! `--max-restarts` times), as the launcher restarts its own.
 
 use std::os::unix::process::CommandExt as _;
 use std::path::PathBuf;
@@ -21,6 +23,9 @@ use crate::usage::usage;
 /// The learner's host silent for this long (no control message through the link; it sends one
 /// every `alfd_wire::CONTROL_PERIOD`): the link is lost, and the actors here are stopped.
 const LINK_SILENCE: Duration = Duration::from_secs(5);
+
+/// How long the run may take to give a crashed actor a new incarnation.
+const RESTART_WAIT: Duration = Duration::from_secs(5);
 
 #[derive(Debug, clap::Args)]
 pub struct JoinArgs {
@@ -229,6 +234,34 @@ impl Host<'_> {
             .with_context(|| format!("cannot start {bin}"))
     }
 
+    /// Starts actor `id` as incarnation `incarnation` against the mirror.
+    fn start_actor(&self, id: u16, incarnation: u64) -> anyhow::Result<Child> {
+        let child = self.start(
+            "alfd-actor",
+            &format!("actor-{id}"),
+            &[
+                format!("--actor-id={id}"),
+                format!("--incarnation={incarnation}"),
+                format!("--run-id={}", self.mirror_id),
+            ],
+        )?;
+        info!(actor = id, incarnation, pid = child.id(), "started");
+        Ok(child)
+    }
+
+    /// Actor `id` crashed: the run gives it a new incarnation, and it starts again (none while
+    /// this host is stopping).
+    fn restart_actor(&self, id: u16, stopping: bool) -> anyhow::Result<Option<Child>> {
+        let Some(mirror) = self.mirror.filter(|_| !stopping) else {
+            return Ok(None);
+        };
+        let incarnation = mirror
+            .restart(id, RESTART_WAIT)
+            .context("the run gives no new incarnation")?;
+        warn!(actor = id, incarnation, "restarting the actor");
+        self.start_actor(id, incarnation).map(Some)
+    }
+
     /// Starts the actors once the run's control message came through, the expert when the run
     /// says so, and waits for them.
     fn run(&self) -> anyhow::Result<()> {
@@ -247,17 +280,7 @@ impl Host<'_> {
         }
         let mut actors: Vec<(u16, Child)> = Vec::new();
         for &(id, incarnation) in &joined.actors {
-            let child = self.start(
-                "alfd-actor",
-                &format!("actor-{id}"),
-                &[
-                    format!("--actor-id={id}"),
-                    format!("--incarnation={incarnation}"),
-                    format!("--run-id={}", self.mirror_id),
-                ],
-            )?;
-            info!(actor = id, incarnation, pid = child.id(), "started");
-            actors.push((id, child));
+            actors.push((id, self.start_actor(id, incarnation)?));
         }
         if !actors.is_empty() {
             eprintln!(
@@ -283,12 +306,20 @@ impl Host<'_> {
                         let (id, _) = actors.remove(i);
                         if status.success() {
                             info!(actor = id, "stopped");
-                        } else {
-                            warn!(actor = id, "exited: {status}");
-                            failed.push(format!(
-                                "actor-{id} ({status}; see {})",
+                            continue;
+                        }
+                        let how = crate::launcher::describe_status(status);
+                        warn!(actor = id, "{how}");
+                        match self.restart_actor(id, stopping.is_some()) {
+                            Ok(Some(child)) => {
+                                actors.insert(i, (id, child));
+                                i += 1;
+                            }
+                            Ok(None) => {}
+                            Err(e) => failed.push(format!(
+                                "actor-{id} {how}, not restarted: {e:#}; see {}",
                                 self.dir.join(format!("actor-{id}.log")).display()
-                            ));
+                            )),
                         }
                     }
                 }

@@ -11,6 +11,12 @@
 //!
 //! While no expert is active (`active = 0`) the actors act on their own at once; their queries
 //! cost nothing.
+//!
+//! An expert served by another host (`alfd join --expert`) that is lost (its host died, the
+//! link dropped, or its process ended there) is restarted on this host under the same name, as
+//! after a crash ([`ExpertLifecycle::lost`]); but if that replacement cannot start here (a
+//! `python:` module only the other host has) or no restart is left, the run goes on without an
+//! expert ([`Action::NoExpert`]): the actors act on their own, and a later swap may bring one.
 
 use std::time::{Duration, Instant};
 
@@ -51,6 +57,9 @@ pub enum Action {
     },
     /// The run cannot go on: `message` says why (about the process of `generation`).
     Fail { generation: u16, message: String },
+    /// The run goes on without an expert (the actors act on their own): `message` says why
+    /// (about the process of `generation`, the replacement of a lost remote expert).
+    NoExpert { generation: u16, message: String },
 }
 
 /// How an expert process ended, as the launcher saw it.
@@ -80,8 +89,13 @@ enum Why {
     Start,
     /// `alfd swap-expert` asked for it; `from` is the expert it replaces.
     Swap { request: SwapRequest, from: String },
-    /// Its predecessor `died` at `since`.
-    Restart { died: u16, since: Instant },
+    /// Its predecessor `died` at `since`; `remote`: it ran on another host, so this host may
+    /// not be able to start it (the run then goes on without an expert rather than failing).
+    Restart {
+        died: u16,
+        since: Instant,
+        remote: bool,
+    },
 }
 
 /// A generation started but not yet answering.
@@ -202,7 +216,7 @@ impl ExpertLifecycle {
                     generation,
                 });
             }
-            Why::Restart { died, since } => out.push(Action::Recovered {
+            Why::Restart { died, since, .. } => out.push(Action::Recovered {
                 generation,
                 died,
                 took: now.saturating_duration_since(since),
@@ -213,6 +227,18 @@ impl ExpertLifecycle {
 
     /// The process of `generation` ended.
     pub fn exited(&mut self, generation: u16, exit: &Exit, now: Instant) -> Vec<Action> {
+        self.ended(generation, exit, now, false)
+    }
+
+    /// The process of `generation` ran on another host and is gone (it ended there, or its
+    /// host or the link was lost). As [`exited`](Self::exited), except that its replacement
+    /// on this host is a best effort: if it cannot start here, or no restart is left, the run
+    /// goes on without an expert ([`Action::NoExpert`]) instead of failing.
+    pub fn lost(&mut self, generation: u16, exit: &Exit, now: Instant) -> Vec<Action> {
+        self.ended(generation, exit, now, true)
+    }
+
+    fn ended(&mut self, generation: u16, exit: &Exit, now: Instant, remote: bool) -> Vec<Action> {
         let mut out = Vec::new();
         self.alive.retain(|&g| g != generation);
         if self.active == generation {
@@ -245,6 +271,15 @@ impl ExpertLifecycle {
                     });
                     self.after_failed_swap(now, &mut out);
                 }
+                Why::Restart { remote: true, .. } => self.go_on_without(
+                    generation,
+                    format!(
+                        "alfd-expert (expert-{generation}), started here in place of the lost \
+                         remote expert, {}",
+                        exit.describe()
+                    ),
+                    &mut out,
+                ),
                 Why::Restart { .. } if exit.code == Some(BAD_INPUT) => out.push(Action::Fail {
                     generation,
                     message: format!(
@@ -253,13 +288,13 @@ impl ExpertLifecycle {
                         exit.describe()
                     ),
                 }),
-                Why::Restart { .. } => self.restart(generation, exit, now, &mut out),
+                Why::Restart { .. } => self.restart(generation, exit, now, false, &mut out),
             }
         } else if current_died {
             match &self.incoming {
                 // Its successor is on its way in (a swap): it becomes active once up.
                 Some(_) => self.try_activate(&mut out),
-                None => self.restart(generation, exit, now, &mut out),
+                None => self.restart(generation, exit, now, remote, &mut out),
             }
         } else {
             // An older generation that was told to go, or one that was killed.
@@ -325,6 +360,20 @@ impl ExpertLifecycle {
                         });
                         self.after_failed_swap(now, &mut out);
                     }
+                    Why::Restart { remote: true, .. } => {
+                        out.push(Action::Kill {
+                            generation: inc.generation,
+                        });
+                        self.go_on_without(
+                            inc.generation,
+                            format!(
+                                "alfd-expert (expert-{}), started here in place of the lost \
+                                 remote expert, {late}",
+                                inc.generation
+                            ),
+                            &mut out,
+                        );
+                    }
                     Why::Start | Why::Restart { .. } => out.push(Action::Fail {
                         generation: inc.generation,
                         message: format!("alfd-expert (expert-{}) {late}", inc.generation),
@@ -358,15 +407,34 @@ impl ExpertLifecycle {
                 code: None,
                 reason: None,
             };
-            self.restart(generation, &exit, now, out);
+            self.restart(generation, &exit, now, false, out);
         }
     }
 
-    /// Starts the current expert again as a new generation, if restarts are left.
-    fn restart(&mut self, died: u16, exit: &Exit, now: Instant, out: &mut Vec<Action>) {
+    /// Starts the current expert again as a new generation, if restarts are left (`remote`:
+    /// the one that died ran on another host).
+    fn restart(
+        &mut self,
+        died: u16,
+        exit: &Exit,
+        now: Instant,
+        remote: bool,
+        out: &mut Vec<Action>,
+    ) {
         let Some((_, name)) = self.current.clone() else {
             return;
         };
+        if self.restarts >= self.max_restarts && remote {
+            let message = format!(
+                "the remote expert-{died} {}, and the expert was restarted {} times already \
+                 (--max-restarts {})",
+                exit.describe(),
+                self.restarts,
+                self.max_restarts
+            );
+            self.go_on_without(died, message, out);
+            return;
+        }
         if self.restarts >= self.max_restarts {
             out.push(Action::Fail {
                 generation: died,
@@ -381,7 +449,27 @@ impl ExpertLifecycle {
             return;
         }
         self.restarts += 1;
-        self.spawn(&name, Why::Restart { died, since: now }, now, out);
+        let why = Why::Restart {
+            died,
+            since: now,
+            remote,
+        };
+        self.spawn(&name, why, now, out);
+    }
+
+    /// No expert from now on (until a swap brings one): nobody answers, the actors act on
+    /// their own.
+    fn go_on_without(&mut self, generation: u16, message: String, out: &mut Vec<Action>) {
+        self.incoming = None;
+        self.current = None;
+        if self.active != 0 {
+            self.active = 0;
+            self.publish(out);
+        }
+        out.push(Action::NoExpert {
+            generation,
+            message,
+        });
     }
 
     fn spawn(&mut self, name: &str, why: Why, now: Instant, out: &mut Vec<Action>) {
@@ -687,6 +775,103 @@ mod tests {
             [Action::Respond { ok: true, .. }]
         ));
         assert_eq!(e.restarts(), 0);
+    }
+
+    fn no_expert(actions: &[Action]) -> Option<&str> {
+        actions.iter().find_map(|a| match a {
+            Action::NoExpert { message, .. } => Some(message.as_str()),
+            _ => None,
+        })
+    }
+
+    /// A run whose expert, served by another host, answers as generation 2.
+    fn remote_running(max_restarts: u32, t0: Instant) -> ExpertLifecycle {
+        let mut e = running(max_restarts, t0);
+        e.swap(request("python:here_only:policy"), t0);
+        e.standby(2, t0);
+        e.exited(1, &killed(), t0);
+        e.running(2, t0);
+        assert_eq!(
+            (e.active(), e.current_name()),
+            (2, Some("python:here_only:policy"))
+        );
+        e
+    }
+
+    #[test]
+    fn a_lost_remote_expert_is_restarted_here_and_a_name_unknown_here_leaves_the_run_without_one() {
+        let t0 = Instant::now();
+        let lost = Exit {
+            how: "was lost with its host".into(),
+            code: None,
+            reason: None,
+        };
+        // Restarted here under the same name, as after a crash; it comes up and answers.
+        let mut e = remote_running(5, t0);
+        let a = e.lost(2, &lost, t0);
+        assert_eq!(last_control(&a), Some((2, 0)));
+        assert_eq!(spawned(&a), vec![3]);
+        e.standby(3, t0);
+        assert!(matches!(
+            e.running(3, t0)[..],
+            [Action::Recovered {
+                generation: 3,
+                died: 2,
+                ..
+            }]
+        ));
+        // Once it answers here, it is a local expert: a refusing restart fails the run again.
+        e.exited(3, &killed(), t0);
+        let refused = Exit {
+            how: "exited with status 2".into(),
+            code: Some(2),
+            reason: Some("no module named here_only".into()),
+        };
+        assert!(matches!(
+            e.exited(4, &refused, t0).last(),
+            Some(Action::Fail { generation: 4, .. })
+        ));
+
+        // The replacement cannot start here (the module is on the other host only): the run
+        // goes on without an expert, nobody answers, and a later swap brings one.
+        let mut e = remote_running(5, t0);
+        e.lost(2, &lost, t0);
+        let a = e.exited(3, &refused, t0);
+        let why = no_expert(&a).expect("no expert");
+        assert!(
+            why.contains("expert-3") && why.contains("no module named here_only"),
+            "{why}"
+        );
+        assert!(!a.iter().any(|a| matches!(a, Action::Fail { .. })), "{a:?}");
+        assert_eq!(
+            (e.active(), e.current_name(), e.settled()),
+            (0, None, false)
+        );
+        assert_eq!(spawned(&e.swap(request("cartpole-200"), t0)), vec![4]);
+        assert_eq!(last_control(&e.standby(4, t0)), Some((4, 4)));
+        assert!(matches!(
+            &e.running(4, t0)[..],
+            [Action::Respond { ok: true, from, .. }] if from.is_empty()
+        ));
+        assert!(e.settled());
+
+        // A replacement that never comes up is killed, and the run goes on without an expert.
+        let mut e = remote_running(5, t0);
+        e.lost(2, &lost, t0);
+        let a = e.tick(t0 + START_TIMEOUT + Duration::from_secs(1));
+        assert!(matches!(a[0], Action::Kill { generation: 3 }), "{a:?}");
+        assert!(no_expert(&a).is_some(), "{a:?}");
+        assert!(e.exited(3, &killed(), t0).is_empty());
+
+        // No restart left: no replacement, and no failure either.
+        let mut e = remote_running(0, t0);
+        let a = e.lost(2, &lost, t0);
+        assert!(spawned(&a).is_empty());
+        assert!(
+            no_expert(&a).is_some_and(|m| m.contains("--max-restarts 0")),
+            "{a:?}"
+        );
+        assert_eq!(e.active(), 0);
     }
 
     #[test]

@@ -207,14 +207,10 @@ fn an_expert_on_another_host_answers_every_query_and_its_demonstrations_are_writ
     // The remote expert's own copy holds the same demonstrations.
     let there = alfd_expert::demo_log::read(&expert_host.join("join").join("demos.jsonl")).unwrap();
     assert_eq!(there, demos);
-    let joined: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(expert_host.join("join").join("join.json")).unwrap(),
-    )
-    .unwrap();
     for id in [
         run_id(&out),
         mirror_id(&actor_host.join("join")),
-        joined["expert_host_run_id"].as_str().unwrap().to_owned(),
+        expert_host_id(&expert_host.join("join")),
     ] {
         assert_eq!(
             wire::leftover_files(&id),
@@ -397,6 +393,290 @@ fn bad_endpoints_and_actor_counts_are_refused_with_exit_code_2() {
         assert!(
             err.contains("--connect") || err.contains("--listen") || err.contains("--actors"),
             "{args:?}: the error names the flag: {err}"
+        );
+    }
+}
+
+/// The iceoryx2 run id of the expert's copy of the run, as `alfd join --expert` recorded it in
+/// its `join.json`.
+fn expert_host_id(join_dir: &Path) -> String {
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(join_dir.join("join.json")).unwrap())
+            .unwrap();
+    v["expert_host_run_id"].as_str().unwrap().to_owned()
+}
+
+/// Lines of a `demos.jsonl` (0 while it does not exist).
+fn lines(path: &Path) -> usize {
+    std::fs::read_to_string(path)
+        .unwrap_or_default()
+        .lines()
+        .count()
+}
+
+/// Waits until `expert-<generation>.log` in `dir` says the expert answers.
+fn wait_answering(dir: &Path, generation: u16) {
+    let log = dir.join(format!("expert-{generation}.log"));
+    let start = Instant::now();
+    while !std::fs::read_to_string(&log).is_ok_and(|t| t.contains("answering queries")) {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "{} does not answer after 60 s",
+            log.display()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// The dead remote host left its expert's iceoryx2 files behind (nobody was there to remove
+/// them); its orphaned `alfd-expert` exits on its own (it sees its parent gone), then the next
+/// `alfd clean` removes them, as for any dead run.
+fn clean_dead_host(id: &str) {
+    let start = Instant::now();
+    while !wire::leftover_files(id).is_empty() && start.elapsed() < Duration::from_secs(30) {
+        let _ = wire::clean_run(id);
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    assert_eq!(wire::leftover_files(id), Vec::<std::path::PathBuf>::new());
+}
+
+#[test]
+fn a_remote_expert_killed_mid_run_is_restarted_here_and_no_demonstration_is_lost() {
+    let _time = timed!();
+    let (out, expert_host, actor_host) = (
+        tmp("remote-expert-kill"),
+        tmp("remote-expert-kill-host"),
+        tmp("remote-expert-kill-actors"),
+    );
+    let port = free_port();
+    let listen = format!("--listen=tcp/127.0.0.1:{port}");
+    // Every step asks until the budget is spent (no model to refit, so answers are quick): the
+    // remote expert dies with demonstrations flowing, and its successor spends the rest.
+    let (episodes, budget) = (120, 2000);
+    let mut run = spawn_run(
+        &out,
+        0,
+        &[
+            &listen,
+            &format!("episodes={episodes}"),
+            "env.max_episode_steps=200",
+            "expert.model=none",
+            "query.mode=first",
+            &format!("budget.total={budget}"),
+        ],
+    );
+    let mut expert = spawn_expert_join(port, "cartpole-200", &expert_host);
+    wait_answering(&expert_host.join("join"), 2);
+    let actors = spawn_join(port, 2, &actor_host);
+    let demos_here = out.join("demos.jsonl");
+    crate::runtime::wait_until(&mut run, "50 demonstrations of the remote expert", || {
+        lines(&demos_here) >= 50
+    });
+    // Its host dies at once: `alfd join --expert` and the link with it.
+    crate::runtime::signal("KILL", expert.child().id());
+    let _ = expert.0.take().expect("running").wait();
+    let there = expert_host.join("join").join("demos.jsonl");
+    let remote_demos = alfd_expert::demo_log::read(&there).unwrap();
+    assert!(
+        remote_demos.len() < budget,
+        "the budget was spent before the kill"
+    );
+    // The run goes on (the actors act on their own meanwhile), restarts the expert here under
+    // the same name, and finishes.
+    let (o, s) = crate::runtime::finished(run, &out, episodes);
+    let a = finish(actors, 60);
+    assert!(a.status.success(), "{}", text(&a));
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(err.contains("link dropped"), "the loss is reported: {err}");
+    assert!(err.contains("expert-3 answers again"), "{err}");
+    assert_eq!(
+        (s["expert_swaps"].as_u64(), s["expert_restarts"].as_u64()),
+        (Some(1), Some(1))
+    );
+    assert!(std::fs::read_to_string(out.join("expert-3.log"))
+        .unwrap()
+        .contains("answering queries"));
+    // Every demonstration is on the learner's host, in order, within the budget, and each is
+    // counted once: the file, the summary and the last episode agree.
+    let demos = alfd_expert::demo_log::read(&demos_here).unwrap();
+    for (i, d) in demos.iter().enumerate() {
+        assert_eq!(d.index as usize, i);
+        assert_eq!(d.expert, "cartpole-200");
+    }
+    assert!(demos.len() <= budget, "{} > {budget}", demos.len());
+    assert_eq!(s["demos"].as_u64(), Some(demos.len() as u64));
+    assert_eq!(s["demos_used"].as_u64(), Some(demos.len() as u64));
+    let rows = rows(&out);
+    assert_eq!(
+        rows.last().unwrap()[3],
+        demos.len().to_string(),
+        "demos_used"
+    );
+    // The remote expert's demonstrations are all here, but for answers in flight when it died
+    // (at most one per actor): the remote copy may hold those, never fewer.
+    let same = demos
+        .iter()
+        .zip(&remote_demos)
+        .take_while(|(a, b)| a == b)
+        .count();
+    assert!(
+        same + 2 >= remote_demos.len(),
+        "{same} of the remote expert's {} demonstrations here",
+        remote_demos.len()
+    );
+    // Its successor here carried on from them.
+    assert!(demos.len() > same, "{} <= {same}", demos.len());
+    assert_eq!(
+        wire::leftover_files(&run_id(&out)),
+        Vec::<std::path::PathBuf>::new()
+    );
+    clean_dead_host(&expert_host_id(&expert_host.join("join")));
+}
+
+#[test]
+fn a_remote_python_expert_lost_with_its_host_leaves_the_run_going_without_an_expert() {
+    let _time = timed!();
+    let (out, expert_host) = (tmp("remote-python-kill"), tmp("remote-python-host"));
+    // A demonstrator only the other host has: a module in its working directory.
+    std::fs::write(
+        expert_host.join("only_there.py"),
+        "def balance(obs):\n    return 1 if obs[2] + 0.5 * obs[3] > 0.0 else 0\n",
+    )
+    .unwrap();
+    let port = free_port();
+    let listen = format!("--listen=tcp/127.0.0.1:{port}");
+    let mut run = spawn_run(
+        &out,
+        1,
+        &[
+            &listen,
+            "episodes=100000",
+            "env.max_episode_steps=200",
+            "expert.model=none",
+            "query.mode=first",
+            "budget.total=100000",
+        ],
+    );
+    let name = "python:only_there:balance";
+    let mut expert = spawn_expert_join(port, name, &expert_host);
+    wait_answering(&expert_host.join("join"), 2);
+    let demos_here = out.join("demos.jsonl");
+    let remote = || {
+        alfd_expert::demo_log::read(&demos_here)
+            .unwrap_or_default()
+            .iter()
+            .filter(|d| d.expert == name)
+            .count()
+    };
+    crate::runtime::wait_until(&mut run, "demonstrations of the remote expert", || {
+        remote() >= 20
+    });
+    crate::runtime::signal("KILL", expert.child().id());
+    let _ = expert.0.take().expect("running").wait();
+    // The learner's host cannot start that name: the run goes on without an expert, its actor
+    // acting on its own, instead of failing.
+    let log = out.join("expert-3.log");
+    let generation_3 = [
+        format!("--run-id={}", run_id(&out)),
+        "--generation=3".into(),
+    ];
+    let generation_3: Vec<&str> = generation_3.iter().map(String::as_str).collect();
+    crate::runtime::wait_until(&mut run, "the replacement tried here and gone", || {
+        std::fs::metadata(&log).is_ok_and(|m| m.len() > 0)
+            && crate::runtime::find_process("alfd-expert", &generation_3).is_none()
+    });
+    let at_loss = lines(&demos_here);
+    let n = rows(&out).len();
+    crate::runtime::wait_until(&mut run, "episodes without an expert", || {
+        rows(&out).len() >= n + 20
+    });
+    let o = crate::runtime::interrupt(run);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(err.contains("link dropped"), "{err}");
+    assert!(err.contains("goes on without an expert"), "{err}");
+    let s = summary(&out);
+    assert_eq!(s["expert_restarts"].as_u64(), Some(1), "{s}");
+    // Nothing was written after the loss, and every line before it is in order: the run's
+    // first expert's, then the remote one's.
+    let demos = alfd_expert::demo_log::read(&demos_here).unwrap();
+    assert_eq!(demos.len(), at_loss);
+    assert!(
+        demos
+            .iter()
+            .all(|d| d.expert == name || d.expert == crate::runtime::EXPERT),
+        "{:?}",
+        demos.iter().map(|d| &d.expert).collect::<Vec<_>>()
+    );
+    assert!(demos.iter().filter(|d| d.expert == name).count() >= 20);
+    assert_eq!(s["demos"].as_u64(), Some(demos.len() as u64));
+    assert_eq!(
+        wire::leftover_files(&run_id(&out)),
+        Vec::<std::path::PathBuf>::new()
+    );
+    clean_dead_host(&expert_host_id(&expert_host.join("join")));
+}
+
+#[test]
+fn a_remote_actor_killed_with_sigkill_is_restarted_by_its_host_with_a_new_incarnation() {
+    let _time = timed!();
+    let (out, remote) = (tmp("remote-actor-kill"), tmp("remote-actor-kill-host"));
+    let port = free_port();
+    let listen = format!("--listen=tcp/127.0.0.1:{port}");
+    // The run's only actor is remote (id 0): once it is killed, nobody plays until its host
+    // restarts it, so the run can end only with the restarted actor's episodes.
+    let episodes = 300;
+    let mut run = spawn_run(
+        &out,
+        0,
+        &[
+            &listen,
+            &format!("episodes={episodes}"),
+            "env.max_episode_steps=100",
+            "budget.total=20",
+            "query.mode=first",
+        ],
+    );
+    let join = spawn_join(port, 1, &remote);
+    crate::runtime::wait_until(&mut run, "5 remote episodes", || rows(&out).len() >= 5);
+    let mirror = format!("--run-id={}", mirror_id(&remote.join("join")));
+    let pid = crate::runtime::find_process("alfd-actor", &[&mirror, "--actor-id=0"])
+        .expect("the remote actor runs");
+    crate::runtime::signal("KILL", pid);
+    let at_kill = rows(&out).len();
+    assert!(at_kill < episodes, "the run ended before the kill");
+    // Its host restarts it with a new incarnation; it plays the run to its end.
+    let (o, s) = crate::runtime::finished(run, &out, episodes);
+    let j = finish(join, 60);
+    assert!(j.status.success(), "{}", text(&j));
+    assert_eq!(s["actor_restarts"].as_u64(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("its host restarts it"), "{err}");
+    let log = std::fs::read_to_string(remote.join("join").join("actor-0.log")).unwrap();
+    assert!(
+        log.contains("incarnation=1") && log.contains("incarnation=2"),
+        "the restarted actor is incarnation 2: {log}"
+    );
+    let rows = rows(&out);
+    assert!(
+        rows[at_kill..].iter().all(|r| r[8] == "0"),
+        "every episode after the kill is the restarted actor's"
+    );
+    assert!(rows.len() - at_kill >= 1);
+    // The budget holds, and every demonstration written was used.
+    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    assert!(
+        demos.len() <= 20,
+        "{} demonstrations, budget 20",
+        demos.len()
+    );
+    assert_eq!(s["demos"].as_u64(), Some(demos.len() as u64));
+    assert_eq!(s["demos_used"].as_u64(), Some(demos.len() as u64));
+    for id in [run_id(&out), mirror_id(&remote.join("join"))] {
+        assert_eq!(
+            wire::leftover_files(&id),
+            Vec::<std::path::PathBuf>::new(),
+            "{id}"
         );
     }
 }

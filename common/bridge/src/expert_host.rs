@@ -249,7 +249,7 @@ fn forward(
                     });
                     continue;
                 }
-                Mail::Joined | Mail::Order(_) => continue,
+                Mail::Joined | Mail::Order(_) | Mail::Left(_) => continue,
             };
             let f = match frame::decode::<Frame>(SCHEMA_VERSION, &b) {
                 Ok(f) => f,
@@ -338,6 +338,10 @@ fn forward(
                 false
             }
         });
+        // Up in the order the expert wrote them (the pending map has no order): the learner's
+        // host appends a demonstration only as its file's next line, so one sent ahead of its
+        // predecessor would be refused, and every one after it.
+        answers.sort_by_key(|r| (r.outcome == outcome::ANSWERED, r.demo_index));
         if let Some(h) = model.latest_into(&mut bytes)? {
             if mine.contains(&(h.expert as u16)) {
                 put(&Frame::DemoModel(h, bytes.clone()))?;

@@ -5,7 +5,7 @@
 //! services under the actors' own headers; what they need (credits, weights, the demonstration
 //! model, control, answers) goes out over zenoh as it is published here.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc, Mutex};
@@ -13,8 +13,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use alfd_wire::{
-    Doorbell, IncomingQuery, PendingQuery, Process, QueryClient, Role, Sender, TransitionBatch,
-    Wake, Wire, WireError, MAX_ACTORS, SCHEMA_VERSION,
+    DemoModelHeader, Doorbell, IncomingQuery, PendingQuery, Process, QueryClient, Role, Sender,
+    TransitionBatch, Wake, Wire, WireError, MAX_ACTORS, SCHEMA_VERSION,
 };
 use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
@@ -25,7 +25,7 @@ use crate::endpoint::Endpoint;
 use crate::error::{zenoh_error, BridgeError, Result};
 use crate::frame::{self, ExpertOrder, Frame};
 use crate::inbox::{inbox, Mail, Post};
-use crate::roster::{JoinReply, JoinRequest, Joined, Roster};
+use crate::roster::{JoinReply, JoinRequest, Joined, RestartReply, RestartRequest, Roster};
 use crate::{keys, TICK};
 
 /// What the hub needs to know of the run.
@@ -36,6 +36,8 @@ pub struct HubOptions {
     /// Actors the launcher starts itself (ids below this are never given to remote hosts).
     pub local_actors: usize,
     pub first_incarnation: u64,
+    /// Restarts allowed per remote actor (`alfd run --max-restarts`).
+    pub max_restarts: u32,
     pub config_toml: String,
     pub runtime_toml: String,
     /// A remote query not answered within this long is dropped (the actor gave up already).
@@ -62,6 +64,12 @@ pub enum HubEvent {
         actors: Vec<u16>,
         expert: bool,
     },
+    /// A remote actor crashed and its host restarts it as `incarnation`.
+    Restarted {
+        join_id: String,
+        actor: u16,
+        incarnation: u64,
+    },
     /// A remote expert process ended; every answer it sent before was taken in.
     ExpertExited {
         generation: u16,
@@ -78,6 +86,7 @@ pub struct Hub {
     post: Post,
     thread: Option<JoinHandle<Result<()>>>,
     _queryable: zenoh::query::Queryable<()>,
+    _restarts: zenoh::query::Queryable<()>,
     _members: zenoh::pubsub::Subscriber<()>,
     _token: zenoh::liveliness::LivelinessToken,
     session: zenoh::Session,
@@ -99,6 +108,7 @@ impl Hub {
         let roster = Arc::new(Mutex::new(Roster::new(
             opts.local_actors,
             opts.first_incarnation,
+            opts.max_restarts,
         )));
         let (events_tx, events) = mpsc::channel();
         let (post, inbox) = inbox(&opts.run_id, 1);
@@ -140,6 +150,45 @@ impl Hub {
                 .map_err(zenoh_error)?
         };
 
+        // Restarts: a remote host's actor crashed, and the host asks for a new incarnation.
+        let restarts = {
+            let roster = Arc::clone(&roster);
+            let events_tx = events_tx.clone();
+            session
+                .declare_queryable(keys::restart(&opts.run_id))
+                .callback(move |query| {
+                    let request = query
+                        .payload()
+                        .map(|p| frame::decode::<RestartRequest>(SCHEMA_VERSION, &p.to_bytes()));
+                    let reply = match request {
+                        Some(Ok(r)) => match roster.lock().expect("roster").restart(&r.join_id, r.actor) {
+                            Ok(incarnation) => {
+                                let _ = events_tx.send(HubEvent::Restarted {
+                                    join_id: r.join_id,
+                                    actor: r.actor,
+                                    incarnation,
+                                });
+                                RestartReply::Restart(incarnation)
+                            }
+                            Err(why) => {
+                                warn!(join_id = %r.join_id, actor = r.actor, "restart refused: {why}");
+                                RestartReply::Refused(why)
+                            }
+                        },
+                        Some(Err(e)) => RestartReply::Refused(e.to_string()),
+                        None => RestartReply::Refused("a restart without a request".to_owned()),
+                    };
+                    match frame::encode(SCHEMA_VERSION, &reply) {
+                        Ok(bytes) => {
+                            let _ = query.reply(query.key_expr().clone(), bytes).wait();
+                        }
+                        Err(e) => warn!("cannot answer a restart: {e}"),
+                    }
+                })
+                .wait()
+                .map_err(zenoh_error)?
+        };
+
         // Members: each joined host holds a liveliness token; when it goes, so do its actors.
         let members = {
             let roster = Arc::clone(&roster);
@@ -158,6 +207,7 @@ impl Hub {
                             post.send(Mail::Joined);
                         }
                         SampleKind::Delete => {
+                            post.send(Mail::Left(join_id.clone()));
                             let left = roster.lock().expect("roster").leave(&join_id);
                             if !left.actors.is_empty() || left.expert {
                                 let _ = events_tx.send(HubEvent::Left {
@@ -219,6 +269,7 @@ impl Hub {
             post,
             thread: Some(thread),
             _queryable: queryable,
+            _restarts: restarts,
             _members: members,
             _token: token,
             session,
@@ -343,7 +394,13 @@ fn forward(
     let server = wire.query_server()?;
     let mut held: HashMap<u32, IncomingQuery<'_>> = HashMap::new();
     let mut remote_model = None;
-    let mut remote_experts: HashSet<u16> = HashSet::new();
+    // Generation → the host serving it; a generation whose host left writes nothing more.
+    let mut remote_experts: HashMap<u16, String> = HashMap::new();
+    // Lines of the run's demos.jsonl while a remote expert is active, and its newest model
+    // while that model counts demonstrations not yet written here (its answers are on their
+    // way): published here only once they are on disk.
+    let mut written = 0usize;
+    let mut early_model: Option<(DemoModelHeader, Vec<u8>)> = None;
     let mut active = 0u32;
     let mut actor_bells = alfd_wire::ActorBells::new(&wire);
     let mut newest = Newest::default();
@@ -376,12 +433,27 @@ fn forward(
                     continue;
                 }
                 Mail::Order(order) => {
-                    if let ExpertOrder::Start { generation, .. } = &order {
-                        remote_experts.insert(*generation);
+                    if let ExpertOrder::Start {
+                        generation,
+                        join_id,
+                        ..
+                    } = &order
+                    {
+                        remote_experts.insert(*generation, join_id.clone());
                     }
                     let f = frame::encode(SCHEMA_VERSION, &Frame::Order(order))?;
                     put(&f)?;
                     newest.orders.push(f);
+                    continue;
+                }
+                Mail::Left(join_id) => {
+                    remote_experts.retain(|generation, j| {
+                        let gone = *j == join_id;
+                        if gone {
+                            info!(generation, %join_id, "the remote expert's host left");
+                        }
+                        !gone
+                    });
                     continue;
                 }
                 Mail::Exited { .. } => continue,
@@ -420,12 +492,25 @@ fn forward(
                     pending.insert(q.actor, (ask, q.header.seq, Instant::now()));
                     Ok(expert.ring())
                 }
-                Frame::DemoModel(h, b) if remote_experts.contains(&(h.expert as u16)) => {
+                Frame::DemoModel(h, b) if remote_experts.contains_key(&(h.expert as u16)) => {
+                    if h.demos as usize > written {
+                        // It counts an answer still on its way: published once that is written.
+                        early_model = Some((h, b));
+                        continue;
+                    }
                     let tx = match &mut remote_model {
                         Some(tx) => tx,
                         None => remote_model.insert(wire.demo_model_sender()?),
                     };
                     tx.forward(h, &b).map(|_| Ok(0))
+                }
+                Frame::ExpertAnswer(r, _) if !remote_experts.contains_key(&(r.expert as u16)) => {
+                    warn!(
+                        generation = r.expert,
+                        index = r.demo_index,
+                        "an answer of a remote expert whose host left; not written, not answered"
+                    );
+                    continue;
                 }
                 Frame::ExpertAnswer(r, demo) => {
                     // On disk here before any actor sees it: no link loss can lose it.
@@ -434,6 +519,19 @@ fn forward(
                         {
                             warn!("a remote expert's demonstration refused: {e}; not answered");
                             continue;
+                        }
+                        written = r.demo_index as usize + 1;
+                        // Its model, which counts it, before its answer (as on one host).
+                        if let Some((h, b)) =
+                            early_model.take_if(|(h, _)| h.demos as usize <= written)
+                        {
+                            let tx = match &mut remote_model {
+                                Some(tx) => tx,
+                                None => remote_model.insert(wire.demo_model_sender()?),
+                            };
+                            if let Err(e) = tx.forward(h, &b) {
+                                warn!("{e}; a remote expert's model dropped");
+                            }
                         }
                     }
                     let Some(q) = held.remove(&r.actor) else {
@@ -454,6 +552,7 @@ fn forward(
                     code,
                 } => {
                     remote_experts.remove(&generation);
+                    early_model = None;
                     let _ = events.send(HubEvent::ExpertExited {
                         generation,
                         how,
@@ -478,7 +577,7 @@ fn forward(
         // host's expert answers them).
         loop {
             match server.receive() {
-                Ok(Some(q)) if remote_experts.contains(&(active as u16)) => {
+                Ok(Some(q)) if remote_experts.contains_key(&(active as u16)) => {
                     put(&frame::encode(SCHEMA_VERSION, &Frame::Query(*q.request()))?)?;
                     held.insert(q.request().actor, q);
                 }
@@ -509,10 +608,12 @@ fn forward(
             if c.active_expert != active {
                 active = c.active_expert;
                 let generation = active as u16;
-                if remote_experts.contains(&generation) {
+                if remote_experts.contains_key(&generation) {
                     // Every expert before it has exited and all its answers are written: the
                     // remote expert reads this back when it becomes active.
                     let text = crate::demos::read(&opts.demos_path)?;
+                    written = text.lines().count();
+                    early_model = None;
                     info!(
                         generation,
                         bytes = text.len(),

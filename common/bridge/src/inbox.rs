@@ -20,6 +20,9 @@ pub(crate) enum Mail {
     Joined,
     /// The launcher's order to a remote expert (the hub sends it down).
     Order(crate::frame::ExpertOrder),
+    /// A joined host left or its link dropped (its liveliness token went): the hub takes
+    /// nothing more from its expert.
+    Left(String),
     /// `alfd join`: the expert process here ended (the mirror sends it up after its answers).
     Exited {
         generation: u16,

@@ -11,6 +11,7 @@
 //! | key                          | what                                               |
 //! |------------------------------|----------------------------------------------------|
 //! | `alfd/<run>/join`            | queryable: a remote host asks for actor ids        |
+//! | `alfd/<run>/restart`         | queryable: a remote host restarts a crashed actor (a new incarnation) |
 //! | `alfd/<run>/up`              | remote hosts → hub: transitions, progress, queries |
 //! | `alfd/<run>/down`            | hub → remote hosts: credits, weights, model, control, answers; to a remote expert: orders, queries, `demos.jsonl` |
 //! | `alfd/<run>/hub`             | liveliness: the hub                                |
@@ -40,7 +41,7 @@ pub use expert_host::{ExpertHost, ExpertHostOrder};
 pub use frame::{decode, encode, ExpertOrder, Frame};
 pub use hub::{Hub, HubEvent, HubOptions};
 pub use mirror::{join, Mirror, Remote};
-pub use roster::{JoinReply, JoinRequest, Joined, Left, Roster};
+pub use roster::{JoinReply, JoinRequest, Joined, Left, RestartReply, RestartRequest, Roster};
 
 /// The longest a bridge sleeps between two looks at what this host published (the learner's
 /// weights and credits ring nobody); rings wake it sooner.
@@ -50,6 +51,9 @@ pub(crate) const TICK: Duration = Duration::from_millis(5);
 pub(crate) mod keys {
     pub fn join(run: &str) -> String {
         format!("alfd/{run}/join")
+    }
+    pub fn restart(run: &str) -> String {
+        format!("alfd/{run}/restart")
     }
     pub fn up(run: &str) -> String {
         format!("alfd/{run}/up")

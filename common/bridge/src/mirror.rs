@@ -21,7 +21,7 @@ use crate::endpoint::Endpoint;
 use crate::error::{zenoh_error, BridgeError, Result};
 use crate::frame::{self, Frame};
 use crate::inbox::{inbox, Mail};
-use crate::roster::{JoinReply, JoinRequest, Joined};
+use crate::roster::{JoinReply, JoinRequest, Joined, RestartReply, RestartRequest};
 use crate::{keys, TICK};
 
 /// A remote host's connection to a run: the zenoh session and the run's answer to the join.
@@ -124,6 +124,8 @@ pub struct Mirror {
     _token: Option<zenoh::liveliness::LivelinessToken>,
     _down: zenoh::pubsub::Subscriber<()>,
     session: zenoh::Session,
+    run_id: String,
+    join_id: String,
 }
 
 impl std::fmt::Debug for Mirror {
@@ -199,7 +201,38 @@ impl Mirror {
             _token: Some(token),
             _down: down,
             session,
+            run_id: joined.run_id,
+            join_id,
         })
+    }
+
+    /// Actor `actor` of this host crashed: asks the run for its new incarnation (waiting at
+    /// most `wait`). The run refuses after its `--max-restarts` restarts of the id.
+    pub fn restart(&self, actor: u16, wait: Duration) -> Result<u64> {
+        let request = RestartRequest {
+            join_id: self.join_id.clone(),
+            actor,
+        };
+        let replies = self
+            .session
+            .get(keys::restart(&self.run_id))
+            .payload(frame::encode(SCHEMA_VERSION, &request)?)
+            .timeout(wait)
+            .wait()
+            .map_err(zenoh_error)?;
+        while let Ok(r) = replies.recv() {
+            if let Ok(s) = r.result() {
+                return match frame::decode::<RestartReply>(SCHEMA_VERSION, &s.payload().to_bytes())?
+                {
+                    RestartReply::Restart(incarnation) => Ok(incarnation),
+                    RestartReply::Refused(why) => Err(BridgeError::Refused(why)),
+                };
+            }
+        }
+        Err(BridgeError::Zenoh(format!(
+            "the run did not answer a restart of actor {actor} within {} ms",
+            wait.as_millis()
+        )))
     }
 
     /// How long since the learner's host was last heard of (`None`: never yet).

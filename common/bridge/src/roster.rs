@@ -2,7 +2,9 @@
 //! incarnation each gets. The launcher owns the ids below `local` (its own actors); remote hosts
 //! get free ids above them, the lowest first; an id given up (a host left or its link dropped) is
 //! given again with a new incarnation, so the learner's credit book sees a new actor process, as
-//! after a crash on one host.
+//! after a crash on one host. A remote actor that crashed is restarted by its host with a new
+//! incarnation of the id it holds, at most `max_restarts` times (the launcher's rule for its
+//! own actors).
 
 use alfd_wire::MAX_ACTORS;
 use serde::{Deserialize, Serialize};
@@ -16,6 +18,21 @@ pub struct JoinRequest {
     pub actors: u16,
     /// The demonstrator this host serves as the run's expert (`alfd join --expert NAME`).
     pub expert: Option<String>,
+}
+
+/// What `alfd join` asks when one of its actors died: a new incarnation of the id it holds.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RestartRequest {
+    pub join_id: String,
+    pub actor: u16,
+}
+
+/// The run's answer to a [`RestartRequest`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum RestartReply {
+    /// Start the actor again with this incarnation.
+    Restart(u64),
+    Refused(String),
 }
 
 /// What a host that left took with it.
@@ -49,6 +66,9 @@ pub struct Joined {
 pub struct Roster {
     local: usize,
     first_incarnation: u64,
+    max_restarts: u32,
+    /// Per id: restarts since its holder joined.
+    restarts: Vec<u32>,
     /// Per id: the join holding it.
     holders: Vec<Option<String>>,
     /// Per id: the incarnation the next holder gets.
@@ -59,11 +79,13 @@ pub struct Roster {
 
 impl Roster {
     /// A run with `local` actors of its own, whose actors' incarnations start at
-    /// `first_incarnation`.
-    pub fn new(local: usize, first_incarnation: u64) -> Self {
+    /// `first_incarnation`, and whose actors may be restarted `max_restarts` times each.
+    pub fn new(local: usize, first_incarnation: u64, max_restarts: u32) -> Self {
         Self {
             local: local.min(MAX_ACTORS),
             first_incarnation,
+            max_restarts,
+            restarts: vec![0; MAX_ACTORS],
             holders: vec![None; MAX_ACTORS],
             next_incarnation: vec![first_incarnation; MAX_ACTORS],
             experts: Vec::new(),
@@ -109,11 +131,32 @@ impl Roster {
             .iter()
             .map(|&i| {
                 self.holders[i] = Some(request.join_id.clone());
+                self.restarts[i] = 0;
                 let inc = self.next_incarnation[i];
                 self.next_incarnation[i] += 1;
                 (i as u16, inc)
             })
             .collect())
+    }
+
+    /// Actor `id` of `join_id` died and its host restarts it: its new incarnation (the
+    /// learner's credit book takes it as a new actor process). Refused for an id the host does
+    /// not hold, and after `max_restarts` restarts of the id since the host joined.
+    pub fn restart(&mut self, join_id: &str, id: u16) -> Result<u64, String> {
+        let i = usize::from(id);
+        if self.holders.get(i).and_then(|h| h.as_deref()) != Some(join_id) {
+            return Err(format!("actor {id} is not held by {join_id}"));
+        }
+        if self.restarts[i] >= self.max_restarts {
+            return Err(format!(
+                "actor {id} was restarted {} times already (--max-restarts {})",
+                self.restarts[i], self.max_restarts
+            ));
+        }
+        self.restarts[i] += 1;
+        let incarnation = self.next_incarnation[i];
+        self.next_incarnation[i] += 1;
+        Ok(incarnation)
     }
 
     /// `join_id` left (or its link dropped): its ids are free again, and its expert gone;
@@ -180,7 +223,7 @@ mod tests {
 
     #[test]
     fn a_host_may_serve_the_expert_with_or_without_actors_one_at_a_time() {
-        let mut r = Roster::new(1, 1);
+        let mut r = Roster::new(1, 1, 5);
         assert_eq!(r.join(&expert("e", 0)).unwrap(), vec![]);
         // Asked again (a lost reply): the same answer, not a second expert.
         assert_eq!(r.join(&expert("e", 0)).unwrap(), vec![]);
@@ -207,7 +250,7 @@ mod tests {
 
     #[test]
     fn remote_actors_get_free_ids_above_the_local_ones_and_new_incarnations_on_rejoin() {
-        let mut r = Roster::new(2, 1);
+        let mut r = Roster::new(2, 1, 5);
         assert_eq!(r.join(&ask("a", 2)).unwrap(), vec![(2, 1), (3, 1)]);
         // A lost reply: asking again gets the same ids, not more.
         assert_eq!(r.join(&ask("a", 2)).unwrap(), vec![(2, 1), (3, 1)]);
@@ -222,8 +265,32 @@ mod tests {
     }
 
     #[test]
+    fn a_crashed_remote_actor_gets_a_new_incarnation_of_its_id_within_the_restart_limit() {
+        let mut r = Roster::new(1, 1, 2);
+        assert_eq!(r.join(&ask("a", 2)).unwrap(), vec![(1, 1), (2, 1)]);
+        assert_eq!(r.restart("a", 2), Ok(2));
+        assert_eq!(r.restart("a", 2), Ok(3));
+        let e = r.restart("a", 2).unwrap_err();
+        assert!(
+            e.contains("restarted 2 times already") && e.contains("--max-restarts 2"),
+            "{e}"
+        );
+        // The other id has its own count; an id of the launcher or of another host is refused.
+        assert_eq!(r.restart("a", 1), Ok(2));
+        assert!(r.restart("a", 0).unwrap_err().contains("not held by a"));
+        assert!(r.restart("b", 1).is_err() && r.restart("a", 99).is_err());
+        // A lost reply asked again: the newest incarnation.
+        assert_eq!(r.join(&ask("a", 2)).unwrap(), vec![(1, 2), (2, 3)]);
+        // A host joining after "a" left gets the next incarnations, and restarts anew.
+        r.leave("a");
+        assert_eq!(r.join(&ask("b", 1)).unwrap(), vec![(1, 3)]);
+        assert_eq!((r.restart("b", 1), r.restart("b", 1)), (Ok(4), Ok(5)));
+        assert!(r.restart("b", 1).is_err());
+    }
+
+    #[test]
     fn a_join_beyond_the_free_ids_or_of_no_actor_is_refused_by_number() {
-        let mut r = Roster::new(14, 1_000_001);
+        let mut r = Roster::new(14, 1_000_001, 5);
         let e = r.join(&ask("a", 3)).unwrap_err();
         assert!(e.contains("3 actors asked for, but only 2"), "{e}");
         assert_eq!(r.remote(), 0, "a refused join holds nothing");

@@ -189,6 +189,7 @@ fn bridges(
         run_id: run_id.to_owned(),
         local_actors: 0,
         first_incarnation: 1,
+        max_restarts: 0,
         config_toml: String::new(),
         runtime_toml: String::new(),
         query_timeout: Duration::from_secs(1),

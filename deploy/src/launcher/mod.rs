@@ -795,6 +795,10 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     "expert-{generation} answers again, {} ms after expert-{died} died",
                     took.as_millis()
                 ),
+                Action::NoExpert {
+                    generation,
+                    message,
+                } => self.no_expert(generation, &message),
                 Action::Fail {
                     generation,
                     message,

@@ -41,6 +41,7 @@ impl Launcher<'_, '_> {
             run_id: self.plan.run_id.clone(),
             local_actors: self.plan.actors,
             first_incarnation: self.plan.first_incarnation(),
+            max_restarts: self.plan.max_restarts,
             config_toml: read("config.toml")?,
             runtime_toml: read(RUNTIME_FILE)?,
             query_timeout: self.plan.runtime.query_timeout(),
@@ -102,6 +103,15 @@ impl Launcher<'_, '_> {
                         self.remote_expert_exited(generation, how.to_owned(), None, running)?;
                     }
                 }
+                alfd_bridge::HubEvent::Restarted {
+                    join_id,
+                    actor,
+                    incarnation,
+                } => {
+                    // Counted as the launcher's own actors' restarts are.
+                    self.restarts += 1;
+                    warn!(%join_id, actor, incarnation, "a remote actor died; its host restarts it");
+                }
                 alfd_bridge::HubEvent::ExpertExited {
                     generation,
                     how,
@@ -135,8 +145,19 @@ impl Launcher<'_, '_> {
         } else {
             info!("remote expert-{generation} {}", exit.how);
         }
-        let actions = self.experts.exited(generation, &exit, Instant::now());
+        // Restarted here under the same name if it can be; else the run goes on without it.
+        let actions = self.experts.lost(generation, &exit, Instant::now());
         self.apply(actions)
+    }
+
+    /// The replacement of a lost remote expert cannot serve here: the run goes on, the actors
+    /// act on their own (their queries cost nothing while no expert is active).
+    pub(super) fn no_expert(&self, generation: u16, message: &str) {
+        warn!(
+            "{message}; see {}. The run goes on without an expert: the actors act on their \
+             own (a host may offer one with `alfd join --expert`, or `alfd swap-expert`)",
+            self.log_of(&format!("expert-{generation}"))
+        );
     }
 
     /// A `Spawn` of the lifecycle while a remote host's offer is taken: the host starts it.
