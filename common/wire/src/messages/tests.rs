@@ -1,3 +1,5 @@
+//! Tests of the wire's messages: layouts, round trips, refusals and a fuzz pass.
+
 use crate::test_support::transition;
 use crate::*;
 
