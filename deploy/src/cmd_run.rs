@@ -12,7 +12,7 @@ use crate::report::{self, Output};
 use crate::usage::usage;
 use crate::{run_dir, setup};
 
-/// The default experiment: the recommended CartPole-1000 preset (Bootstrapped DQN with 100 active
+/// The default experiment: the recommended CartPole-1000 preset (Bootstrapped DQN with 300 active
 /// demonstrations of the 1000 expert, 50,000 steps).
 pub const DEFAULT_CONFIG: &str = include_str!("../configs/recommended/cartpole.toml");
 
