@@ -96,6 +96,27 @@ pub fn tail_mean(curve: &[CurvePoint], last: usize) -> f64 {
     tail.iter().map(|p| p.mean).sum::<f64>() / tail.len().max(1) as f64
 }
 
+/// The mean over the runs of each run's mean return over its own last `last` episodes. With runs
+/// of equal length this is [`tail_mean`] of their mean curve (and computed that way, so the
+/// numbers stay those of the episode curves); with runs of different lengths (runs limited in
+/// environment steps) the last episodes of the mean curve would be those of the runs with the
+/// most, shortest, episodes only, so each run counts its own last episodes instead.
+pub fn runs_tail_mean(returns: &[Vec<f64>], last: usize) -> f64 {
+    let longest = returns.iter().map(Vec::len).max().unwrap_or(0);
+    if returns.iter().all(|r| r.len() == longest) {
+        return tail_mean(&curve(&episodes(longest), returns), last);
+    }
+    let own: Vec<f64> = returns
+        .iter()
+        .filter(|r| !r.is_empty())
+        .map(|r| {
+            let tail = &r[r.len().saturating_sub(last)..];
+            tail.iter().sum::<f64>() / tail.len() as f64
+        })
+        .collect();
+    own.iter().sum::<f64>() / own.len().max(1) as f64
+}
+
 /// A centred moving average of width `window` (shrinking at the ends), for plots.
 pub fn smooth(values: &[f64], window: usize) -> Vec<f64> {
     if window <= 1 {
@@ -224,6 +245,13 @@ mod tests {
         let c = curve(&episodes(4), &[vec![1.0, 2.0, 3.0, 4.0]]);
         assert_eq!(tail_mean(&c, 2), 3.5);
         assert_eq!(tail_mean(&c, 50), 2.5);
+        // Runs of different lengths: each counts its own last 2 episodes, (15 + 20) / 2 and
+        // (1 + 1) / 2, then their mean 9.25 (the mean curve's last 2 points would be 2 and 1).
+        let runs = vec![vec![10.0, 15.0, 20.0], vec![0.0, 1.0, 1.0, 1.0, 1.0]];
+        assert_eq!(runs_tail_mean(&runs, 2), 9.25);
+        // Equal lengths: the mean curve's tail.
+        let equal = vec![vec![1.0, 2.0, 3.0], vec![3.0, 4.0, 5.0]];
+        assert_eq!(runs_tail_mean(&equal, 2), 3.5);
     }
 
     #[test]

@@ -95,10 +95,7 @@ pub fn analyse<'a>(
     anyhow::ensure!(!runs.is_empty(), "method `{}` has no runs", method.name);
     let returns: Vec<Vec<f64>> = runs.iter().map(|r| r.episodes.returns.clone()).collect();
     let longest = returns.iter().map(Vec::len).max().unwrap_or(0);
-    let tail = stats::tail_mean(
-        &stats::curve(&stats::episodes(longest), &returns),
-        exp.last as usize,
-    );
+    let tail = stats::runs_tail_mean(&returns, exp.last as usize);
     // Each seed's values along the x axis, the curve, and the points every seed reached.
     let (xs, series, steps) = match exp.x {
         XAxis::Episodes => (stats::episodes(longest), returns, None),
@@ -474,8 +471,8 @@ pub fn training_summary(
 fn runs_table(md: &mut String, exp: &Experiment, results: &[MethodResult]) {
     let _ = writeln!(
         md,
-        "\n## Runs\n\n\"last {last}\": the mean return over the last {last} episodes and the \
-         seeds. \"demos\": demonstrations used by the end of a run, mean over the seeds. \
+        "\n## Runs\n\n\"last {last}\": the mean return over each seed's last {last} episodes, \
+         then over the seeds. \"demos\": demonstrations used by the end of a run, mean over the seeds. \
          \"s/run\": mean wall-clock time of one run; \"run-s\": their sum. CliffWalk: \"greedy \
          V(S)\": the value at S (γ = 0.99) of each run's final greedy policy, mean over the \
          seeds, next to the optimal one (value iteration).\n",
