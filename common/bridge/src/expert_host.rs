@@ -8,10 +8,10 @@
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use alfd_wire::{
     outcome, Doorbell, PendingQuery, Process, QueryClient, Role, Wake, Wire, WireError, MAX_ACTORS,
@@ -21,10 +21,11 @@ use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
 use zenoh::Wait as _;
 
-use crate::error::{zenoh_error, BridgeError, Result};
+use crate::error::{zenoh_error, Result};
 use crate::frame::{self, ExpertOrder, Frame};
 use crate::inbox::{inbox, Mail, Post};
 use crate::mirror::Remote;
+use crate::worker::{self, Heartbeat};
 use crate::{keys, TICK};
 
 /// What the run asks of `alfd join` about its expert.
@@ -44,8 +45,7 @@ pub struct ExpertHost {
     post: Post,
     orders: mpsc::Receiver<ExpertHostOrder>,
     thread: Option<JoinHandle<Result<()>>>,
-    heard: Arc<AtomicU64>,
-    epoch: Instant,
+    heard: Heartbeat,
     _token: Option<zenoh::liveliness::LivelinessToken>,
     _down: zenoh::pubsub::Subscriber<()>,
 }
@@ -83,13 +83,12 @@ impl ExpertHost {
             .wait()
             .map_err(zenoh_error)?;
         let stop = Arc::new(AtomicBool::new(false));
-        let heard = Arc::new(AtomicU64::new(0));
-        let epoch = Instant::now();
+        let heard = Heartbeat::new();
         let (orders_tx, orders) = mpsc::channel();
         let (ready_tx, ready_rx) = mpsc::channel();
         let thread = {
             let stop = Arc::clone(&stop);
-            let heard = Arc::clone(&heard);
+            let heard = heard.clone();
             let me = Me {
                 run_id: host_run_id.to_owned(),
                 join_id: remote.join_id().to_owned(),
@@ -98,7 +97,7 @@ impl ExpertHost {
             std::thread::Builder::new()
                 .name("expert-host".to_owned())
                 .spawn(move || {
-                    let r = forward(&me, inbox, &up, &stop, &heard, epoch, &orders_tx, ready_tx);
+                    let r = forward(&me, inbox, &up, &stop, &heard, &orders_tx, ready_tx);
                     if let Err(e) = &r {
                         warn!("the expert host's bridge stopped: {e}");
                     }
@@ -124,7 +123,6 @@ impl ExpertHost {
             orders,
             thread: Some(thread),
             heard,
-            epoch,
             _token: token,
             _down: down,
         })
@@ -147,14 +145,7 @@ impl ExpertHost {
 
     /// How long since the learner's host was last heard of (`None`: never yet).
     pub fn silence(&self) -> Option<Duration> {
-        match self.heard.load(Ordering::Relaxed) {
-            0 => None,
-            ms => Some(
-                self.epoch
-                    .elapsed()
-                    .saturating_sub(Duration::from_millis(ms)),
-            ),
-        }
+        self.heard.silence()
     }
 
     /// Whether the bridge's thread ended (an error, said in the log).
@@ -169,12 +160,7 @@ impl ExpertHost {
 
     fn halt(&mut self) -> Result<()> {
         self.stop.store(true, Ordering::Relaxed);
-        let r = match self.thread.take() {
-            Some(t) => t
-                .join()
-                .unwrap_or_else(|_| Err(BridgeError::Zenoh("the expert host panicked".into()))),
-            None => Ok(()),
-        };
+        let r = worker::join(&mut self.thread, "expert host");
         if let Some(t) = self._token.take() {
             let _ = t.undeclare().wait();
         }
@@ -203,8 +189,7 @@ fn forward(
     inbox: crate::inbox::Inbox,
     up: &zenoh::pubsub::Publisher<'static>,
     stop: &AtomicBool,
-    heard: &AtomicU64,
-    epoch: Instant,
+    heard: &Heartbeat,
     orders: &mpsc::Sender<ExpertHostOrder>,
     ready: mpsc::Sender<()>,
 ) -> Result<()> {
@@ -260,10 +245,7 @@ fn forward(
             };
             let done = match f {
                 Frame::Control(c) => {
-                    heard.store(
-                        (epoch.elapsed().as_millis() as u64).max(1),
-                        Ordering::Relaxed,
-                    );
+                    heard.beat();
                     control.forward(c)
                 }
                 Frame::Order(ExpertOrder::Start {

@@ -26,6 +26,7 @@ use crate::error::{zenoh_error, BridgeError, Result};
 use crate::frame::{self, ExpertOrder, Frame};
 use crate::inbox::{inbox, Mail, Post};
 use crate::roster::{JoinReply, JoinRequest, Joined, RestartReply, RestartRequest, Roster};
+use crate::worker;
 use crate::{keys, TICK};
 
 /// What the hub needs to know of the run.
@@ -299,12 +300,7 @@ impl Hub {
 
     fn halt(&mut self) -> Result<()> {
         self.stop.store(true, Ordering::Relaxed);
-        let r = match self.thread.take() {
-            Some(t) => t
-                .join()
-                .unwrap_or_else(|_| Err(BridgeError::Zenoh("the hub panicked".into()))),
-            None => Ok(()),
-        };
+        let r = worker::join(&mut self.thread, "hub");
         let _ = self.session.close().wait();
         r
     }

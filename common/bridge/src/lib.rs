@@ -32,6 +32,7 @@ mod hub;
 mod inbox;
 mod mirror;
 mod roster;
+mod worker;
 
 use std::time::Duration;
 

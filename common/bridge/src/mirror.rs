@@ -5,7 +5,7 @@
 //! back is published here under the sender's own header.
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -22,6 +22,7 @@ use crate::error::{zenoh_error, BridgeError, Result};
 use crate::frame::{self, Frame};
 use crate::inbox::{inbox, Mail};
 use crate::roster::{JoinReply, JoinRequest, Joined, RestartReply, RestartRequest};
+use crate::worker::{self, Heartbeat};
 use crate::{keys, TICK};
 
 /// A remote host's connection to a run: the zenoh session and the run's answer to the join.
@@ -117,10 +118,9 @@ pub fn join(
 pub struct Mirror {
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<Result<()>>>,
-    /// Milliseconds since `epoch` when the learner's host was last heard of (its control
-    /// messages, every `alfd_wire::CONTROL_PERIOD`).
-    heard: Arc<AtomicU64>,
-    epoch: Instant,
+    /// When the learner's host was last heard of (its control messages, every
+    /// `alfd_wire::CONTROL_PERIOD`).
+    heard: Heartbeat,
     _token: Option<zenoh::liveliness::LivelinessToken>,
     _down: zenoh::pubsub::Subscriber<()>,
     session: zenoh::Session,
@@ -158,27 +158,17 @@ impl Mirror {
             .wait()
             .map_err(zenoh_error)?;
         let stop = Arc::new(AtomicBool::new(false));
-        let heard = Arc::new(AtomicU64::new(0));
-        let epoch = Instant::now();
+        let heard = Heartbeat::new();
         let (ready_tx, ready_rx) = std::sync::mpsc::channel();
         let thread = {
             let stop = Arc::clone(&stop);
-            let heard = Arc::clone(&heard);
+            let heard = heard.clone();
             let mirror_run_id = mirror_run_id.to_owned();
             let ids: Vec<u16> = joined.actors.iter().map(|a| a.0).collect();
             std::thread::Builder::new()
                 .name("mirror".to_owned())
                 .spawn(move || {
-                    let r = forward(
-                        &mirror_run_id,
-                        &ids,
-                        inbox,
-                        &up,
-                        &stop,
-                        &heard,
-                        epoch,
-                        ready_tx,
-                    );
+                    let r = forward(&mirror_run_id, &ids, inbox, &up, &stop, &heard, ready_tx);
                     if let Err(e) = &r {
                         warn!("the mirror stopped: {e}");
                     }
@@ -197,7 +187,6 @@ impl Mirror {
             stop,
             thread: Some(thread),
             heard,
-            epoch,
             _token: Some(token),
             _down: down,
             session,
@@ -237,14 +226,7 @@ impl Mirror {
 
     /// How long since the learner's host was last heard of (`None`: never yet).
     pub fn silence(&self) -> Option<Duration> {
-        match self.heard.load(Ordering::Relaxed) {
-            0 => None,
-            ms => Some(
-                self.epoch
-                    .elapsed()
-                    .saturating_sub(Duration::from_millis(ms)),
-            ),
-        }
+        self.heard.silence()
     }
 
     /// Whether the mirror's thread ended (an error, said in the log).
@@ -259,12 +241,7 @@ impl Mirror {
 
     fn halt(&mut self) -> Result<()> {
         self.stop.store(true, Ordering::Relaxed);
-        let r = match self.thread.take() {
-            Some(t) => t
-                .join()
-                .unwrap_or_else(|_| Err(BridgeError::Zenoh("the mirror panicked".into()))),
-            None => Ok(()),
-        };
+        let r = worker::join(&mut self.thread, "mirror");
         if let Some(t) = self._token.take() {
             let _ = t.undeclare().wait();
         }
@@ -288,8 +265,7 @@ fn forward(
     inbox: crate::inbox::Inbox,
     up: &zenoh::pubsub::Publisher<'static>,
     stop: &AtomicBool,
-    heard: &AtomicU64,
-    epoch: Instant,
+    heard: &Heartbeat,
     ready: std::sync::mpsc::Sender<()>,
 ) -> Result<()> {
     let wire = Wire::connect(run_id, Process::new(Role::Bridge, 0), SCHEMA_VERSION)?;
@@ -336,10 +312,7 @@ fn forward(
             let done = match f {
                 Frame::Credits(c) => credits.forward(c).map(|_| true),
                 Frame::Control(c) => {
-                    heard.store(
-                        (epoch.elapsed().as_millis() as u64).max(1),
-                        Ordering::Relaxed,
-                    );
+                    heard.beat();
                     control.forward(c).map(|_| true)
                 }
                 Frame::Weights(h, params) => {

@@ -257,11 +257,7 @@ impl<A: Adder, V: VariableSource> Actor<Vec<f32>> for GenericActor<A, V> {
     }
 
     fn end_episode(&mut self) -> Result<()> {
-        if let Some(window) = &mut self.n_step {
-            // Empty unless the episode stopped in its middle (its last steps go nowhere).
-            window.clear();
-        }
-        self.pending = None;
+        // Nothing waits here: the episode's last step flushed the potential and n-step windows.
         self.adder.end_episode()
     }
 }
