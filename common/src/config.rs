@@ -474,7 +474,7 @@ impl AgentConfig {
     pub fn epsilon(&self, step: u64) -> f64 {
         self.epsilon_end
             + (self.epsilon_start - self.epsilon_end)
-                * (-(step as f64) / self.epsilon_decay_steps).exp()
+                * crate::math::exp(-(step as f64) / self.epsilon_decay_steps)
     }
 }
 

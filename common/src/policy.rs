@@ -11,7 +11,7 @@ pub fn softmax_into(q: &[f64], temperature: f64, out: &mut [f64]) {
     let max = q.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let mut sum = 0.0;
     for (o, &v) in out.iter_mut().zip(q) {
-        *o = ((v - max) / temperature).exp();
+        *o = crate::math::exp((v - max) / temperature);
         sum += *o;
     }
     for o in out.iter_mut() {
@@ -30,7 +30,7 @@ pub fn softmax(q: &[f64], temperature: f64) -> Vec<f64> {
 pub fn entropy(p: &[f64]) -> f64 {
     -p.iter()
         .filter(|&&x| x > 0.0)
-        .map(|&x| x * x.ln())
+        .map(|&x| x * crate::math::ln(x))
         .sum::<f64>()
 }
 

@@ -563,3 +563,70 @@ fn the_dependency_graph_keeps_its_shape() {
     );
     assert_eq!(inside("alfd-bridge"), BTreeSet::from(["alfd-wire"]));
 }
+
+// ---------------------------------------------------------------------------------------------
+// The same numbers on every CPU
+// ---------------------------------------------------------------------------------------------
+
+/// The platform's transcendental methods, which glibc dispatches by CPU features (issue 14);
+/// the core calls `alfd_common::math` instead.
+const PLATFORM_MATH: [&str; 16] = [
+    "exp", "exp2", "exp_m1", "ln", "ln_1p", "log", "log2", "log10", "powf", "sin", "cos", "tan",
+    "sin_cos", "tanh", "atan2", "hypot",
+];
+
+/// Calls of `PLATFORM_MATH` methods in `text` outside its `#[cfg(test)]` part (tests may compare
+/// against the platform), one line per finding.
+fn platform_math_findings(text: &str) -> Vec<String> {
+    let code = code_only(text);
+    let code = code.split("#[cfg(test)]").next().unwrap_or_default();
+    let mut found = Vec::new();
+    for (n, line) in code.lines().enumerate() {
+        for name in PLATFORM_MATH {
+            let call = format!(".{name}(");
+            if line.contains(&call) {
+                found.push(format!("line {}: `{call}`", n + 1));
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn the_platform_math_check_finds_method_calls_but_not_comments_or_tests() {
+    assert_eq!(
+        platform_math_findings("fn f(x: f64) -> f64 { (-x).exp() }").len(),
+        1
+    );
+    assert_eq!(
+        platform_math_findings("let c = theta.cos();\nlet l = p.ln();").len(),
+        2
+    );
+    for code in [
+        "// x.exp() in a comment\nfn f() {}",
+        "fn f(x: f64) -> f64 { crate::math::exp(x) }",
+        "fn f() {}\n#[cfg(test)]\nmod tests { fn g(x: f64) -> f64 { x.exp() } }",
+        "fn f() -> &'static str { \"x.sin()\" }",
+    ] {
+        assert_eq!(platform_math_findings(code), Vec::<String>::new(), "{code}");
+    }
+}
+
+#[test]
+fn the_core_calls_no_platform_transcendentals() {
+    let mut files = Vec::new();
+    rust_files(&workspace().join("common/src"), &mut files);
+    let mut problems = Vec::new();
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        let name = f.strip_prefix(workspace()).unwrap().display().to_string();
+        for finding in platform_math_findings(&text) {
+            problems.push(format!("{name}: {finding}"));
+        }
+    }
+    assert!(
+        problems.is_empty(),
+        "the core calls alfd_common::math (the same bits on every CPU), not the platform's:\n{}",
+        problems.join("\n")
+    );
+}

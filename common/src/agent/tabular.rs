@@ -12,6 +12,7 @@ use crate::config::{AgentConfig, AgentKind, QueryConfig, QueryMode};
 use crate::demo_model::DemoModel;
 use crate::env::Step;
 use crate::environment_loop::{Actor, Result};
+use crate::math;
 use crate::policy::argmax;
 use crate::qfunction::{QFunction, TabularQ};
 use crate::query::QueryRule;
@@ -183,7 +184,7 @@ impl TabularAgent {
             let lr = if self.lr_decay == 0.0 {
                 self.lr
             } else {
-                self.lr / f64::from(self.visits[i]).powf(self.lr_decay)
+                self.lr / math::powf(f64::from(self.visits[i]), self.lr_decay)
             };
             self.q.update_towards(s, k, a, r + self.gamma * next, lr);
         }

@@ -10,6 +10,7 @@
 //! paper (and the scikit-learn reference `kernel_models.json`) does.
 
 pub mod krr;
+pub mod smo;
 pub mod svm;
 
 pub use krr::KernelRidge;
@@ -207,7 +208,7 @@ impl DemoModel {
 /// The RBF kernel `exp(-GAMMA |x - y|^2)`.
 pub(crate) fn rbf(x: &[f64], y: &[f64]) -> f64 {
     let d2: f64 = x.iter().zip(y).map(|(a, b)| (a - b) * (a - b)).sum();
-    (-GAMMA * d2).exp()
+    crate::math::exp(-GAMMA * d2)
 }
 
 fn check_row(row: usize, s: &[f64], dim: usize) -> Result<(), DemoModelError> {

@@ -1,6 +1,7 @@
 //! Kernel SVM demonstration model (paper section 3.4): scikit-learn's
-//! `SVC(C=10, kernel='rbf', gamma=0.1, probability=True)` for two actions, with the SMO solver of
-//! `linfa-svm` and Platt scaling fitted on cross-validated decision values.
+//! `SVC(C=10, kernel='rbf', gamma=0.1, probability=True)` for two actions, with libsvm's SMO
+//! solver (the core's own, [`super::smo`]) and Platt scaling fitted on cross-validated decision
+//! values.
 //!
 //! Conventions:
 //! - the decision value `f(s) = sum_i coef_i k(s, x_i) - rho` is positive for action 1, negative
@@ -18,20 +19,20 @@
 //! - an action demonstrated only once: cross-validation would train folds without that action, so
 //!   the sigmoid is fitted on the final model's in-sample decision values instead.
 
-use linfa::traits::Fit;
 use rand::seq::SliceRandom;
 use serde::{Deserialize, Serialize};
 
-use super::{rbf, validate, DemoModelError, GAMMA};
-use crate::rng;
+use super::{rbf, smo, validate, DemoModelError};
+use crate::{math, rng};
 
 /// The SVM's penalty on margin violations.
 pub const C: f64 = 10.0;
 /// Folds of the cross-validation whose decision values the sigmoid is fitted on.
 pub const PLATT_FOLDS: usize = 5;
-/// Stopping tolerance of the SMO solver (maximal violating pair); linfa-svm's default, which is
-/// tighter than libsvm's 1e-3.
+/// Stopping tolerance of the SMO solver (maximal violating pair), tighter than libsvm's 1e-3.
 pub const SOLVER_EPS: f64 = 1e-7;
+/// The SMO solver's iteration limit (libsvm's).
+pub const SOLVER_MAX_ITER: usize = 10_000_000;
 /// Seed of the shuffle that assigns demonstrations to folds.
 pub const FOLD_SEED: u64 = 0;
 
@@ -66,16 +67,16 @@ impl Platt {
                 .map(|(&f, &t)| {
                     let z = a * f + b;
                     if z >= 0.0 {
-                        t * z + (-z).exp().ln_1p()
+                        t * z + math::ln_1p(math::exp(-z))
                     } else {
-                        (t - 1.0) * z + z.exp().ln_1p()
+                        (t - 1.0) * z + math::ln_1p(math::exp(z))
                     }
                 })
                 .sum()
         };
 
         let mut a = 0.0;
-        let mut b = ((n_neg + 1.0) / (n_pos + 1.0)).ln();
+        let mut b = math::ln((n_neg + 1.0) / (n_pos + 1.0));
         let mut fval = objective(a, b);
         let mut iter = 0;
         while iter < MAX_ITER {
@@ -85,10 +86,10 @@ impl Platt {
             for (&f, &t) in decision.iter().zip(&targets) {
                 let z = a * f + b;
                 let (p, q) = if z >= 0.0 {
-                    let e = (-z).exp();
+                    let e = math::exp(-z);
                     (e / (1.0 + e), 1.0 / (1.0 + e))
                 } else {
-                    let e = z.exp();
+                    let e = math::exp(z);
                     (1.0 / (1.0 + e), e / (1.0 + e))
                 };
                 let d2 = p * q;
@@ -142,10 +143,10 @@ impl Platt {
     pub fn prob(&self, f: f64) -> f64 {
         let z = self.a * f + self.b;
         if z >= 0.0 {
-            let e = (-z).exp();
+            let e = math::exp(-z);
             e / (1.0 + e)
         } else {
-            1.0 / (1.0 + z.exp())
+            1.0 / (1.0 + math::exp(z))
         }
     }
 }
@@ -162,43 +163,43 @@ struct Svc {
 }
 
 impl Svc {
-    /// Solves the C-SVC dual on the rows `idx` of `flat` (row-major, `state_dim` wide) with
-    /// linfa-svm's SMO. Both labels must be present among `idx`.
+    /// Solves the C-SVC dual on the rows `idx` of `flat` (row-major, `state_dim` wide) with the
+    /// core's SMO ([`super::smo`]). Both labels must be present among `idx`.
     fn fit(
         flat: &[f64],
         state_dim: usize,
         idx: &[usize],
         positive: &[bool],
     ) -> Result<Svc, DemoModelError> {
-        let mut records = ndarray::Array2::<f64>::zeros((idx.len(), state_dim));
-        for (r, &i) in idx.iter().enumerate() {
-            for (c, &v) in flat[i * state_dim..(i + 1) * state_dim].iter().enumerate() {
-                records[(r, c)] = v;
+        let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
+        let mut k = Vec::with_capacity(idx.len() * idx.len());
+        for &i in idx {
+            for &j in idx {
+                k.push(rbf(row(i), row(j)));
             }
         }
-        let targets: ndarray::Array1<bool> = idx.iter().map(|&i| positive[i]).collect();
-        let dataset = linfa::Dataset::new(records, targets);
-        let params = linfa_svm::Svm::<f64, bool>::params()
-            .pos_neg_weights(C, C)
-            .gaussian_kernel(1.0 / GAMMA) // linfa's Gaussian(eps) is exp(-|x - y|^2 / eps)
-            .eps(SOLVER_EPS);
-        let model = Fit::<_, _, linfa_svm::SvmError>::fit(&params, &dataset)
-            .map_err(|e| DemoModelError::Solver(e.to_string()))?;
-        tracing::trace!(%model, "SMO solved");
+        let labels: Vec<bool> = idx.iter().map(|&i| positive[i]).collect();
+        let dual = smo::solve(&k, &labels, C, SOLVER_EPS, SOLVER_MAX_ITER);
+        if !dual.rho.is_finite() || dual.coef.iter().any(|c| !c.is_finite()) {
+            return Err(DemoModelError::Solver(format!(
+                "the SMO solver ended with a non-finite solution after {} iterations",
+                dual.iterations
+            )));
+        }
+        tracing::trace!(iterations = dual.iterations, rho = dual.rho, "SMO solved");
 
-        // linfa returns alpha_i y_i for every training row, in order, and f = sum - rho.
         let mut support = Vec::new();
         let mut coef = Vec::new();
-        for (r, &c) in model.alpha.iter().enumerate() {
+        for (&i, &c) in idx.iter().zip(&dual.coef) {
             if c != 0.0 {
-                support.extend(dataset.records().row(r).iter());
+                support.extend_from_slice(row(i));
                 coef.push(c);
             }
         }
         Ok(Svc {
             support,
             coef,
-            rho: model.rho,
+            rho: dual.rho,
         })
     }
 

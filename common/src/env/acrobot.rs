@@ -12,6 +12,7 @@ use rand::Rng as _;
 
 use super::episode::Episode;
 use super::{Env, EnvError, Step};
+use crate::math::{cos, sin};
 
 /// Seconds integrated per step.
 pub const DT: f64 = 0.2;
@@ -85,7 +86,7 @@ impl Acrobot {
     /// The observation of a state.
     pub fn observe(state: &[f64; 4]) -> [f32; 6] {
         let [t1, t2, dt1, dt2] = *state;
-        [t1.cos(), t1.sin(), t2.cos(), t2.sin(), dt1, dt2].map(|v| v as f32)
+        [cos(t1), sin(t1), cos(t2), sin(t2), dt1, dt2].map(|v| v as f32)
     }
 
     /// The time derivative of `[θ1, θ2, θ̇1, θ̇2]` under `torque` (the book's equations, in
@@ -96,15 +97,15 @@ impl Acrobot {
         let (i1, i2, g) = (LINK_MOI, LINK_MOI, GRAVITY);
         let [theta1, theta2, dtheta1, dtheta2] = s;
         let d1 =
-            m1 * (lc1 * lc1) + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * theta2.cos()) + i1 + i2;
-        let d2 = m2 * (lc2 * lc2 + l1 * lc2 * theta2.cos()) + i2;
-        let phi2 = m2 * lc2 * g * (theta1 + theta2 - PI / 2.0).cos();
-        let phi1 = -m2 * l1 * lc2 * (dtheta2 * dtheta2) * theta2.sin()
-            - 2.0 * m2 * l1 * lc2 * dtheta2 * dtheta1 * theta2.sin()
-            + (m1 * lc1 + m2 * l1) * g * (theta1 - PI / 2.0).cos()
+            m1 * (lc1 * lc1) + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * cos(theta2)) + i1 + i2;
+        let d2 = m2 * (lc2 * lc2 + l1 * lc2 * cos(theta2)) + i2;
+        let phi2 = m2 * lc2 * g * cos(theta1 + theta2 - PI / 2.0);
+        let phi1 = -m2 * l1 * lc2 * (dtheta2 * dtheta2) * sin(theta2)
+            - 2.0 * m2 * l1 * lc2 * dtheta2 * dtheta1 * sin(theta2)
+            + (m1 * lc1 + m2 * l1) * g * cos(theta1 - PI / 2.0)
             + phi2;
         let ddtheta2 =
-            (torque + d2 / d1 * phi1 - m2 * l1 * lc2 * (dtheta1 * dtheta1) * theta2.sin() - phi2)
+            (torque + d2 / d1 * phi1 - m2 * l1 * lc2 * (dtheta1 * dtheta1) * sin(theta2) - phi2)
                 / (m2 * (lc2 * lc2) + i2 - (d2 * d2) / d1);
         let ddtheta1 = -(d2 * ddtheta2 + phi1) / d1;
         [dtheta1, dtheta2, ddtheta1, ddtheta2]
@@ -134,7 +135,7 @@ impl Acrobot {
 
     /// Whether the tip is above the bar (Gymnasium's `terminated`).
     pub fn is_terminal(state: &[f64; 4]) -> bool {
-        -state[0].cos() - (state[1] + state[0]).cos() > 1.0
+        -cos(state[0]) - cos(state[1] + state[0]) > 1.0
     }
 }
 

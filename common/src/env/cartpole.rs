@@ -9,6 +9,7 @@ use rand::Rng as _;
 
 use super::episode::Episode;
 use super::{Env, EnvError, Step};
+use crate::math::{cos, sin};
 
 /// Acceleration of gravity (m/s²).
 pub const GRAVITY: f64 = 9.8;
@@ -85,8 +86,8 @@ impl CartPole {
     fn integrate(state: [f64; 4], action: usize) -> [f64; 4] {
         let [x, x_dot, theta, theta_dot] = state;
         let force = if action == 1 { FORCE_MAG } else { -FORCE_MAG };
-        let costheta = theta.cos();
-        let sintheta = theta.sin();
+        let costheta = cos(theta);
+        let sintheta = sin(theta);
         let temp = (force + POLE_MASS_LENGTH * (theta_dot * theta_dot) * sintheta) / TOTAL_MASS;
         let thetaacc = (GRAVITY * sintheta - costheta * temp)
             / (LENGTH * (4.0 / 3.0 - MASS_POLE * (costheta * costheta) / TOTAL_MASS));

@@ -9,6 +9,7 @@ use rand::Rng as _;
 
 use super::episode::Episode;
 use super::{Env, EnvError, Step};
+use crate::math::cos;
 
 /// The left wall: the position is clipped here and the car stops.
 pub const MIN_POSITION: f64 = -1.2;
@@ -79,7 +80,7 @@ impl MountainCar {
         let [position, velocity] = state;
         let push = (action as f64 - 1.0) * FORCE;
         let velocity =
-            (velocity + (push + (3.0 * position).cos() * -GRAVITY)).clamp(-MAX_SPEED, MAX_SPEED);
+            (velocity + (push + cos(3.0 * position) * -GRAVITY)).clamp(-MAX_SPEED, MAX_SPEED);
         let position = (position + velocity).clamp(MIN_POSITION, MAX_POSITION);
         // An inelastic collision with the left wall.
         let velocity = if position == MIN_POSITION && velocity < 0.0 {

@@ -2,6 +2,7 @@
 //! AMSGrad, so that our weights follow a PyTorch run step for step.
 
 use super::{Mlp, Params};
+use crate::math;
 
 /// Adam's hyper-parameters; the defaults are the paper's (and PyTorch's, but for `lr`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -128,8 +129,8 @@ impl Adam {
         self.step += 1;
         let c = &self.config;
         let t = self.step as f64;
-        let bias_correction1 = 1.0 - c.beta1.powf(t);
-        let bias_correction2 = 1.0 - c.beta2.powf(t);
+        let bias_correction1 = 1.0 - math::powf(c.beta1, t);
+        let bias_correction2 = 1.0 - math::powf(c.beta2, t);
         let step_size = (c.lr / bias_correction1) as f32;
         let bias_correction2_sqrt = bias_correction2.sqrt() as f32;
         let w1 = (1.0 - c.beta1) as f32;
