@@ -42,8 +42,10 @@ pub struct RunArgs {
     /// without this flag when stdout is not a terminal).
     #[arg(long)]
     pub json: bool,
-    /// Credit window: steps an actor may run ahead of the learner's updates (1..=64).
-    #[arg(long, default_value_t = 32)]
+    /// Credit window: steps an actor may run ahead of the learner's updates (1..=64). A smaller
+    /// window means less policy lag: with the CartPole preset, 6 of 10 main-job runs at 32 ended
+    /// collapsed, 1 of 6 at 4 (README, the main job).
+    #[arg(long, default_value_t = 4)]
     pub window: u64,
     /// Milliseconds an actor waits for the expert's answer before acting on its own.
     #[arg(long, default_value_t = 1000)]
