@@ -353,8 +353,8 @@ fn the_io_check_sees_through_groups_spacing_and_aliases_but_not_comments() {
     }
 }
 
-#[test]
-fn the_core_does_no_io() {
+/// `findings` over every file of the core (`common/src`), each prefixed with the file's path.
+fn core_findings(findings: fn(&str) -> Vec<String>) -> Vec<String> {
     let mut files = Vec::new();
     rust_files(&workspace().join("common/src"), &mut files);
     assert!(files.len() > 10, "found only {} files", files.len());
@@ -362,10 +362,16 @@ fn the_core_does_no_io() {
     for f in &files {
         let text = std::fs::read_to_string(f).unwrap();
         let name = f.strip_prefix(workspace()).unwrap().display().to_string();
-        for finding in io_findings(&text) {
+        for finding in findings(&text) {
             problems.push(format!("{name}: {finding}"));
         }
     }
+    problems
+}
+
+#[test]
+fn the_core_does_no_io() {
+    let problems = core_findings(io_findings);
     assert!(
         problems.is_empty(),
         "the core does no I/O, but:\n{}",
@@ -614,16 +620,7 @@ fn the_platform_math_check_finds_method_calls_but_not_comments_or_tests() {
 
 #[test]
 fn the_core_calls_no_platform_transcendentals() {
-    let mut files = Vec::new();
-    rust_files(&workspace().join("common/src"), &mut files);
-    let mut problems = Vec::new();
-    for f in &files {
-        let text = std::fs::read_to_string(f).unwrap();
-        let name = f.strip_prefix(workspace()).unwrap().display().to_string();
-        for finding in platform_math_findings(&text) {
-            problems.push(format!("{name}: {finding}"));
-        }
-    }
+    let problems = core_findings(platform_math_findings);
     assert!(
         problems.is_empty(),
         "the core calls alfd_common::math (the same bits on every CPU), not the platform's:\n{}",

@@ -34,6 +34,15 @@ pub fn solve(k: &[f64], positive: &[bool], c: f64, eps: f64, max_iter: usize) ->
         .map(|&p| if p { 1.0 } else { -1.0 })
         .collect();
     let kij = |i: usize, j: usize| k[i * n + j];
+    // The curvature of the objective along the pair (i, j), floored at TAU.
+    let curvature = |i: usize, j: usize| {
+        let a = kij(i, i) + kij(j, j) - 2.0 * kij(i, j);
+        if a > 0.0 {
+            a
+        } else {
+            TAU
+        }
+    };
     let mut alpha = vec![0.0; n];
     // The objective's gradient Qα − e, at α = 0.
     let mut grad = vec![-1.0; n];
@@ -69,9 +78,7 @@ pub fn solve(k: &[f64], positive: &[bool], c: f64, eps: f64, max_iter: usize) ->
             }
             let b = gmax + yg;
             if b > 0.0 {
-                let a = kij(i, i) + kij(t, t) - 2.0 * kij(i, t);
-                let a = if a > 0.0 { a } else { TAU };
-                let gain = -(b * b) / a;
+                let gain = -(b * b) / curvature(i, t);
                 if gain <= best {
                     best = gain;
                     j = t;
@@ -85,8 +92,7 @@ pub fn solve(k: &[f64], positive: &[bool], c: f64, eps: f64, max_iter: usize) ->
 
         // The two-variable subproblem, clipped to the box (libsvm's update, with C_i = C_j = C).
         let (old_i, old_j) = (alpha[i], alpha[j]);
-        let curvature = kij(i, i) + kij(j, j) - 2.0 * kij(i, j);
-        let curvature = if curvature > 0.0 { curvature } else { TAU };
+        let curvature = curvature(i, j);
         if y[i] != y[j] {
             let delta = (-grad[i] - grad[j]) / curvature;
             let diff = alpha[i] - alpha[j];
