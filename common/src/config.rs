@@ -326,6 +326,9 @@ pub struct AgentConfig {
     /// Neural: the loss on TD errors, `huber` (SmoothL1, the paper's) or `mse`.
     #[serde(default)]
     pub loss: LossKind,
+    /// Neural: δ of the Huber loss (PyTorch's `HuberLoss(delta)`; 1 is SmoothL1, the paper's).
+    #[serde(default = "default_huber_delta")]
+    pub huber_delta: f64,
     /// Neural: Double DQN targets (the online head picks the next action, the target evaluates).
     #[serde(default)]
     pub double_dqn: bool,
@@ -399,6 +402,9 @@ pub enum LossKind {
     Mse,
 }
 
+fn default_huber_delta() -> f64 {
+    1.0
+}
 fn default_tau() -> f64 {
     1.0
 }

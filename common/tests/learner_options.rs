@@ -32,6 +32,7 @@ fn loss64(
             .collect()
     };
     let mut total = 0.0;
+    let delta = f64::from(cfg.huber_delta);
     for i in 0..b.size {
         let q = forward64(online, hidden, heads * actions, &row(&b.states, i));
         let qt = forward64(target, hidden, heads * actions, &row(&b.next_states, i));
@@ -57,8 +58,8 @@ fn loss64(
                 + f64::from(cfg.gamma).powi(horizon) * (1.0 - f64::from(b.terminated[i])) * next;
             let td = h(&q, a) - y;
             total += m * match cfg.loss {
-                TdLoss::Huber if td.abs() < 1.0 => 0.5 * td * td,
-                TdLoss::Huber => td.abs() - 0.5,
+                TdLoss::Huber if td.abs() < delta => 0.5 * td * td,
+                TdLoss::Huber => delta * (td.abs() - 0.5 * delta),
                 TdLoss::Mse => td * td,
             };
             if cfg.margin_weight > 0.0 && b.demos[i] != 0.0 {
@@ -125,6 +126,11 @@ fn each_loss_option_matches_an_f64_recomputation_and_finite_differences() {
         ..base
     });
     check_against_f64(TdConfig {
+        double: true,
+        ..base
+    });
+    check_against_f64(TdConfig {
+        huber_delta: 0.3,
         double: true,
         ..base
     });

@@ -352,6 +352,7 @@ impl NeuralLearner {
                     LossKind::Huber => TdLoss::Huber,
                     LossKind::Mse => TdLoss::Mse,
                 },
+                huber_delta: agent.huber_delta as f32,
                 double: agent.double_dqn,
                 margin_weight: agent.margin_loss_weight as f32,
                 margin: agent.margin as f32,

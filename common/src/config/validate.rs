@@ -201,6 +201,12 @@ impl ExperimentConfig {
                 format!("must be in (0, 1], got {}", a.tau),
             ));
         }
+        if !(a.huber_delta > 0.0 && a.huber_delta.is_finite()) {
+            return Err(invalid(
+                "agent.huber_delta",
+                format!("must be > 0, got {}", a.huber_delta),
+            ));
+        }
         if let Some(g) = a.max_grad_norm {
             if !(g > 0.0 && g.is_finite()) {
                 return Err(invalid(

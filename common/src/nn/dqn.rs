@@ -17,6 +17,11 @@
 //!
 //! [`TdConfig`] adds, each off by default ([`TdConfig::dqn`] is the loss above):
 //! - `loss = Mse`: `td^2` instead of `huber(td)` (CleanRL's `F.mse_loss`);
+//! - `huber_delta = δ`: PyTorch's `HuberLoss(delta = δ)`, `td^2 / 2` inside `[-δ, δ]`,
+//!   `δ (|td| - δ/2)` outside, instead of `beta = 1` (δ = 1 is the loss above, to the bit): a TD
+//!   error larger than δ pulls with a force of only δ, so with returns in the hundreds
+//!   (CartPole-1000 at γ = 0.995) a δ of 1 lets rare large errors, those of terminal transitions,
+//!   lose against the many small ones (EXPERIMENTS.md, "Session 7");
 //! - `double`: Double DQN targets, `y = r + gamma * Q_target_k(s', argmax_a Q_k(s', a))`
 //!   (van Hasselt et al. 2016), the action chosen by the online head;
 //! - `margin_weight > 0`: DQfD's large-margin loss on demonstrated transitions (Hester et al.
@@ -49,6 +54,8 @@ pub enum TdLoss {
 pub struct TdConfig {
     pub gamma: f32,
     pub loss: TdLoss,
+    /// δ of the Huber loss (1: SmoothL1 with `beta = 1`); unused by `Mse`.
+    pub huber_delta: f32,
     pub double: bool,
     /// `lambda_E` of the large-margin loss (0: off).
     pub margin_weight: f32,
@@ -63,6 +70,7 @@ impl TdConfig {
         Self {
             gamma,
             loss: TdLoss::Huber,
+            huber_delta: 1.0,
             double: false,
             margin_weight: 0.0,
             margin: 0.8,
@@ -90,20 +98,27 @@ impl TrainScratch {
     }
 }
 
-/// SmoothL1 with `beta = 1`.
+/// SmoothL1 with `beta = 1` (the Huber loss with δ = 1).
 #[inline]
 pub fn huber(td: f32) -> f32 {
-    if td.abs() < 1.0 {
+    huber_with(td, 1.0)
+}
+
+/// PyTorch's `HuberLoss(delta)`: `td^2 / 2` for `|td| < delta`, `delta * (|td| - delta / 2)`
+/// beyond.
+#[inline]
+pub fn huber_with(td: f32, delta: f32) -> f32 {
+    if td.abs() < delta {
         0.5 * td * td
     } else {
-        td.abs() - 0.5
+        delta * (td.abs() - 0.5 * delta)
     }
 }
 
-/// The derivative of [`huber`]: `td` clipped to `[-1, 1]`.
+/// The derivative of [`huber_with`]: `td` clipped to `[-delta, delta]`.
 #[inline]
-fn huber_grad(td: f32) -> f32 {
-    td.clamp(-1.0, 1.0)
+fn huber_grad(td: f32, delta: f32) -> f32 {
+    td.clamp(-delta, delta)
 }
 
 /// The loss of the module docs, without gradients.
@@ -314,7 +329,10 @@ fn td_loss(
             let y = batch.rewards[i] + bootstrap * next;
             let td = q[(i, col(a))] - y;
             let (l, g) = match cfg.loss {
-                TdLoss::Huber => (huber(td), huber_grad(td)),
+                TdLoss::Huber => (
+                    huber_with(td, cfg.huber_delta),
+                    huber_grad(td, cfg.huber_delta),
+                ),
                 TdLoss::Mse => (td * td, 2.0 * td),
             };
             loss += f64::from(mask * l);
@@ -363,8 +381,22 @@ mod tests {
         assert_eq!(huber(3.0), 2.5);
         assert_eq!(huber(-3.0), 2.5);
         assert_eq!(huber(1.0), 0.5);
-        assert_eq!(huber_grad(0.25), 0.25);
-        assert_eq!(huber_grad(-7.0), -1.0);
+        assert_eq!(huber_grad(0.25, 1.0), 0.25);
+        assert_eq!(huber_grad(-7.0, 1.0), -1.0);
+    }
+
+    #[test]
+    fn huber_with_delta_is_torch_huber_loss() {
+        // torch.nn.HuberLoss(delta=10): 0.5 * 4^2 = 8 inside, 10 * (30 - 5) = 250 outside.
+        assert_eq!(huber_with(4.0, 10.0), 8.0);
+        assert_eq!(huber_with(-30.0, 10.0), 250.0);
+        assert_eq!(huber_with(10.0, 10.0), 50.0);
+        assert_eq!(huber_grad(-30.0, 10.0), -10.0);
+        assert_eq!(huber_grad(4.0, 10.0), 4.0);
+        // δ = 1 is SmoothL1 with beta = 1, to the bit.
+        for td in [-3.7f32, -1.0, -0.3, 0.0, 0.99, 1.0, 2.5, 1e4] {
+            assert_eq!(huber_with(td, 1.0).to_bits(), huber(td).to_bits());
+        }
     }
 
     #[test]
