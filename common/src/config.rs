@@ -339,6 +339,10 @@ pub struct AgentConfig {
     /// Neural: the gradient is scaled to at most this global L2 norm (absent: no clipping).
     #[serde(default)]
     pub max_grad_norm: Option<f64>,
+    /// Neural: `[lo, hi]` every TD target is clamped to, the range of the true values (CartPole-1000
+    /// at γ = 0.995: `[0, 200]`); absent: unclamped.
+    #[serde(default)]
+    pub target_bounds: Option<[f64; 2]>,
     /// Neural: no update before this many transitions were stored (nor before a full batch).
     #[serde(default)]
     pub learning_starts: u64,

@@ -56,6 +56,10 @@ fn loss64(
             let horizon = b.horizons.get(i).map_or(1, |&h| i32::from(h));
             let y = f64::from(b.rewards[i])
                 + f64::from(cfg.gamma).powi(horizon) * (1.0 - f64::from(b.terminated[i])) * next;
+            let y = match cfg.target_bounds {
+                Some((lo, hi)) => y.clamp(f64::from(lo), f64::from(hi)),
+                None => y,
+            };
             let td = h(&q, a) - y;
             total += m * match cfg.loss {
                 TdLoss::Huber if td.abs() < delta => 0.5 * td * td,
@@ -130,6 +134,11 @@ fn each_loss_option_matches_an_f64_recomputation_and_finite_differences() {
         ..base
     });
     check_against_f64(TdConfig {
+        target_bounds: Some((-0.2, 0.3)),
+        loss: TdLoss::Mse,
+        ..base
+    });
+    check_against_f64(TdConfig {
         huber_delta: 0.3,
         double: true,
         ..base
@@ -196,6 +205,20 @@ fn n_step_targets_bootstrap_with_gamma_to_the_horizon() {
     assert_eq!(
         loss_and_grads_with(&online, &target, &batch(vec![]), &cfg, &mut scratch),
         5.5
+    );
+    // Targets clamped to [0, 4]: the one-step y = 6 becomes 4, huber(0 - 4) = 3.5; the 3-step
+    // y = 2.25 is inside and stays.
+    let bounded = TdConfig {
+        target_bounds: Some((0.0, 4.0)),
+        ..cfg
+    };
+    assert_eq!(
+        loss_and_grads_with(&online, &target, &batch(vec![1]), &bounded, &mut scratch),
+        3.5
+    );
+    assert_eq!(
+        loss_and_grads_with(&online, &target, &batch(vec![3]), &bounded, &mut scratch),
+        1.75
     );
 }
 

@@ -357,6 +357,7 @@ impl NeuralLearner {
                 margin_weight: agent.margin_loss_weight as f32,
                 margin: agent.margin as f32,
                 max_grad_norm: agent.max_grad_norm.map(|g| g as f32),
+                target_bounds: agent.target_bounds.map(|[lo, hi]| (lo as f32, hi as f32)),
             },
             batch_size: agent.batch_size,
             target_update_every: agent.target_update_every,

@@ -207,6 +207,14 @@ impl ExperimentConfig {
                 format!("must be > 0, got {}", a.huber_delta),
             ));
         }
+        if let Some([lo, hi]) = a.target_bounds {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(invalid(
+                    "agent.target_bounds",
+                    format!("must be [lo, hi] with finite lo < hi, got [{lo}, {hi}]"),
+                ));
+            }
+        }
         if let Some(g) = a.max_grad_norm {
             if !(g > 0.0 && g.is_finite()) {
                 return Err(invalid(

@@ -28,6 +28,9 @@
 //!   2018; the paper's ref. [5] adds it to the TD loss),
 //!   `lambda_E * (max_a [Q_k(s, a) + l(a_E, a)] - Q_k(s, a_E)) / B` with `l = margin` for
 //!   `a != a_E`, 0 otherwise;
+//! - `target_bounds = (lo, hi)`: each target `y` clamped to `[lo, hi]`, the range every true value
+//!   lies in (with rewards in `[r_min, r_max]`, `[r_min, r_max] / (1 - gamma)`), so that a
+//!   diverging bootstrap cannot carry the targets past what any return could be;
 //! - `max_grad_norm`: the gradient scaled to at most this global L2 norm (PyTorch's
 //!   `clip_grad_norm_`) before Adam's step.
 //!
@@ -62,6 +65,8 @@ pub struct TdConfig {
     /// `l(a_E, a)` for `a != a_E`.
     pub margin: f32,
     pub max_grad_norm: Option<f32>,
+    /// `[lo, hi]` every TD target is clamped to (`None`: unclamped).
+    pub target_bounds: Option<(f32, f32)>,
 }
 
 impl TdConfig {
@@ -75,6 +80,7 @@ impl TdConfig {
             margin_weight: 0.0,
             margin: 0.8,
             max_grad_norm: None,
+            target_bounds: None,
         }
     }
 }
@@ -327,6 +333,10 @@ fn td_loss(
                 None => (0..actions).fold(f32::NEG_INFINITY, |m, b| m.max(q_next[(i, col(b))])),
             };
             let y = batch.rewards[i] + bootstrap * next;
+            let y = match cfg.target_bounds {
+                Some((lo, hi)) => y.clamp(lo, hi),
+                None => y,
+            };
             let td = q[(i, col(a))] - y;
             let (l, g) = match cfg.loss {
                 TdLoss::Huber => (
