@@ -173,3 +173,52 @@ fn bad_shard_values_are_refused() {
         assert!(!out.join("runs").exists(), "{s}: something ran");
     }
 }
+
+/// With `--first-seed 5` the shards split seeds 5-7 as they split 0-2, merge to the unsharded
+/// sweep's curves, and a collect that forgets `--first-seed` is refused.
+#[test]
+fn sharded_sweep_from_a_first_seed_collects_to_the_unsharded_curves() {
+    let _time = timed!();
+    let dir = tmp("shards-first-seed");
+    let exp = experiment(&dir, "tiny", 20);
+    let (whole, s1, s2, merged) = (
+        dir.join("whole"),
+        dir.join("s1"),
+        dir.join("s2"),
+        dir.join("merged"),
+    );
+    fn with(more: &[&'static str]) -> Vec<&'static Path> {
+        ["--first-seed", "5"]
+            .iter()
+            .chain(more)
+            .map(|a| Path::new(*a))
+            .collect()
+    }
+    ok(&sweep(&exp, &whole, &with(&[])));
+    ok(&sweep(&exp, &s1, &with(&["--shard", "1/2"])));
+    ok(&sweep(&exp, &s2, &with(&["--shard", "2/2"])));
+    let has = |d: &Path, m: &str, s: u64| {
+        d.join("runs")
+            .join(m)
+            .join(s.to_string())
+            .join("summary.json")
+            .is_file()
+    };
+    // Method-major order over seeds 5, 6, 7: k = 0 (qlearning 5), 2 (qlearning 7), 4
+    // (bootstrapped 6) in shard 1; the others in shard 2.
+    assert!(has(&s1, "qlearning", 5) && has(&s1, "qlearning", 7) && has(&s1, "bootstrapped", 6));
+    assert!(has(&s2, "qlearning", 6) && has(&s2, "bootstrapped", 5) && has(&s2, "bootstrapped", 7));
+    assert!(!has(&s1, "qlearning", 0) && !has(&s2, "qlearning", 0));
+    let forgot = sweep(
+        &exp,
+        &dir.join("forgot"),
+        &[Path::new("--collect"), &s1, &s2],
+    );
+    refused(&forgot, &["another experiment", "--first-seed"]);
+    let mut args = with(&["--collect"]);
+    args.push(&s1);
+    args.push(&s2);
+    ok(&sweep(&exp, &merged, &args));
+    let read = |d: &Path| std::fs::read(d.join("curves.csv")).unwrap();
+    assert_eq!(read(&whole), read(&merged));
+}

@@ -668,6 +668,13 @@ fn bad_experiments_are_refused_before_anything_runs() {
         &["time", "episodes", "steps"],
     );
     assert_refused("zero-seeds", "", None, &["--seeds", "0"], &["seeds", "0"]);
+    assert_refused(
+        "first-seed-overflow",
+        "",
+        None,
+        &["--first-seed", "18446744073709551615"],
+        &["--first-seed 18446744073709551615", "2 seeds"],
+    );
     assert_refused("unknown-key", "colour = \"red\"", None, &[], &["colour"]);
     assert_refused(
         "seed-in-set",
@@ -686,6 +693,48 @@ fn bad_experiments_are_refused_before_anything_runs() {
         &[],
         &["`qlearning` is listed twice"],
     );
+}
+
+/// `--first-seed 1000`: the runs are seeds 1000 and 1001, each the run `alfd local` makes with that
+/// seed, and the summary and the command say so.
+#[test]
+fn first_seed_runs_the_seeds_from_there() {
+    let _time = timed!();
+    let dir = scratch("first-seed");
+    let experiment = write_experiment(&dir, "");
+    let out = dir.join("out");
+    assert_ok(&sweep(&experiment, &out, &["--first-seed", "1000"]));
+    for m in METHODS {
+        assert!(
+            !out.join("runs").join(m).join("0").exists(),
+            "{m}: seed 0 ran"
+        );
+        for s in 1000..1000 + SEEDS {
+            let run = out.join("runs").join(m).join(s.to_string());
+            let cfg = std::fs::read_to_string(run.join("config.toml")).unwrap();
+            assert!(cfg.contains(&format!("seed = {s}\n")), "{cfg}");
+        }
+    }
+    let local = dir.join("local");
+    let res = alfd(&[
+        "local",
+        "--config",
+        &config("cartpole-bdqn-krr.toml"),
+        "--set",
+        "seed=1001",
+        "--set",
+        &format!("episodes={EPISODES}"),
+        "--out",
+        local.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert_ok(&res);
+    let swept = std::fs::read_to_string(out.join("runs/bdqn-krr/1001/episodes.csv")).unwrap();
+    let alone = std::fs::read_to_string(local.join("episodes.csv")).unwrap();
+    assert_eq!(swept, alone, "the sweep's seed-1001 run is `alfd local`'s");
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(md.contains("× 2 seeds (1000..1001)"), "{md}");
+    assert!(md.contains("--first-seed 1000"), "{md}");
 }
 
 #[test]

@@ -152,7 +152,10 @@ pub struct Experiment {
     pub name: String,
     pub title: String,
     pub kind: ExperimentKind,
+    /// Number of seeds; runs use seeds `first_seed..first_seed + seeds` ([`Experiment::seed_range`]).
     pub seeds: u64,
+    /// The first seed (0 unless `alfd sweep --first-seed` says otherwise: tuning seeds, say).
+    pub first_seed: u64,
     pub episodes: Option<u32>,
     pub log_y: bool,
     pub thresholds: Vec<f64>,
@@ -218,6 +221,29 @@ impl Method {
 pub const MAX_SEEDS: u64 = 10_000;
 
 impl Experiment {
+    /// The seeds of the sweep's runs, in order.
+    pub fn seed_range(&self) -> std::ops::Range<u64> {
+        self.first_seed..self.first_seed + self.seeds
+    }
+
+    /// The last seed of the sweep.
+    pub fn last_seed(&self) -> u64 {
+        self.first_seed + self.seeds - 1
+    }
+
+    /// Starts the sweep's seeds at `first` (`--first-seed`); refused when the last would not fit.
+    pub fn with_first_seed(mut self, first: u64) -> anyhow::Result<Self> {
+        if first.checked_add(self.seeds).is_none() {
+            return Err(usage(format!(
+                "--first-seed {first} with {} seeds: the last seed would pass {}",
+                self.seeds,
+                u64::MAX
+            )));
+        }
+        self.first_seed = first;
+        Ok(self)
+    }
+
     /// Reads and validates an experiment file; `seeds` and `episodes` override the file's.
     /// Every method's config is loaded and checked, and its expert looked up, so that a bad entry
     /// is refused before anything runs.
@@ -321,6 +347,7 @@ impl Experiment {
             title: file.title,
             kind: file.kind,
             seeds,
+            first_seed: 0,
             episodes,
             log_y: file.log_y,
             thresholds: file.thresholds,

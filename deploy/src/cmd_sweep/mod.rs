@@ -55,9 +55,15 @@ pub struct SweepArgs {
     /// to its directory.
     #[arg(long)]
     pub config: PathBuf,
-    /// Number of seeds (runs use seeds 0..N); overrides the experiment file's `seeds`.
+    /// Number of seeds (runs use seeds 0..N, or F..F+N with --first-seed F); overrides the
+    /// experiment file's `seeds`.
     #[arg(long)]
     pub seeds: Option<u64>,
+    /// The first seed (default 0): `--first-seed 1000 --seeds 20` runs seeds 1000-1019, the
+    /// tuning seeds of EXPERIMENTS.md, so that settings are chosen on other seeds than the
+    /// reported 0..N.
+    #[arg(long)]
+    pub first_seed: Option<u64>,
     /// Runs at a time (default: the number of cores).
     #[arg(long)]
     pub jobs: Option<usize>,
@@ -102,7 +108,10 @@ pub fn run(args: SweepArgs) -> anyhow::Result<()> {
         None if !args.collect.is_empty() => Mode::Collect,
         None => Mode::Whole,
     };
-    let exp = Experiment::load(&args.config, args.seeds, args.episodes)?;
+    let mut exp = Experiment::load(&args.config, args.seeds, args.episodes)?;
+    if let Some(first) = args.first_seed {
+        exp = exp.with_first_seed(first)?;
+    }
     if mode != Mode::Whole && exp.kind != ExperimentKind::Training {
         return Err(usage(format!(
             "--shard and --collect split training sweeps; {} is a {:?} experiment (it runs no \
@@ -132,6 +141,9 @@ pub fn run(args: SweepArgs) -> anyhow::Result<()> {
         args.config.display(),
         exp.seeds
     );
+    if exp.first_seed != 0 {
+        write!(command, " --first-seed {}", exp.first_seed)?;
+    }
     if let Some(e) = args.episodes {
         write!(command, " --episodes {e}")?;
     }
@@ -196,7 +208,7 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
     let mut pending = Vec::new();
     let mut resumed = 0u64;
     let mut total = 0u64;
-    for seed in 0..exp.seeds {
+    for seed in exp.seed_range() {
         for (m, method) in exp.methods.iter().enumerate() {
             if let Mode::Shard(s) = ctx.mode {
                 if !s.owns(shard::index_of(exp, m, seed)) {
@@ -234,7 +246,7 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
 
     let mut results = Vec::with_capacity(exp.methods.len());
     for method in &exp.methods {
-        let runs = read_runs(ctx.out, method, exp.seeds)?;
+        let runs = read_runs(ctx.out, method, exp.seed_range())?;
         results.push(summary::analyse(method, &runs, exp)?);
     }
     write(
@@ -419,8 +431,12 @@ fn parallel_map<T: Sync, R: Send>(
 }
 
 /// Each seed's run of `method`, read back from its directory.
-fn read_runs(out: &Path, method: &Method, seeds: u64) -> anyhow::Result<Vec<summary::Run>> {
-    (0..seeds)
+fn read_runs(
+    out: &Path,
+    method: &Method,
+    seeds: std::ops::Range<u64>,
+) -> anyhow::Result<Vec<summary::Run>> {
+    seeds
         .map(|seed| {
             let dir = run_dir(out, &method.name, seed);
             let path = dir.join("episodes.csv");
@@ -517,7 +533,7 @@ fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
         else {
             anyhow::bail!("method `{}` is not a demo-model-policy method", method.name);
         };
-        let seeds: Vec<u64> = (0..exp.seeds).collect();
+        let seeds: Vec<u64> = exp.seed_range().collect();
         let runs = parallel_map(&seeds, ctx.jobs, |&seed| {
             let run = cmd_demo_model_policy::play(expert, *demos, *model, seed, source);
             bar.inc(1);
@@ -560,11 +576,12 @@ fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
         "Experiment `{}`: each run fits a demonstration model on demonstrations (\"demos\": how \
          many, mean over the runs; \"source\": the states they were given in, see \
          `alfd demo-model-policy --help`), then plays one greedy CartPole episode (limit 1000) \
-         from a seeded reset; {} runs (seeds 0..{}) per method. Returns are the episodes' \
+         from a seeded reset; {} runs (seeds {}..{}) per method. Returns are the episodes' \
          (`returns.csv`).\n",
         exp.name,
         exp.seeds,
-        exp.seeds - 1
+        exp.first_seed,
+        exp.last_seed()
     );
     let _ = writeln!(md, "Command: `{}`\n", ctx.command);
     let _ = writeln!(

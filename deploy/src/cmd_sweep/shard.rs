@@ -3,7 +3,7 @@
 //! outputs.
 //!
 //! The runs of a sweep, in its fixed order, are method-major: run `k` is method `k / seeds` (in
-//! the experiment file's order) with seed `k % seeds`. Shard `I` of `N` (1-based) owns the runs
+//! the experiment file's order) with seed `first_seed + k % seeds`. Shard `I` of `N` (1-based) owns the runs
 //! with `k % N == I - 1`, so that every shard gets runs of every method when there are more
 //! seeds than shards. A shard writes its runs as a sweep does (`OUT/runs/METHOD/SEED/`, resumable
 //! the same way) and `OUT/shard.json`: the experiment's name and fingerprint (a hash of its
@@ -89,13 +89,13 @@ impl std::fmt::Display for Shard {
 pub fn run_at(exp: &Experiment, k: u64) -> (usize, u64) {
     (
         usize::try_from(k / exp.seeds).expect("a method index"),
-        k % exp.seeds,
+        exp.first_seed + k % exp.seeds,
     )
 }
 
 /// The index of (method `m`, `seed`) in the sweep's fixed order.
 pub fn index_of(exp: &Experiment, m: usize, seed: u64) -> u64 {
-    m as u64 * exp.seeds + seed
+    m as u64 * exp.seeds + (seed - exp.first_seed)
 }
 
 /// One run, as `shard.json` lists it.
@@ -155,6 +155,10 @@ pub fn fingerprint(exp: &Experiment) -> anyhow::Result<(String, Vec<MethodHash>)
         exp.legend,
         exp.x
     );
+    // Only when set, so that the fingerprints of sweeps from seed 0 stay what they were.
+    if exp.first_seed != 0 {
+        let _ = writeln!(text, "first_seed {}", exp.first_seed);
+    }
     let mut methods = Vec::with_capacity(exp.methods.len());
     for m in &exp.methods {
         let config_hash = hex(fnv1a64(m.config(0, exp.episodes)?.to_toml().as_bytes()));
@@ -311,7 +315,7 @@ pub fn collect(exp: &Experiment, dirs: &[PathBuf], out: &Path) -> anyhow::Result
         if file.experiment != exp.name || file.experiment_hash != hash {
             return Err(usage(format!(
                 "--collect {}: a shard of another experiment (`{}`, hash {}) than the --config \
-                 one (`{}`, hash {hash}; give --seeds and --episodes as the shards had them)",
+                 one (`{}`, hash {hash}; give --seeds, --first-seed and --episodes as the shards had them)",
                 dir.display(),
                 file.experiment,
                 file.experiment_hash,

@@ -364,11 +364,12 @@ pub fn training_summary(
     );
     let _ = writeln!(
         md,
-        "Experiment `{}`: {} methods × {} (0..{}), {} episodes; x axis: {x_desc}.\n",
+        "Experiment `{}`: {} methods × {} ({}..{}), {} episodes; x axis: {x_desc}.\n",
         exp.name,
         results.len(),
         count(exp.seeds, "seed"),
-        exp.seeds - 1,
+        exp.first_seed,
+        exp.last_seed(),
         episodes
     );
     let _ = writeln!(md, "Command: `{}`\n", ctx.command);
