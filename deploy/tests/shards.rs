@@ -56,29 +56,26 @@ fn refused(o: &Output, needles: &[&str]) {
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
 
+/// Whether shard or sweep directory `d` holds a complete run of method `m` with seed `s`.
+fn has(d: &Path, m: &str, s: u64) -> bool {
+    d.join("runs")
+        .join(m)
+        .join(s.to_string())
+        .join("summary.json")
+        .is_file()
+}
+
 #[test]
 fn sharded_sweep_collects_to_the_unsharded_curves() {
     let _time = timed!();
     let dir = tmp("shards");
     let exp = experiment(&dir, "tiny", 20);
-    let (whole, s1, s2, merged) = (
-        dir.join("whole"),
-        dir.join("s1"),
-        dir.join("s2"),
-        dir.join("merged"),
-    );
+    let [whole, s1, s2, merged] = ["whole", "s1", "s2", "merged"].map(|d| dir.join(d));
     ok(&sweep(&exp, &whole, &[]));
     ok(&sweep(&exp, &s1, &[Path::new("--shard"), Path::new("1/2")]));
     ok(&sweep(&exp, &s2, &[Path::new("--shard"), Path::new("2/2")]));
 
     // Each shard ran its half of the runs (method-major order, k % 2), and wrote no curves.
-    let has = |d: &Path, m: &str, s: u64| {
-        d.join("runs")
-            .join(m)
-            .join(s.to_string())
-            .join("summary.json")
-            .is_file()
-    };
     for (k, (m, s)) in [("qlearning", 0), ("qlearning", 1), ("qlearning", 2)]
         .into_iter()
         .chain([
@@ -181,12 +178,7 @@ fn sharded_sweep_from_a_first_seed_collects_to_the_unsharded_curves() {
     let _time = timed!();
     let dir = tmp("shards-first-seed");
     let exp = experiment(&dir, "tiny", 20);
-    let (whole, s1, s2, merged) = (
-        dir.join("whole"),
-        dir.join("s1"),
-        dir.join("s2"),
-        dir.join("merged"),
-    );
+    let [whole, s1, s2, merged] = ["whole", "s1", "s2", "merged"].map(|d| dir.join(d));
     fn with(more: &[&'static str]) -> Vec<&'static Path> {
         ["--first-seed", "5"]
             .iter()
@@ -197,13 +189,6 @@ fn sharded_sweep_from_a_first_seed_collects_to_the_unsharded_curves() {
     ok(&sweep(&exp, &whole, &with(&[])));
     ok(&sweep(&exp, &s1, &with(&["--shard", "1/2"])));
     ok(&sweep(&exp, &s2, &with(&["--shard", "2/2"])));
-    let has = |d: &Path, m: &str, s: u64| {
-        d.join("runs")
-            .join(m)
-            .join(s.to_string())
-            .join("summary.json")
-            .is_file()
-    };
     // Method-major order over seeds 5, 6, 7: k = 0 (qlearning 5), 2 (qlearning 7), 4
     // (bootstrapped 6) in shard 1; the others in shard 2.
     assert!(has(&s1, "qlearning", 5) && has(&s1, "qlearning", 7) && has(&s1, "bootstrapped", 6));

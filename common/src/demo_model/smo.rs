@@ -228,8 +228,8 @@ mod tests {
                 .sum::<f64>()
                 - d.rho
         };
-        for i in 0..x.len() {
-            let y = if positive[i] { 1.0 } else { -1.0 };
+        for (i, &pos) in positive.iter().enumerate() {
+            let y = if pos { 1.0 } else { -1.0 };
             let a = d.coef[i] * y;
             assert!((-1e-12..=c + 1e-12).contains(&a));
             let margin = y * f(i);
