@@ -170,6 +170,17 @@ impl EnvName {
         }
     }
 
+    /// The range `[r_min, r_max]` of one step's reward (CartPole 1, MountainCar −1, Acrobot −1 or
+    /// 0); `None` where it is not known here (CliffWalk's maps, Gymnasium's environments).
+    pub fn reward_range(self) -> Option<(f64, f64)> {
+        match self {
+            EnvName::Cartpole => Some((1.0, 1.0)),
+            EnvName::Mountaincar => Some((-1.0, -1.0)),
+            EnvName::Acrobot => Some((-1.0, 0.0)),
+            EnvName::Cliffwalk | EnvName::Gymnasium => None,
+        }
+    }
+
     /// Whether the environment runs in another process (a Gymnasium adapter).
     pub fn is_remote(self) -> bool {
         self == EnvName::Gymnasium

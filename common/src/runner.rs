@@ -458,6 +458,53 @@ pub fn evaluate_greedy(
     Ok(returns.iter().sum::<f64>() / returns.len().max(1) as f64)
 }
 
+/// The Q-values a network takes on its own greedy episodes ([`q_range`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct QRange {
+    /// The smallest and the largest Q-value of any head and action at any state visited.
+    pub min: f64,
+    pub max: f64,
+    /// The mean return of the episodes.
+    pub mean_return: f64,
+}
+
+/// Plays `episodes` greedy episodes of `env` with `net` (on the mean of its heads, as
+/// [`evaluate_greedy`]), the first reset seeded with `seed`, and records the range of every
+/// Q-value it computes on the way: a check for divergence against [`value_bounds`].
+pub fn q_range(
+    net: &Mlp,
+    env: &mut VectorEnv,
+    episodes: u32,
+    seed: u64,
+) -> Result<QRange, EnvError> {
+    let mut q = vec![0.0f32; net.heads() * net.actions()];
+    let (mut min, mut max) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut policy = NetworkDemonstrator::new(net.clone());
+    let returns = evaluate(env, episodes as usize, seed, |obs| {
+        net.forward_one(obs, &mut q);
+        for &v in &q {
+            min = min.min(f64::from(v));
+            max = max.max(f64::from(v));
+        }
+        policy.act(obs)
+    })?;
+    Ok(QRange {
+        min,
+        max,
+        mean_return: returns.iter().sum::<f64>() / returns.len().max(1) as f64,
+    })
+}
+
+/// The range every true value lies in when each step's reward is in `[r_min, r_max]` and the
+/// discount is `gamma < 1`: `[min(0, r_min), max(0, r_max)] / (1 - gamma)` (an episode may end
+/// at any step, so 0 is always reachable). CartPole-1000 at γ = 0.995: `[0, 200]`.
+pub fn value_bounds((r_min, r_max): (f64, f64), gamma: f64) -> (f64, f64) {
+    (
+        r_min.min(0.0) / (1.0 - gamma),
+        r_max.max(0.0) / (1.0 - gamma),
+    )
+}
+
 /// Returns of `episodes` episodes of `env` played by `act`, the first reset seeded with `seed`;
 /// the environment's error if a step fails (one in another process that died, say).
 pub fn evaluate<E: Env + ?Sized>(

@@ -232,3 +232,41 @@ fn single_head_never_queries_because_one_head_has_no_divergence() {
         .iter()
         .all(|r| r.mean_js == 0.0 && r.queries == 0));
 }
+
+/// `q_range` sees every Q-value of the greedy episodes: with zero weights and output biases
+/// (3, 250) for head 0 and (−7, 1) for head 1, every Q-value is one of those four, so the range
+/// is [−7, 250]; the heads' mean (−2, 125.5) always picks action 1, which CartPole plays to a
+/// fall; `value_bounds` gives CartPole-1000's [0, 200] at γ = 0.995.
+#[test]
+fn q_range_reports_every_q_value_of_the_greedy_episodes() {
+    use alfd_common::config::EnvName;
+    use alfd_common::env::vector_env_named;
+    use alfd_common::nn::{Mlp, Params};
+    use alfd_common::runner::{evaluate_greedy, q_range, value_bounds};
+
+    let mut params = Params::zeros(4, 8, 4);
+    params
+        .bh
+        .as_mut_slice()
+        .copy_from_slice(&[3.0, 250.0, -7.0, 1.0]);
+    let net = Mlp::from_params(params, 2, 2).unwrap();
+    let mut env = vector_env_named(EnvName::Cartpole, 1000).unwrap();
+    let r = q_range(&net, env.as_mut(), 2, 5).unwrap();
+    assert_eq!((r.min, r.max), (-7.0, 250.0));
+    let mut env = vector_env_named(EnvName::Cartpole, 1000).unwrap();
+    assert_eq!(
+        r.mean_return,
+        evaluate_greedy(&net, env.as_mut(), 2, 5).unwrap()
+    );
+    assert!(
+        r.mean_return < 20.0,
+        "always pushing right falls: {}",
+        r.mean_return
+    );
+    let (lo, hi) = value_bounds(EnvName::Cartpole.reward_range().unwrap(), 0.995);
+    assert_eq!(lo, 0.0);
+    assert!((hi - 200.0).abs() < 1e-9, "{hi}");
+    let (lo, hi) = value_bounds(EnvName::Acrobot.reward_range().unwrap(), 0.99);
+    assert!((lo + 100.0).abs() < 1e-9 && hi == 0.0, "[{lo}, {hi}]");
+    assert_eq!(EnvName::Gymnasium.reward_range(), None);
+}

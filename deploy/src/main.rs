@@ -9,6 +9,7 @@ mod cmd_env;
 mod cmd_expert;
 mod cmd_join;
 mod cmd_local;
+mod cmd_q_range;
 mod cmd_resume;
 mod cmd_run;
 mod cmd_sweep;
@@ -57,6 +58,9 @@ enum Command {
     Sweep(cmd_sweep::SweepArgs),
     /// Evaluate a demonstration model fitted on an expert's demonstrations as a policy.
     DemoModelPolicy(cmd_demo_model_policy::DemoModelPolicyArgs),
+    /// The Q-values of runs' learned networks on greedy episodes against the range of the true
+    /// values: a check for divergence.
+    QRange(cmd_q_range::QRangeArgs),
 }
 
 fn main() {
@@ -79,6 +83,7 @@ fn main() {
         Command::DemoModel(a) => cmd_demo_model::run(a),
         Command::Sweep(a) => cmd_sweep::run(a),
         Command::DemoModelPolicy(a) => cmd_demo_model_policy::run(a),
+        Command::QRange(a) => cmd_q_range::run(a),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

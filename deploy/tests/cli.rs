@@ -824,3 +824,46 @@ fn size_like_arguments_have_limits_naming_the_argument() {
     );
     assert!(!out.join("sweep").exists(), "nothing ran");
 }
+
+/// `alfd q-range` on a short CartPole run: one line with the range [0, 200] and a verdict; a
+/// tabular run's directory and a directory without a run are refused with exit code 2.
+#[test]
+fn q_range_checks_a_run_and_refuses_what_is_not_one() {
+    let _time = timed!();
+    let dir = tmp("q-range");
+    let (run, table) = (dir.join("cartpole"), dir.join("cliffwalk"));
+    for (config, out) in [
+        ("deploy/configs/recommended/cartpole.toml", &run),
+        ("deploy/configs/cliffwalk-bootstrapped.toml", &table),
+    ] {
+        let o = local_40(config, out, &[]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let o = alfd(&["q-range", run.to_str().unwrap(), "--episodes", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    let row = out
+        .lines()
+        .find(|l| l.starts_with(run.to_str().unwrap()))
+        .unwrap_or_else(|| panic!("no row for the run: {out}"));
+    let cells: Vec<&str> = row.split('\t').collect();
+    assert_eq!(cells.len(), 6, "{row}");
+    let (min, max): (f64, f64) = (cells[1].parse().unwrap(), cells[2].parse().unwrap());
+    assert!(min <= max && min.is_finite() && max.is_finite(), "{row}");
+    assert_eq!(cells[4], "[0, 200]", "CartPole-1000 at γ = 0.995: {row}");
+    let verdict = if max > 250.0 || min < -50.0 {
+        "DIVERGED"
+    } else {
+        "ok"
+    };
+    assert_eq!(cells[5], verdict, "{row}");
+    assert!(out.contains("of 1 diverged"), "{out}");
+
+    let o = alfd(&["q-range", table.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("weights.safetensors") || stderr(&o).contains("cliffwalk"));
+    let o = alfd(&["q-range", dir.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("config.toml"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked"));
+}

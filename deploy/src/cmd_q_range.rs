@@ -1,0 +1,112 @@
+//! `alfd q-range`: the Q-values a run's learned network takes on its own greedy episodes, against
+//! the range every true value lies in — a check for divergence (EXPERIMENTS.md, "Session 7": a
+//! CartPole-1000 network whose Q-values reached 40,000 where no return exceeds 200 had learned to
+//! seek failure).
+//!
+//! Reads each run directory's `config.toml` (the environment, its step limit and γ) and
+//! `weights.safetensors`, plays `--episodes` greedy episodes in the native environment and prints
+//! one line per run. A run directory that is not a neural run of CartPole, MountainCar or Acrobot
+//! is refused with exit code 2, naming what is missing.
+
+use std::path::{Path, PathBuf};
+
+use alfd_common::config::ExperimentConfig;
+use alfd_common::env::vector_env;
+use alfd_common::nn::Mlp;
+use alfd_common::runner::{q_range, value_bounds, QRange};
+
+use crate::usage::usage;
+
+#[derive(Debug, clap::Args)]
+pub struct QRangeArgs {
+    /// Run directories (as `alfd local`, `alfd run` and `alfd sweep` write them).
+    #[arg(required = true)]
+    pub runs: Vec<PathBuf>,
+    /// Greedy episodes per run.
+    #[arg(long, default_value_t = 3)]
+    pub episodes: u32,
+    /// Seed of the first episode's reset.
+    #[arg(long, default_value_t = 100)]
+    pub seed: u64,
+}
+
+/// One run's verdict.
+struct Checked {
+    range: QRange,
+    bounds: (f64, f64),
+    diverged: bool,
+}
+
+/// A run diverged when its Q-values leave the true range by more than a quarter of its width
+/// (shaping moves values a little past the range; a diverged network is off by multiples of it).
+fn check(dir: &Path, episodes: u32, seed: u64) -> anyhow::Result<Checked> {
+    let read = |name: &str| {
+        let path = dir.join(name);
+        std::fs::read(&path).map_err(|e| {
+            usage(format!(
+                "{}: cannot read {name} ({e}); q-range needs a neural run's directory",
+                dir.display()
+            ))
+        })
+    };
+    let text = String::from_utf8(read("config.toml")?)
+        .map_err(|_| usage(format!("{}: config.toml is not UTF-8", dir.display())))?;
+    let cfg = ExperimentConfig::from_toml(&text)
+        .map_err(|e| usage(format!("{}: config.toml: {e}", dir.display())))?;
+    let name = cfg.env.name;
+    let (Some(rewards), Some(mut env)) = (name.reward_range(), vector_env(&cfg.env)) else {
+        return Err(usage(format!(
+            "{}: environment `{name}`; q-range knows the reward range of cartpole, mountaincar \
+             and acrobot",
+            dir.display()
+        )));
+    };
+    let net = Mlp::from_safetensors_bytes(&read("weights.safetensors")?)
+        .map_err(|e| usage(format!("{}: weights.safetensors: {e}", dir.display())))?;
+    if net.obs_dim() != env.observation_dim() || net.actions() != env.num_actions() {
+        return Err(usage(format!(
+            "{}: the network takes {} inputs and gives {} actions; `{name}` has {} and {}",
+            dir.display(),
+            net.obs_dim(),
+            net.actions(),
+            env.observation_dim(),
+            env.num_actions()
+        )));
+    }
+    let range = q_range(&net, env.as_mut(), episodes, seed)?;
+    let bounds = value_bounds(rewards, cfg.agent.gamma);
+    let slack = 0.25 * (bounds.1 - bounds.0);
+    let diverged = range.max > bounds.1 + slack || range.min < bounds.0 - slack;
+    Ok(Checked {
+        range,
+        bounds,
+        diverged,
+    })
+}
+
+pub fn run(args: QRangeArgs) -> anyhow::Result<()> {
+    if args.episodes == 0 {
+        return Err(usage("--episodes must be at least 1"));
+    }
+    let mut diverged = 0;
+    println!("run\tmin Q\tmax Q\tgreedy return\ttrue values in\tverdict");
+    for dir in &args.runs {
+        let c = check(dir, args.episodes, args.seed)?;
+        diverged += usize::from(c.diverged);
+        println!(
+            "{}\t{:.1}\t{:.1}\t{:.1}\t[{:.0}, {:.0}]\t{}",
+            dir.display(),
+            c.range.min,
+            c.range.max,
+            c.range.mean_return,
+            c.bounds.0,
+            c.bounds.1,
+            if c.diverged { "DIVERGED" } else { "ok" }
+        );
+    }
+    println!(
+        "{diverged} of {} diverged (Q-values beyond the true range by more than a quarter of its width)",
+        args.runs.len()
+    );
+    Ok(())
+}
