@@ -53,6 +53,17 @@ fn check(dir: &Path, episodes: u32, seed: u64) -> anyhow::Result<Checked> {
         .map_err(|_| usage(format!("{}: config.toml is not UTF-8", dir.display())))?;
     let cfg = ExperimentConfig::from_toml(&text)
         .map_err(|e| usage(format!("{}: config.toml: {e}", dir.display())))?;
+    check_with(dir, &cfg, &read("weights.safetensors")?, episodes, seed)
+}
+
+/// [`check`] with the config read and the weights' bytes.
+fn check_with(
+    dir: &Path,
+    cfg: &ExperimentConfig,
+    weights: &[u8],
+    episodes: u32,
+    seed: u64,
+) -> anyhow::Result<Checked> {
     let name = cfg.env.name;
     let (Some(rewards), Some(mut env)) = (name.reward_range(), vector_env(&cfg.env)) else {
         return Err(usage(format!(
@@ -61,7 +72,7 @@ fn check(dir: &Path, episodes: u32, seed: u64) -> anyhow::Result<Checked> {
             dir.display()
         )));
     };
-    let net = Mlp::from_safetensors_bytes(&read("weights.safetensors")?)
+    let net = Mlp::from_safetensors_bytes(weights)
         .map_err(|e| usage(format!("{}: weights.safetensors: {e}", dir.display())))?;
     if net.obs_dim() != env.observation_dim() || net.actions() != env.num_actions() {
         return Err(usage(format!(
@@ -82,6 +93,26 @@ fn check(dir: &Path, episodes: u32, seed: u64) -> anyhow::Result<Checked> {
         bounds,
         diverged,
     })
+}
+
+/// The end-of-run summary's line on the learned network's Q-values (3 greedy episodes), or `None`
+/// where there is nothing to check (a tabular run, an environment of unknown reward range, no
+/// weights) or the check fails: the summary reports, it does not fail.
+pub fn summary_text(dir: &Path, cfg: &ExperimentConfig) -> Option<String> {
+    cfg.env.name.reward_range()?;
+    let weights = std::fs::read(dir.join("weights.safetensors")).ok()?;
+    let c = check_with(dir, cfg, &weights, 3, 100).ok()?;
+    let mut text = format!(
+        "{:.1} to {:.1} on 3 greedy episodes; every true value lies in [{:.0}, {:.0}] (γ = {})",
+        c.range.min, c.range.max, c.bounds.0, c.bounds.1, cfg.agent.gamma
+    );
+    if c.diverged {
+        text.push_str(
+            " — DIVERGED: the network values states beyond any return (EXPERIMENTS.md, \
+             \"Session 7\"; `agent.target_bounds` clamps the targets)",
+        );
+    }
+    Some(text)
 }
 
 pub fn run(args: QRangeArgs) -> anyhow::Result<()> {

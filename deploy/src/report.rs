@@ -101,6 +101,7 @@ pub fn finish_run(
             summary,
             records: &records,
             files: files_in(dir),
+            q_values: crate::cmd_q_range::summary_text(dir, cfg),
         };
         eprint!("{}", report.text(Style::stderr()));
     }
@@ -261,6 +262,9 @@ pub(crate) struct RunReport<'a> {
     pub records: &'a [EpisodeRecord],
     /// The files in `dir` to list.
     pub files: Vec<String>,
+    /// The learned network's Q-values against the true values' range
+    /// ([`crate::cmd_q_range::summary_text`]), for neural runs.
+    pub q_values: Option<String>,
 }
 
 /// The width of the summary's labels.
@@ -298,6 +302,9 @@ impl RunReport<'_> {
             ),
         );
         line("mean return", self.return_text());
+        if let Some(q) = &self.q_values {
+            line("Q-values", q.clone());
+        }
         if let (Some(greedy), Some(optimal)) = (s.greedy_value_at_start, s.optimal_value_at_start) {
             line(
                 "greedy policy",
@@ -639,6 +646,7 @@ mod tests {
                 "curve.svg".into(),
                 "actor-1.log".into(),
             ],
+            q_values: Some("-3.0 to 201.0 on 3 greedy episodes".into()),
         };
         let text = report.text(Style { ansi: false });
         for needle in [
@@ -652,6 +660,7 @@ mod tests {
             "demonstrations   9 used of the budget of 20",
             "reward shaped in 2 episodes, from episode 1 to 2",
             "wall-clock       1 min 15 s",
+            "Q-values         -3.0 to 201.0 on 3 greedy episodes",
             "    config.toml  the experiment config as run",
             "    curve.svg    the learning curve",
             "    actor-1.log  actor 1's log",
