@@ -453,9 +453,7 @@ pub fn evaluate_greedy(
     episodes: u32,
     seed: u64,
 ) -> Result<f64, EnvError> {
-    let mut policy = NetworkDemonstrator::new(net.clone());
-    let returns = evaluate(env, episodes as usize, seed, |obs| policy.act(obs))?;
-    Ok(returns.iter().sum::<f64>() / returns.len().max(1) as f64)
+    Ok(q_range(net, env, episodes, seed)?.mean_return)
 }
 
 /// The Q-values a network takes on its own greedy episodes ([`q_range`]).
@@ -468,25 +466,24 @@ pub struct QRange {
     pub mean_return: f64,
 }
 
-/// Plays `episodes` greedy episodes of `env` with `net` (on the mean of its heads, as
-/// [`evaluate_greedy`]), the first reset seeded with `seed`, and records the range of every
-/// Q-value it computes on the way: a check for divergence against [`value_bounds`].
+/// Plays `episodes` greedy episodes of `env` with `net` (on the mean of its heads), the first
+/// reset seeded with `seed`: their mean return ([`evaluate_greedy`]) and the range of every
+/// Q-value computed on the way, a check for divergence against [`value_bounds`].
 pub fn q_range(
     net: &Mlp,
     env: &mut VectorEnv,
     episodes: u32,
     seed: u64,
 ) -> Result<QRange, EnvError> {
-    let mut q = vec![0.0f32; net.heads() * net.actions()];
     let (mut min, mut max) = (f64::INFINITY, f64::NEG_INFINITY);
     let mut policy = NetworkDemonstrator::new(net.clone());
     let returns = evaluate(env, episodes as usize, seed, |obs| {
-        net.forward_one(obs, &mut q);
-        for &v in &q {
+        let action = policy.act(obs);
+        for &v in policy.last_q() {
             min = min.min(f64::from(v));
             max = max.max(f64::from(v));
         }
-        policy.act(obs)
+        action
     })?;
     Ok(QRange {
         min,

@@ -17,16 +17,20 @@ use alfd_common::runner::{q_range, value_bounds, QRange};
 
 use crate::usage::usage;
 
+/// Greedy episodes and the first one's reset seed, of the command and of the end-of-run summary.
+const EPISODES: u32 = 3;
+const SEED: u64 = 100;
+
 #[derive(Debug, clap::Args)]
 pub struct QRangeArgs {
     /// Run directories (as `alfd local`, `alfd run` and `alfd sweep` write them).
     #[arg(required = true)]
     pub runs: Vec<PathBuf>,
     /// Greedy episodes per run.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = EPISODES)]
     pub episodes: u32,
     /// Seed of the first episode's reset.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = SEED)]
     pub seed: u64,
 }
 
@@ -101,9 +105,10 @@ fn check_with(
 pub fn summary_text(dir: &Path, cfg: &ExperimentConfig) -> Option<String> {
     cfg.env.name.reward_range()?;
     let weights = std::fs::read(dir.join("weights.safetensors")).ok()?;
-    let c = check_with(dir, cfg, &weights, 3, 100).ok()?;
+    let c = check_with(dir, cfg, &weights, EPISODES, SEED).ok()?;
     let mut text = format!(
-        "{:.1} to {:.1} on 3 greedy episodes; every true value lies in [{:.0}, {:.0}] (γ = {})",
+        "{:.1} to {:.1} on {EPISODES} greedy episodes; every true value lies in [{:.0}, {:.0}] \
+         (γ = {})",
         c.range.min, c.range.max, c.bounds.0, c.bounds.1, cfg.agent.gamma
     );
     if c.diverged {

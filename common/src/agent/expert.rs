@@ -66,6 +66,11 @@ impl NetworkDemonstrator {
     pub fn network(&self) -> &Mlp {
         &self.net
     }
+
+    /// Every head's Q-values at the state last passed to `act` (head-major).
+    pub fn last_q(&self) -> &[f32] {
+        &self.q
+    }
 }
 
 impl Demonstrator<[f32]> for NetworkDemonstrator {
