@@ -4,7 +4,7 @@
 use std::hint::black_box;
 
 use alfd_common::nn::{train_step, Adam, Mlp, TrainScratch};
-use alfd_common::query::QueryRule;
+use alfd_common::query::PercentileGate;
 use alfd_common::replay::{Batch, ReplayBuffer, Transition};
 use alfd_common::rng::seeded;
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -84,7 +84,7 @@ fn bench_act_step(c: &mut Criterion) {
     let mut rng = seeded(2);
     let net = Mlp::new(OBS, HIDDEN, HEADS, ACTIONS, &mut rng);
     let states: Vec<Vec<f32>> = (0..256).map(|_| random_state(&mut rng)).collect();
-    let mut rule = QueryRule::new(1000, 99.0);
+    let mut rule = PercentileGate::new(1000, 99.0);
     let mut i = 0;
 
     c.bench_function("forward_one_k2_a2", |b| {
@@ -100,7 +100,7 @@ fn bench_act_step(c: &mut Criterion) {
     // configs' values) and the greedy action of the episode's head.
     c.bench_function("act_step_k2_a2", |b| {
         let cfg = alfd_common::config::ExperimentConfig::from_toml(
-            "seed = 0\nepisodes = 1\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"bdqn\"\n[query]\nmode = \"active\"\nqueue_len = 1000\npercentile = 99.0\n",
+            "seed = 0\nepisodes = 1\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"bdqn\"\n[query]\nrule = \"js\"\nqueue_len = 1000\npercentile = 99.0\n",
         )
         .expect("valid config");
         let mut actor = alfd_common::agent::NeuralActor::new(
@@ -115,7 +115,7 @@ fn bench_act_step(c: &mut Criterion) {
         actor.begin_episode();
         b.iter(|| {
             i = (i + 1) % states.len();
-            black_box(actor.decide(black_box(&states[i]), true))
+            black_box(actor.decide(black_box(&states[i]), i as u64, true))
         })
     });
     c.bench_function("query_rule_observe_lq1000", |b| {

@@ -9,7 +9,7 @@ use serde::Serialize;
 /// The first bytes of every checkpoint.
 pub const MAGIC: [u8; 8] = *b"ALFDCKPT";
 /// The version of the format and of the state's layout; bumped whenever either changes.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// Magic, version, config hash, payload length, checksum.
 pub const HEADER_LEN: usize = 8 + 4 + 8 + 8 + 8;
 

@@ -6,6 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
+mod query;
 mod validate;
 
 pub use validate::{MAX_BATCH_SIZE, MAX_HIDDEN, MAX_N_STEP, MAX_QUEUE_LEN, MAX_REPLAY_CAPACITY};
@@ -499,51 +500,8 @@ impl AgentConfig {
     }
 }
 
-/// When the agent asks the expert.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum QueryMode {
-    /// Never: pure RL.
-    Never,
-    /// On every step until the budget is spent ("all the budget at the beginning").
-    First,
-    /// When the JS divergence is above the `p_r` percentile of the last `L_q` values (section 3.3).
-    Active,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct QueryConfig {
-    /// `never`, `first` or `active`.
-    #[serde(default = "default_query_mode")]
-    pub mode: QueryMode,
-    /// L_q: length of the divergence queue (at most [`MAX_QUEUE_LEN`]).
-    #[serde(default = "default_queue_len")]
-    pub queue_len: usize,
-    /// p_r: percentile of the queue the divergence must exceed, in [0, 100].
-    #[serde(default = "default_percentile")]
-    pub percentile: f64,
-}
-
-fn default_query_mode() -> QueryMode {
-    QueryMode::Never
-}
-fn default_queue_len() -> usize {
-    1000
-}
-fn default_percentile() -> f64 {
-    99.0
-}
-
-impl Default for QueryConfig {
-    fn default() -> Self {
-        Self {
-            mode: default_query_mode(),
-            queue_len: default_queue_len(),
-            percentile: default_percentile(),
-        }
-    }
-}
+pub use crate::query::RuleKind;
+pub use query::QueryConfig;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -673,6 +631,7 @@ impl ExperimentConfig {
         let mut value: toml::Table = text
             .parse()
             .map_err(|e: toml::de::Error| ConfigError::Parse(e.to_string()))?;
+        rename_query_mode(&mut value)?;
         for o in overrides {
             apply_override(&mut value, o)?;
         }
@@ -700,6 +659,27 @@ impl ExperimentConfig {
         Ok(cfg)
     }
 
+    /// Reads rule `random`'s schedule (`query.schedule`, `{seed}` replaced by the run's seed)
+    /// into `query.schedule_steps` with `read` (a file's text, or why it cannot be read);
+    /// nothing to do for the other rules. Every entry point that runs a config calls it.
+    pub fn load_schedule(
+        &mut self,
+        read: impl FnOnce(&str) -> std::result::Result<String, String>,
+    ) -> Result<()> {
+        if self.query.rule != RuleKind::Random {
+            return Ok(());
+        }
+        let path = self
+            .query
+            .schedule_path(self.seed)
+            .ok_or_else(|| invalid("query.schedule", "rule `random` needs a schedule"))?;
+        let text = read(&path)
+            .map_err(|e| invalid("query.schedule", format!("cannot read {path}: {e}")))?;
+        self.query.schedule_steps = crate::query::schedule_from_demos(&text)
+            .map_err(|e| invalid("query.schedule", format!("{path}: {e}")))?;
+        Ok(())
+    }
+
     /// The config as TOML (what a run directory records as `config.toml`).
     pub fn to_toml(&self) -> String {
         toml::to_string(self).expect("an ExperimentConfig always serialises")
@@ -717,11 +697,32 @@ impl ExperimentConfig {
 }
 
 /// Applies one `a.b.c=value` override to a TOML table.
+/// `query.mode`, the older name of `query.rule`, read as `query.rule` (both at once are refused).
+fn rename_query_mode(table: &mut toml::Table) -> Result<()> {
+    let Some(toml::Value::Table(query)) = table.get_mut("query") else {
+        return Ok(());
+    };
+    if let Some(mode) = query.remove("mode") {
+        if query.contains_key("rule") {
+            return Err(invalid(
+                "query.mode",
+                "is the older name of `query.rule`: give one of them",
+            ));
+        }
+        query.insert("rule".to_owned(), mode);
+    }
+    Ok(())
+}
+
 fn apply_override(table: &mut toml::Table, item: &str) -> Result<()> {
     let (key, raw) = item
         .split_once('=')
         .ok_or_else(|| ConfigError::BadOverride(item.to_owned()))?;
-    let key = key.trim();
+    // `query.mode` is the older name of `query.rule`.
+    let key = match key.trim() {
+        "query.mode" => "query.rule",
+        k => k,
+    };
     if key.is_empty() || key.split('.').any(str::is_empty) {
         return Err(ConfigError::BadOverride(item.to_owned()));
     }
@@ -797,6 +798,72 @@ model = "krr"
         assert_eq!(c.expert.name, "cartpole-200");
         assert_eq!(c.query.percentile, 95.5);
         assert_eq!(ExperimentConfig::from_toml(&c.to_toml()).unwrap(), c);
+    }
+
+    #[test]
+    fn query_rule_keys_and_the_older_query_mode() {
+        let rule = |text: &str, o: &[&str]| {
+            let o: Vec<String> = o.iter().map(|s| s.to_string()).collect();
+            ExperimentConfig::from_toml_with_overrides(&format!("{BASE}{text}"), &o)
+                .map(|c| c.query.rule)
+        };
+        assert_eq!(rule("", &[]), Ok(RuleKind::Never));
+        assert_eq!(rule("[query]\nmode = \"active\"\n", &[]), Ok(RuleKind::Js));
+        assert_eq!(rule("[query]\nrule = \"q-std\"\n", &[]), Ok(RuleKind::QStd));
+        // `--set query.mode=...` and `--set query.rule=...` both replace the file's rule.
+        let js = "[query]\nrule = \"js\"\n";
+        assert_eq!(rule(js, &["query.mode=first"]), Ok(RuleKind::First));
+        assert_eq!(rule(js, &["query.rule=js-burst"]), Ok(RuleKind::JsBurst));
+        let both = rule("[query]\nrule = \"js\"\nmode = \"first\"\n", &[]).unwrap_err();
+        assert!(both.to_string().contains("query.mode"), "{both}");
+        for kind in RuleKind::ALL {
+            let c = ExperimentConfig::from_toml_with_overrides(
+                BASE,
+                &[
+                    format!("query.rule={}", kind.name()),
+                    "query.schedule=run/{seed}/demos.jsonl".into(),
+                ],
+            )
+            .unwrap();
+            assert_eq!(c.query.rule, kind);
+            assert_eq!(ExperimentConfig::from_toml(&c.to_toml()).unwrap(), c);
+            assert_eq!(c.query.schedule_path(7).unwrap(), "run/7/demos.jsonl");
+        }
+        assert!(err(&["query.rule=random"]).contains("query.schedule"));
+        assert!(err(&["query.probability=1.5"]).contains("query.probability"));
+        assert!(err(&["query.burst=0"]).contains("query.burst"));
+        assert!(err(&["query.gap=0"]).contains("query.gap"));
+        assert!(err(&["query.rule=sometimes"]).contains("sometimes"));
+    }
+
+    #[test]
+    fn the_random_rule_loads_its_schedule_from_a_run() {
+        let mut c = ExperimentConfig::from_toml_with_overrides(
+            BASE,
+            &[
+                "seed=3".into(),
+                "query.rule=random".into(),
+                "query.schedule=runs/{seed}/demos.jsonl".into(),
+            ],
+        )
+        .unwrap();
+        c.load_schedule(|p| {
+            assert_eq!(p, "runs/3/demos.jsonl");
+            Ok("{\"step\":4}\n{\"step\":2}\n".into())
+        })
+        .unwrap();
+        assert_eq!(c.query.schedule_steps, vec![4, 2]);
+        let e = c.load_schedule(|_| Err("no such file".into())).unwrap_err();
+        let e = e.to_string();
+        assert!(
+            e.contains("query.schedule")
+                && e.contains("cannot read runs/3/demos.jsonl: no such file"),
+            "{e}"
+        );
+        let e = c
+            .load_schedule(|_| Ok("{\"index\":0}\n".into()))
+            .unwrap_err();
+        assert!(e.to_string().contains("line 1"), "{e}");
     }
 
     fn err(overrides: &[&str]) -> String {

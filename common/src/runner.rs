@@ -27,6 +27,8 @@ pub struct TabularRun {
     /// The greedy policy learned (mean over heads).
     pub greedy_policy: Vec<usize>,
     pub agent: TabularAgent,
+    /// The demonstrations of the run, in the order they were given.
+    pub demos: Vec<crate::agent::DemoRecord>,
 }
 
 /// What a neural run leaves behind.
@@ -268,11 +270,12 @@ pub fn run_tabular_checkpointed(
             })
         },
     );
-    let (_, agent, _) = state.into_inner();
+    let (_, agent, expert) = state.into_inner();
     Ok(TabularRun {
         records: records.into_inner(),
         greedy_policy: agent.greedy_policy(),
         agent,
+        demos: expert.core.snapshot().demos,
     })
 }
 

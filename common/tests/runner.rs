@@ -189,7 +189,7 @@ fn shaping_runs_from_min_demos_until_twice_the_last_demonstration_step() {
         &[
             "episodes=30",
             "expert.name=cartpole-perfect",
-            "query.mode=first",
+            "query.rule=first",
             "budget.total=12",
             "seed=2",
         ],

@@ -279,7 +279,7 @@ pub(crate) fn run_pieces(
             write(out, "policy.json", table.to_string().as_bytes())?;
             (
                 run.records,
-                Vec::new(),
+                run.demos,
                 Some(greedy[s0]),
                 Some(vi.values[s0]),
             )

@@ -5,6 +5,7 @@ mod checkpoint_file;
 mod cmd_clean;
 mod cmd_demo_model;
 mod cmd_demo_model_policy;
+mod cmd_docs;
 mod cmd_env;
 mod cmd_expert;
 mod cmd_join;
@@ -61,6 +62,9 @@ enum Command {
     /// The Q-values of runs' learned networks on greedy episodes against the range of the true
     /// values: a check for divergence.
     QRange(cmd_q_range::QRangeArgs),
+    /// Re-make the generated tables of README.md, EXPERIMENTS.md and BENCHMARKS.md from the
+    /// committed results (`--check`: fail if any differs).
+    Docs(cmd_docs::DocsArgs),
 }
 
 fn main() {
@@ -84,6 +88,7 @@ fn main() {
         Command::Sweep(a) => cmd_sweep::run(a),
         Command::DemoModelPolicy(a) => cmd_demo_model_policy::run(a),
         Command::QRange(a) => cmd_q_range::run(a),
+        Command::Docs(a) => cmd_docs::run(a),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

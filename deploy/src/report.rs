@@ -14,7 +14,7 @@ use std::fmt::Write as _;
 use std::io::IsTerminal as _;
 use std::path::Path;
 
-use alfd_common::config::{EnvName, ExperimentConfig, QueryMode};
+use alfd_common::config::{EnvName, ExperimentConfig, RuleKind};
 use alfd_common::record::{parse_episodes_csv, EpisodeRecord, RunSummary};
 use alfd_expert::registry::{self, ExpertEntry};
 use anyhow::Context as _;
@@ -243,7 +243,7 @@ pub(crate) fn expert_reference(cfg: &ExperimentConfig) -> ExpertReference {
                 .to_owned(),
         );
     }
-    if cfg.query.mode == QueryMode::Never || cfg.budget() == 0 {
+    if cfg.query.rule == RuleKind::Never || cfg.budget() == 0 {
         notes.push("for reference only: this run asks for no demonstrations".to_owned());
     }
     ExpertReference {

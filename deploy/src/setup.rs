@@ -39,7 +39,7 @@ pub fn parse_config(
     overrides: &[String],
     source: &str,
 ) -> anyhow::Result<ExperimentConfig> {
-    ExperimentConfig::from_toml_with_overrides(text, overrides).map_err(|e| {
+    let mut cfg = ExperimentConfig::from_toml_with_overrides(text, overrides).map_err(|e| {
         let file_alone = if overrides.is_empty() {
             None
         } else {
@@ -54,7 +54,14 @@ pub fn parse_config(
             ),
         };
         anyhow::Error::new(e).context(context)
-    })
+    })?;
+    cfg.load_schedule(read_text)?;
+    Ok(cfg)
+}
+
+/// A file's text, or why it cannot be read (for [`ExperimentConfig::load_schedule`]).
+pub fn read_text(path: &str) -> Result<String, String> {
+    std::fs::read_to_string(path).map_err(|e| e.to_string())
 }
 
 /// Where a bad config value came from.

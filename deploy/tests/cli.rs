@@ -867,3 +867,42 @@ fn q_range_checks_a_run_and_refuses_what_is_not_one() {
     assert!(stderr(&o).contains("config.toml"), "{}", stderr(&o));
     assert!(!stderr(&o).contains("panicked"));
 }
+
+#[test]
+fn the_documents_generated_tables_match_the_committed_results() {
+    let _time = timed!();
+    let experiments =
+        std::fs::read_to_string(crate::support::repo().join("EXPERIMENTS.md")).unwrap();
+    let parts = experiments.matches("<!-- generated from ").count();
+    assert!(parts >= 2, "EXPERIMENTS.md has {parts} generated parts");
+    let o = alfd(&["docs", "--check"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // A part edited by hand is found.
+    let dir = tmp("docs-check");
+    for doc in ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"] {
+        std::fs::copy(crate::support::repo().join(doc), dir.join(doc)).unwrap();
+    }
+    std::fs::create_dir_all(dir.join("results")).unwrap();
+    let copy = Command::new("cp")
+        .args(["-r", "results", dir.to_str().unwrap()])
+        .current_dir(crate::support::repo())
+        .status()
+        .unwrap();
+    assert!(copy.success());
+    let edited = experiments.replacen("<!-- end generated -->", "| 1 |\n<!-- end generated -->", 1);
+    std::fs::write(dir.join("EXPERIMENTS.md"), edited).unwrap();
+    let o = alfd(&["docs", "--check", "--root", dir.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("EXPERIMENTS.md: line"),
+        "{}",
+        stderr(&o)
+    );
+    // `alfd docs` mends it.
+    let o = alfd(&["docs", "--root", dir.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        std::fs::read_to_string(dir.join("EXPERIMENTS.md")).unwrap(),
+        experiments
+    );
+}

@@ -52,7 +52,7 @@ const FAULT_RUN: [&str; 6] = [
     "episodes=300",
     "env.max_episode_steps=200",
     "expert.model=none",
-    "query.mode=first",
+    "query.rule=first",
     "budget.total=1500",
     "--checkpoint-every=200",
 ];
@@ -159,7 +159,7 @@ fn episodes_n_with_two_actors_plays_and_records_n_and_the_files_agree() {
             actors,
             &[
                 &format!("episodes={episodes}"),
-                "query.mode=first",
+                "query.rule=first",
                 "expert.model=none",
                 "budget.total=1000",
             ],

@@ -200,7 +200,7 @@ fn an_environment_of_ones_own_module_runs_with_its_kwargs() {
         .args(["--set", "env.kwargs={width = 6}", "--set", "episodes=3"])
         .args(["--set", "env.max_episode_steps=40"])
         .args(["--set", "expert.name=python:alfd_examples:corridor_right"])
-        .args(["--set", "query.mode=first", "--set", "budget.total=4"])
+        .args(["--set", "query.rule=first", "--set", "budget.total=4"])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", text(&o));
@@ -337,7 +337,7 @@ fn swap_expert_goes_from_a_built_in_expert_to_an_external_one_and_back() {
                 "--set",
                 "expert.name=acrobot-energy",
                 "--set",
-                "query.mode=first",
+                "query.rule=first",
             ])
             .args(["--set", "budget.total=100000", "--set", "episodes=1000000"])
             .args(["--set", "expert.model=none"])

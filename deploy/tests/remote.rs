@@ -87,7 +87,7 @@ fn two_remote_actors_over_zenoh_play_a_run_to_its_end_within_the_budget() {
             &listen,
             "episodes=150",
             "budget.total=10",
-            "query.mode=first",
+            "query.rule=first",
         ],
     );
     // A host built from other sources is refused by name, with exit code 2, and joins nothing.
@@ -164,7 +164,7 @@ fn an_expert_on_another_host_answers_every_query_and_its_demonstrations_are_writ
             &listen,
             "episodes=120",
             "budget.total=12",
-            "query.mode=first",
+            "query.rule=first",
         ],
     );
     // The run starts with its own expert (cartpole-perfect, local); a host joins as its expert,
@@ -233,7 +233,7 @@ fn alfd_swap_expert_swaps_away_from_a_remote_expert_and_its_host_leaves() {
             &listen,
             "episodes=100000",
             "budget.total=1000",
-            "query.mode=first",
+            "query.rule=first",
         ],
     );
     let expert = spawn_expert_join(port, "cartpole-200", &expert_host);
@@ -292,7 +292,7 @@ fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
             &listen,
             "episodes=100000",
             "budget.total=20",
-            "query.mode=first",
+            "query.rule=first",
         ],
     );
     let remote_rows = |out: &Path| rows(out).iter().filter(|r| r[8] == "1").count();
@@ -461,7 +461,7 @@ fn a_remote_expert_killed_mid_run_is_restarted_here_and_no_demonstration_is_lost
             &format!("episodes={episodes}"),
             "env.max_episode_steps=200",
             "expert.model=none",
-            "query.mode=first",
+            "query.rule=first",
             &format!("budget.total={budget}"),
         ],
     );
@@ -553,7 +553,7 @@ fn a_remote_python_expert_lost_with_its_host_leaves_the_run_going_without_an_exp
             "episodes=100000",
             "env.max_episode_steps=200",
             "expert.model=none",
-            "query.mode=first",
+            "query.rule=first",
             "budget.total=100000",
         ],
     );
@@ -634,7 +634,7 @@ fn a_remote_actor_killed_with_sigkill_is_restarted_by_its_host_with_a_new_incarn
             &format!("episodes={episodes}"),
             "env.max_episode_steps=100",
             "budget.total=20",
-            "query.mode=first",
+            "query.rule=first",
         ],
     );
     let join = spawn_join(port, 1, &remote);

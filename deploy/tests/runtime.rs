@@ -20,7 +20,7 @@ const ASKING_ALL_ALONG: [&str; 5] = [
     "episodes=1000000",
     "expert.name=cartpole-200",
     "expert.model=none",
-    "query.mode=first",
+    "query.rule=first",
     "budget.total=100000",
 ];
 
@@ -159,7 +159,7 @@ fn a_small_run_with_two_actors_fills_its_run_directory() {
     let o = run(
         &out,
         2,
-        &["episodes=300", "budget.total=10", "query.mode=first"],
+        &["episodes=300", "budget.total=10", "query.rule=first"],
     );
     assert!(o.status.success(), "{}", text(&o));
     let s = summary(&out);
@@ -417,7 +417,7 @@ fn two_concurrent_runs_do_not_see_each_other() {
                 &[
                     "episodes=30",
                     "budget.total=5",
-                    "query.mode=first",
+                    "query.rule=first",
                     "seed=1",
                 ],
             )
@@ -429,7 +429,7 @@ fn two_concurrent_runs_do_not_see_each_other() {
         &[
             "episodes=30",
             "budget.total=7",
-            "query.mode=first",
+            "query.rule=first",
             "seed=2",
         ],
     );
@@ -551,7 +551,7 @@ fn an_expert_killed_with_sigkill_is_restarted_and_the_run_completes() {
             &format!("episodes={episodes}"),
             "env.max_episode_steps=200",
             "expert.model=none",
-            "query.mode=first",
+            "query.rule=first",
             &format!("budget.total={budget}"),
         ],
     );

@@ -5,6 +5,7 @@ mod faults;
 mod golden;
 mod gymnasium;
 mod human;
+mod query_rules;
 mod remote;
 mod report;
 mod runtime;

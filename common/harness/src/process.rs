@@ -41,7 +41,10 @@ impl ProcessArgs {
     /// Reads `RUN_DIR/config.toml` and `RUN_DIR/runtime.toml`; a bad file is [`BadInput`].
     pub fn load(&self) -> anyhow::Result<Setup> {
         let config = read(&self.run_dir.join("config.toml"), |t| {
-            ExperimentConfig::for_multi_process(t).map_err(|e| e.to_string())
+            let mut cfg = ExperimentConfig::for_multi_process(t).map_err(|e| e.to_string())?;
+            cfg.load_schedule(|p| std::fs::read_to_string(p).map_err(|e| e.to_string()))
+                .map_err(|e| e.to_string())?;
+            Ok(cfg)
         })?;
         let runtime = read(&self.run_dir.join(RUNTIME_FILE), |t| {
             RuntimeConfig::from_toml(t).map_err(|e| e.to_string())

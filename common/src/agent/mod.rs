@@ -17,9 +17,8 @@ pub use tabular::{TabularAgent, TabularSnapshot};
 
 use rand::Rng as _;
 
-use crate::config::{AgentConfig, Exploration, QueryMode};
+use crate::config::{AgentConfig, Exploration};
 use crate::policy::{argmax, softmax_into};
-use crate::query::QueryRule;
 use crate::rng::Rng;
 
 /// What an agent decided at one state (Algorithm 1 lines 3-16, before any answer of the expert).
@@ -31,19 +30,6 @@ pub struct Decision {
     pub js: f64,
     /// The query rule fired: ask the expert.
     pub query: bool,
-}
-
-/// Algorithm 1 lines 3-8 for one state: given the divergence `u`, whether to query the expert.
-/// The divergence is pushed to the queue only while budget remains, as in the paper.
-pub fn query_decision(mode: QueryMode, rule: &mut QueryRule, u: f64, budget_left: bool) -> bool {
-    if !budget_left {
-        return false;
-    }
-    match mode {
-        QueryMode::Never => false,
-        QueryMode::First => true,
-        QueryMode::Active => rule.observe(u),
-    }
 }
 
 /// How an agent picks its own action from the Q-values of the head it follows: greedily, ε-greedily

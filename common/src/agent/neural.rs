@@ -6,14 +6,14 @@ use rand::Rng as _;
 
 use serde::{Deserialize, Serialize};
 
-use crate::agent::{query_decision, Decision, Explorer};
+use crate::agent::{Decision, Explorer};
 use crate::checkpoint::StateMismatch;
 use crate::config::LossKind;
-use crate::config::{AgentConfig, LrSchedule, QueryConfig, QueryMode};
+use crate::config::{AgentConfig, LrSchedule, QueryConfig};
 use crate::demo_model::DemoModel;
 use crate::nn::{Adam, AdamConfig, AdamState, Mlp, NnError, TdConfig, TdLoss, TrainScratch};
 use crate::policy::{js_divergence, softmax_into};
-use crate::query::QueryRule;
+use crate::query::{novelty, q_spread, Rule, RuleKind, Signals};
 use crate::replay::{Batch, ReplayBuffer, Transition};
 use crate::rng::{Rng, RngState};
 use crate::shaping::{shaped_reward, ShapingKind};
@@ -27,8 +27,10 @@ pub struct NeuralActor {
     explorer: Explorer,
     temperature: f64,
     bootstrap_probability: f64,
-    mode: QueryMode,
-    rule: QueryRule,
+    rule_kind: RuleKind,
+    rule: Rule,
+    /// The states of the demonstrations this actor was given (the novelty rule's reference set).
+    demo_states: Vec<Vec<f64>>,
     rng: Rng,
     arm: usize,
     q32: Vec<f32>,
@@ -61,8 +63,9 @@ impl NeuralActor {
             explorer: Explorer::new(agent, actions),
             temperature: agent.temperature,
             bootstrap_probability: agent.bootstrap_probability,
-            mode: query.mode,
-            rule: QueryRule::new(query.queue_len, query.percentile),
+            rule_kind: query.rule,
+            rule: Rule::new(&query.spec(), &rng),
+            demo_states: Vec::new(),
             rng,
             arm: 0,
             q32: vec![0.0; heads * actions],
@@ -113,9 +116,10 @@ impl NeuralActor {
         self.arm = self.rng.random_range(0..self.heads);
     }
 
-    /// Algorithm 1 lines 3-16 at state `obs`: the divergence, the query decision, and the agent's
-    /// own action (greedy on the episode's head, or ε-greedy / softmax as configured).
-    pub fn decide(&mut self, obs: &[f32], budget_left: bool) -> Decision {
+    /// Algorithm 1 lines 3-16 at state `obs`, the run's global step `step`: the divergence, the
+    /// query rule's decision, and the agent's own action (greedy on the episode's head, or
+    /// ε-greedy / softmax as configured).
+    pub fn decide(&mut self, obs: &[f32], step: u64, budget_left: bool) -> Decision {
         self.net.forward_one(obs, &mut self.q32);
         for (q, &v) in self.q.iter_mut().zip(&self.q32) {
             *q = f64::from(v);
@@ -125,12 +129,37 @@ impl NeuralActor {
         } else {
             0.0
         };
-        let query = query_decision(self.mode, &mut self.rule, js, budget_left);
+        let query = budget_left && {
+            let signals = self.signals(obs, step, js);
+            self.rule.decide(&signals, budget_left)
+        };
         let a = self.actions;
         let action = self
             .explorer
             .act(&self.q[self.arm * a..(self.arm + 1) * a], &mut self.rng);
         Decision { action, js, query }
+    }
+
+    /// The query rule's view of `obs` (Q-values already computed), with the Q spread and the
+    /// novelty only when the rule reads them.
+    fn signals(&self, obs: &[f32], step: u64, js: f64) -> Signals {
+        let q_std = match self.rule_kind.needs_q_std() && self.heads > 1 {
+            true => q_spread(&self.q, self.heads),
+            false => 0.0,
+        };
+        let novelty = match self.rule_kind.needs_novelty() {
+            true => {
+                let s: Vec<f64> = obs.iter().map(|&x| f64::from(x)).collect();
+                novelty(&s, self.demo_states.iter().map(Vec::as_slice))
+            }
+            false => None,
+        };
+        Signals {
+            step,
+            js,
+            q_std,
+            novelty,
+        }
     }
 
     /// `π(a|s)` of the episode's head at the state last passed to [`NeuralActor::decide`] (eq. 2).
@@ -178,6 +207,10 @@ impl NeuralActor {
         demo: bool,
         shaping: Option<(&DemoModel, f64)>,
     ) -> Transition {
+        if demo && self.rule_kind.needs_novelty() {
+            self.demo_states
+                .push(obs.iter().map(|&x| f64::from(x)).collect());
+        }
         let reward = match shaping {
             Some((model, lambda)) => {
                 let s: Vec<f64> = obs.iter().map(|&x| f64::from(x)).collect();
@@ -218,7 +251,9 @@ pub struct ActorSnapshot {
     pub weights: Vec<f32>,
     pub weights_version: u64,
     pub explorer_steps: u64,
-    pub rule: QueryRule,
+    pub rule: Rule,
+    /// The demonstrations' states the novelty rule measures against.
+    pub demo_states: Vec<Vec<f64>>,
     pub rng: RngState,
     pub arm: usize,
 }
@@ -230,6 +265,7 @@ impl NeuralActor {
             weights_version: self.weights_version,
             explorer_steps: self.explorer.steps(),
             rule: self.rule.clone(),
+            demo_states: self.demo_states.clone(),
             rng: RngState::of(&self.rng),
             arm: self.arm,
         }
@@ -244,6 +280,7 @@ impl NeuralActor {
             .map_err(|e| StateMismatch(format!("actor weights: {e}")))?;
         self.explorer.restore_steps(s.explorer_steps);
         self.rule = s.rule.clone();
+        self.demo_states = s.demo_states.clone();
         self.rng = s.rng.to_rng();
         self.arm = s.arm;
         Ok(())

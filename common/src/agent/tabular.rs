@@ -6,16 +6,16 @@ use rand::Rng as _;
 
 use serde::{Deserialize, Serialize};
 
-use crate::agent::{query_decision, Decision, Explorer};
+use crate::agent::{Decision, Explorer};
 use crate::checkpoint::StateMismatch;
-use crate::config::{AgentConfig, AgentKind, QueryConfig, QueryMode};
+use crate::config::{AgentConfig, AgentKind, QueryConfig};
 use crate::demo_model::DemoModel;
 use crate::env::Step;
 use crate::environment_loop::{Actor, Result};
 use crate::math;
 use crate::policy::argmax;
 use crate::qfunction::{QFunction, TabularQ};
-use crate::query::QueryRule;
+use crate::query::{q_spread, Rule, RuleKind, Signals};
 use crate::rng::{Rng, RngState};
 
 /// A tabular agent over `states` states and `actions` actions.
@@ -34,8 +34,11 @@ pub struct TabularAgent {
     rng: Rng,
     /// The head followed this episode (Algorithm 1 line 1).
     arm: usize,
-    mode: QueryMode,
-    rule: QueryRule,
+    rule_kind: RuleKind,
+    rule: Rule,
+    /// The states demonstrated so far, sorted (the novelty rule's reference set: a state is novel,
+    /// 1, until it is demonstrated, 0).
+    demo_states: Vec<usize>,
     /// SARSA's last transition `(s, a, r, s')`, learned from once the action at `s'` is known.
     pending: Option<(usize, usize, f64, usize)>,
 }
@@ -49,7 +52,8 @@ pub struct TabularSnapshot {
     pub explorer_steps: u64,
     pub rng: RngState,
     pub arm: usize,
-    pub rule: QueryRule,
+    pub rule: Rule,
+    pub demo_states: Vec<usize>,
     pub pending: Option<(usize, usize, f64, usize)>,
 }
 
@@ -62,6 +66,7 @@ impl TabularAgent {
             rng: RngState::of(&self.rng),
             arm: self.arm,
             rule: self.rule.clone(),
+            demo_states: self.demo_states.clone(),
             pending: self.pending,
         }
     }
@@ -89,6 +94,7 @@ impl TabularAgent {
         self.rng = s.rng.to_rng();
         self.arm = s.arm;
         self.rule = s.rule.clone();
+        self.demo_states = s.demo_states.clone();
         self.pending = s.pending;
         Ok(())
     }
@@ -101,6 +107,7 @@ impl TabularAgent {
         rng: Rng,
     ) -> Self {
         let heads = cfg.heads();
+        let rule = Rule::new(&query.spec(), &rng);
         Self {
             kind: cfg.kind,
             explorer: Explorer::new(cfg, actions),
@@ -113,8 +120,9 @@ impl TabularAgent {
             bootstrap_probability: cfg.bootstrap_probability,
             rng,
             arm: 0,
-            mode: query.mode,
-            rule: QueryRule::new(query.queue_len, query.percentile),
+            rule_kind: query.rule,
+            rule,
+            demo_states: Vec::new(),
             pending: None,
         }
     }
@@ -146,13 +154,48 @@ impl TabularAgent {
             .act(self.q.head_values(s, self.arm), &mut self.rng)
     }
 
-    /// Algorithm 1 lines 3-16 at `s`: the divergence, the query decision (the same
-    /// [`query_decision`] as the neural agents), and the agent's own action.
-    pub fn decide(&mut self, s: usize, budget_left: bool) -> Decision {
+    /// Algorithm 1 lines 3-16 at `s`, the run's global step `step`: the divergence, the agent's
+    /// own action, and the query rule's decision.
+    pub fn decide(&mut self, s: usize, step: u64, budget_left: bool) -> Decision {
         let js = self.js_divergence(s);
         let action = self.act(s);
-        let query = query_decision(self.mode, &mut self.rule, js, budget_left);
+        let query = budget_left && {
+            let signals = self.signals(s, step, js);
+            self.rule.decide(&signals, budget_left)
+        };
         Decision { action, js, query }
+    }
+
+    /// The query rule's view of `s`, with the Q spread and the novelty only when the rule reads
+    /// them.
+    fn signals(&self, s: usize, step: u64, js: f64) -> Signals {
+        let heads = self.q.heads();
+        let q_std = match self.rule_kind.needs_q_std() && heads > 1 {
+            true => {
+                let q: Vec<f64> = (0..heads)
+                    .flat_map(|k| self.q.head_values(s, k).iter().copied())
+                    .collect();
+                q_spread(&q, heads)
+            }
+            false => 0.0,
+        };
+        let novelty = match self.rule_kind.needs_novelty() && !self.demo_states.is_empty() {
+            true => Some(f64::from(self.demo_states.binary_search(&s).is_err())),
+            false => None,
+        };
+        Signals {
+            step,
+            js,
+            q_std,
+            novelty,
+        }
+    }
+
+    /// Remembers that `s` was demonstrated (the novelty rule's reference set).
+    fn note_demo(&mut self, s: usize) {
+        if let Err(i) = self.demo_states.binary_search(&s) {
+            self.demo_states.insert(i, s);
+        }
     }
 
     /// Learns from one transition. `next_action` is the action taken at `s_next` (SARSA's target;
@@ -216,8 +259,8 @@ impl Actor<usize> for TabularAgent {
         TabularAgent::begin_episode(self);
     }
 
-    fn select(&mut self, obs: &usize, budget_left: bool) -> Decision {
-        self.decide(*obs, budget_left)
+    fn select(&mut self, obs: &usize, step: u64, budget_left: bool) -> Decision {
+        self.decide(*obs, step, budget_left)
     }
 
     fn observe(
@@ -225,9 +268,12 @@ impl Actor<usize> for TabularAgent {
         obs: &usize,
         action: usize,
         step: &Step<usize>,
-        _demo: bool,
+        demo: bool,
         _shaping: Option<(&DemoModel, f64)>,
     ) -> Result<bool> {
+        if demo && self.rule_kind.needs_novelty() {
+            self.note_demo(*obs);
+        }
         if let Some((s, a, r, s_next)) = self.pending.take() {
             self.learn(s, a, r, s_next, false, Some(action));
         }

@@ -1,7 +1,7 @@
 //! [`ExperimentConfig::validate`]: every value of a config checked, the error naming the field;
 //! sizes (buffers, layers, queues) have upper limits so that no config asks for absurd memory.
 
-use super::{invalid, AgentKind, EnvName, ExperimentConfig, Result};
+use super::{invalid, AgentKind, EnvName, ExperimentConfig, Result, RuleKind};
 use crate::demo_model::MAX_DEMOS;
 
 /// The largest `agent.replay_capacity`: a million transitions take about 100 MB.
@@ -278,6 +278,24 @@ impl ExperimentConfig {
             return Err(invalid(
                 "query.percentile",
                 format!("p_r must be in [0, 100], got {}", q.percentile),
+            ));
+        }
+        if !(0.0..=1.0).contains(&q.probability) {
+            return Err(invalid(
+                "query.probability",
+                format!("must be in [0, 1], got {}", q.probability),
+            ));
+        }
+        if q.burst == 0 {
+            return Err(invalid("query.burst", "must be at least 1"));
+        }
+        if q.gap == 0 {
+            return Err(invalid("query.gap", "must be at least 1"));
+        }
+        if q.rule == RuleKind::Random && q.schedule.is_none() {
+            return Err(invalid(
+                "query.schedule",
+                "rule `random` asks at the steps of a recorded run: give its demos.jsonl",
             ));
         }
         if self.budget.total < 0 {

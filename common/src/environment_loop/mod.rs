@@ -92,9 +92,10 @@ pub trait Actor<O> {
     }
     /// Algorithm 1 line 1: sample the head to follow this episode.
     fn begin_episode(&mut self);
-    /// Algorithm 1 lines 3-16 but the asking: the divergence of the heads at `obs`, whether the
-    /// query rule fires (only while budget is left), and the agent's own action.
-    fn select(&mut self, obs: &O, budget_left: bool) -> Decision;
+    /// Algorithm 1 lines 3-16 but the asking: the divergence of the heads at `obs` (the run's
+    /// global step `step`), whether the query rule fires (only while budget is left), and the
+    /// agent's own action.
+    fn select(&mut self, obs: &O, step: u64, budget_left: bool) -> Decision;
     /// Algorithm 1 lines 17-20: learn from (or hand on) the step taken with `action` from `obs`,
     /// with the reward shaped when `shaping` is given. Returns whether the reward was shaped.
     fn observe(
@@ -225,8 +226,8 @@ impl<A: Adder, V: VariableSource> Actor<Vec<f32>> for GenericActor<A, V> {
         self.core.begin_episode();
     }
 
-    fn select(&mut self, obs: &Vec<f32>, budget_left: bool) -> Decision {
-        self.core.decide(obs, budget_left)
+    fn select(&mut self, obs: &Vec<f32>, step: u64, budget_left: bool) -> Decision {
+        self.core.decide(obs, step, budget_left)
     }
 
     fn observe(
@@ -403,7 +404,7 @@ where
         expert.update()?;
         let global_step = actor.global_step(*steps);
         // Lines 3-16: the divergence, the query rule, the action.
-        let decision = actor.select(&obs, expert.budget_left());
+        let decision = actor.select(&obs, global_step, expert.budget_left());
         js_sum += decision.js;
         let (action, demo) = match decision.query {
             true => match expert.ask(&obs, global_step)? {

@@ -91,6 +91,18 @@ struct ExperimentFile {
     /// The summary reports the first episode at which the mean return reaches each of these.
     #[serde(default = "default_thresholds")]
     thresholds: Vec<f64>,
+    /// The summary reports, per method, the demonstrations used when greedy evaluation first
+    /// reaches this return.
+    #[serde(default)]
+    eval_threshold: Option<f64>,
+    /// The summary also reads the methods as query rules × budgets (each method's `query.rule`
+    /// and `budget.total`): tables and plots against B.
+    #[serde(default)]
+    by_budget: bool,
+    /// The training-return curves leave out the episodes in which the expert acted (the
+    /// learner's own play only).
+    #[serde(default)]
+    learner_episodes_only: bool,
     /// The summary reports the mean return over this many final episodes.
     #[serde(default = "default_last")]
     last: u32,
@@ -159,6 +171,9 @@ pub struct Experiment {
     pub episodes: Option<u32>,
     pub log_y: bool,
     pub thresholds: Vec<f64>,
+    pub eval_threshold: Option<f64>,
+    pub by_budget: bool,
+    pub learner_episodes_only: bool,
     pub last: u32,
     pub smooth: usize,
     pub y_range: Option<(f64, f64)>,
@@ -351,6 +366,9 @@ impl Experiment {
             episodes,
             log_y: file.log_y,
             thresholds: file.thresholds,
+            eval_threshold: file.eval_threshold,
+            by_budget: file.by_budget,
+            learner_episodes_only: file.learner_episodes_only,
             last: file.last,
             smooth: file.smooth,
             y_range,

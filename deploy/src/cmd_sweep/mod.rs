@@ -26,6 +26,7 @@
 //! `--shard I/N` runs only a share of the runs and `--collect DIR...` merges the shards into the
 //! usual outputs (`shard.rs`), so that a cluster's scheduler can spread a sweep over machines.
 
+mod budget;
 mod experiment;
 pub(crate) mod plot;
 mod shard;
@@ -38,7 +39,7 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
-use alfd_common::config::ExperimentConfig;
+use alfd_common::config::{ExperimentConfig, RuleKind};
 use alfd_common::record::ReturnStats;
 use anyhow::Context as _;
 
@@ -216,7 +217,16 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
                 }
             }
             total += 1;
-            let cfg = method.config(seed, exp.episodes)?;
+            let mut cfg = method.config(seed, exp.episodes)?;
+            // A matched control's schedule names another method's runs of this sweep: `{out}`
+            // is the sweep's directory, `{other_seed}` the sweep's next seed (the last one's is
+            // the first).
+            if let Some(path) = &mut cfg.query.schedule {
+                let other = exp.first_seed + (seed - exp.first_seed + 1) % exp.seeds;
+                *path = path
+                    .replace("{out}", &ctx.out.display().to_string())
+                    .replace("{other_seed}", &other.to_string());
+            }
             let dir = run_dir(ctx.out, &method.name, seed);
             if is_complete(&dir, &cfg)? {
                 resumed += 1;
@@ -238,16 +248,45 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
         );
     }
     tracing::info!(total, resumed, jobs = ctx.jobs, "sweep {}", exp.name);
-    run_jobs(&pending, ctx.jobs, total, resumed, ctx.progress)?;
+    // Runs that replay another run's query steps (rule `random`) go after every other run.
+    let (replays, first): (Vec<Job>, Vec<Job>) = pending
+        .into_iter()
+        .partition(|j| j.cfg.query.rule == RuleKind::Random);
+    run_jobs(&first, ctx.jobs, total, resumed, ctx.progress)?;
+    let done = resumed + first.len() as u64;
+    run_jobs(&replays, ctx.jobs, total, done, ctx.progress)?;
+    let pending_len = first.len() + replays.len();
     if let Mode::Shard(s) = ctx.mode {
         let wall = ctx.start.elapsed().as_secs_f64();
-        return shard::finish(exp, s, ctx.out, ctx.output, pending.len(), resumed, wall);
+        return shard::finish(exp, s, ctx.out, ctx.output, pending_len, resumed, wall);
     }
 
     let mut results = Vec::with_capacity(exp.methods.len());
+    let mut by_budget = budget::Table::new();
     for method in &exp.methods {
         let runs = read_runs(ctx.out, method, exp.seed_range())?;
-        results.push(summary::analyse(method, &runs, exp)?);
+        let own: Vec<summary::Run>;
+        let curve_runs = if exp.learner_episodes_only {
+            own = runs
+                .iter()
+                .map(|r| summary::Run {
+                    episodes: r.episodes.without_expert(),
+                    ..r.clone()
+                })
+                .collect();
+            &own
+        } else {
+            &runs
+        };
+        results.push(summary::analyse(method, curve_runs, exp)?);
+        if exp.by_budget {
+            let cfg = method.config(exp.first_seed, exp.episodes)?;
+            let cell = budget::cell(&runs, exp.eval_threshold, &method.name);
+            by_budget
+                .entry(cfg.query.rule.name().to_owned())
+                .or_default()
+                .insert(cfg.budget(), cell);
+        }
     }
     write(
         ctx.out,
@@ -257,13 +296,22 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
     let series = summary::training_series(exp, &results);
     let plotted = write_plot(ctx, &series, summary::x_name(exp.x).1)?;
     let wall = ctx.start.elapsed().as_secs_f64();
-    let md = summary::training_summary(ctx, &results, pending.len(), resumed, wall, &plotted);
+    let mut md = summary::training_summary(ctx, &results, pending_len, resumed, wall, &plotted);
+    if exp.learner_episodes_only {
+        md.push_str(
+            "\nThe training-return curves, crossings, areas and final returns leave out the \
+             episodes in which the expert acted: they are the learner's own play.\n",
+        );
+    }
+    if exp.by_budget {
+        md.push_str(&budget_section(ctx, &by_budget)?);
+    }
     write(ctx.out, "summary.md", md.as_bytes())?;
     let line = format!(
         "sweep {}: {} runs, {} run now, {} resumed (complete already), {:.1} s; see {}",
         exp.name,
         total,
-        pending.len(),
+        pending_len,
         resumed,
         wall,
         ctx.out.join("summary.md").display()
@@ -272,7 +320,7 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
     sweep_report(
         ctx,
         total,
-        pending.len(),
+        pending_len,
         resumed,
         wall,
         &files,
@@ -362,7 +410,9 @@ fn run_jobs(
                     // The sweep's own run directory, re-run in place if unfinished; locked so
                     // that two sweeps of one --out never run the same job at once.
                     let run = crate::run_dir::lock(&job.dir).and_then(|_lock| {
-                        cmd_local::run_config(&job.cfg, &job.dir, false)
+                        let mut cfg = job.cfg.clone();
+                        cfg.load_schedule(crate::setup::read_text)?;
+                        cmd_local::run_config(&cfg, &job.dir, false)
                     });
                     match run {
                         Ok(summary) => {
@@ -458,6 +508,83 @@ fn read_runs(
             })
         })
         .collect()
+}
+
+/// The query-rule view of the sweep ([`budget`]): its Markdown, its plots against B and
+/// `by-budget.csv`.
+fn budget_section(ctx: &Ctx, table: &budget::Table) -> anyhow::Result<String> {
+    let exp = ctx.exp;
+    let score_desc = if table
+        .values()
+        .flat_map(|m| m.values())
+        .any(|c| c.demos_to.is_some())
+    {
+        "Final greedy evaluation (each seed's last `eval_return`)"
+    } else {
+        "Final greedy score (each seed's last `eval_return`, or CliffWalk's greedy V(S))"
+    };
+    let mut md = budget::markdown(table, exp.eval_threshold, score_desc);
+    let mut csv = String::from(
+        "rule,budget,seeds,score,score_low,score_high,demos_to,demos_to_low,demos_to_high,reached,expert_share\n",
+    );
+    for (rule, cells) in table {
+        for (b, c) in cells {
+            let e = |x: Option<&budget::Estimate>| {
+                x.map_or(",,".to_owned(), |e| {
+                    format!("{},{},{}", e.value, e.ci.low, e.ci.high)
+                })
+            };
+            let _ = writeln!(
+                csv,
+                "{rule},{b},{},{},{},{},{}",
+                c.seeds,
+                e(c.score.as_ref()),
+                e(c.demos_to.as_ref()),
+                c.reached,
+                c.expert_share
+            );
+        }
+    }
+    write(ctx.out, "by-budget.csv", csv.as_bytes())?;
+    let seeds = summary::count(exp.seeds, "seed");
+    let mut plots = vec![(
+        "eval",
+        format!("final greedy score: mean of {seeds}"),
+        budget::series(table, |c| c.score),
+    )];
+    if let Some(t) = exp.eval_threshold {
+        plots.push((
+            "demos",
+            format!("demonstrations to greedy eval ≥ {t}: median of {seeds}"),
+            budget::series(table, |c| c.demos_to),
+        ));
+    }
+    let mut files = Vec::new();
+    for (tag, y_desc, series) in &plots {
+        let svg = plot::svg(&plot::Plot {
+            title: &summary::title_with_count(&exp.title, exp.seeds, "seed"),
+            x_desc: "budget B (demonstrations)",
+            y_desc,
+            log_y: false,
+            y_range: None,
+            legend: exp.legend,
+            band_desc: Some("band: 95% bootstrap CI"),
+            series,
+        })?;
+        let name = format!("{}-by-budget-{tag}", exp.name);
+        write(ctx.out, &format!("{name}.svg"), svg.as_bytes())?;
+        files.push(format!("{name}.svg"));
+        if let Some(png) = plot::png_from_svg(&svg)? {
+            write(ctx.out, &format!("{name}.png"), &png)?;
+            files.push(format!("{name}.png"));
+        }
+    }
+    let _ = writeln!(
+        md,
+        "\nPlots against B: {}; table: by-budget.csv.",
+        files.join(", ")
+    );
+    Ok(md)
 }
 
 /// Writes `EXPERIMENT.svg` and, when a font is found, `EXPERIMENT.png`; returns the files written.

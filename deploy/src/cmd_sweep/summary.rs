@@ -26,11 +26,38 @@ pub struct Episodes {
     pub returns: Vec<f64>,
     /// Demonstrations used by the last episode.
     pub demos_used: f64,
+    /// `demos_used` of each episode (the run's demonstrations known at its end).
+    pub demos: Vec<f64>,
     /// `total_steps` of each episode, when the column is there.
     pub total_steps: Option<Vec<f64>>,
     /// `eval_return` of each episode, when the column is there (NaN where it is empty or NaN:
     /// no evaluation after that episode).
     pub eval_return: Option<Vec<f64>>,
+    /// `queries` of each episode (the steps the expert acted in), when the column is there.
+    pub queries: Option<Vec<f64>>,
+}
+
+impl Episodes {
+    /// The episodes in which the expert never acted (`queries` 0; all of them without the
+    /// column): the learner's own training returns. The demonstrations and evaluations are kept
+    /// as they are (an evaluation never asks the expert).
+    pub fn without_expert(&self) -> Episodes {
+        let Some(q) = &self.queries else {
+            return self.clone();
+        };
+        let keep = |v: &Vec<f64>| -> Vec<f64> {
+            v.iter()
+                .zip(q)
+                .filter(|(_, &n)| n == 0.0)
+                .map(|(&x, _)| x)
+                .collect()
+        };
+        Episodes {
+            returns: keep(&self.returns),
+            total_steps: self.total_steps.as_ref().map(keep),
+            ..self.clone()
+        }
+    }
 }
 
 /// What one run left: its episodes and the numbers of its `summary.json`.
@@ -199,8 +226,11 @@ pub fn parse_episodes(text: &str) -> anyhow::Result<Episodes> {
     let need = |name: &str| col(name).with_context(|| format!("no `{name}` column"));
     let (ret_col, demos_col) = (need("return")?, need("demos_used")?);
     let (steps_col, eval_col) = (col("total_steps"), col("eval_return"));
+    let queries_col = col("queries");
+    let mut queries = queries_col.map(|_| Vec::new());
     let mut returns = Vec::new();
     let mut demos_used = 0.0;
+    let mut demos = Vec::new();
     let mut total_steps = steps_col.map(|_| Vec::new());
     let mut eval_return = eval_col.map(|_| Vec::new());
     for (i, line) in lines.enumerate().filter(|(_, l)| !l.is_empty()) {
@@ -213,7 +243,11 @@ pub fn parse_episodes(text: &str) -> anyhow::Result<Episodes> {
         };
         returns.push(field(ret_col)?);
         demos_used = field(demos_col)?;
+        demos.push(demos_used);
         if let (Some(c), Some(v)) = (steps_col, total_steps.as_mut()) {
+            v.push(field(c)?);
+        }
+        if let (Some(c), Some(v)) = (queries_col, queries.as_mut()) {
             v.push(field(c)?);
         }
         if let (Some(c), Some(v)) = (eval_col, eval_return.as_mut()) {
@@ -225,8 +259,10 @@ pub fn parse_episodes(text: &str) -> anyhow::Result<Episodes> {
     Ok(Episodes {
         returns,
         demos_used,
+        demos,
         total_steps,
         eval_return,
+        queries,
     })
 }
 
@@ -535,6 +571,23 @@ mod tests {
     }
 
     #[test]
+    fn episodes_the_expert_acted_in_can_be_left_out() {
+        let text = "return,demos_used,queries,total_steps,eval_return\n-200,5,5,200,\n-150,5,0,350,-140\n-120,9,4,470,\n-110,9,0,580,-100\n";
+        let e = parse_episodes(text).unwrap();
+        let own = e.without_expert();
+        assert_eq!(own.returns, vec![-150.0, -110.0]);
+        assert_eq!(own.total_steps, Some(vec![350.0, 580.0]));
+        assert_eq!((own.demos.len(), own.demos_used), (4, 9.0));
+        assert_eq!(
+            own.eval_return.unwrap().len(),
+            4,
+            "evaluations are all kept"
+        );
+        let no_column = parse_episodes("return,demos_used\n1,0\n").unwrap();
+        assert_eq!(no_column.without_expert(), no_column);
+    }
+
+    #[test]
     fn steps_and_evaluations_are_read_when_present() {
         let text = "return,demos_used,total_steps,eval_return\n1,0,10,\n2,1,25,NaN\n3,1,40,7.5\n";
         let e = parse_episodes(text).unwrap();
@@ -551,8 +604,10 @@ mod tests {
             episodes: Episodes {
                 returns: vec![0.0; 3],
                 demos_used: 0.0,
+                demos: vec![0.0; 3],
                 total_steps: None,
                 eval_return: eval,
+                queries: None,
             },
             wall_clock_s: 0.0,
             greedy_value: None,
