@@ -44,8 +44,15 @@ cargo build --release --workspace --locked
 # The Python side (the Gymnasium adapter's .venv/, deploy/python/requirements.txt): installed here
 # the way alfd installs it on first use, so that no test waits on it (a no-op once installed).
 bash deploy/python/setup-venv.sh >/dev/null
-# The human page's browser test: Debian's Chromium (apt-get install -y chromium) driven by
-# Playwright (deploy/tests/browser/package.json, pinned), installed with npm here as the test would.
+# The human page's browser test: Debian's Chromium driven by Playwright
+# (deploy/tests/browser/package.json, pinned), installed with npm here as the test would. Chromium
+# is installed from Debian's packages when absent and this runs as root; a browser test that still
+# cannot run fails when CI is set (as .ci/run sets it) and says SKIPPED otherwise.
+if [ ! -x /usr/bin/chromium ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+  echo "== installing Debian's chromium for the human page's browser test"
+  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) >/dev/null ||
+    echo "warning: apt-get install chromium failed"
+fi
 if [ -x /usr/bin/chromium ] && [ ! -d deploy/tests/browser/node_modules/playwright-core ]; then
   (cd deploy/tests/browser && npm ci --no-audit --no-fund --silent)
 fi

@@ -266,9 +266,16 @@ fn browser_driver() -> Result<PathBuf, String> {
     Ok(dir.join("drive.mjs"))
 }
 
-/// The browser and its driver; `None` only when Chromium is not installed (said loudly).
+/// The browser and its driver; `None` only when Chromium is not installed (said loudly), and a
+/// failure then when `CI` is set: a test that did not run does not pass there.
 fn browser() -> Option<PathBuf> {
     if chromium().is_none() {
+        let ci = std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0");
+        assert!(
+            !ci,
+            "no Chromium at /usr/bin/chromium (apt-get install -y chromium, or set ALFD_CHROMIUM): \
+             the human page's browser test cannot run, and CI is set"
+        );
         eprintln!(
             "\n*** SKIPPED: no Chromium at /usr/bin/chromium (apt-get install -y chromium, or set \
              ALFD_CHROMIUM); the human page's browser test did not run ***\n"
