@@ -2,8 +2,8 @@
 # The main job: an experiment as separate processes (learner, expert, N actors over iceoryx2).
 #   deploy/run.sh [--config FILE] [--actors N] [--set key=value]... [--out DIR]
 # Without --config: `alfd run`'s default, the recommended CartPole-1000 preset
-# (deploy/configs/recommended/cartpole.toml: Bootstrapped DQN with 100 active demonstrations of the
-# 1000 expert, 50,000 steps), 2 actors.
+# (deploy/configs/recommended/cartpole.toml: Bootstrapped DQN with a budget of 300 active
+# demonstrations of the cartpole-1000 expert, 50,000 steps), 2 actors.
 # Builds the release binaries first, showing cargo's progress (quick when they are up to date).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

@@ -6,6 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
+mod normalize;
 mod query;
 mod validate;
 
@@ -538,7 +539,8 @@ pub enum DemoModelChoice {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ExpertConfig {
-    /// The demonstrator, by name (`alfd expert list`).
+    /// The demonstrator, by name (`alfd expert list`); default the environment's reference expert
+    /// (`cartpole-1000`, `cliffwalk-optimal`, `mountaincar-energy`, `acrobot-energy`).
     #[serde(default = "default_expert")]
     pub name: String,
     /// The demonstration model fitted on the demonstrations: `none`, `krr` or `svm`.
@@ -631,7 +633,8 @@ impl ExperimentConfig {
         let mut value: toml::Table = text
             .parse()
             .map_err(|e: toml::de::Error| ConfigError::Parse(e.to_string()))?;
-        rename_query_mode(&mut value)?;
+        normalize::rename_query_mode(&mut value)?;
+        normalize::default_expert_of_env(&mut value);
         for o in overrides {
             apply_override(&mut value, o)?;
         }
@@ -697,23 +700,6 @@ impl ExperimentConfig {
 }
 
 /// Applies one `a.b.c=value` override to a TOML table.
-/// `query.mode`, the older name of `query.rule`, read as `query.rule` (both at once are refused).
-fn rename_query_mode(table: &mut toml::Table) -> Result<()> {
-    let Some(toml::Value::Table(query)) = table.get_mut("query") else {
-        return Ok(());
-    };
-    if let Some(mode) = query.remove("mode") {
-        if query.contains_key("rule") {
-            return Err(invalid(
-                "query.mode",
-                "is the older name of `query.rule`: give one of them",
-            ));
-        }
-        query.insert("rule".to_owned(), mode);
-    }
-    Ok(())
-}
-
 fn apply_override(table: &mut toml::Table, item: &str) -> Result<()> {
     let (key, raw) = item
         .split_once('=')
@@ -834,6 +820,34 @@ model = "krr"
         assert!(err(&["query.burst=0"]).contains("query.burst"));
         assert!(err(&["query.gap=0"]).contains("query.gap"));
         assert!(err(&["query.rule=sometimes"]).contains("sometimes"));
+    }
+
+    #[test]
+    fn the_expert_defaults_to_the_environment_s_reference_expert() {
+        let expert = |env: &str| {
+            ExperimentConfig::from_toml(&format!(
+                "seed = 0\nepisodes = 1\n[env]\nname = \"{env}\"\n[agent]\nkind = \"{}\"\n",
+                if env == "cliffwalk" {
+                    "qlearning"
+                } else {
+                    "bdqn"
+                }
+            ))
+            .unwrap()
+            .expert
+            .name
+        };
+        assert_eq!(expert("cartpole"), "cartpole-1000");
+        assert_eq!(expert("cliffwalk"), "cliffwalk-optimal");
+        assert_eq!(expert("mountaincar"), "mountaincar-energy");
+        assert_eq!(expert("acrobot"), "acrobot-energy");
+        // A name given stays.
+        let c = ExperimentConfig::from_toml_with_overrides(
+            "seed = 0\nepisodes = 1\n[env]\nname = \"acrobot\"\n[agent]\nkind = \"bdqn\"\n",
+            &["expert.name=acrobot-poor".into()],
+        )
+        .unwrap();
+        assert_eq!(c.expert.name, "acrobot-poor");
     }
 
     #[test]

@@ -45,9 +45,7 @@ pub struct RunArgs {
     /// Credit window: steps an actor may run ahead of the learner's updates (1..=64); default 1
     /// (actors in lockstep with the learner: with one actor, `alfd local`'s run to the byte), or
     /// 32 with --listen (remote actors' transitions cross the link in batches). Less lag learns
-    /// more reliably: of 10 main-job runs of session 6's CartPole preset, 4 ended learned at
-    /// window 32, 7 at 4, 9 and then 8 at 1, at the same speed; session 7's preset: 10 of 10 at 1
-    /// (README, the main job).
+    /// more reliably at the same speed (README, the main job: ten runs at each window).
     #[arg(long)]
     pub window: Option<u64>,
     /// Milliseconds an actor waits for the expert's answer before acting on its own.

@@ -47,7 +47,7 @@ enum Command {
     Join(cmd_join::JoinArgs),
     /// Replace the expert of a live run (make before break).
     SwapExpert(cmd_run::SwapArgs),
-    /// Environments: roll out CartPole from a state, show a CliffWalk map.
+    /// Environments: roll out CartPole, MountainCar or Acrobot from a state, show a CliffWalk map.
     Env(cmd_env::EnvArgs),
     /// Demonstrators: list them, evaluate one.
     Expert(cmd_expert::ExpertArgs),
