@@ -1,5 +1,5 @@
 //! Criterion benchmarks of the core's hot paths: the learner's train step and the actor's act step
-//! (issue 3, item 9: targets 80 µs and 5 µs). Results and machine in BENCHMARKS.md.
+//! (targets 80 µs and 5 µs). Results and machine in BENCHMARKS.md.
 
 use std::hint::black_box;
 

@@ -1,4 +1,4 @@
-//! Criterion benchmarks of the environments' step (issue 14, item 1): CartPole, MountainCar-v0
+//! Criterion benchmarks of the environments' step: CartPole, MountainCar-v0
 //! and Acrobot-v1 stepped through a fixed, random-looking sequence of actions, reset (without a
 //! new seed, as Gymnasium's `reset()`) whenever an episode ends. One iteration is one step, so
 //! Criterion's throughput is environment steps per second. `deploy/bench/peers.sh` runs them

@@ -4,7 +4,7 @@
 //! its implementations at run time by the CPU's features: on a CPU with FMA it runs
 //! `__ieee754_exp_fma`, `__ieee754_log_fma`, `__ieee754_pow_fma` and `__sin_fma`, elsewhere other
 //! variants, and their results differ in the last bit for some arguments. The learning dynamics
-//! amplify one bit into different curves (issue 14: masking FMA from glibc alone,
+//! amplify one bit into different curves (masking FMA from glibc alone,
 //! `GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F,-FMA4`, changed a CartPole run from episode
 //! 129). These come instead from the `libm` crate (a port of musl's), plain Rust compiled once for
 //! the x86-64 baseline, so they do not depend on the CPU. The tidy test

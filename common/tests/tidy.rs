@@ -574,7 +574,7 @@ fn the_dependency_graph_keeps_its_shape() {
 // The same numbers on every CPU
 // ---------------------------------------------------------------------------------------------
 
-/// The platform's transcendental methods, which glibc dispatches by CPU features (issue 14);
+/// The platform's transcendental methods, which glibc dispatches by CPU features;
 /// the core calls `alfd_common::math` instead.
 const PLATFORM_MATH: [&str; 16] = [
     "exp", "exp2", "exp_m1", "ln", "ln_1p", "log", "log2", "log10", "powf", "sin", "cos", "tan",
@@ -625,5 +625,92 @@ fn the_core_calls_no_platform_transcendentals() {
         problems.is_empty(),
         "the core calls alfd_common::math (the same bits on every CPU), not the platform's:\n{}",
         problems.join("\n")
+    );
+}
+
+/// "session 6", "issue 9" and their plurals, in any case: development history, which belongs in
+/// git and the issue tracker, not in what a reader of the code or the configs meets.
+fn history_findings(text: &str) -> Vec<String> {
+    let lower = text.to_lowercase();
+    let mut found = Vec::new();
+    for word in ["session", "issue"] {
+        for (i, _) in lower.match_indices(word) {
+            let before = lower[..i].chars().next_back();
+            if before.is_some_and(char::is_alphanumeric) {
+                continue;
+            }
+            let rest = lower[i + word.len()..]
+                .strip_prefix('s')
+                .unwrap_or(&lower[i + word.len()..]);
+            if rest
+                .strip_prefix(' ')
+                .is_some_and(|r| r.starts_with(|c: char| c.is_ascii_digit()))
+            {
+                let line = lower[..i].matches('\n').count() + 1;
+                found.push(format!(
+                    "line {line}: {}",
+                    &text[i..(i + word.len() + 3).min(text.len())]
+                ));
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn the_history_check_finds_session_and_issue_numbers_only() {
+    assert_eq!(history_findings("a\n// Session 7: x").len(), 1);
+    assert_eq!(history_findings("issues 3 and 4").len(), 1);
+    assert_eq!(history_findings("(issue 14, item 1)").len(), 1);
+    assert!(history_findings("the session's id, an issue of size, tissue 3, session_6").is_empty());
+}
+
+/// Source files, configs, experiment files and scripts state what is: no "session 6" or
+/// "issue 9" in them (nor, through the sources, in `--help`).
+#[test]
+fn code_configs_and_scripts_carry_no_development_history() {
+    let mut files = workspace_rust_files();
+    for dir in [
+        "deploy/configs",
+        "deploy/experiments",
+        "deploy/bench",
+        "deploy/python",
+        "deploy",
+    ] {
+        let Ok(entries) = std::fs::read_dir(workspace().join(dir)) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let p = e.path();
+            let ext = p.extension().and_then(|x| x.to_str()).unwrap_or("");
+            if p.is_file() && ["toml", "sh", "py"].contains(&ext) {
+                files.push(p);
+            }
+        }
+    }
+    for sub in ["deploy/configs/recommended", "deploy/experiments/study"] {
+        for e in std::fs::read_dir(workspace().join(sub)).unwrap().flatten() {
+            files.push(e.path());
+        }
+    }
+    files.push(workspace().join("Cargo.toml"));
+    files.push(workspace().join(".ci/run"));
+    let mut found = Vec::new();
+    // This file names the words it looks for.
+    files.retain(|f| !f.ends_with("common/tests/tidy.rs"));
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap_or_default();
+        for hit in history_findings(&text) {
+            found.push(format!(
+                "{}: {hit}",
+                f.strip_prefix(workspace()).unwrap().display()
+            ));
+        }
+    }
+    assert!(files.len() > 100, "{} files read", files.len());
+    assert!(
+        found.is_empty(),
+        "development history in:\n{}",
+        found.join("\n")
     );
 }

@@ -1,4 +1,4 @@
-"""Side-by-side speed of alfd and its Python peers (issue 14, item 1).
+"""Side-by-side speed of alfd and its Python peers.
 
 Run through deploy/bench/peers.sh, which builds our binaries and prepares the virtual environment.
 Every quantity is measured once per round, ours then theirs, for a few rounds, so that a change in

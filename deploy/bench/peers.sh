@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Side-by-side speed of alfd and PyTorch / Gymnasium (issue 14, item 1): the train step, the act
+# Side-by-side speed of alfd and PyTorch / Gymnasium: the train step, the act
 # step, environment steps/s and an end-to-end DQN, measured interleaved; prints one table.
 #
 #   bash deploy/bench/peers.sh            # 5 rounds, about 5 minutes after the first install

@@ -1,6 +1,6 @@
 //! `alfd q-range`: the Q-values a run's learned network takes on its own greedy episodes, against
-//! the range every true value lies in — a check for divergence (EXPERIMENTS.md, "Session 7": a
-//! CartPole-1000 network whose Q-values reached 40,000 where no return exceeds 200 had learned to
+//! the range every true value lies in — a check for divergence (EXPERIMENTS.md, the CartPole Q-value
+//! divergence: a CartPole-1000 network whose Q-values reached 40,000 where no return exceeds 200 had learned to
 //! seek failure).
 //!
 //! Reads each run directory's `config.toml` (the environment, its step limit and γ) and
@@ -114,7 +114,7 @@ pub fn summary_text(dir: &Path, cfg: &ExperimentConfig) -> Option<String> {
     if c.diverged {
         text.push_str(
             " — DIVERGED: the network values states beyond any return (EXPERIMENTS.md, \
-             \"Session 7\"; `agent.target_bounds` clamps the targets)",
+             the CartPole Q-value divergence; `agent.target_bounds` clamps the targets)",
         );
     }
     Some(text)

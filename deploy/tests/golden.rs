@@ -1,4 +1,4 @@
-//! The golden runs (issue 14, item 3): a short CartPole run, `data/golden-cartpole.toml`, must
+//! The golden runs: a short CartPole run, `data/golden-cartpole.toml`, must
 //! give the committed `data/golden-cartpole-episodes.csv` to the byte, and the same run with the
 //! SVM demonstration model `data/golden-cartpole-svm-episodes.csv`:
 //! - with the AVX2+FMA products;

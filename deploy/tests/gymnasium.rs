@@ -1,4 +1,4 @@
-//! Bring your own environment and your own expert (issue 12): Gymnasium environments served by
+//! Bring your own environment and your own expert: Gymnasium environments served by
 //! the Python adapter (`deploy/python/alfd_adapter.py`) pass the same conformance suite as the
 //! built-in ones and give our CartPole's trajectories, and a multi-process run plays one with
 //! an external Python expert.

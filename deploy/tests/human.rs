@@ -1,4 +1,4 @@
-//! A person as the expert (issue 12, item 3): `alfd run --expert human` serves a page on
+//! A person as the expert: `alfd run --expert human` serves a page on
 //! 127.0.0.1; these tests act as the person, over HTTP from Rust and in Debian's Chromium driven
 //! by Playwright (`deploy/tests/browser/`, installed with npm by the test itself).
 

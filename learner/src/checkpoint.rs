@@ -185,7 +185,7 @@ mod tests {
         );
     }
 
-    // The fuzz pass (issue 10): a damaged learner.ckpt (truncated, bytes changed, bytes
+    // The fuzz pass: a damaged learner.ckpt (truncated, bytes changed, bytes
     // appended) is refused with an error and never panics; nothing else decodes it.
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]

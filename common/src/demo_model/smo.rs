@@ -3,8 +3,8 @@
 //! (2005, "WSS 2"), libsvm's clipped two-variable update, and its rule for the offset `rho`.
 //!
 //! Written here rather than taken from a crate so that every number comes from the core's own
-//! arithmetic: the RBF kernel through `crate::math::exp`, the same bits on every CPU (issue 14;
-//! `linfa-kernel` called the platform's `exp`). No shrinking and no kernel cache: the
+//! arithmetic: the RBF kernel through `crate::math::exp`, the same bits on every CPU (a
+//! crate calling the platform's `exp` would not give them). No shrinking and no kernel cache: the
 //! demonstrations are a few hundred at most and the kernel matrix is computed once.
 //!
 //! The problem, with `y_i = ±1`, `Q_ij = y_i y_j K(x_i, x_j)`:

@@ -21,7 +21,7 @@
 //!   `δ (|td| - δ/2)` outside, instead of `beta = 1` (δ = 1 is the loss above, to the bit): a TD
 //!   error larger than δ pulls with a force of only δ, so with returns in the hundreds
 //!   (CartPole-1000 at γ = 0.995) a δ of 1 lets rare large errors, those of terminal transitions,
-//!   lose against the many small ones (EXPERIMENTS.md, "Session 7");
+//!   lose against the many small ones (EXPERIMENTS.md, the CartPole Q-value divergence);
 //! - `double`: Double DQN targets, `y = r + gamma * Q_target_k(s', argmax_a Q_k(s', a))`
 //!   (van Hasselt et al. 2016), the action chosen by the online head;
 //! - `margin_weight > 0`: DQfD's large-margin loss on demonstrated transitions (Hester et al.
