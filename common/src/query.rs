@@ -74,20 +74,10 @@ impl RuleKind {
             RuleKind::JsPaced => "js-paced",
         }
     }
-
-    /// Whether the rule reads [`Signals::q_std`] (the agents compute it only then).
-    pub fn needs_q_std(self) -> bool {
-        self == RuleKind::QStd
-    }
-
-    /// Whether the rule reads [`Signals::novelty`] (the agents compute it only then).
-    pub fn needs_novelty(self) -> bool {
-        self == RuleKind::Novelty
-    }
 }
 
-/// What a rule sees at one state. The agents fill `q_std` and `novelty` only for the rules that
-/// read them ([`RuleKind::needs_q_std`], [`RuleKind::needs_novelty`]).
+/// What a rule sees at one state. [`Rule::decide_at`] computes `q_std` and `novelty` only for the
+/// rules that read them.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Signals {
     /// The run's global step of this state.
@@ -324,6 +314,42 @@ impl Rule {
     /// and no signal pushed to a queue, once the budget is spent (as in the paper).
     pub fn decide(&mut self, signals: &Signals, budget_left: bool) -> bool {
         budget_left && self.ask(signals)
+    }
+
+    /// [`Rule::decide`] at the run's global step `step` with divergence `js`, calling `q_std` and
+    /// `novelty` only when the budget is left and the rule reads them (the act step's hot path).
+    pub fn decide_at(
+        &mut self,
+        budget_left: bool,
+        step: u64,
+        js: f64,
+        q_std: impl FnOnce() -> f64,
+        novelty: impl FnOnce() -> Option<f64>,
+    ) -> bool {
+        if !budget_left {
+            return false;
+        }
+        let signals = Signals {
+            step,
+            js,
+            q_std: if self.reads(Signal::QStd) {
+                q_std()
+            } else {
+                0.0
+            },
+            novelty: if self.reads(Signal::Novelty) {
+                novelty()
+            } else {
+                None
+            },
+        };
+        self.ask(&signals)
+    }
+
+    /// Whether the rule reads `signal` beyond the divergence (the agents keep the demonstrated
+    /// states only for a rule that reads the novelty).
+    pub fn reads(&self, signal: Signal) -> bool {
+        matches!(self, Rule::Disagreement(d) if d.signal == signal)
     }
 }
 
@@ -600,6 +626,25 @@ mod tests {
                 assert_eq!(rule.decide(&s, true), want, "{kind:?} step {i}");
             }
         }
+    }
+
+    #[test]
+    fn decide_at_computes_only_the_signals_the_rule_reads_and_nothing_without_budget() {
+        let rng = crate::rng::seeded(0);
+        let mut js = Rule::new(&spec(RuleKind::Js), &rng);
+        let never_called = || -> f64 { panic!("q_std computed for the js rule") };
+        assert!(!js.decide_at(true, 0, 1.0, never_called, || panic!("novelty computed")));
+        assert!(js.decide_at(true, 1, 2.0, never_called, || panic!("novelty computed")));
+        let mut q = Rule::new(&spec(RuleKind::QStd), &rng);
+        assert!(!q.decide_at(true, 0, 9.0, || 1.0, || panic!("novelty computed")));
+        assert!(q.decide_at(true, 1, 0.0, || 2.0, || panic!("novelty computed")));
+        assert!(!q.decide_at(false, 2, 0.0, || panic!("computed without budget"), || None));
+        let mut n = Rule::new(&spec(RuleKind::Novelty), &rng);
+        assert!(
+            n.decide_at(true, 0, 0.0, never_called, || None),
+            "nothing held: ask"
+        );
+        assert!(n.reads(Signal::Novelty) && !n.reads(Signal::QStd) && !js.reads(Signal::Novelty));
     }
 
     #[test]

@@ -55,13 +55,8 @@ pub fn parse_config(
         };
         anyhow::Error::new(e).context(context)
     })?;
-    cfg.load_schedule(read_text)?;
+    cfg.load_schedule(alfd_harness::read_text)?;
     Ok(cfg)
-}
-
-/// A file's text, or why it cannot be read (for [`ExperimentConfig::load_schedule`]).
-pub fn read_text(path: &str) -> Result<String, String> {
-    std::fs::read_to_string(path).map_err(|e| e.to_string())
 }
 
 /// Where a bad config value came from.

@@ -42,8 +42,7 @@ impl ProcessArgs {
     pub fn load(&self) -> anyhow::Result<Setup> {
         let config = read(&self.run_dir.join("config.toml"), |t| {
             let mut cfg = ExperimentConfig::for_multi_process(t).map_err(|e| e.to_string())?;
-            cfg.load_schedule(|p| std::fs::read_to_string(p).map_err(|e| e.to_string()))
-                .map_err(|e| e.to_string())?;
+            cfg.load_schedule(read_text).map_err(|e| e.to_string())?;
             Ok(cfg)
         })?;
         let runtime = read(&self.run_dir.join(RUNTIME_FILE), |t| {
@@ -58,6 +57,12 @@ impl ProcessArgs {
     pub fn connect(&self, me: Process, schema: u32) -> anyhow::Result<Wire> {
         Wire::connect(&self.run_id, me, schema).context("cannot join the run")
     }
+}
+
+/// A file's text, or why it cannot be read (what [`ExperimentConfig::load_schedule`] reads
+/// rule `random`'s schedule with).
+pub fn read_text(path: &str) -> Result<String, String> {
+    std::fs::read_to_string(path).map_err(|e| e.to_string())
 }
 
 fn read<T>(path: &Path, parse: impl FnOnce(&str) -> Result<T, String>) -> anyhow::Result<T> {

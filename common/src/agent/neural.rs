@@ -13,7 +13,7 @@ use crate::config::{AgentConfig, LrSchedule, QueryConfig};
 use crate::demo_model::DemoModel;
 use crate::nn::{Adam, AdamConfig, AdamState, Mlp, NnError, TdConfig, TdLoss, TrainScratch};
 use crate::policy::{js_divergence, softmax_into};
-use crate::query::{novelty, q_spread, Rule, RuleKind, Signals};
+use crate::query::{novelty, q_spread, Rule, Signal};
 use crate::replay::{Batch, ReplayBuffer, Transition};
 use crate::rng::{Rng, RngState};
 use crate::shaping::{shaped_reward, ShapingKind};
@@ -27,7 +27,6 @@ pub struct NeuralActor {
     explorer: Explorer,
     temperature: f64,
     bootstrap_probability: f64,
-    rule_kind: RuleKind,
     rule: Rule,
     /// The states of the demonstrations this actor was given (the novelty rule's reference set).
     demo_states: Vec<Vec<f64>>,
@@ -63,7 +62,6 @@ impl NeuralActor {
             explorer: Explorer::new(agent, actions),
             temperature: agent.temperature,
             bootstrap_probability: agent.bootstrap_probability,
-            rule_kind: query.rule,
             rule: Rule::new(&query.spec(), &rng),
             demo_states: Vec::new(),
             rng,
@@ -129,37 +127,22 @@ impl NeuralActor {
         } else {
             0.0
         };
-        let query = budget_left && {
-            let signals = self.signals(obs, step, js);
-            self.rule.decide(&signals, budget_left)
-        };
+        let (q, heads, held) = (&self.q, self.heads, &self.demo_states);
+        let query = self.rule.decide_at(
+            budget_left,
+            step,
+            js,
+            || q_spread(q, heads),
+            || {
+                let s: Vec<f64> = obs.iter().map(|&x| f64::from(x)).collect();
+                novelty(&s, held.iter().map(Vec::as_slice))
+            },
+        );
         let a = self.actions;
         let action = self
             .explorer
             .act(&self.q[self.arm * a..(self.arm + 1) * a], &mut self.rng);
         Decision { action, js, query }
-    }
-
-    /// The query rule's view of `obs` (Q-values already computed), with the Q spread and the
-    /// novelty only when the rule reads them.
-    fn signals(&self, obs: &[f32], step: u64, js: f64) -> Signals {
-        let q_std = match self.rule_kind.needs_q_std() && self.heads > 1 {
-            true => q_spread(&self.q, self.heads),
-            false => 0.0,
-        };
-        let novelty = match self.rule_kind.needs_novelty() {
-            true => {
-                let s: Vec<f64> = obs.iter().map(|&x| f64::from(x)).collect();
-                novelty(&s, self.demo_states.iter().map(Vec::as_slice))
-            }
-            false => None,
-        };
-        Signals {
-            step,
-            js,
-            q_std,
-            novelty,
-        }
     }
 
     /// `π(a|s)` of the episode's head at the state last passed to [`NeuralActor::decide`] (eq. 2).
@@ -207,7 +190,7 @@ impl NeuralActor {
         demo: bool,
         shaping: Option<(&DemoModel, f64)>,
     ) -> Transition {
-        if demo && self.rule_kind.needs_novelty() {
+        if demo && self.rule.reads(Signal::Novelty) {
             self.demo_states
                 .push(obs.iter().map(|&x| f64::from(x)).collect());
         }

@@ -15,7 +15,7 @@ use crate::environment_loop::{Actor, Result};
 use crate::math;
 use crate::policy::argmax;
 use crate::qfunction::{QFunction, TabularQ};
-use crate::query::{q_spread, Rule, RuleKind, Signals};
+use crate::query::{q_spread, Rule, Signal};
 use crate::rng::{Rng, RngState};
 
 /// A tabular agent over `states` states and `actions` actions.
@@ -34,7 +34,6 @@ pub struct TabularAgent {
     rng: Rng,
     /// The head followed this episode (Algorithm 1 line 1).
     arm: usize,
-    rule_kind: RuleKind,
     rule: Rule,
     /// The states demonstrated so far, sorted (the novelty rule's reference set: a state is novel,
     /// 1, until it is demonstrated, 0).
@@ -120,7 +119,6 @@ impl TabularAgent {
             bootstrap_probability: cfg.bootstrap_probability,
             rng,
             arm: 0,
-            rule_kind: query.rule,
             rule,
             demo_states: Vec::new(),
             pending: None,
@@ -159,36 +157,22 @@ impl TabularAgent {
     pub fn decide(&mut self, s: usize, step: u64, budget_left: bool) -> Decision {
         let js = self.js_divergence(s);
         let action = self.act(s);
-        let query = budget_left && {
-            let signals = self.signals(s, step, js);
-            self.rule.decide(&signals, budget_left)
-        };
-        Decision { action, js, query }
-    }
-
-    /// The query rule's view of `s`, with the Q spread and the novelty only when the rule reads
-    /// them.
-    fn signals(&self, s: usize, step: u64, js: f64) -> Signals {
-        let heads = self.q.heads();
-        let q_std = match self.rule_kind.needs_q_std() && heads > 1 {
-            true => {
-                let q: Vec<f64> = (0..heads)
-                    .flat_map(|k| self.q.head_values(s, k).iter().copied())
-                    .collect();
-                q_spread(&q, heads)
-            }
-            false => 0.0,
-        };
-        let novelty = match self.rule_kind.needs_novelty() && !self.demo_states.is_empty() {
-            true => Some(f64::from(self.demo_states.binary_search(&s).is_err())),
-            false => None,
-        };
-        Signals {
+        let (q, held) = (&self.q, &self.demo_states);
+        let heads = q.heads();
+        let query = self.rule.decide_at(
+            budget_left,
             step,
             js,
-            q_std,
-            novelty,
-        }
+            || {
+                let values: Vec<f64> = (0..heads)
+                    .flat_map(|k| q.head_values(s, k).iter().copied())
+                    .collect();
+                q_spread(&values, heads)
+            },
+            // A state is novel (1) until it is demonstrated (0).
+            || (!held.is_empty()).then(|| f64::from(held.binary_search(&s).is_err())),
+        );
+        Decision { action, js, query }
     }
 
     /// Remembers that `s` was demonstrated (the novelty rule's reference set).
@@ -271,7 +255,7 @@ impl Actor<usize> for TabularAgent {
         demo: bool,
         _shaping: Option<(&DemoModel, f64)>,
     ) -> Result<bool> {
-        if demo && self.rule_kind.needs_novelty() {
+        if demo && self.rule.reads(Signal::Novelty) {
             self.note_demo(*obs);
         }
         if let Some((s, a, r, s_next)) = self.pending.take() {

@@ -411,7 +411,7 @@ fn run_jobs(
                     // that two sweeps of one --out never run the same job at once.
                     let run = crate::run_dir::lock(&job.dir).and_then(|_lock| {
                         let mut cfg = job.cfg.clone();
-                        cfg.load_schedule(crate::setup::read_text)?;
+                        cfg.load_schedule(alfd_harness::read_text)?;
                         cmd_local::run_config(&cfg, &job.dir, false)
                     });
                     match run {
