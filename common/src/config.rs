@@ -382,6 +382,18 @@ pub struct AgentConfig {
     /// bootstraps with `gamma^n`; fewer at an episode's end (1: one-step TD, the paper's).
     #[serde(default = "default_n_step", skip_serializing_if = "is_one_u32")]
     pub n_step: u32,
+    /// Neural: β of randomized prior functions (Osband et al. 2018): each head's Q-values add β
+    /// times the output of a fixed random network of the same shape that is never trained, so
+    /// that the heads disagree where no data has pulled them together (0: none, the paper's).
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub prior_scale: f64,
+    /// Neural: the seed the prior network is drawn from (absent: the run's `seed`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior_seed: Option<u64>,
+}
+
+fn is_zero_f64(v: &f64) -> bool {
+    *v == 0.0
 }
 
 fn default_n_step() -> u32 {
@@ -491,6 +503,19 @@ impl AgentConfig {
             AgentKind::Dqn => Exploration::EpsilonGreedy,
             AgentKind::BootstrappedQ | AgentKind::Bdqn => Exploration::GreedyHead,
         })
+    }
+
+    /// A freshly initialised Q-network of this agent (weights drawn from `rng`), with its
+    /// randomized prior function when `prior_scale` > 0: actors, learner and target networks of
+    /// one run all carry the same prior.
+    pub fn network(
+        &self,
+        obs_dim: usize,
+        actions: usize,
+        rng: &mut crate::rng::Rng,
+    ) -> crate::nn::Mlp {
+        let net = crate::nn::Mlp::new(obs_dim, self.hidden, self.heads(), actions, rng);
+        net.with_prior(self.prior_scale as f32, self.prior_seed.unwrap_or(0))
     }
 
     /// ε after `step` environment steps: `end + (start − end) · exp(−step / decay)`.
@@ -638,10 +663,13 @@ impl ExperimentConfig {
         for o in overrides {
             apply_override(&mut value, o)?;
         }
-        let config: Self = toml::Value::Table(value)
+        let mut config: Self = toml::Value::Table(value)
             .try_into()
             .map_err(|e: toml::de::Error| ConfigError::Parse(e.to_string().trim().to_owned()))?;
         config.validate()?;
+        if config.agent.prior_scale > 0.0 && config.agent.prior_seed.is_none() {
+            config.agent.prior_seed = Some(config.seed);
+        }
         Ok(config)
     }
 
@@ -969,6 +997,34 @@ model = "krr"
         .unwrap_err()
         .to_string();
         assert!(tab.contains("agent.kind"), "{tab}");
+    }
+
+    #[test]
+    fn a_prior_is_drawn_from_the_run_s_seed_unless_given_and_only_for_neural_agents() {
+        let cfg = |set: &[&str]| {
+            let set: Vec<String> = set.iter().map(|s| (*s).to_owned()).collect();
+            ExperimentConfig::from_toml_with_overrides(BASE, &set)
+        };
+        let plain = cfg(&[]).unwrap();
+        assert_eq!((plain.agent.prior_scale, plain.agent.prior_seed), (0.0, None));
+        let with = cfg(&["seed=7", "agent.prior_scale=3.0"]).unwrap();
+        assert_eq!(with.agent.prior_seed, Some(7));
+        assert_eq!(ExperimentConfig::from_toml(&with.to_toml()).unwrap(), with);
+        let given = cfg(&["agent.prior_scale=3.0", "agent.prior_seed=11"]).unwrap();
+        assert_eq!(given.agent.prior_seed, Some(11));
+        // Two runs of one seed build the same prior; the networks carry it.
+        let mut rng = crate::rng::seeded(1);
+        let net = with.agent.network(4, 2, &mut rng);
+        let prior = net.prior().unwrap();
+        assert_eq!((prior.scale(), prior.seed()), (3.0, 7));
+        assert!(plain.agent.network(4, 2, &mut rng).prior().is_none());
+        for bad in ["-1.0", "nan", "inf"] {
+            let e = cfg(&[&format!("agent.prior_scale={bad}")]).unwrap_err();
+            assert!(e.to_string().contains("agent.prior_scale"), "{e}");
+        }
+        let e = cfg(&["agent.kind=qlearning", "env.name=cliffwalk", "agent.prior_scale=1.0"])
+            .unwrap_err();
+        assert!(e.to_string().contains("neural agents"), "{e}");
     }
 
     #[test]

@@ -54,7 +54,7 @@ impl NeuralActor {
         mut rng: Rng,
     ) -> Self {
         let heads = agent.heads();
-        let net = Mlp::new(obs_dim, agent.hidden, heads, actions, &mut rng);
+        let net = agent.network(obs_dim, actions, &mut rng);
         Self {
             net,
             heads,
@@ -348,7 +348,7 @@ pub struct NeuralLearner {
 impl NeuralLearner {
     pub fn new(agent: &AgentConfig, obs_dim: usize, actions: usize, mut rng: Rng) -> Self {
         let heads = agent.heads();
-        let online = Mlp::new(obs_dim, agent.hidden, heads, actions, &mut rng);
+        let online = agent.network(obs_dim, actions, &mut rng);
         let target = online.clone();
         let adam = Adam::with_config(
             &online,

@@ -269,6 +269,18 @@ impl ExperimentConfig {
                 return Err(invalid(field, format!("must be >= 0, got {v}")));
             }
         }
+        if !(a.prior_scale >= 0.0 && a.prior_scale.is_finite()) {
+            return Err(invalid(
+                "agent.prior_scale",
+                format!("must be >= 0, got {}", a.prior_scale),
+            ));
+        }
+        if a.prior_scale > 0.0 && a.kind.is_tabular() {
+            return Err(invalid(
+                "agent.prior_scale",
+                "applies to the neural agents (dqn, bdqn); the Q-tables have no prior network",
+            ));
+        }
         let q = &self.query;
         if q.queue_len == 0 {
             return Err(invalid("query.queue_len", "L_q must be at least 1"));

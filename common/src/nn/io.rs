@@ -3,7 +3,9 @@
 //! caller does the file I/O.
 //!
 //! The file holds the six tensors of [`PARAM_NAMES`] as F32 with their PyTorch shapes, and the
-//! metadata `heads`, `actions` and `format_version` (decimal strings). The header is written
+//! metadata `heads`, `actions` and `format_version` (decimal strings); a network with a
+//! randomized prior function adds `prior_scale` and `prior_seed`, from which the prior is drawn
+//! again on reading (a PyTorch reader gets the trained part only). The header is written
 //! here with sorted keys so that the same network always gives the same bytes; reading goes
 //! through the `safetensors` crate, which validates the container.
 
@@ -38,11 +40,15 @@ impl Mlp {
         let shapes = self.params.shapes();
         let tensors = self.params.tensors();
         let mut header: BTreeMap<&'static str, HeaderEntry> = BTreeMap::new();
-        let metadata = BTreeMap::from([
+        let mut metadata = BTreeMap::from([
             ("heads", self.heads().to_string()),
             ("actions", self.actions().to_string()),
             ("format_version", FORMAT_VERSION.to_string()),
         ]);
+        if let Some(prior) = self.prior() {
+            metadata.insert("prior_scale", prior.scale().to_string());
+            metadata.insert("prior_seed", prior.seed().to_string());
+        }
         header.insert("__metadata__", HeaderEntry::Metadata(metadata));
         let mut offset = 0;
         for ((name, shape), data) in PARAM_NAMES.iter().zip(shapes).zip(tensors) {
@@ -106,6 +112,7 @@ impl Mlp {
         }
         let heads = read_meta("heads")?;
         let actions = read_meta("actions")?;
+        let prior = read_prior(meta)?;
 
         if let Some(name) = file.names().into_iter().find(|n| !PARAM_NAMES.contains(n)) {
             return Err(NnError::UnexpectedTensor(name.to_string()));
@@ -164,7 +171,38 @@ impl Mlp {
         for (dst, (_, src)) in params.tensors_mut().into_iter().zip(&data) {
             dst.copy_from_slice(src);
         }
-        Mlp::from_params(params, heads, actions)
+        let net = Mlp::from_params(params, heads, actions)?;
+        Ok(match prior {
+            Some((scale, seed)) => net.with_prior(scale, seed),
+            None => net,
+        })
+    }
+}
+
+/// `prior_scale` and `prior_seed`, both or neither.
+fn read_prior(
+    meta: Option<&std::collections::HashMap<String, String>>,
+) -> Result<Option<(f32, u64)>> {
+    let get = |key: &str| meta.and_then(|m| m.get(key));
+    let bad = |key: &str, reason: String| NnError::Metadata {
+        key: key.to_owned(),
+        reason,
+    };
+    match (get("prior_scale"), get("prior_seed")) {
+        (None, None) => Ok(None),
+        (Some(scale), Some(seed)) => {
+            let s: f32 = scale
+                .parse()
+                .ok()
+                .filter(|s: &f32| s.is_finite())
+                .ok_or_else(|| bad("prior_scale", format!("`{scale}` is not a finite number")))?;
+            let n: u64 = seed
+                .parse()
+                .map_err(|e| bad("prior_seed", format!("`{seed}` is not a seed: {e}")))?;
+            Ok(Some((s, n)))
+        }
+        (Some(_), None) => Err(bad("prior_seed", "missing (prior_scale is given)".into())),
+        (None, Some(_)) => Err(bad("prior_scale", "missing (prior_seed is given)".into())),
     }
 }
 
@@ -181,5 +219,15 @@ mod tests {
         let n = u64::from_le_bytes(a[..8].try_into().unwrap()) as usize;
         assert_eq!(n % 8, 0);
         assert_eq!(a.len(), 8 + n + 4 * net.num_params());
+    }
+
+    #[test]
+    fn a_prior_is_stored_as_its_scale_and_seed_and_drawn_again() {
+        let net = Mlp::new(4, 8, 2, 2, &mut crate::rng::seeded(3)).with_prior(3.0, 42);
+        let back = Mlp::from_safetensors_bytes(&net.to_safetensors_bytes()).unwrap();
+        assert_eq!(back, net);
+        let plain = Mlp::new(4, 8, 2, 2, &mut crate::rng::seeded(3));
+        let back = Mlp::from_safetensors_bytes(&plain.to_safetensors_bytes()).unwrap();
+        assert!(back.prior().is_none());
     }
 }

@@ -14,6 +14,7 @@ use rand::Rng as _;
 
 use super::dots::{self, dot, dot4};
 use super::gemm::{gemm, thin, wide, Epi, MatRef};
+use super::prior::Prior;
 use super::{torch_shapes, NnError, Params, Result};
 use crate::rng::Rng;
 
@@ -26,6 +27,8 @@ pub struct Mlp {
     heads: usize,
     actions: usize,
     pub(crate) params: Params,
+    /// A randomized prior function added to every output (absent: none).
+    prior: Option<Box<Prior>>,
 }
 
 /// Activations of one batched forward pass, kept for the backward pass, plus the backward pass's
@@ -45,6 +48,8 @@ pub struct ForwardCache {
     dz0: DMatrix<f32>,
     /// Scratch of the wide products (a transposed operand, packed).
     pack: Vec<f32>,
+    /// The prior network's own pass (networks with a prior).
+    prior: Option<Box<ForwardCache>>,
 }
 
 impl Default for ForwardCache {
@@ -57,6 +62,7 @@ impl Default for ForwardCache {
             dz1: DMatrix::zeros(0, 0),
             dz0: DMatrix::zeros(0, 0),
             pack: Vec::new(),
+            prior: None,
         }
     }
 }
@@ -103,7 +109,23 @@ impl Mlp {
             heads,
             actions,
             params,
+            prior: None,
         }
+    }
+
+    /// The network with a randomized prior function of scale `scale` drawn from `seed` (see
+    /// [`Prior`]); scale 0 gives the network without one.
+    pub fn with_prior(mut self, scale: f32, seed: u64) -> Self {
+        self.prior = (scale != 0.0).then(|| {
+            let (d, h) = (self.obs_dim(), self.hidden());
+            Box::new(Prior::new(d, h, self.heads, self.actions, scale, seed))
+        });
+        self
+    }
+
+    /// The randomized prior function, if the network has one.
+    pub fn prior(&self) -> Option<&Prior> {
+        self.prior.as_deref()
     }
 
     /// A network from given tensors; checks that their shapes fit together and with
@@ -140,6 +162,7 @@ impl Mlp {
             heads,
             actions,
             params,
+            prior: None,
         })
     }
 
@@ -292,6 +315,9 @@ impl Mlp {
         dense_one(&p.w0, &p.b0, x, h0, true);
         dense_one(&p.w1, &p.b1, h0, h1, true);
         dense_one(&p.wh, &p.bh, h1, out, false);
+        if let Some(prior) = &self.prior {
+            prior.add_one(x, out);
+        }
     }
 
     /// The batched forward pass: `states` holds `batch * obs_dim` values, one state per row
@@ -340,6 +366,10 @@ impl Mlp {
                 );
             },
         );
+        if let Some(prior) = &self.prior {
+            let scratch = cache.prior.get_or_insert_with(Box::default);
+            prior.add_batch(states, &mut cache.q, scratch);
+        }
     }
 
     /// The backward pass of the batch last given to [`Mlp::forward_batch`] with `cache`: from
@@ -613,6 +643,63 @@ mod tests {
                 "tr_matmul {m}x{k}x{n}"
             );
         }
+    }
+
+    #[test]
+    fn a_prior_adds_beta_times_its_fixed_network_to_every_output() {
+        let base = net();
+        assert!(base.clone().with_prior(0.0, 1).prior().is_none());
+        let with = base.clone().with_prior(2.5, 7);
+        let prior = with.prior().unwrap();
+        assert_eq!((prior.scale(), prior.seed()), (2.5, 7));
+        // The same seed draws the same prior; another seed another one.
+        assert_eq!(with, base.clone().with_prior(2.5, 7));
+        assert_ne!(with, base.clone().with_prior(2.5, 8));
+        let x = [0.3f32, -1.2, 0.8, 2.0];
+        let (mut f, mut p, mut q) = ([0.0f32; 6], [0.0f32; 6], [0.0f32; 6]);
+        base.forward_one(&x, &mut f);
+        prior.network().forward_one(&x, &mut p);
+        with.forward_one(&x, &mut q);
+        for c in 0..6 {
+            assert!((q[c] - (f[c] + 2.5 * p[c])).abs() < 1e-5, "output {c}");
+            assert!(p[c] != 0.0);
+        }
+        // The batched pass adds the same prior.
+        let states: Vec<f32> = (0..20).map(|i| (i as f32 * 0.3).cos()).collect();
+        let mut cache = ForwardCache::default();
+        with.forward_batch(&states, &mut cache);
+        for (j, s) in states.chunks_exact(4).enumerate() {
+            with.forward_one(s, &mut q);
+            for (c, &v) in q.iter().enumerate() {
+                assert!((cache.q()[(j, c)] - v).abs() < 1e-5, "row {j} col {c}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_prior_is_not_trained_sent_or_overwritten() {
+        let base = net();
+        let with = base.clone().with_prior(1.0, 3);
+        // The prior is no parameter: not in the flat vector, untouched by loading weights.
+        assert_eq!(with.num_params(), base.num_params());
+        let mut other = Mlp::new(4, 16, 2, 3, &mut crate::rng::seeded(8)).with_prior(1.0, 3);
+        other.load_params_flat(&base.params_flat()).unwrap();
+        assert_eq!(other, with);
+        let mut copied = Mlp::new(4, 16, 2, 3, &mut crate::rng::seeded(9)).with_prior(1.0, 3);
+        copied.copy_params_from(&base).unwrap();
+        assert_eq!(copied, with);
+        // The gradients of the trained weights do not depend on the prior: dQ/dθ is the plain
+        // network's at the same activations.
+        let states: Vec<f32> = (0..12).map(|i| (i as f32 * 0.9).sin()).collect();
+        let dq = DMatrix::from_fn(3, 6, |i, j| (i as f32 - j as f32) * 0.1);
+        let (mut g_base, mut g_with) = (base.params().zeros_like(), base.params().zeros_like());
+        let (mut c_base, mut c_with) = (ForwardCache::default(), ForwardCache::default());
+        base.forward_batch(&states, &mut c_base);
+        base.backward(&mut c_base, &dq, &mut g_base);
+        with.forward_batch(&states, &mut c_with);
+        with.backward(&mut c_with, &dq, &mut g_with);
+        assert_eq!(g_base, g_with);
+        assert_ne!(c_base.q(), c_with.q());
     }
 
     #[test]

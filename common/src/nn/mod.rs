@@ -20,6 +20,7 @@ pub mod dqn;
 mod gemm;
 mod io;
 mod mlp;
+mod prior;
 
 pub use adam::{Adam, AdamConfig, AdamState};
 pub use dqn::{
@@ -29,6 +30,7 @@ pub use dqn::{
 pub use gemm::{fma_peak_probe, use_portable_kernels};
 pub use io::FORMAT_VERSION;
 pub use mlp::{ForwardCache, Mlp};
+pub use prior::Prior;
 
 use nalgebra::{DMatrix, DVector};
 

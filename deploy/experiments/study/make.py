@@ -62,6 +62,8 @@ def write(path, title, task, seeds, preset, ms, comment):
     if not path.name.startswith("screen"):
         lines.append("by_budget = true")
         lines.append("learner_episodes_only = true")
+        if eval_threshold is not None:
+            lines.append("eval_curves = true")
     for name, label, s in ms:
         sets = ", ".join(f'"{v}"' for v in s)
         lines += ["", "[[method]]", f'name = "{name}"', f'label = "{label}"',
@@ -86,6 +88,7 @@ def main():
         preset, ms = methods(task, [b], RULES)
         write(HERE / f"{task}-headline.toml", f"Query rules at B = {b}: {title}", task, 30,
               preset, ms, f"Every query rule at B = {b} on the {task} preset, 30 seeds (0-29).")
+    screen_rules()
     for task in ["mountaincar", "acrobot"]:
         title = TASKS[task][0]
         preset = TASKS[task][1]
@@ -96,6 +99,24 @@ def main():
                        ["query.rule=js-burst", "budget.total=100", f"query.burst={burst}"]))
         write(HERE / f"screen-burst-{task}.toml", f"Burst-length screen: {title}", task, 5,
               preset, ms, "The burst length of js-burst, screened on tuning seeds 1000-1004.")
+
+
+# The presets' rule, chosen on tuning seeds 1000-1009 at each preset's budget: the rules that do
+# best in the study, and js with randomized prior functions of three scales.
+PRESET_BUDGET = {"mountaincar": 100, "acrobot": 100, "cartpole": 300}
+PRIOR_SCALES = [3, 10, 30]
+
+
+def screen_rules():
+    for task, b in PRESET_BUDGET.items():
+        title = TASKS[task][0]
+        preset, ms = methods(task, [b], ["first", "js", "uniform", "js-burst", "js-paced"])
+        for scale in PRIOR_SCALES:
+            ms.append((f"js-prior{scale}-b{b}", f"js, prior {scale}, B = {b}",
+                       ["query.rule=js", f"budget.total={b}", f"agent.prior_scale={scale}"]))
+        write(HERE / f"screen-rules-{task}.toml", f"Rule screen at B = {b}: {title}", task, 10,
+              preset, [m for m in ms if m[0] != "never"],
+              "The presets' query rule, screened on tuning seeds 1000-1009.")
 
 
 if __name__ == "__main__":

@@ -103,6 +103,10 @@ struct ExperimentFile {
     /// learner's own play only).
     #[serde(default)]
     learner_episodes_only: bool,
+    /// The sweep also writes the learning curves of greedy evaluation (`eval_return`):
+    /// `eval-curves.csv`, `NAME-eval.svg` and their table in the summary.
+    #[serde(default)]
+    eval_curves: bool,
     /// The summary reports the mean return over this many final episodes.
     #[serde(default = "default_last")]
     last: u32,
@@ -174,6 +178,7 @@ pub struct Experiment {
     pub eval_threshold: Option<f64>,
     pub by_budget: bool,
     pub learner_episodes_only: bool,
+    pub eval_curves: bool,
     pub last: u32,
     pub smooth: usize,
     pub y_range: Option<(f64, f64)>,
@@ -369,6 +374,7 @@ impl Experiment {
             eval_threshold: file.eval_threshold,
             by_budget: file.by_budget,
             learner_episodes_only: file.learner_episodes_only,
+            eval_curves: file.eval_curves,
             last: file.last,
             smooth: file.smooth,
             y_range,

@@ -303,6 +303,9 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
              episodes in which the expert acted: they are the learner's own play.\n",
         );
     }
+    if exp.eval_curves {
+        md.push_str(&eval_curves(ctx)?);
+    }
     if exp.by_budget {
         md.push_str(&budget_section(ctx, &by_budget)?);
     }
@@ -587,8 +590,53 @@ fn budget_section(ctx: &Ctx, table: &budget::Table) -> anyhow::Result<String> {
     Ok(md)
 }
 
+/// The learning curves of greedy evaluation: `eval-curves.csv`, `EXPERIMENT-eval.svg` (and
+/// `.png`) and their section of `summary.md`.
+fn eval_curves(ctx: &Ctx) -> anyhow::Result<String> {
+    let exp = ctx.exp;
+    let mut results = Vec::with_capacity(exp.methods.len());
+    for method in &exp.methods {
+        let runs: Vec<summary::Run> = read_runs(ctx.out, method, exp.seed_range())?
+            .into_iter()
+            .map(|r| summary::Run {
+                episodes: r.episodes.greedy_evaluations(),
+                ..r
+            })
+            .collect();
+        if runs.iter().any(|r| r.episodes.returns.is_empty()) {
+            anyhow::bail!(
+                "`eval_curves`: a run of method `{}` records no greedy evaluation (set \
+                 `evaluation.every` in its config)",
+                method.name
+            );
+        }
+        results.push(summary::analyse(method, &runs, exp)?);
+    }
+    write(
+        ctx.out,
+        "eval-curves.csv",
+        summary::curves_csv(exp, &results).as_bytes(),
+    )?;
+    let series = summary::training_series(exp, &results);
+    let stem = format!("{}-eval", exp.name);
+    let x_desc = summary::x_name(exp.x).1;
+    let plotted = write_plot_as(ctx, &series, x_desc, &stem, "greedy evaluation return")?;
+    Ok(summary::eval_curves_section(exp, &results, &plotted))
+}
+
 /// Writes `EXPERIMENT.svg` and, when a font is found, `EXPERIMENT.png`; returns the files written.
 fn write_plot(ctx: &Ctx, series: &[plot::Series], x_desc: &str) -> anyhow::Result<Vec<String>> {
+    write_plot_as(ctx, series, x_desc, &ctx.exp.name, "return")
+}
+
+/// [`write_plot`] as `STEM.svg` (and `.png`), the y axis naming `what` is averaged.
+fn write_plot_as(
+    ctx: &Ctx,
+    series: &[plot::Series],
+    x_desc: &str,
+    stem: &str,
+    what: &str,
+) -> anyhow::Result<Vec<String>> {
     let exp = ctx.exp;
     let seeds = summary::count(exp.seeds, "seed");
     let (title, y_desc, band) = match exp.kind {
@@ -596,12 +644,12 @@ fn write_plot(ctx: &Ctx, series: &[plot::Series], x_desc: &str) -> anyhow::Resul
             summary::title_with_count(&exp.title, exp.seeds, "seed"),
             if exp.smooth > 1 {
                 format!(
-                    "return: mean of {seeds} ({}-{} moving average)",
+                    "{what}: mean of {seeds} ({}-{} moving average)",
                     exp.smooth,
                     summary::smooth_unit(exp.x)
                 )
             } else {
-                format!("return: mean of {seeds}")
+                format!("{what}: mean of {seeds}")
             },
             Some("band: 95% bootstrap CI of the mean"),
         ),
@@ -621,9 +669,9 @@ fn write_plot(ctx: &Ctx, series: &[plot::Series], x_desc: &str) -> anyhow::Resul
         band_desc: band,
         series,
     })?;
-    let mut files = vec![format!("{}.svg", exp.name)];
+    let mut files = vec![format!("{stem}.svg")];
     write(ctx.out, &files[0], svg.as_bytes())?;
-    let png_name = format!("{}.png", exp.name);
+    let png_name = format!("{stem}.png");
     match plot::png_from_svg(&svg)? {
         Some(png) => {
             write(ctx.out, &png_name, &png)?;

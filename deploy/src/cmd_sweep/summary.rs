@@ -60,6 +60,31 @@ impl Episodes {
     }
 }
 
+impl Episodes {
+    /// The episodes after which the learner was evaluated, with their evaluation return as the
+    /// return: the greedy-evaluation learning curve. Empty without the `eval_return` column.
+    pub fn greedy_evaluations(&self) -> Episodes {
+        let Some(eval) = &self.eval_return else {
+            return Episodes {
+                returns: Vec::new(),
+                demos: Vec::new(),
+                total_steps: self.total_steps.as_ref().map(|_| Vec::new()),
+                queries: self.queries.as_ref().map(|_| Vec::new()),
+                ..self.clone()
+            };
+        };
+        let kept: Vec<usize> = (0..eval.len()).filter(|&i| eval[i].is_finite()).collect();
+        let pick = |v: &Vec<f64>| -> Vec<f64> { kept.iter().map(|&i| v[i]).collect() };
+        Episodes {
+            returns: pick(eval),
+            demos: pick(&self.demos),
+            total_steps: self.total_steps.as_ref().map(pick),
+            queries: self.queries.as_ref().map(pick),
+            ..self.clone()
+        }
+    }
+}
+
 /// What one run left: its episodes and the numbers of its `summary.json`.
 #[derive(Debug, Clone)]
 pub struct Run {
@@ -434,26 +459,7 @@ pub fn training_summary(
             ),
         }
     );
-    let mut header = String::from("| method | final | IQM final | AUC |");
-    let mut rule = String::from("|---|---:|---:|---:|");
-    for t in &exp.thresholds {
-        let _ = write!(header, " crosses {t} |");
-        rule.push_str("---:|");
-    }
-    let _ = writeln!(md, "{header}\n{rule}");
-    for r in results {
-        let mut row = format!(
-            "| {} | {} | {} | {} |",
-            r.method.name,
-            estimate(&r.final_mean),
-            estimate(&r.final_iqm),
-            estimate(&r.auc)
-        );
-        for c in &r.crossings {
-            let _ = write!(row, " {} |", crossing(c));
-        }
-        let _ = writeln!(md, "{row}");
-    }
+    curves_table(&mut md, exp, results);
     if results.iter().any(|r| r.eval.is_some()) {
         let _ = writeln!(
             md,
@@ -501,6 +507,43 @@ pub fn training_summary(
             String::new()
         }
     );
+    md
+}
+
+/// The learning-curve table: final, IQM final, AUC and the crossings of each method.
+fn curves_table(md: &mut String, exp: &Experiment, results: &[MethodResult]) {
+    let mut header = String::from("| method | final | IQM final | AUC |");
+    let mut rule = String::from("|---|---:|---:|---:|");
+    for t in &exp.thresholds {
+        let _ = write!(header, " crosses {t} |");
+        rule.push_str("---:|");
+    }
+    let _ = writeln!(md, "{header}\n{rule}");
+    for r in results {
+        let mut row = format!(
+            "| {} | {} | {} | {} |",
+            r.method.name,
+            estimate(&r.final_mean),
+            estimate(&r.final_iqm),
+            estimate(&r.auc)
+        );
+        for c in &r.crossings {
+            let _ = write!(row, " {} |", crossing(c));
+        }
+        let _ = writeln!(md, "{row}");
+    }
+}
+
+/// The section of the learning curves of greedy evaluation (`eval_return` against the same x):
+/// the table of [`curves_table`] over them, and the plots written.
+pub fn eval_curves_section(exp: &Experiment, results: &[MethodResult], plotted: &[String]) -> String {
+    let mut md = String::from(
+        "\n## Greedy-evaluation curves\n\nThe same statistics over the greedy evaluations \
+         instead of the training returns: a seed's value at x is its last `eval_return` recorded \
+         by x (the learner's own greedy play; the expert never acts in an evaluation).\n\n",
+    );
+    curves_table(&mut md, exp, results);
+    let _ = writeln!(md, "\nPlot: {}; table: eval-curves.csv.", plotted.join(", "));
     md
 }
 
@@ -568,6 +611,18 @@ mod tests {
         assert!(parse_episodes("episode,length\n0,1\n").is_err());
         assert!(parse_episodes("episode,return,demos_used\n0,x,1\n").is_err());
         assert!(parse_episodes("episode,return,demos_used\n").is_err());
+    }
+
+    #[test]
+    fn the_greedy_evaluation_curve_is_the_evaluated_episodes_with_their_eval_return() {
+        let text = "return,demos_used,queries,total_steps,eval_return\n-200,5,5,200,\n-150,5,0,350,-140\n-120,9,4,470,\n-110,9,0,580,-100\n";
+        let e = parse_episodes(text).unwrap().greedy_evaluations();
+        assert_eq!(e.returns, vec![-140.0, -100.0]);
+        assert_eq!(e.total_steps, Some(vec![350.0, 580.0]));
+        assert_eq!(e.demos, vec![5.0, 9.0]);
+        assert_eq!(e.queries, Some(vec![0.0, 0.0]));
+        let none = parse_episodes("return,demos_used\n-200,5\n").unwrap();
+        assert!(none.greedy_evaluations().returns.is_empty());
     }
 
     #[test]
