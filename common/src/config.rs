@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 mod normalize;
 mod query;
+pub mod reference;
 mod validate;
 
 pub use validate::{MAX_BATCH_SIZE, MAX_HIDDEN, MAX_N_STEP, MAX_QUEUE_LEN, MAX_REPLAY_CAPACITY};
@@ -36,7 +37,7 @@ fn invalid(field: &'static str, message: impl Into<String>) -> ConfigError {
 }
 
 /// One experiment: an environment, an agent, its query rule, budget, expert and shaping.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ExperimentConfig {
     /// Seed of everything random in the run (environment, initialisation, exploration, masks).
@@ -74,7 +75,7 @@ fn is_zero_u64(v: &u64) -> bool {
 /// learned network (the mean of the heads' Q-values; no queries, no learning, no exploration) on
 /// a separate copy of the environment, the same seed every time. Their mean return is the
 /// `eval_return` of that training episode's record.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct EvalConfig {
     /// Evaluate after every this many training episodes (0: never).
@@ -127,12 +128,18 @@ impl ExperimentConfig {
 }
 
 /// Which environment.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum EnvName {
+    /// CartPole-1000: Gymnasium's CartPole-v1 dynamics, episodes of up to 1,000 steps (the
+    /// paper's).
     Cartpole,
+    /// The paper's tabular grid with a cliff (section 5.1.1), moves that succeed with
+    /// `env.p_success`.
     Cliffwalk,
+    /// MountainCar-v0 (Gymnasium's dynamics; sparse reward, 200 steps).
     Mountaincar,
+    /// Acrobot-v1 (Gymnasium's dynamics; sparse reward, 500 steps).
     Acrobot,
     /// Any Gymnasium environment (`env.id`), served by a Python adapter in another process.
     Gymnasium,
@@ -215,10 +222,11 @@ impl std::str::FromStr for EnvName {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct EnvConfig {
-    /// `cartpole`, `cliffwalk`, `mountaincar`, `acrobot` or `gymnasium`.
+    /// The environment: CartPole-1000, CliffWalk, MountainCar-v0, Acrobot-v1 (Gymnasium's
+    /// dynamics, reimplemented), or any Gymnasium environment.
     pub name: EnvName,
     /// Step limit after which an episode is truncated (by default CartPole 1000, CliffWalk 500,
     /// MountainCar 200, Acrobot 500, a Gymnasium environment its registration's).
@@ -229,6 +237,7 @@ pub struct EnvConfig {
     pub id: Option<String>,
     /// Gymnasium: keyword arguments of `gymnasium.make` (numbers, strings, booleans).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<std::collections::BTreeMap<String, String>>")]
     pub kwargs: Option<toml::Table>,
     /// CliffWalk: probability that the chosen move happens, in (0, 1].
     #[serde(default = "default_p_success")]
@@ -250,7 +259,7 @@ impl EnvConfig {
 }
 
 /// The learning algorithm.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum AgentKind {
     /// Tabular Q-learning.
@@ -272,7 +281,7 @@ impl AgentKind {
 }
 
 /// How the agent picks its own actions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Exploration {
     /// Sample from the softmax policy (eq. 2) of the acting head.
@@ -283,10 +292,10 @@ pub enum Exploration {
     GreedyHead,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AgentConfig {
-    /// `qlearning`, `sarsa`, `bootstrapped-q`, `dqn` or `bdqn`.
+    /// The learning algorithm.
     pub kind: AgentKind,
     /// K, the number of heads (default 1 for qlearning/sarsa/dqn, 2 for bootstrapped-q/bdqn).
     #[serde(default)]
@@ -381,6 +390,7 @@ pub struct AgentConfig {
     /// the discounted sum of up to `n_step` rewards and the state after them, and its target
     /// bootstraps with `gamma^n`; fewer at an episode's end (1: one-step TD, the paper's).
     #[serde(default = "default_n_step", skip_serializing_if = "is_one_u32")]
+    #[schemars(extend("default" = 1))]
     pub n_step: u32,
     /// Neural: β of randomized prior functions (Osband et al. 2018): each head's Q-values add β
     /// times the output of a fixed random network of the same shape that is never trained, so
@@ -423,11 +433,13 @@ impl LrSchedule {
 }
 
 /// The loss on TD errors.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum LossKind {
+    /// PyTorch's `HuberLoss(delta)` on the TD errors.
     #[default]
     Huber,
+    /// The mean squared TD error.
     Mse,
 }
 
@@ -529,7 +541,7 @@ impl AgentConfig {
 pub use crate::query::RuleKind;
 pub use query::QueryConfig;
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BudgetConfig {
     /// B: how many demonstrations may be asked for in the whole run.
@@ -550,7 +562,7 @@ impl Default for BudgetConfig {
 }
 
 /// Which model of the demonstrations shapes the reward.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum DemoModelChoice {
     /// No model: no shaping.
@@ -561,14 +573,14 @@ pub enum DemoModelChoice {
     Svm,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ExpertConfig {
     /// The demonstrator, by name (`alfd expert list`); default the environment's reference expert
     /// (`cartpole-1000`, `cliffwalk-optimal`, `mountaincar-energy`, `acrobot-energy`).
     #[serde(default = "default_expert")]
     pub name: String,
-    /// The demonstration model fitted on the demonstrations: `none`, `krr` or `svm`.
+    /// The demonstration model fitted on the demonstrations.
     #[serde(default = "default_model")]
     pub model: DemoModelChoice,
 }
@@ -589,7 +601,7 @@ impl Default for ExpertConfig {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ShapingConfig {
     /// λ of eq. 4.
@@ -611,11 +623,13 @@ pub struct ShapingConfig {
 }
 
 /// Which shaping.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum ShapingKind {
+    /// Eq. 4, for a while (see `shaping.stop_multiple`).
     #[default]
     Paper,
+    /// Potential-based shaping with the demonstration model, for the whole run.
     Potential,
 }
 

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::rng::{Rng, RngState};
 
 /// Which rule decides when to ask (`query.rule`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum RuleKind {
     /// Never: pure RL.

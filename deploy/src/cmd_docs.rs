@@ -11,7 +11,8 @@
 //!
 //! The source is a path from the repository's root; `, section "NAME"` takes the part of a
 //! Markdown file under its heading `## NAME` (to the next heading of that level or higher),
-//! without it the whole file. `alfd docs` rewrites the documents; `alfd docs --check` changes
+//! without it the whole file. The source [`CONFIG_REFERENCE`] is the configuration reference
+//! made from the config types (`alfd config reference`). `alfd docs` rewrites the documents; `alfd docs --check` changes
 //! nothing and fails (exit code 1) naming each part that differs.
 
 use std::path::{Path, PathBuf};
@@ -24,6 +25,8 @@ use crate::usage::usage;
 pub const DOCUMENTS: [&str; 3] = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"];
 
 const BEGIN: &str = "<!-- generated from ";
+/// The source name of the configuration reference.
+pub const CONFIG_REFERENCE: &str = "`alfd config reference`";
 const END: &str = "<!-- end generated -->";
 
 #[derive(Debug, clap::Args)]
@@ -68,6 +71,8 @@ pub fn run(args: DocsArgs) -> anyhow::Result<()> {
 pub struct Source {
     pub path: String,
     pub section: Option<String>,
+    /// `, table` after the section: only the section's first Markdown table.
+    pub table: bool,
 }
 
 impl Source {
@@ -78,6 +83,10 @@ impl Source {
             .strip_suffix("-->")
             .context("a generated marker must end with -->")?
             .trim();
+        let (rest, table) = match rest.strip_suffix(", table") {
+            Some(r) => (r.trim_end(), true),
+            None => (rest, false),
+        };
         Ok(match rest.split_once(", section ") {
             Some((path, section)) => Source {
                 path: path.trim().to_owned(),
@@ -89,24 +98,43 @@ impl Source {
                         .with_context(|| format!("the section in `{rest}` must be quoted"))?
                         .to_owned(),
                 ),
+                table,
             },
             None => Source {
                 path: rest.to_owned(),
                 section: None,
+                table,
             },
         })
     }
 }
 
 fn read_source(root: &Path, src: &Source) -> anyhow::Result<String> {
+    if src.path == CONFIG_REFERENCE {
+        return Ok(alfd_common::config::reference::markdown());
+    }
     let path = root.join(&src.path);
     let text = std::fs::read_to_string(&path)
         .map_err(|e| usage(format!("cannot read {}: {e}", path.display())))?;
-    match &src.section {
-        None => Ok(text),
+    let part = match &src.section {
+        None => text,
         Some(name) => section(&text, name)
-            .ok_or_else(|| usage(format!("{} has no section \"{name}\"", path.display()))),
+            .ok_or_else(|| usage(format!("{} has no section \"{name}\"", path.display())))?,
+    };
+    if !src.table {
+        return Ok(part);
     }
+    first_table(&part).ok_or_else(|| usage(format!("{}: no table in {src:?}", path.display())))
+}
+
+/// The first Markdown table of `text`: its consecutive lines that start with `|`.
+pub fn first_table(text: &str) -> Option<String> {
+    let rows: Vec<&str> = text
+        .lines()
+        .skip_while(|l| !l.starts_with('|'))
+        .take_while(|l| l.starts_with('|'))
+        .collect();
+    (!rows.is_empty()).then(|| rows.join("\n"))
 }
 
 /// The text under the heading `#… name` of `markdown`, to the next heading of its level or
@@ -202,6 +230,19 @@ mod tests {
         // Generated again: nothing changes.
         let again = generate(&g.text, read).unwrap();
         assert_eq!((again.text, again.changed.len()), (g.text, 0));
+    }
+
+    #[test]
+    fn a_table_marker_takes_the_section_s_first_table() {
+        let src = Source::parse("r/s.md, section \"Query rules by budget\", table -->").unwrap();
+        assert_eq!(
+            (src.path.as_str(), src.section.as_deref(), src.table),
+            ("r/s.md", Some("Query rules by budget"), true)
+        );
+        let part = section(SUMMARY, "Query rules by budget").unwrap();
+        assert_eq!(first_table(&part).unwrap(), "| a |\n|---|\n| 1 |");
+        assert_eq!(first_table("no table here"), None);
+        assert!(!Source::parse("r/s.md -->").unwrap().table);
     }
 
     #[test]

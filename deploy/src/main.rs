@@ -3,6 +3,7 @@
 
 mod checkpoint_file;
 mod cmd_clean;
+mod cmd_config;
 mod cmd_demo_model;
 mod cmd_demo_model_policy;
 mod cmd_docs;
@@ -65,6 +66,9 @@ enum Command {
     /// Re-make the generated tables of README.md, EXPERIMENTS.md and BENCHMARKS.md from the
     /// committed results (`--check`: fail if any differs).
     Docs(cmd_docs::DocsArgs),
+    /// Experiment configs: every key with its default (`reference`), or one file validated and
+    /// printed in full (`check`).
+    Config(cmd_config::ConfigArgs),
 }
 
 fn main() {
@@ -89,6 +93,7 @@ fn main() {
         Command::DemoModelPolicy(a) => cmd_demo_model_policy::run(a),
         Command::QRange(a) => cmd_q_range::run(a),
         Command::Docs(a) => cmd_docs::run(a),
+        Command::Config(a) => cmd_config::run(a),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

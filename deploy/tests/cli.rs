@@ -869,6 +869,47 @@ fn q_range_checks_a_run_and_refuses_what_is_not_one() {
 }
 
 #[test]
+fn the_readme_documents_every_output_column_and_summary_field() {
+    use alfd_common::record::{RunSummary, RuntimeSummary, CSV_HEADER};
+    let readme = std::fs::read_to_string(crate::support::repo().join("README.md")).unwrap();
+    let documented = |name: &str| {
+        readme
+            .lines()
+            .any(|l| l.starts_with('|') && l.split('|').nth(1).is_some_and(|c| c.contains(&format!("`{name}`"))))
+    };
+    for column in CSV_HEADER.split(',') {
+        assert!(documented(column), "episodes.csv column `{column}` is not in README.md");
+    }
+    let summary = RunSummary {
+        episodes: 1,
+        mean_return_last_50: 0.0,
+        demos_used: 0,
+        wall_clock_s: 0.0,
+        greedy_value_at_start: Some(0.0),
+        optimal_value_at_start: Some(0.0),
+        runtime: Some(RuntimeSummary {
+            run_id: String::new(),
+            demos: 0,
+            env_steps: 0,
+            updates: 0,
+            env_steps_per_s: 0.0,
+            updates_per_s: 0.0,
+            actor_restarts: 0,
+            expert_swaps: 0,
+            expert_restarts: 0,
+            learner_restarts: 0,
+            interrupted: false,
+        }),
+    };
+    let json = serde_json::to_value(&summary).unwrap();
+    let fields = json.as_object().unwrap();
+    assert!(fields.len() >= 17, "{fields:?}");
+    for field in fields.keys() {
+        assert!(documented(field), "summary.json field `{field}` is not in README.md");
+    }
+}
+
+#[test]
 fn the_documents_generated_tables_match_the_committed_results() {
     let _time = timed!();
     let experiments =

@@ -5,12 +5,10 @@ use serde::{Deserialize, Serialize};
 use super::RuleKind;
 
 /// When the agent asks the expert (`[query]`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct QueryConfig {
-    /// The query rule: `never`, `first`, `js` (the paper's; `active` is the same), `random`,
-    /// `uniform`, `q-std`, `novelty`, `js-burst` or `js-paced`. `query.mode` is read as
-    /// `query.rule`.
+    /// The query rule (`active` is read as `js`; the older key `query.mode` as `query.rule`).
     #[serde(default = "default_query_rule")]
     pub rule: RuleKind,
     /// L_q: length of the queue of past signal values (at most [`super::MAX_QUEUE_LEN`]).

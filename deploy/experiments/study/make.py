@@ -89,6 +89,7 @@ def main():
         write(HERE / f"{task}-headline.toml", f"Query rules at B = {b}: {title}", task, 30,
               preset, ms, f"Every query rule at B = {b} on the {task} preset, 30 seeds (0-29).")
     screen_rules()
+    prior_study()
     for task in ["mountaincar", "acrobot"]:
         title = TASKS[task][0]
         preset = TASKS[task][1]
@@ -117,6 +118,25 @@ def screen_rules():
         write(HERE / f"screen-rules-{task}.toml", f"Rule screen at B = {b}: {title}", task, 10,
               preset, [m for m in ms if m[0] != "never"],
               "The presets' query rule, screened on tuning seeds 1000-1009.")
+
+
+# Randomized prior functions on held-out seeds 0-9: the scale that did best on the tuning seeds
+# (screen-rules-*) against the plain js rule, at three budgets.
+PRIOR_SCALE = 30
+
+
+def prior_study():
+    for task in ["mountaincar", "acrobot"]:
+        title = TASKS[task][0]
+        preset, _ = methods(task, [], [])
+        ms = []
+        for b in [10, 50, 100]:
+            ms.append((f"js-b{b}", f"js, B = {b}", ["query.rule=js", f"budget.total={b}"]))
+            ms.append((f"js-prior-b{b}", f"js + prior {PRIOR_SCALE}, B = {b}",
+                       ["query.rule=js", f"budget.total={b}", f"agent.prior_scale={PRIOR_SCALE}"]))
+        write(HERE / f"prior-{task}.toml", f"Randomized prior functions: {title}", task, 10,
+              preset, ms, f"The js rule with and without prior functions (scale {PRIOR_SCALE}), "
+              "10 seeds (0-9).")
 
 
 if __name__ == "__main__":

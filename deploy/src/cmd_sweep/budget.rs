@@ -13,6 +13,16 @@ use super::stats::bootstrap::Resamples;
 use super::stats::{self};
 use super::summary::{Episodes, Run};
 
+/// The row of a method in the tables against B: its query rule, and its prior scale when the
+/// heads have randomized prior functions (`js + prior 30`).
+pub fn row_name(cfg: &alfd_common::config::ExperimentConfig) -> String {
+    let rule = cfg.query.rule.name();
+    match cfg.agent.prior_scale {
+        s if s > 0.0 => format!("{rule} + prior {s}"),
+        _ => rule.to_owned(),
+    }
+}
+
 /// The demonstrations used by the end of the first episode after which greedy evaluation reached
 /// `threshold`; infinite when it never did (or the run records no evaluation).
 pub fn demos_to_threshold(e: &Episodes, threshold: f64) -> f64 {

@@ -283,7 +283,7 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
             let cfg = method.config(exp.first_seed, exp.episodes)?;
             let cell = budget::cell(&runs, exp.eval_threshold, &method.name);
             by_budget
-                .entry(cfg.query.rule.name().to_owned())
+                .entry(budget::row_name(&cfg))
                 .or_default()
                 .insert(cfg.budget(), cell);
         }
