@@ -200,8 +200,11 @@ mod x86 {
         c: usize,
     ) {
         let full = m - m % 8;
+        // SAFETY: columns r..r + 4 of `a` and c..c + C of `b` start inside their slices
+        // (`r + 4 <= k`, `c + C <= n`, the slices hold `m × k` and `m × n` values).
         let a_cols: [*const f32; 4] =
             std::array::from_fn(|o| unsafe { a.as_ptr().add((r + o) * m) });
+        // SAFETY: as above.
         let b_cols: [*const f32; C] =
             std::array::from_fn(|q| unsafe { b.as_ptr().add((c + q) * m) });
         let mut acc = [[_mm256_setzero_ps(); 4]; C];

@@ -278,8 +278,9 @@ pub(crate) fn wide<R>(f: impl FnOnce() -> R) -> R {
     f()
 }
 
-/// The AVX2+FMA kernels: the only unsafe code of the core (the intrinsics' loads and stores,
-/// and calling functions compiled for features that were checked at run time).
+/// The AVX2+FMA kernels: unsafe code of the core, with `dots.rs`'s AVX2 dot products (the
+/// intrinsics' loads and stores, and calling functions compiled for features that were checked
+/// at run time).
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
 mod x86 {
@@ -376,6 +377,8 @@ mod x86 {
         unsafe { avx2_inner(f) }
     }
 
+    /// # Safety
+    /// The CPU has AVX2 (the only caller, [`avx2`], asserts it).
     #[target_feature(enable = "avx2")]
     unsafe fn avx2_inner<R>(f: impl FnOnce() -> R) -> R {
         f()
@@ -388,6 +391,8 @@ mod x86 {
         unsafe { probe_avx2_fma(rounds) }
     }
 
+    /// # Safety
+    /// The CPU has AVX2 and FMA (the only caller, [`probe`], asserts it).
     #[target_feature(enable = "avx2,fma")]
     unsafe fn probe_avx2_fma(rounds: u64) -> f32 {
         let mut acc = [_mm256_set1_ps(1.0); 12];
@@ -425,6 +430,10 @@ mod x86 {
     /// `C` with AVX2 and FMA: blocks of 6 columns (then fewer), and in each, blocks of 16 rows
     /// (then 8), all accumulated in registers over the whole `k` loop, the elements of `B`
     /// broadcast from where they are; the last 1-7 rows under a mask, in the same order.
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA, and `a`, `b` and `c` hold `m × k`, `k × n` and `m × n` values
+    /// (the caller, [`gemm`], asserts the features; its callers check the shapes).
     #[target_feature(enable = "avx2,fma")]
     unsafe fn gemm_avx2_fma<const FMA: bool>(
         (m, k, n): (usize, usize, usize),

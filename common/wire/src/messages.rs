@@ -624,6 +624,9 @@ pub struct Episode(pub EpisodeRecord);
 // `an_episode_record_has_the_layout_the_wire_expects` pins its size and alignment.
 #[allow(unsafe_code)]
 unsafe impl ZeroCopySend for Episode {
+    /// # Safety
+    /// iceoryx2 compares this name between processes to check that they share a type: it is
+    /// unique to this record's layout (see the SAFETY comment of the impl).
     unsafe fn type_name() -> &'static str {
         "alfd.EpisodeRecord"
     }

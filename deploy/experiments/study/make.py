@@ -61,6 +61,7 @@ def write(path, title, task, seeds, preset, ms, comment):
         lines.append(f"eval_threshold = {eval_threshold}")
     if not path.name.startswith("screen"):
         lines.append("by_budget = true")
+    if not path.name.startswith("screen-burst"):
         lines.append("learner_episodes_only = true")
         if eval_threshold is not None:
             lines.append("eval_curves = true")
