@@ -12,7 +12,7 @@ use alfd_common::demo_model::{DemoModel, DemoModelError, DemoModelKind, MAX_ACTI
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
 
-pub use crate::usage::UsageError;
+pub use alfd_harness::BadInput;
 
 /// Which demonstration model to fit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -83,7 +83,7 @@ fn parse_lines<T: for<'de> Deserialize<'de>>(
     file: &str,
     mut dim: Option<usize>,
     state: impl Fn(&T) -> &[f64],
-) -> Result<Vec<(usize, T)>, UsageError> {
+) -> Result<Vec<(usize, T)>, BadInput> {
     let mut out = Vec::new();
     let mut first_line = 0;
     for (i, line) in text.lines().enumerate() {
@@ -95,14 +95,14 @@ fn parse_lines<T: for<'de> Deserialize<'de>>(
             // serde_json's message ends with its own "at line 1 column N": keep the column only.
             let msg = e.to_string();
             let msg = msg.split(" at line ").next().unwrap_or_default();
-            UsageError(format!(
+            BadInput(format!(
                 "{file}:{line_no}: malformed line (column {}): {msg}",
                 e.column()
             ))
         })?;
         let s = state(&item);
         if s.is_empty() {
-            return Err(UsageError(format!("{file}:{line_no}: the state is empty")));
+            return Err(BadInput(format!("{file}:{line_no}: the state is empty")));
         }
         match dim {
             None => {
@@ -115,7 +115,7 @@ fn parse_lines<T: for<'de> Deserialize<'de>>(
                 } else {
                     "as the demonstrations".to_string()
                 };
-                return Err(UsageError(format!(
+                return Err(BadInput(format!(
                     "{file}:{line_no}: the state has {} components, expected {d} ({reference})",
                     s.len()
                 )));
@@ -123,7 +123,7 @@ fn parse_lines<T: for<'de> Deserialize<'de>>(
             Some(_) => {}
         }
         if let Some(c) = s.iter().position(|v| !v.is_finite()) {
-            return Err(UsageError(format!(
+            return Err(BadInput(format!(
                 "{file}:{line_no}: state component {c} is not finite"
             )));
         }
@@ -133,13 +133,13 @@ fn parse_lines<T: for<'de> Deserialize<'de>>(
 }
 
 /// Parses a demos file's text (`file` names it in errors): at most [`MAX_DEMOS`] demonstrations.
-pub fn parse_demos(text: &str, file: &str) -> Result<Demos, UsageError> {
+pub fn parse_demos(text: &str, file: &str) -> Result<Demos, BadInput> {
     let items = parse_lines::<DemoLine>(text, file, None, |d| &d.state)?;
     if items.is_empty() {
-        return Err(UsageError(format!("{file}: no demonstrations")));
+        return Err(BadInput(format!("{file}: no demonstrations")));
     }
     if items.len() > MAX_DEMOS {
-        return Err(UsageError(format!(
+        return Err(BadInput(format!(
             "{file}: {} demonstrations, but a demonstration model is fitted on at most {MAX_DEMOS} \
              (its kernel matrix holds n × n numbers)",
             items.len()
@@ -159,7 +159,7 @@ pub fn parse_demos(text: &str, file: &str) -> Result<Demos, UsageError> {
 }
 
 /// Parses a query file's text; every state must have `dim` components.
-pub fn parse_queries(text: &str, file: &str, dim: usize) -> Result<Vec<Vec<f64>>, UsageError> {
+pub fn parse_queries(text: &str, file: &str, dim: usize) -> Result<Vec<Vec<f64>>, BadInput> {
     let items = parse_lines::<QueryLine>(text, file, Some(dim), |q| &q.state)?;
     Ok(items.into_iter().map(|(_, q)| q.state).collect())
 }
@@ -170,10 +170,10 @@ pub fn num_actions(
     demos: &Demos,
     requested: Option<usize>,
     file: &str,
-) -> Result<usize, UsageError> {
+) -> Result<usize, BadInput> {
     let Some(n) = requested else {
         if let Some(i) = demos.actions.iter().position(|&a| a >= MAX_ACTIONS) {
-            return Err(UsageError(format!(
+            return Err(BadInput(format!(
                 "{file}:{}: action {} is too large: a demonstration model handles at most \
                  {MAX_ACTIONS} actions (0 to {})",
                 demos.lines[i],
@@ -184,15 +184,15 @@ pub fn num_actions(
         return Ok(demos.actions.iter().max().map_or(2, |&m| (m + 1).max(2)));
     };
     if n == 0 {
-        return Err(UsageError("--actions must be at least 1".to_string()));
+        return Err(BadInput("--actions must be at least 1".to_string()));
     }
     if n > MAX_ACTIONS {
-        return Err(UsageError(format!(
+        return Err(BadInput(format!(
             "--actions {n}: a demonstration model handles at most {MAX_ACTIONS} actions"
         )));
     }
     if let Some(i) = demos.actions.iter().position(|&a| a >= n) {
-        return Err(UsageError(format!(
+        return Err(BadInput(format!(
             "{file}:{}: action {} is outside the action space {{0..{n}}} set by --actions",
             demos.lines[i], demos.actions[i]
         )));
@@ -200,9 +200,9 @@ pub fn num_actions(
     Ok(n)
 }
 
-fn read(path: &Path, what: &str) -> Result<String, UsageError> {
+fn read(path: &Path, what: &str) -> Result<String, BadInput> {
     std::fs::read_to_string(path).map_err(|e| {
-        UsageError(format!(
+        BadInput(format!(
             "cannot read the {what} file {}: {e}",
             path.display()
         ))
@@ -232,7 +232,7 @@ pub fn run(args: DemoModelArgs) -> anyhow::Result<()> {
             e @ (DemoModelError::Unsupported(_)
             | DemoModelError::TooManyActions(_)
             | DemoModelError::TooManyDemos(_)),
-        ) => return Err(UsageError(format!("{kind} on {demos_name}: {e}")).into()),
+        ) => return Err(BadInput(format!("{kind} on {demos_name}: {e}")).into()),
         Err(e) => return Err(e).with_context(|| format!("fitting {kind} on {demos_name}")),
     };
 
@@ -358,7 +358,7 @@ mod tests {
             actions: None,
         };
         let e = run(args).unwrap_err();
-        let usage = e.downcast_ref::<UsageError>().expect("a UsageError");
+        let usage = e.downcast_ref::<BadInput>().expect("a BadInput");
         assert!(
             usage.0.contains("demos file /nonexistent/alfd-demos.jsonl"),
             "{usage}"

@@ -3,7 +3,7 @@
 //! show a CliffWalk map.
 //!
 //! Bad input (a malformed state or action list, an unknown env name, an unreadable or malformed
-//! map, an out-of-range parameter) is returned as a [`UsageError`], which `main` maps to exit
+//! map, an out-of-range parameter) is returned as a [`BadInput`], which `main` maps to exit
 //! code 2 (see [`crate::usage::exit_code`]).
 
 use std::io::Write;
@@ -19,7 +19,7 @@ use anyhow::Context;
 #[cfg(test)]
 use crate::usage::is_usage_error;
 use crate::usage::usage;
-pub use crate::usage::UsageError;
+pub use alfd_harness::BadInput;
 
 /// Arguments of `alfd env`.
 #[derive(Debug, clap::Args)]
@@ -108,10 +108,10 @@ fn check_env(name: &str, supported: &[EnvName], subcommand: &str) -> anyhow::Res
 
 /// Parses `--initial-state`: exactly `N` finite comma-separated numbers, named `names`
 /// (`X,XDOT,THETA,THETADOT`) in the error.
-pub fn parse_state<const N: usize>(text: &str, names: &str) -> Result<[f64; N], UsageError> {
+pub fn parse_state<const N: usize>(text: &str, names: &str) -> Result<[f64; N], BadInput> {
     let fields: Vec<&str> = text.split(',').map(str::trim).collect();
     if fields.len() != N {
-        return Err(UsageError(format!(
+        return Err(BadInput(format!(
             "--initial-state: expected {N} comma-separated numbers {names}, got {} value(s) in {text:?}",
             fields.len()
         )));
@@ -119,13 +119,13 @@ pub fn parse_state<const N: usize>(text: &str, names: &str) -> Result<[f64; N], 
     let mut state = [0.0; N];
     for (i, (slot, field)) in state.iter_mut().zip(&fields).enumerate() {
         let value: f64 = field.parse().map_err(|_| {
-            UsageError(format!(
+            BadInput(format!(
                 "--initial-state: value {} ({field:?}) is not a number",
                 i + 1
             ))
         })?;
         if !value.is_finite() {
-            return Err(UsageError(format!(
+            return Err(BadInput(format!(
                 "--initial-state: value {} ({field:?}) is not finite",
                 i + 1
             )));
@@ -136,9 +136,9 @@ pub fn parse_state<const N: usize>(text: &str, names: &str) -> Result<[f64; N], 
 }
 
 /// Parses `--actions`: a non-empty comma-separated list of actions in `0..num_actions`.
-pub fn parse_actions(text: &str, num_actions: usize) -> Result<Vec<usize>, UsageError> {
+pub fn parse_actions(text: &str, num_actions: usize) -> Result<Vec<usize>, BadInput> {
     if text.trim().is_empty() {
-        return Err(UsageError(
+        return Err(BadInput(
             "--actions: expected at least one action".to_string(),
         ));
     }
@@ -147,7 +147,7 @@ pub fn parse_actions(text: &str, num_actions: usize) -> Result<Vec<usize>, Usage
         .enumerate()
         .map(|(i, field)| match field.parse::<usize>() {
             Ok(a) if a < num_actions => Ok(a),
-            _ => Err(UsageError(format!(
+            _ => Err(BadInput(format!(
                 "--actions: action {} ({field:?}) must be an integer from 0 to {}",
                 i + 1,
                 num_actions - 1

@@ -86,7 +86,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let mut builtin = match adapter {
         Some(_) => None,
         None if human => None,
-        None => Some(registry::for_env(cfg.env.name, &name).map_err(|e| BadInput(e.to_string()))?),
+        None => Some(registry::for_env(cfg.env.name, &name)?),
     };
     let demos_path = args.process.run_dir.join("demos.jsonl");
     // Read the demonstrations now, to refuse a bad file before the run depends on us; they are

@@ -6,6 +6,7 @@ use alfd_common::agent::{BalancingController, Demonstrator, NetworkDemonstrator,
 use alfd_common::config::EnvName;
 use alfd_common::env::cliffwalk::{value_iteration, CliffWalk};
 use alfd_common::nn::Mlp;
+use alfd_harness::BadInput;
 use serde::{Deserialize, Serialize};
 
 use crate::scripted::Scripted;
@@ -36,7 +37,8 @@ pub struct ExpertEntry {
     pub provenance: Option<String>,
 }
 
-/// An expert that cannot be loaded.
+/// An expert that cannot be loaded. The public functions return it as an
+/// [`alfd_harness::BadInput`] (exit code 2: the name is the user's to fix).
 #[derive(Debug, thiserror::Error)]
 pub enum RegistryError {
     #[error("unknown expert `{name}` for {env}; known: {known}")]
@@ -56,6 +58,12 @@ pub enum RegistryError {
     NotVector { name: String, env: String },
     #[error("expert `{name}` is corrupt: {reason}")]
     Corrupt { name: String, reason: String },
+}
+
+impl From<RegistryError> for BadInput {
+    fn from(e: RegistryError) -> Self {
+        BadInput(e.to_string())
+    }
 }
 
 const MANIFEST: &str = include_str!("../demonstrators/manifest.json");
@@ -161,7 +169,11 @@ pub fn external_policy(name: &str) -> Option<&str> {
 
 /// Checks an external demonstrator's name: `python:MODULE:FUNCTION` or `sb3:ALGO:PATH`, each
 /// part non-empty (whether it loads is the adapter's to say, at start-up).
-pub fn check_external(name: &str) -> Result<(), RegistryError> {
+pub fn check_external(name: &str) -> Result<(), BadInput> {
+    check_external_name(name).map_err(BadInput::from)
+}
+
+fn check_external_name(name: &str) -> Result<(), RegistryError> {
     let mut parts = name.splitn(3, ':');
     let (kind, a, b) = (parts.next(), parts.next(), parts.next());
     let ok = matches!(kind, Some("python") | Some("sb3"))
@@ -178,7 +190,7 @@ pub fn check_external(name: &str) -> Result<(), RegistryError> {
 }
 
 /// A CartPole demonstrator by name (the same as `for_env(EnvName::Cartpole, name)`).
-pub fn cartpole(name: &str) -> Result<Box<dyn Demonstrator<[f32]> + Send>, RegistryError> {
+pub fn cartpole(name: &str) -> Result<Box<dyn Demonstrator<[f32]> + Send>, BadInput> {
     for_env(EnvName::Cartpole, name)
 }
 
@@ -186,6 +198,13 @@ pub fn cartpole(name: &str) -> Result<Box<dyn Demonstrator<[f32]> + Send>, Regis
 /// Acrobot). A name that is not one of `env`'s experts is refused with the list of those that
 /// are; CliffWalk's demonstrators come from [`cliffwalk`] (they need the map).
 pub fn for_env(
+    env: EnvName,
+    name: &str,
+) -> Result<Box<dyn Demonstrator<[f32]> + Send>, BadInput> {
+    vector_demonstrator(env, name).map_err(BadInput::from)
+}
+
+fn vector_demonstrator(
     env: EnvName,
     name: &str,
 ) -> Result<Box<dyn Demonstrator<[f32]> + Send>, RegistryError> {
@@ -226,6 +245,13 @@ pub fn for_env(
 
 /// A CliffWalk demonstrator by name, for `env` (the optimal one is computed for its map).
 pub fn cliffwalk(
+    name: &str,
+    env: &CliffWalk,
+) -> Result<Box<dyn Demonstrator<usize> + Send>, BadInput> {
+    cliffwalk_demonstrator(name, env).map_err(BadInput::from)
+}
+
+fn cliffwalk_demonstrator(
     name: &str,
     env: &CliffWalk,
 ) -> Result<Box<dyn Demonstrator<usize> + Send>, RegistryError> {

@@ -13,7 +13,9 @@ mod session;
 mod startup;
 
 pub use fs::{load_checkpoint, save_checkpoint, test_dir, write_atomically};
-pub use process::{check_wire_limits, exit_code, main, read_text, BadInput, ProcessArgs, Setup};
+pub use process::{
+    bad_input, check_wire_limits, exit_code, main, read_text, BadInput, ProcessArgs, Setup,
+};
 pub use runtime::{
     RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY, DEFAULT_HUMAN_QUERY_TIMEOUT_MS,
     HUMAN_EXPERT, RUNTIME_FILE,

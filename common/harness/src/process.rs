@@ -14,10 +14,16 @@ use anyhow::Context as _;
 use crate::python::{Adapter, AdapterEnv};
 use crate::runtime::{RuntimeConfig, RUNTIME_FILE};
 
-/// Bad input (a config, a file of the run directory, a flag): the process exits with code 2.
-#[derive(Debug, thiserror::Error)]
+/// Bad input (a config, a file, a flag, a name), already phrased for the user: every binary
+/// exits with code 2 on it (see [`exit_code`]), and 1 on anything else.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{0}")]
 pub struct BadInput(pub String);
+
+/// Shorthand for `anyhow::Error::new(BadInput(msg))`: `Err(bad_input(format!(..)))?`.
+pub fn bad_input(msg: impl Into<String>) -> anyhow::Error {
+    anyhow::Error::new(BadInput(msg.into()))
+}
 
 /// The arguments every process takes.
 #[derive(Debug, Clone, clap::Args)]
@@ -163,9 +169,17 @@ pub fn check_wire_limits(obs_dim: usize, heads: usize) -> Result<(), BadInput> {
     Ok(())
 }
 
-/// The exit code for an error: 2 when bad input caused it, 1 otherwise.
+/// The exit code of every binary for an error: 2 when the user's input caused it ([`BadInput`],
+/// or the core's errors about a config, a map or CliffWalk's parameters anywhere in its chain),
+/// 1 otherwise.
 pub fn exit_code(err: &anyhow::Error) -> i32 {
-    if err.chain().any(|e| e.is::<BadInput>()) {
+    let user_fault = |e: &(dyn std::error::Error + 'static)| {
+        e.is::<BadInput>()
+            || e.is::<alfd_common::config::ConfigError>()
+            || e.is::<alfd_common::env::cliffwalk::MapError>()
+            || e.is::<alfd_common::env::cliffwalk::CliffWalkError>()
+    };
+    if err.chain().any(user_fault) {
         2
     } else {
         1
