@@ -1,6 +1,8 @@
 //! Kernel Ridge Regression on one-hot actions (paper section 3.4), as scikit-learn's
 //! `KernelRidge(alpha=0.1, kernel='rbf', gamma=0.1)`: dual coefficients `(K + alpha I)^-1 Y` by
-//! Cholesky, outputs `f(x) = k(x, X) dual_coef`.
+//! Cholesky, outputs `f(x) = k(x, X) dual_coef`. Up to [`BLOCKED_FROM`] demonstrations the
+//! factorisation is nalgebra's; from there the blocked one of `cholesky.rs`, several times faster
+//! on large matrices (BENCHMARKS.md) and equal to it within rounding.
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -9,6 +11,10 @@ use super::{rbf, validate, DemoModelError};
 
 /// The ridge penalty added to the kernel's diagonal.
 pub const ALPHA: f64 = 0.1;
+
+/// From this many demonstrations on, the kernel matrix is factored by the blocked Cholesky
+/// (below it, by nalgebra's, whose numbers every run with fewer demonstrations keeps).
+pub const BLOCKED_FROM: usize = 512;
 
 /// Below this total of clipped outputs (more than two actions), the outputs are taken to have
 /// vanished (the state is far from every demonstration) and p(a|s) is uniform.
@@ -50,10 +56,7 @@ impl KernelRidge {
         for (i, &a) in actions.iter().enumerate() {
             y[(i, a)] = 1.0;
         }
-        let cholesky = k.cholesky().ok_or_else(|| {
-            DemoModelError::Solver("K + alpha I is not positive definite".to_string())
-        })?;
-        let coef = cholesky.solve(&y);
+        let coef = solve_spd(k, y)?;
         let mut dual_coef = Vec::with_capacity(n * num_actions);
         for i in 0..n {
             for a in 0..num_actions {
@@ -122,6 +125,23 @@ impl KernelRidge {
     }
 }
 
+/// `k⁻¹ y` for the symmetric positive-definite kernel matrix `k`, by Cholesky.
+fn solve_spd(k: DMatrix<f64>, y: DMatrix<f64>) -> Result<DMatrix<f64>, DemoModelError> {
+    let not_pd = || DemoModelError::Solver("K + alpha I is not positive definite".to_string());
+    let n = k.nrows();
+    if n < BLOCKED_FROM {
+        return Ok(k.cholesky().ok_or_else(not_pd)?.solve(&y));
+    }
+    let cols = y.ncols();
+    let mut l: Vec<f64> = k.data.into();
+    if !super::cholesky::factor(&mut l, n) {
+        return Err(not_pd());
+    }
+    let mut x: Vec<f64> = y.data.into();
+    super::cholesky::solve(&l, n, &mut x);
+    Ok(DMatrix::from_vec(n, cols, x))
+}
+
 /// p(a|s) from the regression outputs, as described at [`KernelRidge::probs`].
 pub fn probs_from_outputs(f: &[f64]) -> Vec<f64> {
     match f.len() {
@@ -187,6 +207,27 @@ mod tests {
                 "state {s:?} action {a}: {:?}",
                 m.probs(s)
             );
+        }
+    }
+
+    #[test]
+    fn the_blocked_solve_of_many_demonstrations_matches_nalgebra_s() {
+        let n = BLOCKED_FROM + 40;
+        let states: Vec<[f64; 2]> = (0..n)
+            .map(|i| [((i * 7919) % 997) as f64 / 50.0, ((i * 104_729) % 991) as f64 / 50.0])
+            .collect();
+        let actions: Vec<usize> = (0..n).map(|i| i % 3).collect();
+        let m = KernelRidge::fit(&states, &actions, 3).unwrap();
+        let k = DMatrix::from_fn(n, n, |i, j| {
+            rbf(&states[i], &states[j]) + if i == j { ALPHA } else { 0.0 }
+        });
+        let y = DMatrix::from_fn(n, 3, |i, a| f64::from(u8::from(actions[i] == a)));
+        let expected = k.cholesky().unwrap().solve(&y);
+        for i in 0..n {
+            for a in 0..3 {
+                let got = m.dual_coef[i * 3 + a];
+                assert!((got - expected[(i, a)]).abs() < 1e-8, "coef {i},{a}");
+            }
         }
     }
 

@@ -9,6 +9,7 @@
 //! Both models use the RBF kernel `k(x, y) = exp(-gamma |x - y|^2)` with `gamma = 0.1`, as the
 //! paper (and the scikit-learn reference `kernel_models.json`) does.
 
+mod cholesky;
 pub mod krr;
 pub mod smo;
 pub mod svm;
