@@ -62,8 +62,15 @@ fn start_run(config: &Path, run_dir: &Path, actors: usize) -> (Background, Strin
     }
 }
 
-/// One HTTP/1.1 request; the status and the body.
+/// One HTTP/1.1 request to the page at `addr` (`HOST:PORT/TOKEN`, the page's address without
+/// its scheme), `path` under its token; the status and the body.
 fn http(addr: &str, method: &str, path: &str, body: Option<&str>) -> (u16, String) {
+    let (host, token) = addr.split_once('/').expect("the page's address has its token");
+    raw_http(host, method, &format!("/{token}{path}"), body)
+}
+
+/// One HTTP/1.1 request to `host` with `path` as it is.
+fn raw_http(addr: &str, method: &str, path: &str, body: Option<&str>) -> (u16, String) {
     let mut s = TcpStream::connect(addr).unwrap();
     let body = body.unwrap_or("");
     write!(
@@ -104,10 +111,11 @@ fn until(addr: &str, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
 
 /// The first server-sent event of `GET /events`, parsed.
 fn first_event(addr: &str) -> Value {
-    let mut s = TcpStream::connect(addr).unwrap();
+    let (host, token) = addr.split_once('/').expect("the page's address has its token");
+    let mut s = TcpStream::connect(host).unwrap();
     write!(
         s,
-        "GET /events HTTP/1.1\r\nHost: {addr}\r\nAccept: text/event-stream\r\n\r\n"
+        "GET /{token}/events HTTP/1.1\r\nHost: {host}\r\nAccept: text/event-stream\r\n\r\n"
     )
     .unwrap();
     let mut lines = BufReader::new(s).lines();
@@ -133,6 +141,20 @@ fn a_person_answers_and_declines_over_http_and_only_answers_spend_budget() {
     // The page itself, and its live state as events.
     let (status, page) = http(&addr, "GET", "/", None);
     assert!(status == 200 && page.contains("EventSource"), "{page}");
+    // Only at its token: without it, or with another, every path is refused.
+    let (host, token) = addr.split_once('/').unwrap();
+    assert_eq!(token.len(), 32, "{addr}");
+    for path in ["/", "/state", "/events", "/0123456789abcdef0123456789abcdef/state"] {
+        assert_eq!(raw_http(host, "GET", path, None).0, 403, "GET {path}");
+    }
+    assert_eq!(
+        raw_http(host, "POST", "/answer", Some("{\"id\":0,\"action\":0}")).0,
+        403
+    );
+    // The address with its token is readable by its owner only.
+    use std::os::unix::fs::PermissionsExt as _;
+    let mode = std::fs::metadata(run_dir.join("human-page-1.txt")).unwrap().permissions().mode();
+    assert_eq!(mode & 0o777, 0o600);
     let event = first_event(&addr);
     assert_eq!(event["env"], "cartpole");
     assert_eq!(

@@ -133,8 +133,8 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         )
         .map_err(|e| BadInput(e.to_string()))?;
         let url = page.url();
-        info!(url = %url, "the human expert's page is served");
-        alfd_harness::write_atomically(
+        info!(addr = %page.addr(), "the human expert's page is served (its address with the token: the run directory's human-page file)");
+        alfd_harness::write_private(
             &args
                 .process
                 .run_dir

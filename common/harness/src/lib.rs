@@ -12,7 +12,7 @@ mod runtime;
 mod session;
 mod startup;
 
-pub use fs::{load_checkpoint, save_checkpoint, test_dir, write_atomically};
+pub use fs::{load_checkpoint, save_checkpoint, test_dir, write_atomically, write_private};
 pub use process::{
     bad_input, check_wire_limits, exit_code, main, read_text, BadInput, ProcessArgs, Setup,
 };

@@ -6,6 +6,10 @@
 //! `POST /decline {"id"}` send the person's decision to the expert process, which answers the
 //! actor (see `crate::process`: budget, `demos.jsonl` and the model are handled there, as for
 //! every other expert).
+//!
+//! The page answers only its person: every path lives under a secret token made when the page
+//! starts (`http://127.0.0.1:PORT/TOKEN/`, 128 random bits), which the expert process writes to
+//! the run directory in a file only its owner can read; any other request gets 403.
 
 use std::convert::Infallible;
 use std::net::{Ipv4Addr, SocketAddr, TcpListener};
@@ -94,6 +98,8 @@ struct Shared {
 /// The page, served until the process exits.
 pub struct HumanPage {
     addr: SocketAddr,
+    /// The secret path segment every request must start with.
+    token: String,
     shared: Arc<Shared>,
     decisions: mpsc::Receiver<Decision>,
 }
@@ -141,12 +147,21 @@ impl HumanPage {
             .enable_all()
             .build()
             .map_err(HumanError::Start)?;
+        let token = new_token();
+        let at = |path: &str| format!("/{token}/{path}");
         let app = Router::new()
-            .route("/", get(|| async { Html(PAGE) }))
-            .route("/state", get(current))
-            .route("/events", get(events))
-            .route("/answer", post(answer))
-            .route("/decline", post(decline))
+            .route(&at(""), get(|| async { Html(PAGE) }))
+            .route(&at("state"), get(current))
+            .route(&at("events"), get(events))
+            .route(&at("answer"), post(answer))
+            .route(&at("decline"), post(decline))
+            .fallback(|| async {
+                refuse(
+                    StatusCode::FORBIDDEN,
+                    "this page answers only at the address in the run directory's human-page file"
+                        .to_owned(),
+                )
+            })
             .with_state(shared.clone());
         std::thread::Builder::new()
             .name("human-page".into())
@@ -165,14 +180,20 @@ impl HumanPage {
             .map_err(HumanError::Start)?;
         Ok(Self {
             addr,
+            token,
             shared,
             decisions: rx,
         })
     }
 
-    /// The page's address, `http://127.0.0.1:PORT/`.
+    /// The page's address with its secret token, `http://127.0.0.1:PORT/TOKEN/`.
     pub fn url(&self) -> String {
-        format!("http://{}/", self.addr)
+        format!("http://{}/{}/", self.addr, self.token)
+    }
+
+    /// Where the page listens, `127.0.0.1:PORT` (without the token: safe to log).
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
     }
 
     /// Changes what the page shows (sent to every open page if anything changed).
@@ -203,6 +224,12 @@ impl HumanPage {
     pub fn decisions(&self) -> Vec<Decision> {
         self.decisions.try_iter().collect()
     }
+}
+
+/// 128 random bits from the operating system's generator, as 32 hexadecimal digits.
+fn new_token() -> String {
+    use rand::Rng as _;
+    format!("{:032x}", rand::rng().random::<u128>())
 }
 
 async fn current(State(shared): State<Arc<Shared>>) -> Json<PageState> {
