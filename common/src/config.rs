@@ -6,6 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
+mod env;
 mod normalize;
 mod query;
 pub mod reference;
@@ -124,137 +125,6 @@ impl ExperimentConfig {
     /// The step limit, if any.
     pub fn step_limit(&self) -> Option<u64> {
         (self.steps > 0).then_some(self.steps)
-    }
-}
-
-/// Which environment.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum EnvName {
-    /// CartPole-1000: Gymnasium's CartPole-v1 dynamics, episodes of up to 1,000 steps (the
-    /// paper's).
-    Cartpole,
-    /// The paper's tabular grid with a cliff (section 5.1.1), moves that succeed with
-    /// `env.p_success`.
-    Cliffwalk,
-    /// MountainCar-v0 (Gymnasium's dynamics; sparse reward, 200 steps).
-    Mountaincar,
-    /// Acrobot-v1 (Gymnasium's dynamics; sparse reward, 500 steps).
-    Acrobot,
-    /// Any Gymnasium environment (`env.id`), served by a Python adapter in another process.
-    Gymnasium,
-}
-
-impl EnvName {
-    /// Every environment, in the order a message lists them.
-    pub const ALL: [EnvName; 5] = [
-        EnvName::Cartpole,
-        EnvName::Cliffwalk,
-        EnvName::Mountaincar,
-        EnvName::Acrobot,
-        EnvName::Gymnasium,
-    ];
-
-    /// The name a config uses (`cartpole`, `cliffwalk`, `mountaincar`, `acrobot`, `gymnasium`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            EnvName::Cartpole => "cartpole",
-            EnvName::Cliffwalk => "cliffwalk",
-            EnvName::Mountaincar => "mountaincar",
-            EnvName::Acrobot => "acrobot",
-            EnvName::Gymnasium => "gymnasium",
-        }
-    }
-
-    /// The step limit of a config that sets none: the paper's 1000 for CartPole, CliffWalk's
-    /// 500, and `gym.make`'s for MountainCar-v0 (200) and Acrobot-v1 (500); 0 for Gymnasium,
-    /// meaning the registration's own (the adapter reports it).
-    pub fn default_max_episode_steps(self) -> usize {
-        match self {
-            EnvName::Cartpole => 1000,
-            EnvName::Cliffwalk => 500,
-            EnvName::Mountaincar => 200,
-            EnvName::Acrobot => 500,
-            EnvName::Gymnasium => 0,
-        }
-    }
-
-    /// The range `[r_min, r_max]` of one step's reward (CartPole 1, MountainCar −1, Acrobot −1 or
-    /// 0); `None` where it is not known here (CliffWalk's maps, Gymnasium's environments).
-    pub fn reward_range(self) -> Option<(f64, f64)> {
-        match self {
-            EnvName::Cartpole => Some((1.0, 1.0)),
-            EnvName::Mountaincar => Some((-1.0, -1.0)),
-            EnvName::Acrobot => Some((-1.0, 0.0)),
-            EnvName::Cliffwalk | EnvName::Gymnasium => None,
-        }
-    }
-
-    /// Whether the environment runs in another process (a Gymnasium adapter).
-    pub fn is_remote(self) -> bool {
-        self == EnvName::Gymnasium
-    }
-
-    /// Whether the states are ids (the tabular agents' environments) rather than vectors.
-    pub fn is_tabular(self) -> bool {
-        self == EnvName::Cliffwalk
-    }
-}
-
-impl std::fmt::Display for EnvName {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl std::str::FromStr for EnvName {
-    type Err = String;
-
-    /// A config name; the error lists the known ones.
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        Self::ALL
-            .into_iter()
-            .find(|e| e.as_str() == s)
-            .ok_or_else(|| {
-                let known: Vec<&str> = Self::ALL.iter().map(|e| e.as_str()).collect();
-                format!("unknown environment `{s}` (known: {})", known.join(", "))
-            })
-    }
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct EnvConfig {
-    /// The environment: CartPole-1000, CliffWalk, MountainCar-v0, Acrobot-v1 (Gymnasium's
-    /// dynamics, reimplemented), or any Gymnasium environment.
-    pub name: EnvName,
-    /// Step limit after which an episode is truncated (by default CartPole 1000, CliffWalk 500,
-    /// MountainCar 200, Acrobot 500, a Gymnasium environment its registration's).
-    #[serde(default)]
-    pub max_episode_steps: Option<usize>,
-    /// Gymnasium: the environment id given to `gymnasium.make`, e.g. `Acrobot-v1`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub id: Option<String>,
-    /// Gymnasium: keyword arguments of `gymnasium.make` (numbers, strings, booleans).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schemars(with = "Option<std::collections::BTreeMap<String, String>>")]
-    pub kwargs: Option<toml::Table>,
-    /// CliffWalk: probability that the chosen move happens, in (0, 1].
-    #[serde(default = "default_p_success")]
-    pub p_success: f64,
-    /// CliffWalk: a map file of `S`, `G`, `X`, `.`; the built-in map when absent.
-    #[serde(default)]
-    pub map: Option<String>,
-}
-
-fn default_p_success() -> f64 {
-    0.9
-}
-
-impl EnvConfig {
-    pub fn max_episode_steps(&self) -> usize {
-        self.max_episode_steps
-            .unwrap_or(self.name.default_max_episode_steps())
     }
 }
 
@@ -539,6 +409,7 @@ impl AgentConfig {
 }
 
 pub use crate::query::RuleKind;
+pub use env::{EnvConfig, EnvName};
 pub use query::QueryConfig;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
