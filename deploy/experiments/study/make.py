@@ -35,7 +35,7 @@ TASKS = {
 
 def methods(task, budgets, rules, burst=BURST):
     _, preset, _, _, _, p_r, _ = TASKS[task]
-    out = [("never", "never (B = 0)", ["query.rule=never", "budget.total=0"])]
+    out = [("never", "never (B = 0)", ["query.rule=never", "budget.total=0", "query.burst=10"])]
     for b in budgets:
         for rule in rules:
             s = [f"query.rule={rule}", f"budget.total={b}"]
@@ -43,8 +43,9 @@ def methods(task, budgets, rules, burst=BURST):
                 s.append(f"query.schedule={{out}}/runs/js-b{b}/{{other_seed}}/demos.jsonl")
             if rule == "uniform":
                 s.append(f"query.probability={(100 - p_r) / 100}")
-            if rule == "js-burst":
-                s.append(f"query.burst={burst}")
+            # Every method names its burst length: js-burst's, and the default 10 for the rules
+            # that do not read it, whatever the preset says.
+            s.append(f"query.burst={burst if rule == 'js-burst' else 10}")
             if rule == "js-paced":
                 s.append(f"query.gap={round(100 / (100 - p_r))}")
             out.append((f"{rule}-b{b}", f"{rule}, B = {b}", s))
@@ -72,8 +73,8 @@ def write(path, title, task, seeds, preset, ms, comment):
     path.write_text("\n".join(lines) + "\n")
 
 
-# CartPole runs take six times as long as the others: two budgets only.
-TASK_BUDGETS = {"cartpole": [25, 100]}
+# Every task at every budget.
+TASK_BUDGETS = {}
 # The headline comparisons: one budget, 30 seeds (0-29).
 HEADLINE = {"mountaincar": 10, "acrobot": 10}
 
