@@ -62,6 +62,9 @@ const PALETTE: [RGBColor; 10] = [
 ];
 
 /// The plot as an SVG document.
+/// Series of at most this many points get a marker at each.
+const MARKED_POINTS: usize = 12;
+
 pub fn svg(plot: &Plot) -> anyhow::Result<String> {
     let mut out = String::new();
     {
@@ -154,7 +157,8 @@ where
                 .filter(|((_, l), h)| l.is_finite() && h.is_finite())
                 .map(|((&x, &l), &h)| (x, clamp(l), clamp(h)))
                 .collect();
-        if !edges.is_empty() {
+        // A band needs two x values (one point has no area: nothing to draw).
+        if edges.len() >= 2 {
             let band: Vec<(f64, f64)> = edges
                 .iter()
                 .map(|&(x, _, h)| (x, h))
@@ -170,9 +174,19 @@ where
     }
     for (i, s) in plot.series.iter().enumerate() {
         let color = PALETTE[i % PALETTE.len()];
-        let points = s.x.iter().zip(&s.y).map(|(&x, &y)| (x, clamp(y)));
-        chart
-            .draw_series(LineSeries::new(points, color.stroke_width(2)))
+        let points: Vec<(f64, f64)> = s.x.iter().zip(&s.y).map(|(&x, &y)| (x, clamp(y))).collect();
+        // Few points (a plot against B): each marked; one point: a marker alone, no line.
+        if (2..=MARKED_POINTS).contains(&points.len()) {
+            chart
+                .draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())))
+                .map_err(err)?;
+        }
+        let drawn = if points.len() >= 2 {
+            chart.draw_series(LineSeries::new(points, color.stroke_width(2)))
+        } else {
+            chart.draw_series(points.into_iter().map(|p| Circle::new(p, 4, color.filled())))
+        };
+        drawn
             .map_err(err)?
             // The legend box is sized from an estimate of the text's width that runs short for
             // common fonts; trailing spaces (not rendered) widen it.
