@@ -82,7 +82,7 @@ pub struct EvalConfig {
     /// Evaluate after every this many training episodes (0: never).
     #[serde(default)]
     pub every: u32,
-    /// Greedy episodes per evaluation.
+    /// Greedy episodes per evaluation (at least 1 when `every` > 0).
     #[serde(default = "default_eval_episodes")]
     pub episodes: u32,
 }
@@ -167,16 +167,19 @@ pub enum Exploration {
 pub struct AgentConfig {
     /// The learning algorithm.
     pub kind: AgentKind,
-    /// K, the number of heads (default 1 for qlearning/sarsa/dqn, 2 for bootstrapped-q/bdqn).
+    /// K, the number of heads, 1 to 8 (default 1 for qlearning/sarsa/dqn, 2 for
+    /// bootstrapped-q/bdqn).
     #[serde(default)]
     pub heads: Option<usize>,
     /// Discount factor γ, in [0, 1] (below 1 for the tabular agents).
     #[serde(default = "default_gamma")]
     pub gamma: f64,
-    /// Temperature of the softmax policies of eq. 2 (JS divergence, shaping, softmax exploration).
+    /// Temperature of the softmax policies of eq. 2 (JS divergence, shaping, softmax exploration);
+    /// > 0.
     #[serde(default = "default_temperature")]
     pub temperature: f64,
-    /// Step size: α of the tabular update (default 0.1), or Adam's learning rate (default 1e-3).
+    /// Step size, > 0: α of the tabular update (default 0.1), or Adam's learning rate (default
+    /// 1e-3).
     #[serde(default)]
     pub learning_rate: Option<f64>,
     /// Tabular: the step size of the n-th update of a state-action pair is
@@ -188,47 +191,49 @@ pub struct AgentConfig {
     /// greedy-head for the bootstrapped agents).
     #[serde(default)]
     pub exploration: Option<Exploration>,
-    /// ε at the first step.
+    /// ε at the first step, in [0, 1].
     #[serde(default = "default_epsilon_start")]
     pub epsilon_start: f64,
-    /// ε reached asymptotically.
+    /// ε reached asymptotically, in [0, 1].
     #[serde(default = "default_epsilon_end")]
     pub epsilon_end: f64,
-    /// Time constant of the exponential decay of ε, in environment steps.
+    /// Time constant of the exponential decay of ε, in environment steps (> 0).
     #[serde(default = "default_epsilon_decay_steps")]
     pub epsilon_decay_steps: f64,
-    /// Probability that a transition trains a given head (the Bernoulli bootstrap mask).
+    /// Probability that a transition trains a given head (the Bernoulli bootstrap mask), in
+    /// (0, 1].
     #[serde(default = "default_bootstrap_probability")]
     pub bootstrap_probability: f64,
-    /// Neural: replay buffer capacity (at most [`MAX_REPLAY_CAPACITY`]).
+    /// Neural: replay buffer capacity (at least `batch_size`, at most [`MAX_REPLAY_CAPACITY`]).
     #[serde(default = "default_replay_capacity")]
     pub replay_capacity: usize,
-    /// Neural: mini-batch size (at most [`MAX_BATCH_SIZE`] and the replay capacity).
+    /// Neural: mini-batch size (1 to [`MAX_BATCH_SIZE`], and at most the replay capacity).
     #[serde(default = "default_batch_size")]
     pub batch_size: usize,
-    /// Neural: the target networks are copied from the online one every this many updates.
+    /// Neural: the target networks are copied from the online one every this many updates (≥ 1).
     #[serde(default = "default_target_update_every")]
     pub target_update_every: u64,
-    /// Neural: updates per environment step (the replay ratio U).
+    /// Neural: updates per environment step (the replay ratio U; ≥ 1).
     #[serde(default = "default_updates_per_step")]
     pub updates_per_step: u32,
-    /// Neural: width of the two hidden layers (at most [`MAX_HIDDEN`]).
+    /// Neural: width of the two hidden layers (1 to [`MAX_HIDDEN`]).
     #[serde(default = "default_hidden")]
     pub hidden: usize,
     /// Neural: the loss on TD errors, `huber` (SmoothL1, the paper's) or `mse`.
     #[serde(default)]
     pub loss: LossKind,
-    /// Neural: δ of the Huber loss (PyTorch's `HuberLoss(delta)`; 1 is SmoothL1, the paper's).
+    /// Neural: δ of the Huber loss, > 0 (PyTorch's `HuberLoss(delta)`; 1 is SmoothL1, the
+    /// paper's).
     #[serde(default = "default_huber_delta")]
     pub huber_delta: f64,
     /// Neural: Double DQN targets (the online head picks the next action, the target evaluates).
     #[serde(default)]
     pub double_dqn: bool,
     /// Neural: every `target_update_every` updates, `target <- tau * online + (1 - tau) *
-    /// target` (Polyak); 1 copies (the paper's hard update).
+    /// target` (Polyak), τ in (0, 1]; 1 copies (the paper's hard update).
     #[serde(default = "default_tau")]
     pub tau: f64,
-    /// Neural: the gradient is scaled to at most this global L2 norm (absent: no clipping).
+    /// Neural: the gradient is scaled to at most this global L2 norm, > 0 (absent: no clipping).
     #[serde(default)]
     pub max_grad_norm: Option<f64>,
     /// Neural: `[lo, hi]` every TD target is clamped to, the range of the true values (CartPole-1000
@@ -238,14 +243,14 @@ pub struct AgentConfig {
     /// Neural: no update before this many transitions were stored (nor before a full batch).
     #[serde(default)]
     pub learning_starts: u64,
-    /// Neural: the fraction of every batch drawn from the demonstrations in the replay buffer
-    /// (0: uniform, the paper's).
+    /// Neural: the fraction of every batch drawn from the demonstrations in the replay buffer,
+    /// in [0, 1] (0: uniform, the paper's).
     #[serde(default)]
     pub demo_fraction: f64,
-    /// Neural: λ_E of DQfD's large-margin loss on demonstrated transitions (0: off).
+    /// Neural: λ_E of DQfD's large-margin loss on demonstrated transitions, ≥ 0 (0: off).
     #[serde(default)]
     pub margin_loss_weight: f64,
-    /// Neural: the margin `l` of that loss (Hester et al. use 0.8).
+    /// Neural: the margin `l` of that loss, ≥ 0 (Hester et al. use 0.8).
     #[serde(default = "default_margin")]
     pub margin: f64,
     /// Neural: Adam's learning rate goes linearly from `learning_rate` to this over the first
@@ -258,7 +263,8 @@ pub struct AgentConfig {
     pub learning_rate_anneal_steps: u64,
     /// Neural: n-step returns (Rainbow's, and DQfD's n-step loss): a stored transition carries
     /// the discounted sum of up to `n_step` rewards and the state after them, and its target
-    /// bootstraps with `gamma^n`; fewer at an episode's end (1: one-step TD, the paper's).
+    /// bootstraps with `gamma^n`; fewer at an episode's end (1 to [`MAX_N_STEP`]; 1: one-step TD,
+    /// the paper's).
     #[serde(default = "default_n_step", skip_serializing_if = "is_one_u32")]
     #[schemars(extend("default" = 1))]
     pub n_step: u32,
@@ -303,7 +309,9 @@ impl LrSchedule {
 }
 
 /// The loss on TD errors.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum LossKind {
     /// PyTorch's `HuberLoss(delta)` on the TD errors.
@@ -415,7 +423,7 @@ pub use query::QueryConfig;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BudgetConfig {
-    /// B: how many demonstrations may be asked for in the whole run.
+    /// B: how many demonstrations may be asked for in the whole run (≥ 0).
     #[serde(default = "default_budget")]
     pub total: i64,
 }
@@ -475,13 +483,13 @@ impl Default for ExpertConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ShapingConfig {
-    /// λ of eq. 4.
+    /// λ of eq. 4 (and of the potential), ≥ 0.
     #[serde(default = "default_lambda")]
     pub lambda: f64,
     /// Shaping starts once this many demonstrations exist.
     #[serde(default = "default_min_demos")]
     pub min_demos: usize,
-    /// Shaping stops at this multiple of the global step of the last demonstration (`paper`
+    /// Shaping stops at this multiple of the global step of the last demonstration, ≥ 0 (`paper`
     /// shaping only).
     #[serde(default = "default_stop_multiple")]
     pub stop_multiple: f64,
@@ -494,7 +502,9 @@ pub struct ShapingConfig {
 }
 
 /// Which shaping.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum ShapingKind {
     /// Eq. 4, for a while (see `shaping.stop_multiple`).
@@ -891,7 +901,10 @@ model = "krr"
             ExperimentConfig::from_toml_with_overrides(BASE, &set)
         };
         let plain = cfg(&[]).unwrap();
-        assert_eq!((plain.agent.prior_scale, plain.agent.prior_seed), (0.0, None));
+        assert_eq!(
+            (plain.agent.prior_scale, plain.agent.prior_seed),
+            (0.0, None)
+        );
         let with = cfg(&["seed=7", "agent.prior_scale=3.0"]).unwrap();
         assert_eq!(with.agent.prior_seed, Some(7));
         assert_eq!(ExperimentConfig::from_toml(&with.to_toml()).unwrap(), with);
@@ -907,8 +920,12 @@ model = "krr"
             let e = cfg(&[&format!("agent.prior_scale={bad}")]).unwrap_err();
             assert!(e.to_string().contains("agent.prior_scale"), "{e}");
         }
-        let e = cfg(&["agent.kind=qlearning", "env.name=cliffwalk", "agent.prior_scale=1.0"])
-            .unwrap_err();
+        let e = cfg(&[
+            "agent.kind=qlearning",
+            "env.name=cliffwalk",
+            "agent.prior_scale=1.0",
+        ])
+        .unwrap_err();
         assert!(e.to_string().contains("neural agents"), "{e}");
     }
 

@@ -696,7 +696,12 @@ fn code_configs_scripts_and_documents_carry_no_development_history() {
     files.push(workspace().join("Cargo.toml"));
     files.push(workspace().join(".ci/run"));
     // The documents a user reads (CHANGELOG.md is history by nature).
-    for doc in ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md", "ARCHITECTURE.md"] {
+    for doc in [
+        "README.md",
+        "EXPERIMENTS.md",
+        "BENCHMARKS.md",
+        "ARCHITECTURE.md",
+    ] {
         files.push(workspace().join(doc));
     }
     let mut found = Vec::new();

@@ -166,11 +166,7 @@ pub fn parse_queries(text: &str, file: &str, dim: usize) -> Result<Vec<Vec<f64>>
 
 /// The number of actions: `requested` if given (every action must be below it), else the largest
 /// action + 1, at least 2; at most [`MAX_ACTIONS`] either way.
-pub fn num_actions(
-    demos: &Demos,
-    requested: Option<usize>,
-    file: &str,
-) -> Result<usize, BadInput> {
+pub fn num_actions(demos: &Demos, requested: Option<usize>, file: &str) -> Result<usize, BadInput> {
     let Some(n) = requested else {
         if let Some(i) = demos.actions.iter().position(|&a| a >= MAX_ACTIONS) {
             return Err(BadInput(format!(

@@ -873,12 +873,18 @@ fn the_readme_documents_every_output_column_and_summary_field() {
     use alfd_common::record::{RunSummary, RuntimeSummary, CSV_HEADER};
     let readme = std::fs::read_to_string(crate::support::repo().join("README.md")).unwrap();
     let documented = |name: &str| {
-        readme
-            .lines()
-            .any(|l| l.starts_with('|') && l.split('|').nth(1).is_some_and(|c| c.contains(&format!("`{name}`"))))
+        readme.lines().any(|l| {
+            l.starts_with('|')
+                && l.split('|')
+                    .nth(1)
+                    .is_some_and(|c| c.contains(&format!("`{name}`")))
+        })
     };
     for column in CSV_HEADER.split(',') {
-        assert!(documented(column), "episodes.csv column `{column}` is not in README.md");
+        assert!(
+            documented(column),
+            "episodes.csv column `{column}` is not in README.md"
+        );
     }
     let summary = RunSummary {
         episodes: 1,
@@ -905,7 +911,10 @@ fn the_readme_documents_every_output_column_and_summary_field() {
     let fields = json.as_object().unwrap();
     assert!(fields.len() >= 17, "{fields:?}");
     for field in fields.keys() {
-        assert!(documented(field), "summary.json field `{field}` is not in README.md");
+        assert!(
+            documented(field),
+            "summary.json field `{field}` is not in README.md"
+        );
     }
 }
 

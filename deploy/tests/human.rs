@@ -65,7 +65,9 @@ fn start_run(config: &Path, run_dir: &Path, actors: usize) -> (Background, Strin
 /// One HTTP/1.1 request to the page at `addr` (`HOST:PORT/TOKEN`, the page's address without
 /// its scheme), `path` under its token; the status and the body.
 fn http(addr: &str, method: &str, path: &str, body: Option<&str>) -> (u16, String) {
-    let (host, token) = addr.split_once('/').expect("the page's address has its token");
+    let (host, token) = addr
+        .split_once('/')
+        .expect("the page's address has its token");
     raw_http(host, method, &format!("/{token}{path}"), body)
 }
 
@@ -111,7 +113,9 @@ fn until(addr: &str, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
 
 /// The first server-sent event of `GET /events`, parsed.
 fn first_event(addr: &str) -> Value {
-    let (host, token) = addr.split_once('/').expect("the page's address has its token");
+    let (host, token) = addr
+        .split_once('/')
+        .expect("the page's address has its token");
     let mut s = TcpStream::connect(host).unwrap();
     write!(
         s,
@@ -144,7 +148,12 @@ fn a_person_answers_and_declines_over_http_and_only_answers_spend_budget() {
     // Only at its token: without it, or with another, every path is refused.
     let (host, token) = addr.split_once('/').unwrap();
     assert_eq!(token.len(), 32, "{addr}");
-    for path in ["/", "/state", "/events", "/0123456789abcdef0123456789abcdef/state"] {
+    for path in [
+        "/",
+        "/state",
+        "/events",
+        "/0123456789abcdef0123456789abcdef/state",
+    ] {
         assert_eq!(raw_http(host, "GET", path, None).0, 403, "GET {path}");
     }
     assert_eq!(
@@ -153,7 +162,10 @@ fn a_person_answers_and_declines_over_http_and_only_answers_spend_budget() {
     );
     // The address with its token is readable by its owner only.
     use std::os::unix::fs::PermissionsExt as _;
-    let mode = std::fs::metadata(run_dir.join("human-page-1.txt")).unwrap().permissions().mode();
+    let mode = std::fs::metadata(run_dir.join("human-page-1.txt"))
+        .unwrap()
+        .permissions()
+        .mode();
     assert_eq!(mode & 0o777, 0o600);
     let event = first_event(&addr);
     assert_eq!(event["env"], "cartpole");

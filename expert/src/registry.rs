@@ -197,10 +197,7 @@ pub fn cartpole(name: &str) -> Result<Box<dyn Demonstrator<[f32]> + Send>, BadIn
 /// The demonstrator `name` for an environment with vector observations (CartPole, MountainCar,
 /// Acrobot). A name that is not one of `env`'s experts is refused with the list of those that
 /// are; CliffWalk's demonstrators come from [`cliffwalk`] (they need the map).
-pub fn for_env(
-    env: EnvName,
-    name: &str,
-) -> Result<Box<dyn Demonstrator<[f32]> + Send>, BadInput> {
+pub fn for_env(env: EnvName, name: &str) -> Result<Box<dyn Demonstrator<[f32]> + Send>, BadInput> {
     vector_demonstrator(env, name).map_err(BadInput::from)
 }
 

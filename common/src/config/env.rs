@@ -103,7 +103,7 @@ pub struct EnvConfig {
     /// The environment: CartPole-1000, CliffWalk, MountainCar-v0, Acrobot-v1 (Gymnasium's
     /// dynamics, reimplemented), or any Gymnasium environment.
     pub name: EnvName,
-    /// Step limit after which an episode is truncated (by default CartPole 1000, CliffWalk 500,
+    /// Step limit after which an episode is truncated, ≥ 1 (by default CartPole 1000, CliffWalk 500,
     /// MountainCar 200, Acrobot 500, a Gymnasium environment its registration's).
     #[serde(default)]
     pub max_episode_steps: Option<usize>,

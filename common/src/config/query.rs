@@ -11,7 +11,7 @@ pub struct QueryConfig {
     /// The query rule (`active` is read as `js`; the older key `query.mode` as `query.rule`).
     #[serde(default = "default_query_rule")]
     pub rule: RuleKind,
-    /// L_q: length of the queue of past signal values (at most [`super::MAX_QUEUE_LEN`]).
+    /// L_q: length of the queue of past signal values (1 to [`super::MAX_QUEUE_LEN`]).
     #[serde(default = "default_queue_len")]
     pub queue_len: usize,
     /// p_r: percentile of the queue the signal must exceed, in [0, 100].

@@ -39,7 +39,11 @@ pub fn markdown() -> String {
 }
 
 fn table(md: &mut String, title: &str, about: Option<&str>, rows: &[String]) {
-    let _ = writeln!(md, "**{title}**{}\n", about.map(|a| format!(": {a}")).unwrap_or_default());
+    let _ = writeln!(
+        md,
+        "**{title}**{}\n",
+        about.map(|a| format!(": {a}")).unwrap_or_default()
+    );
     let _ = writeln!(md, "| key | type | default | meaning |\n|---|---|---|---|");
     for r in rows {
         let _ = writeln!(md, "{r}");
@@ -90,13 +94,19 @@ fn row(key: &str, prop: &Value, required: bool, defs: &Map<String, Value>) -> St
         }
         meaning.push_str(&variants.join(" "));
     }
-    format!("| `{key}` | {ty} | {default} | {} |", meaning.replace('|', "\\|"))
+    format!(
+        "| `{key}` | {ty} | {default} | {} |",
+        meaning.replace('|', "\\|")
+    )
 }
 
 /// The type's name, and the documented values of an enumeration (`` `name`: meaning ``).
 fn type_of(prop: &Value, defs: &Map<String, Value>) -> (String, Vec<String>) {
     if let Some(any) = prop.get("anyOf").and_then(Value::as_array) {
-        let inner: Vec<&Value> = any.iter().filter(|v| v.get("type") != Some(&"null".into())).collect();
+        let inner: Vec<&Value> = any
+            .iter()
+            .filter(|v| v.get("type") != Some(&"null".into()))
+            .collect();
         if let [one] = inner[..] {
             let (t, variants) = type_of(one, defs);
             return (format!("{t} or absent"), variants);
@@ -114,8 +124,14 @@ fn type_of(prop: &Value, defs: &Map<String, Value>) -> (String, Vec<String>) {
     let ty = match target.get("type") {
         Some(Value::String(t)) => simple(t, target, defs),
         Some(Value::Array(ts)) => {
-            let t: Vec<&str> = ts.iter().filter_map(Value::as_str).filter(|t| *t != "null").collect();
-            let name = t.first().map_or("any".to_owned(), |t| simple(t, target, defs));
+            let t: Vec<&str> = ts
+                .iter()
+                .filter_map(Value::as_str)
+                .filter(|t| *t != "null")
+                .collect();
+            let name = t
+                .first()
+                .map_or("any".to_owned(), |t| simple(t, target, defs));
             if ts.iter().any(|t| t == "null") {
                 format!("{name} or absent")
             } else {
@@ -135,7 +151,9 @@ fn simple(t: &str, target: &Value, defs: &Map<String, Value>) -> String {
         },
         "number" => "number".to_owned(),
         "array" => {
-            let n = target.get("minItems").filter(|&m| Some(m) == target.get("maxItems"));
+            let n = target
+                .get("minItems")
+                .filter(|&m| Some(m) == target.get("maxItems"));
             if let (Some(n), Some(item)) = (n.and_then(Value::as_u64), target.get("items")) {
                 let t = type_of(item, defs).0;
                 return format!("[{}]", vec![t; n as usize].join(", "));
@@ -144,7 +162,11 @@ fn simple(t: &str, target: &Value, defs: &Map<String, Value>) -> String {
                 .get("prefixItems")
                 .or_else(|| target.get("items"))
                 .map(|i| match i {
-                    Value::Array(a) => a.iter().map(|v| type_of(v, defs).0).collect::<Vec<_>>().join(", "),
+                    Value::Array(a) => a
+                        .iter()
+                        .map(|v| type_of(v, defs).0)
+                        .collect::<Vec<_>>()
+                        .join(", "),
                     v => type_of(v, defs).0,
                 })
                 .unwrap_or_default();
@@ -158,7 +180,13 @@ fn simple(t: &str, target: &Value, defs: &Map<String, Value>) -> String {
 /// The values of an enumeration of strings, with their doc comments.
 fn enum_values(v: &Value) -> Option<Vec<(String, Option<String>)>> {
     if let Some(values) = v.get("enum").and_then(Value::as_array) {
-        return Some(values.iter().filter_map(Value::as_str).map(|s| (s.to_owned(), None)).collect());
+        return Some(
+            values
+                .iter()
+                .filter_map(Value::as_str)
+                .map(|s| (s.to_owned(), None))
+                .collect(),
+        );
     }
     let one_of = v.get("oneOf").and_then(Value::as_array)?;
     let mut out = Vec::new();
@@ -202,7 +230,10 @@ fn description(v: &Value) -> Option<String> {
     }
     out.push_str(rest);
     for (name, value) in [
-        ("MAX_REPLAY_CAPACITY", super::MAX_REPLAY_CAPACITY.to_string()),
+        (
+            "MAX_REPLAY_CAPACITY",
+            super::MAX_REPLAY_CAPACITY.to_string(),
+        ),
         ("MAX_BATCH_SIZE", super::MAX_BATCH_SIZE.to_string()),
         ("MAX_HIDDEN", super::MAX_HIDDEN.to_string()),
         ("MAX_QUEUE_LEN", super::MAX_QUEUE_LEN.to_string()),
@@ -217,7 +248,10 @@ fn description(v: &Value) -> Option<String> {
 fn toml_literal(v: &Value) -> String {
     match v {
         Value::String(s) => format!("\"{s}\""),
-        Value::Array(a) => format!("[{}]", a.iter().map(toml_literal).collect::<Vec<_>>().join(", ")),
+        Value::Array(a) => format!(
+            "[{}]",
+            a.iter().map(toml_literal).collect::<Vec<_>>().join(", ")
+        ),
         Value::Number(n) => match n.as_f64() {
             Some(f) if n.is_f64() && f.fract() == 0.0 && f.abs() < 1e15 => format!("{f:.1}"),
             _ => n.to_string(),
@@ -250,20 +284,33 @@ mod tests {
                 .unwrap_or_else(|| panic!("no row {key}"))
                 .to_owned()
         };
-        assert!(row("query.percentile").contains("| `99.0` |"), "{}", row("query.percentile"));
+        assert!(
+            row("query.percentile").contains("| `99.0` |"),
+            "{}",
+            row("query.percentile")
+        );
         assert!(row("query.rule").contains("`js-paced`"));
         assert!(row("query.rule").contains("`never`: Never: pure RL."));
         assert!(row("budget.total").contains("| `100` |"));
         assert!(row("agent.kind").contains("| required |"));
-        assert!(row("agent.prior_seed").contains("| absent |"), "{}", row("agent.prior_seed"));
-        assert!(row("agent.n_step").contains("| `1` |"), "{}", row("agent.n_step"));
+        assert!(
+            row("agent.prior_seed").contains("| absent |"),
+            "{}",
+            row("agent.prior_seed")
+        );
+        assert!(
+            row("agent.n_step").contains("| `1` |"),
+            "{}",
+            row("agent.n_step")
+        );
         assert!(row("agent.prior_scale").contains("| `0.0` |"));
         assert!(row("agent.target_bounds").contains("[number, number] or absent"));
-        assert!(row("agent.hidden").contains("at most 1024"));
+        assert!(row("agent.hidden").contains("1 to 1024"), "{}", row("agent.hidden"));
         assert!(!md.contains("schedule_steps"), "a key TOML never holds");
         // Every key a shipped preset sets is documented.
-        let preset: toml::Table =
-            include_str!("../../../deploy/configs/recommended/cartpole.toml").parse().unwrap();
+        let preset: toml::Table = include_str!("../../../deploy/configs/recommended/cartpole.toml")
+            .parse()
+            .unwrap();
         for (k, v) in &preset {
             match v {
                 toml::Value::Table(t) => {

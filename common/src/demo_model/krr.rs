@@ -214,7 +214,12 @@ mod tests {
     fn the_blocked_solve_of_many_demonstrations_matches_nalgebra_s() {
         let n = BLOCKED_FROM + 40;
         let states: Vec<[f64; 2]> = (0..n)
-            .map(|i| [((i * 7919) % 997) as f64 / 50.0, ((i * 104_729) % 991) as f64 / 50.0])
+            .map(|i| {
+                [
+                    ((i * 7919) % 997) as f64 / 50.0,
+                    ((i * 104_729) % 991) as f64 / 50.0,
+                ]
+            })
             .collect();
         let actions: Vec<usize> = (0..n).map(|i| i % 3).collect();
         let m = KernelRidge::fit(&states, &actions, 3).unwrap();

@@ -184,7 +184,11 @@ where
         let drawn = if points.len() >= 2 {
             chart.draw_series(LineSeries::new(points, color.stroke_width(2)))
         } else {
-            chart.draw_series(points.into_iter().map(|p| Circle::new(p, 4, color.filled())))
+            chart.draw_series(
+                points
+                    .into_iter()
+                    .map(|p| Circle::new(p, 4, color.filled())),
+            )
         };
         drawn
             .map_err(err)?

@@ -536,14 +536,22 @@ fn curves_table(md: &mut String, exp: &Experiment, results: &[MethodResult]) {
 
 /// The section of the learning curves of greedy evaluation (`eval_return` against the same x):
 /// the table of [`curves_table`] over them, and the plots written.
-pub fn eval_curves_section(exp: &Experiment, results: &[MethodResult], plotted: &[String]) -> String {
+pub fn eval_curves_section(
+    exp: &Experiment,
+    results: &[MethodResult],
+    plotted: &[String],
+) -> String {
     let mut md = String::from(
         "\n## Greedy-evaluation curves\n\nThe same statistics over the greedy evaluations \
          instead of the training returns: a seed's value at x is its last `eval_return` recorded \
          by x (the learner's own greedy play; the expert never acts in an evaluation).\n\n",
     );
     curves_table(&mut md, exp, results);
-    let _ = writeln!(md, "\nPlot: {}; table: eval-curves.csv.", plotted.join(", "));
+    let _ = writeln!(
+        md,
+        "\nPlot: {}; table: eval-curves.csv.",
+        plotted.join(", ")
+    );
     md
 }
 
