@@ -305,7 +305,11 @@ mod tests {
         );
         assert!(row("agent.prior_scale").contains("| `0.0` |"));
         assert!(row("agent.target_bounds").contains("[number, number] or absent"));
-        assert!(row("agent.hidden").contains("1 to 1024"), "{}", row("agent.hidden"));
+        assert!(
+            row("agent.hidden").contains("1 to 1024"),
+            "{}",
+            row("agent.hidden")
+        );
         assert!(!md.contains("schedule_steps"), "a key TOML never holds");
         // Every key a shipped preset sets is documented.
         let preset: toml::Table = include_str!("../../../deploy/configs/recommended/cartpole.toml")
