@@ -141,21 +141,26 @@ pub fn cliffwalk(cfg: &ExperimentConfig) -> anyhow::Result<CliffWalk> {
     )?)
 }
 
-/// The demonstrator named by a neural config, for its environment.
-/// The config's demonstrator exists: a built-in one for its environment, or a well-formed
-/// external one (`python:MODULE:FUNCTION`, `sb3:ALGO:PATH`), which the expert process starts.
+/// The config's demonstrator exists: a built-in one for its environment (CliffWalk's for its
+/// map), or a well-formed external one (`python:MODULE:FUNCTION`, `sb3:ALGO:PATH`), which the
+/// expert process starts.
 pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
     if cfg.expert.name == alfd_expert::human::HUMAN {
         // A person answers on a web page: any environment, any number of actions.
         return Ok(());
     }
     if alfd_expert::registry::external_policy(&cfg.expert.name).is_some() {
-        return alfd_expert::registry::check_external(&cfg.expert.name)
-            .map_err(|e| usage(e.to_string()));
+        return Ok(alfd_expert::registry::check_external(&cfg.expert.name)?);
+    }
+    if cfg.env.name.is_tabular() {
+        return Ok(
+            alfd_expert::registry::cliffwalk(&cfg.expert.name, &cliffwalk(cfg)?).map(|_| ())?,
+        );
     }
     neural_demonstrator(cfg).map(|_| ())
 }
 
+/// The demonstrator named by a neural config, for its environment.
 pub fn neural_demonstrator(
     cfg: &ExperimentConfig,
 ) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>> {
@@ -165,7 +170,10 @@ pub fn neural_demonstrator(
              swap-expert` only: its page is served by the expert process",
         ));
     }
-    alfd_expert::registry::for_env(cfg.env.name, &cfg.expert.name).map_err(|e| usage(e.to_string()))
+    Ok(alfd_expert::registry::for_env(
+        cfg.env.name,
+        &cfg.expert.name,
+    )?)
 }
 
 #[cfg(test)]

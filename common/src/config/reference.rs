@@ -284,32 +284,20 @@ mod tests {
                 .unwrap_or_else(|| panic!("no row {key}"))
                 .to_owned()
         };
-        assert!(
-            row("query.percentile").contains("| `99.0` |"),
-            "{}",
-            row("query.percentile")
-        );
-        assert!(row("query.rule").contains("`js-paced`"));
-        assert!(row("query.rule").contains("`never`: Never: pure RL."));
-        assert!(row("budget.total").contains("| `100` |"));
-        assert!(row("agent.kind").contains("| required |"));
-        assert!(
-            row("agent.prior_seed").contains("| absent |"),
-            "{}",
-            row("agent.prior_seed")
-        );
-        assert!(
-            row("agent.n_step").contains("| `1` |"),
-            "{}",
-            row("agent.n_step")
-        );
-        assert!(row("agent.prior_scale").contains("| `0.0` |"));
-        assert!(row("agent.target_bounds").contains("[number, number] or absent"));
-        assert!(
-            row("agent.hidden").contains("1 to 1024"),
-            "{}",
-            row("agent.hidden")
-        );
+        for (key, part) in [
+            ("query.percentile", "| `99.0` |"),
+            ("query.rule", "`js-paced`"),
+            ("query.rule", "`never`: Never: pure RL."),
+            ("budget.total", "| `100` |"),
+            ("agent.kind", "| required |"),
+            ("agent.prior_seed", "| absent |"),
+            ("agent.n_step", "| `1` |"),
+            ("agent.prior_scale", "| `0.0` |"),
+            ("agent.target_bounds", "[number, number] or absent"),
+            ("agent.hidden", "1 to 1024"),
+        ] {
+            assert!(row(key).contains(part), "{key}: {}", row(key));
+        }
         assert!(!md.contains("schedule_steps"), "a key TOML never holds");
         // Every key a shipped preset sets is documented.
         let preset: toml::Table = include_str!("../../../deploy/configs/recommended/cartpole.toml")

@@ -264,16 +264,11 @@ impl ExperimentConfig {
         for (field, v) in [
             ("agent.margin_loss_weight", a.margin_loss_weight),
             ("agent.margin", a.margin),
+            ("agent.prior_scale", a.prior_scale),
         ] {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(invalid(field, format!("must be >= 0, got {v}")));
             }
-        }
-        if !(a.prior_scale >= 0.0 && a.prior_scale.is_finite()) {
-            return Err(invalid(
-                "agent.prior_scale",
-                format!("must be >= 0, got {}", a.prior_scale),
-            ));
         }
         if a.prior_scale > 0.0 && a.kind.is_tabular() {
             return Err(invalid(

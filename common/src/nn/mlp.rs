@@ -563,12 +563,10 @@ mod tests {
         assert_eq!(a.num_params(), 16 * 4 + 16 + 16 * 16 + 16 + 6 * 16 + 6);
     }
 
-    #[test]
-    fn forward_one_matches_forward_batch() {
-        let net = net();
-        let states: Vec<f32> = (0..20).map(|i| (i as f32 * 0.7).sin() * 2.0).collect();
+    /// `net`'s batched pass on five 4-dimensional states gives its one-state pass on each.
+    fn assert_batch_matches_one(net: &Mlp, states: &[f32]) {
         let mut cache = ForwardCache::default();
-        net.forward_batch(&states, &mut cache);
+        net.forward_batch(states, &mut cache);
         assert_eq!(cache.batch_size(), 5);
         let mut out = [0.0f32; 6];
         for (j, s) in states.chunks_exact(4).enumerate() {
@@ -577,6 +575,12 @@ mod tests {
                 assert!((cache.q()[(j, c)] - o).abs() < 1e-5, "row {j} col {c}");
             }
         }
+    }
+
+    #[test]
+    fn forward_one_matches_forward_batch() {
+        let states: Vec<f32> = (0..20).map(|i| (i as f32 * 0.7).sin() * 2.0).collect();
+        assert_batch_matches_one(&net(), &states);
     }
 
     #[test]
@@ -666,14 +670,7 @@ mod tests {
         }
         // The batched pass adds the same prior.
         let states: Vec<f32> = (0..20).map(|i| (i as f32 * 0.3).cos()).collect();
-        let mut cache = ForwardCache::default();
-        with.forward_batch(&states, &mut cache);
-        for (j, s) in states.chunks_exact(4).enumerate() {
-            with.forward_one(s, &mut q);
-            for (c, &v) in q.iter().enumerate() {
-                assert!((cache.q()[(j, c)] - v).abs() < 1e-5, "row {j} col {c}");
-            }
-        }
+        assert_batch_matches_one(&with, &states);
     }
 
     #[test]

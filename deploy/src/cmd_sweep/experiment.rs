@@ -29,7 +29,7 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-use alfd_common::config::{EnvName, ExperimentConfig};
+use alfd_common::config::ExperimentConfig;
 use alfd_common::demo_model::DemoModelKind;
 use anyhow::Context as _;
 use serde::Deserialize;
@@ -358,7 +358,8 @@ impl Experiment {
                 let cfg = method
                     .config(0, episodes)
                     .map_err(|e| bad(format!("{e:#}")))?;
-                check_expert(&cfg).map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?;
+                setup::check_demonstrator(&cfg)
+                    .map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?;
             }
             methods.push(method);
         }
@@ -455,20 +456,6 @@ fn policy_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {
         source,
         source_desc,
     })
-}
-
-/// The config's demonstrator exists for its environment (and a CliffWalk map loads).
-fn check_expert(cfg: &ExperimentConfig) -> anyhow::Result<()> {
-    match cfg.env.name {
-        EnvName::Cliffwalk => {
-            let env = setup::cliffwalk(cfg)?;
-            alfd_expert::registry::cliffwalk(&cfg.expert.name, &env)?;
-        }
-        _ => {
-            setup::check_demonstrator(cfg)?;
-        }
-    }
-    Ok(())
 }
 
 /// A name usable as a directory name.

@@ -262,23 +262,16 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
     }
 
     let mut results = Vec::with_capacity(exp.methods.len());
+    let mut all_runs = Vec::with_capacity(exp.methods.len());
     let mut by_budget = budget::Table::new();
     for method in &exp.methods {
         let runs = read_runs(ctx.out, method, exp.seed_range())?;
-        let own: Vec<summary::Run>;
         let curve_runs = if exp.learner_episodes_only {
-            own = runs
-                .iter()
-                .map(|r| summary::Run {
-                    episodes: r.episodes.without_expert(),
-                    ..r.clone()
-                })
-                .collect();
-            &own
+            with_episodes(&runs, summary::Episodes::without_expert)
         } else {
-            &runs
+            runs.clone()
         };
-        results.push(summary::analyse(method, curve_runs, exp)?);
+        results.push(summary::analyse(method, &curve_runs, exp)?);
         if exp.by_budget {
             let cfg = method.config(exp.first_seed, exp.episodes)?;
             let cell = budget::cell(&runs, exp.eval_threshold, &method.name);
@@ -287,14 +280,9 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
                 .or_default()
                 .insert(cfg.budget(), cell);
         }
+        all_runs.push(runs);
     }
-    write(
-        ctx.out,
-        "curves.csv",
-        summary::curves_csv(exp, &results).as_bytes(),
-    )?;
-    let series = summary::training_series(exp, &results);
-    let plotted = write_plot(ctx, &series, summary::x_name(exp.x).1)?;
+    let plotted = write_curves(ctx, &results, "curves.csv", &exp.name, "return")?;
     let wall = ctx.start.elapsed().as_secs_f64();
     let mut md = summary::training_summary(ctx, &results, pending_len, resumed, wall, &plotted);
     if exp.learner_episodes_only {
@@ -304,7 +292,7 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
         );
     }
     if exp.eval_curves {
-        md.push_str(&eval_curves(ctx)?);
+        md.push_str(&eval_curves(ctx, &all_runs)?);
     }
     if exp.by_budget {
         md.push_str(&budget_section(ctx, &by_budget)?);
@@ -590,19 +578,45 @@ fn budget_section(ctx: &Ctx, table: &budget::Table) -> anyhow::Result<String> {
     Ok(md)
 }
 
-/// The learning curves of greedy evaluation: `eval-curves.csv`, `EXPERIMENT-eval.svg` (and
-/// `.png`) and their section of `summary.md`.
-fn eval_curves(ctx: &Ctx) -> anyhow::Result<String> {
+/// The runs with each one's episodes replaced by `f` of them.
+fn with_episodes(
+    runs: &[summary::Run],
+    f: impl Fn(&summary::Episodes) -> summary::Episodes,
+) -> Vec<summary::Run> {
+    runs.iter()
+        .map(|r| summary::Run {
+            episodes: f(&r.episodes),
+            ..r.clone()
+        })
+        .collect()
+}
+
+/// Writes the curves of `results` as `csv` and plots them as `STEM.svg` (and `.png`), the y axis
+/// naming `what`; returns the plot files written.
+fn write_curves(
+    ctx: &Ctx,
+    results: &[summary::MethodResult],
+    csv: &str,
+    stem: &str,
+    what: &str,
+) -> anyhow::Result<Vec<String>> {
+    write(
+        ctx.out,
+        csv,
+        summary::curves_csv(ctx.exp, results).as_bytes(),
+    )?;
+    let series = summary::training_series(ctx.exp, results);
+    write_plot_as(ctx, &series, summary::x_name(ctx.exp.x).1, stem, what)
+}
+
+/// The learning curves of greedy evaluation from each method's `runs` (in the order of the
+/// experiment's methods): `eval-curves.csv`, `EXPERIMENT-eval.svg` (and `.png`) and their section
+/// of `summary.md`.
+fn eval_curves(ctx: &Ctx, all_runs: &[Vec<summary::Run>]) -> anyhow::Result<String> {
     let exp = ctx.exp;
     let mut results = Vec::with_capacity(exp.methods.len());
-    for method in &exp.methods {
-        let runs: Vec<summary::Run> = read_runs(ctx.out, method, exp.seed_range())?
-            .into_iter()
-            .map(|r| summary::Run {
-                episodes: r.episodes.greedy_evaluations(),
-                ..r
-            })
-            .collect();
+    for (method, runs) in exp.methods.iter().zip(all_runs) {
+        let runs = with_episodes(runs, summary::Episodes::greedy_evaluations);
         if runs.iter().any(|r| r.episodes.returns.is_empty()) {
             anyhow::bail!(
                 "`eval_curves`: a run of method `{}` records no greedy evaluation (set \
@@ -612,15 +626,14 @@ fn eval_curves(ctx: &Ctx) -> anyhow::Result<String> {
         }
         results.push(summary::analyse(method, &runs, exp)?);
     }
-    write(
-        ctx.out,
-        "eval-curves.csv",
-        summary::curves_csv(exp, &results).as_bytes(),
-    )?;
-    let series = summary::training_series(exp, &results);
     let stem = format!("{}-eval", exp.name);
-    let x_desc = summary::x_name(exp.x).1;
-    let plotted = write_plot_as(ctx, &series, x_desc, &stem, "greedy evaluation return")?;
+    let plotted = write_curves(
+        ctx,
+        &results,
+        "eval-curves.csv",
+        &stem,
+        "greedy evaluation return",
+    )?;
     Ok(summary::eval_curves_section(exp, &results, &plotted))
 }
 

@@ -45,44 +45,36 @@ impl Episodes {
         let Some(q) = &self.queries else {
             return self.clone();
         };
-        let keep = |v: &Vec<f64>| -> Vec<f64> {
-            v.iter()
-                .zip(q)
-                .filter(|(_, &n)| n == 0.0)
-                .map(|(&x, _)| x)
-                .collect()
-        };
+        let keep: Vec<bool> = q.iter().map(|&n| n == 0.0).collect();
         Episodes {
-            returns: keep(&self.returns),
-            total_steps: self.total_steps.as_ref().map(keep),
+            returns: kept(&self.returns, &keep),
+            total_steps: self.total_steps.as_ref().map(|v| kept(v, &keep)),
+            ..self.clone()
+        }
+    }
+
+    /// The episodes after which the learner was evaluated, with their evaluation return as the
+    /// return: the greedy-evaluation learning curve. Empty without the `eval_return` column.
+    pub fn greedy_evaluations(&self) -> Episodes {
+        let eval = self.eval_return.as_deref().unwrap_or(&[]);
+        let keep: Vec<bool> = eval.iter().map(|v| v.is_finite()).collect();
+        Episodes {
+            returns: kept(eval, &keep),
+            demos: kept(&self.demos, &keep),
+            total_steps: self.total_steps.as_ref().map(|v| kept(v, &keep)),
+            queries: self.queries.as_ref().map(|v| kept(v, &keep)),
             ..self.clone()
         }
     }
 }
 
-impl Episodes {
-    /// The episodes after which the learner was evaluated, with their evaluation return as the
-    /// return: the greedy-evaluation learning curve. Empty without the `eval_return` column.
-    pub fn greedy_evaluations(&self) -> Episodes {
-        let Some(eval) = &self.eval_return else {
-            return Episodes {
-                returns: Vec::new(),
-                demos: Vec::new(),
-                total_steps: self.total_steps.as_ref().map(|_| Vec::new()),
-                queries: self.queries.as_ref().map(|_| Vec::new()),
-                ..self.clone()
-            };
-        };
-        let kept: Vec<usize> = (0..eval.len()).filter(|&i| eval[i].is_finite()).collect();
-        let pick = |v: &Vec<f64>| -> Vec<f64> { kept.iter().map(|&i| v[i]).collect() };
-        Episodes {
-            returns: pick(eval),
-            demos: pick(&self.demos),
-            total_steps: self.total_steps.as_ref().map(pick),
-            queries: self.queries.as_ref().map(pick),
-            ..self.clone()
-        }
-    }
+/// The values of `v` whose episode `keep` says to keep (none past the end of `keep`).
+fn kept(v: &[f64], keep: &[bool]) -> Vec<f64> {
+    v.iter()
+        .zip(keep)
+        .filter(|(_, &k)| k)
+        .map(|(&x, _)| x)
+        .collect()
 }
 
 /// What one run left: its episodes and the numbers of its `summary.json`.
