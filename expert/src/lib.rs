@@ -4,6 +4,7 @@
 
 pub mod demo_log;
 pub mod human;
+pub mod machine;
 mod process;
 pub mod registry;
 pub mod scripted;

@@ -76,7 +76,7 @@ def write(path, title, task, seeds, preset, ms, comment):
 # Every task at every budget.
 TASK_BUDGETS = {}
 # The headline comparisons: one budget, 30 seeds (0-29).
-HEADLINE = {"mountaincar": 10, "acrobot": 10, "cliffwalk": 10}
+HEADLINE = {"mountaincar": 10, "acrobot": 10, "cliffwalk": 10, "cartpole": 10}
 
 
 def main():
