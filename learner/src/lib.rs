@@ -5,8 +5,8 @@
 
 pub mod checkpoint;
 pub mod credit_book;
+pub mod machine;
 
-use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use alfd_common::agent::NeuralLearner;
@@ -22,6 +22,7 @@ use tracing::{debug, info, warn};
 use crate::checkpoint::LearnerCheckpoint;
 
 pub use credit_book::{BatchShape, CreditBook, Queued};
+pub use machine::{LearnerMachine, Learns, Todo, CREDITS_EVERY};
 
 /// `alfd-learner`: the learner process of a run (started by `alfd run`).
 #[derive(Debug, Clone, clap::Parser)]
@@ -101,23 +102,74 @@ fn serve(
     restored: Option<LearnerCheckpoint>,
     wire: &wire::Wire,
 ) -> anyhow::Result<End> {
-    let (cfg, runtime) = (&setup.config, &setup.runtime);
+    let runtime = &setup.runtime;
     let run_dir = &args.process.run_dir;
-    let (obs_dim, num_actions) = setup.env_dims()?;
     let session = Session::join(wire, Doorbell::Learner, runtime.handshake_timeout())?;
-    let rx = wire.transitions_receiver()?;
-    let mut credits_tx = wire.credits_sender()?;
-    let mut actors = ActorBells::new(wire);
-    let mut progress = wire.progress_sender()?;
+    let mut m = machine(setup, restored.as_ref(), run_dir)?;
+    let params = vec![0.0f32; m.learner().network().num_params()];
+    let mut shell = Shell {
+        rx: wire.transitions_receiver()?,
+        credits_tx: wire.credits_sender()?,
+        actors: ActorBells::new(wire),
+        progress: wire.progress_sender()?,
+        weights_tx: wire.weights_sender(params.len())?,
+        params,
+        run_dir,
+        config_toml,
+        clock: Instant::now(),
+        stats: Stats::default(),
+    };
+    shell.publish(&m)?;
+    shell.credits_tx.send(m.book().credits(0))?;
+    info!(
+        params = shell.params.len(),
+        window = runtime.window,
+        "learner running"
+    );
+    shell.status(&mut m, process_state::RUNNING)?;
+    let (stop_reason, end) = shell.serve(&mut m, &session)?;
+    shell.stats.log(stop_reason, &m);
+    let path = run_dir.join("weights.safetensors");
+    write_atomically(&path, &m.learner().network().to_safetensors_bytes())?;
+    info!(path = %path.display(), "final weights saved");
+    if m.final_checkpoint(runtime.window) {
+        shell.checkpoint(&m)?;
+    } else {
+        info!("lockstep with one actor: the last checkpoint (at an episode end) is kept");
+    }
+    let s = &shell.stats;
+    info!(
+        checkpoints = s.checkpoints,
+        bytes = s.checkpoint_bytes,
+        write_s = s.checkpoint_time.as_secs_f64(),
+        share_of_learner_time =
+            s.checkpoint_time.as_secs_f64() / shell.clock.elapsed().as_secs_f64(),
+        "learner state checkpointed"
+    );
+    shell.status(&mut m, process_state::EXITING)?;
+    debug!(
+        lost = (0..MAX_ACTORS as u16)
+            .map(|a| m.book().lost(a))
+            .sum::<u64>(),
+        "lost steps"
+    );
+    Ok(end)
+}
 
+/// The learner's state machine for this run, restored from `restored` when given.
+fn machine(
+    setup: &Setup,
+    restored: Option<&LearnerCheckpoint>,
+    run_dir: &std::path::Path,
+) -> anyhow::Result<LearnerMachine<NeuralLearner>> {
+    let (cfg, runtime) = (&setup.config, &setup.runtime);
+    let (obs_dim, num_actions) = setup.env_dims()?;
     let mut learner = NeuralLearner::new(
         &cfg.agent,
         obs_dim,
         num_actions,
         seeded(derive_seed(cfg.seed, "learner")),
     );
-    let mut params = vec![0.0f32; learner.network().num_params()];
-    let mut weights_tx = wire.weights_sender(params.len())?;
     let mut book = CreditBook::new(
         runtime.window,
         BatchShape {
@@ -126,8 +178,7 @@ fn serve(
             actions: num_actions,
         },
     );
-
-    if let Some(ckpt) = &restored {
+    if let Some(ckpt) = restored {
         learner
             .restore(&ckpt.learner)
             .map_err(|e| BadInput(format!("{}: {e}", checkpoint::path(run_dir).display())))?;
@@ -138,281 +189,210 @@ fn serve(
             "restored from the checkpoint"
         );
     }
-    let started = Instant::now();
-    let restored_step = restored.as_ref().map_or(0, |c| c.env_steps);
-    let mut checkpoints = Checkpoints {
-        cadence: Cadence::new(
-            Cadence::steps_for_updates(runtime.checkpoint_every, cfg.agent.updates_per_step),
-            restored_step,
-        ),
-        written: 0,
-        time: Duration::ZERO,
-        bytes: 0,
-    };
+    Ok(LearnerMachine::new(
+        learner,
+        book,
+        runtime.weights_every,
+        Cadence::steps_for_updates(runtime.checkpoint_every, cfg.agent.updates_per_step),
+        restored.map_or(0, |c| c.env_steps),
+    ))
+}
 
-    let publish_weights = |learner: &NeuralLearner,
-                           params: &mut Vec<f32>,
-                           tx: &mut wire::WeightsSender<'_>,
-                           env_steps: u64|
-     -> anyhow::Result<()> {
-        learner.network().copy_params_into(params)?;
-        tx.publish(learner.updates(), learner.updates(), env_steps, params)?;
-        Ok(())
-    };
-    publish_weights(&learner, &mut params, &mut weights_tx, 0)?;
-    credits_tx.send(book.credits(0))?;
-    info!(
-        params = params.len(),
-        window = runtime.window,
-        "learner running"
-    );
+/// What the learner measures of itself (logged when it stops).
+#[derive(Debug, Default)]
+struct Stats {
+    idle_waits: u64,
+    idle: Duration,
+    idle_running: Duration,
+    publish: Duration,
+    first_step: Option<Instant>,
+    checkpoints: u64,
+    checkpoint_time: Duration,
+    checkpoint_bytes: usize,
+}
 
-    let mut status = Status::new(std::process::id());
-    status.send(&mut progress, process_state::RUNNING, &book, &learner)?;
-    let mut queue: VecDeque<Queued> = VecDeque::new();
-    let mut published_version = 0u64;
-    let mut credits_dirty = false;
-    let mut learned_since_credits = 0u64;
-    let mut since_check = 0u32;
-    let (mut idle_waits, mut idle) = (0u64, Duration::ZERO);
-    let mut first_step: Option<Instant> = None;
-    let mut idle_running = Duration::ZERO;
-    let mut publish_time = Duration::ZERO;
-    let stop_reason;
-    let mut end = End::Stopped;
-    loop {
-        // Take in whatever arrived.
+impl Stats {
+    fn log(&self, reason: &str, m: &LearnerMachine<NeuralLearner>) {
+        let updates = m.learner().updates();
+        info!(
+            reason,
+            updates,
+            env_steps = m.book().env_steps(),
+            idle_waits = self.idle_waits,
+            idle_s = self.idle.as_secs_f64(),
+            idle_running_s = self.idle_running.as_secs_f64(),
+            publish_s = self.publish.as_secs_f64(),
+            updates_per_s = updates as f64
+                / self
+                    .first_step
+                    .map_or(f64::INFINITY, |t| t.elapsed().as_secs_f64()),
+            "learner stopping"
+        );
+    }
+}
+
+/// The learner's I/O: the wire's ports and the run directory.
+struct Shell<'w, 'a> {
+    rx: wire::Receiver<'w, wire::TransitionBatch>,
+    credits_tx: wire::Sender<'w, Credits>,
+    actors: ActorBells<'w>,
+    progress: wire::Sender<'w, Progress>,
+    weights_tx: wire::WeightsSender<'w>,
+    params: Vec<f32>,
+    run_dir: &'a std::path::Path,
+    config_toml: &'a str,
+    clock: Instant,
+    stats: Stats,
+}
+
+type Machine = LearnerMachine<NeuralLearner>;
+
+impl Shell<'_, '_> {
+    /// The loop: take in the batches, learn one step (checking the session every 32 steps),
+    /// publish and grant when the queue drains, wait when there is nothing to do.
+    fn serve(
+        &mut self,
+        m: &mut Machine,
+        session: &Session<'_>,
+    ) -> anyhow::Result<(&'static str, End)> {
+        let mut since_check = 0u32;
         loop {
-            match rx.receive() {
-                Ok(Some(batch)) => {
-                    book.accept(&batch, &mut queue);
+            self.receive(m)?;
+            if m.any_blocked() {
+                // Its grant may already be there (it blocked on stale news): wake it at once.
+                self.send_credits(m)?;
+            }
+            if let Some(todo) = m.step() {
+                self.stats.first_step.get_or_insert_with(Instant::now);
+                self.carry_out(m, todo)?;
+                since_check += 1;
+                if since_check < 32 {
+                    continue;
                 }
-                Ok(None) => break,
+            }
+            since_check = 0;
+            let todo = m.drained();
+            self.carry_out(m, todo)?;
+            if m.tick(self.clock.elapsed()) {
+                self.status(m, process_state::RUNNING)?;
+            }
+            // A process that subscribed since the last publication gets the history sample now.
+            self.weights_tx.update_connections()?;
+            self.credits_tx.update_connections()?;
+            match session.should_stop() {
+                Ok(Some(stop)) => return Ok((stop.0, End::Stopped)),
+                Ok(None) => {}
+                Err(e) if e.orphaned() => {
+                    warn!("{e}: saving the learner's state and leaving");
+                    return Ok(("the launcher is gone", End::Orphaned));
+                }
+                Err(e) => return Err(e.into()),
+            }
+            if m.queue_is_empty() && self.idle(m, session)? == Wake::Signal {
+                return Ok(("termination signal", End::Stopped));
+            }
+        }
+    }
+
+    /// Takes in whatever arrived.
+    fn receive(&mut self, m: &mut Machine) -> anyhow::Result<()> {
+        loop {
+            match self.rx.receive() {
+                Ok(Some(batch)) => m.accept(&batch),
+                Ok(None) => return Ok(()),
                 Err(e @ WireError::SchemaMismatch { .. }) => {
                     tracing::error!("{e}; batch dropped");
                 }
                 Err(e) => return Err(e.into()),
             }
         }
-        if book.any_blocked() {
-            // Its grant may already be there (it blocked on stale news): wake it at once.
-            send_credits(&mut book, &mut credits_tx, &mut actors, learner.updates())?;
-        }
-        if let Some(q) = queue.pop_front() {
-            first_step.get_or_insert_with(Instant::now);
-            // Algorithm 1 lines 19-20, U times per step.
-            if let Some(loss) = learner.learn(&q.transition) {
-                status.loss = f64::from(loss);
-            }
-            book.learned(q.actor, q.incarnation);
-            if learner.updates() >= published_version.saturating_add(runtime.weights_every) {
-                let t = Instant::now();
-                publish_weights(&learner, &mut params, &mut weights_tx, book.env_steps())?;
-                publish_time += t.elapsed();
-                published_version = learner.updates();
-            }
-            // At an actor's episode end, every `checkpoint_every` updates' worth of steps: in
-            // lockstep with one actor, where that actor checkpoints too.
-            if q.episode_end && checkpoints.cadence.episode_end(book.env_steps()) {
-                checkpoints.write(run_dir, &learner, &book, config_toml)?;
-            }
-            credits_dirty = true;
-            learned_since_credits += 1;
-            // Credits go back every few steps (so an actor refills its batch while the learner
-            // works through the rest of the queue) and at the end of every batch.
-            if q.last_of_batch || learned_since_credits >= CREDITS_EVERY {
-                send_credits(&mut book, &mut credits_tx, &mut actors, learner.updates())?;
-                credits_dirty = false;
-                learned_since_credits = 0;
-            }
-            since_check += 1;
-            if since_check < 32 {
-                continue;
-            }
-        }
-        since_check = 0;
-        if queue.is_empty() {
-            if learner.updates() > published_version {
-                publish_weights(&learner, &mut params, &mut weights_tx, book.env_steps())?;
-                published_version = learner.updates();
-            }
-            if credits_dirty {
-                send_credits(&mut book, &mut credits_tx, &mut actors, learner.updates())?;
-                credits_dirty = false;
-            }
-        }
-        if status.due() {
-            status.send(&mut progress, process_state::RUNNING, &book, &learner)?;
-        }
-        // A process that subscribed since the last publication gets the history sample now.
-        weights_tx.update_connections()?;
-        credits_tx.update_connections()?;
-        match session.should_stop() {
-            Ok(Some(stop)) => {
-                stop_reason = stop.0;
-                break;
-            }
-            Ok(None) => {}
-            Err(e) if e.orphaned() => {
-                warn!("{e}: saving the learner's state and leaving");
-                stop_reason = "the launcher is gone";
-                end = End::Orphaned;
-                break;
-            }
-            Err(e) => return Err(e.into()),
-        }
-        if queue.is_empty() {
-            let idle_since = Instant::now();
-            idle_waits += 1;
-            let wake = session.wait_for(Duration::from_millis(100))?;
-            idle += idle_since.elapsed();
-            if first_step.is_some() {
-                idle_running += idle_since.elapsed();
-            }
-            if idle_since.elapsed() > Duration::from_millis(5) {
-                debug!(
-                    waited_ms = idle_since.elapsed().as_millis() as u64,
-                    ?wake,
-                    env_steps = book.env_steps(),
-                    "long idle wait"
-                );
-            }
-            if wake == Wake::Signal {
-                stop_reason = "termination signal";
-                break;
-            }
-        }
     }
-    info!(
-        reason = stop_reason,
-        updates = learner.updates(),
-        env_steps = book.env_steps(),
-        idle_waits,
-        idle_s = idle.as_secs_f64(),
-        idle_running_s = idle_running.as_secs_f64(),
-        publish_s = publish_time.as_secs_f64(),
-        updates_per_s = learner.updates() as f64
-            / first_step.map_or(f64::INFINITY, |t| t.elapsed().as_secs_f64()),
-        "learner stopping"
-    );
-    let path = run_dir.join("weights.safetensors");
-    write_atomically(&path, &learner.network().to_safetensors_bytes())?;
-    info!(path = %path.display(), "final weights saved");
-    // One actor in lockstep: the last checkpoint pairs with the actor's at an episode end, from
-    // which `alfd resume` continues as the uninterrupted run; a final one would not pair.
-    if runtime.window == 1 && book.senders() <= 1 && (checkpoints.written > 0 || restored_step > 0)
-    {
-        info!("lockstep with one actor: the last checkpoint (at an episode end) is kept");
-    } else {
-        checkpoints.write(run_dir, &learner, &book, config_toml)?;
+
+    fn idle(&mut self, m: &Machine, session: &Session<'_>) -> anyhow::Result<Wake> {
+        let since = Instant::now();
+        self.stats.idle_waits += 1;
+        let wake = session.wait_for(Duration::from_millis(100))?;
+        let waited = since.elapsed();
+        self.stats.idle += waited;
+        if self.stats.first_step.is_some() {
+            self.stats.idle_running += waited;
+        }
+        if waited > Duration::from_millis(5) {
+            debug!(
+                waited_ms = waited.as_millis() as u64,
+                ?wake,
+                env_steps = m.book().env_steps(),
+                "long idle wait"
+            );
+        }
+        Ok(wake)
     }
-    info!(
-        checkpoints = checkpoints.written,
-        bytes = checkpoints.bytes,
-        write_s = checkpoints.time.as_secs_f64(),
-        share_of_learner_time = checkpoints.time.as_secs_f64() / started.elapsed().as_secs_f64(),
-        "learner state checkpointed"
-    );
-    status.send(&mut progress, process_state::EXITING, &book, &learner)?;
-    debug!(
-        lost = (0..MAX_ACTORS as u16).map(|a| book.lost(a)).sum::<u64>(),
-        "lost steps"
-    );
-    Ok(end)
-}
 
-/// When the learner checkpoints, and what its checkpoints cost.
-struct Checkpoints {
-    cadence: Cadence,
-    written: u64,
-    time: Duration,
-    bytes: usize,
-}
+    fn carry_out(&mut self, m: &mut Machine, todo: Todo) -> anyhow::Result<()> {
+        if todo.publish {
+            let t = Instant::now();
+            self.publish(m)?;
+            self.stats.publish += t.elapsed();
+        }
+        if todo.checkpoint {
+            self.checkpoint(m)?;
+        }
+        if todo.credits {
+            self.send_credits(m)?;
+        }
+        Ok(())
+    }
 
-impl Checkpoints {
-    fn write(
-        &mut self,
-        run_dir: &std::path::Path,
-        learner: &NeuralLearner,
-        book: &CreditBook,
-        config_toml: &str,
-    ) -> anyhow::Result<()> {
+    fn publish(&mut self, m: &Machine) -> anyhow::Result<()> {
+        let learner = m.learner();
+        learner.network().copy_params_into(&mut self.params)?;
+        let v = learner.updates();
+        self.weights_tx
+            .publish(v, v, m.book().env_steps(), &self.params)?;
+        Ok(())
+    }
+
+    /// Publishes the grants, and wakes the actors that wait for them.
+    fn send_credits(&mut self, m: &mut Machine) -> anyhow::Result<()> {
+        let (credits, wake) = m.grant();
+        self.credits_tx.send(credits)?;
+        for id in wake {
+            self.actors.ring(id)?;
+        }
+        Ok(())
+    }
+
+    fn checkpoint(&mut self, m: &Machine) -> anyhow::Result<()> {
         let t = Instant::now();
         let ckpt = LearnerCheckpoint {
-            learner: learner.snapshot(),
-            env_steps: book.env_steps(),
+            learner: m.learner().snapshot(),
+            env_steps: m.book().env_steps(),
         };
-        self.bytes = checkpoint::save(run_dir, &ckpt, config_toml)?;
+        self.stats.checkpoint_bytes = checkpoint::save(self.run_dir, &ckpt, self.config_toml)?;
         let took = t.elapsed();
-        self.time += took;
-        self.written += 1;
+        self.stats.checkpoint_time += took;
+        self.stats.checkpoints += 1;
         debug!(
-            updates = learner.updates(),
-            env_steps = book.env_steps(),
-            bytes = self.bytes,
+            updates = m.learner().updates(),
+            env_steps = m.book().env_steps(),
+            bytes = self.stats.checkpoint_bytes,
             ms = took.as_secs_f64() * 1e3,
             "checkpoint written"
         );
         Ok(())
     }
-}
 
-/// Publishes the grants, and wakes the actors that wait for them.
-fn send_credits(
-    book: &mut CreditBook,
-    tx: &mut wire::Sender<'_, Credits>,
-    actors: &mut ActorBells<'_>,
-    updates: u64,
-) -> anyhow::Result<()> {
-    let (credits, wake) = book.grant(updates);
-    tx.send(credits)?;
-    for id in wake {
-        actors.ring(id)?;
-    }
-    Ok(())
-}
-
-/// Credits are returned after at most this many learned steps.
-pub const CREDITS_EVERY: u64 = 8;
-
-/// The learner's periodic status message.
-struct Status {
-    pid: u32,
-    loss: f64,
-    last: Instant,
-}
-
-impl Status {
-    fn new(pid: u32) -> Self {
-        Self {
-            pid,
-            loss: f64::NAN,
-            last: Instant::now(),
-        }
-    }
-
-    fn due(&self) -> bool {
-        self.last.elapsed() >= Duration::from_millis(500)
-    }
-
-    fn send(
-        &mut self,
-        tx: &mut wire::Sender<'_, Progress>,
-        state: u32,
-        book: &CreditBook,
-        learner: &NeuralLearner,
-    ) -> anyhow::Result<()> {
-        tx.send(Progress {
+    fn status(&mut self, m: &mut Machine, state: u32) -> anyhow::Result<()> {
+        self.progress.send(Progress {
             kind: progress_kind::STATUS,
             state,
-            pid: self.pid,
-            env_steps: book.env_steps(),
-            updates: learner.updates(),
-            weights_version: learner.updates(),
-            loss: self.loss,
+            pid: std::process::id(),
+            env_steps: m.book().env_steps(),
+            updates: m.learner().updates(),
+            weights_version: m.learner().updates(),
+            loss: m.loss(),
             ..Progress::default()
         })?;
-        self.last = Instant::now();
         Ok(())
     }
 }
