@@ -13,8 +13,8 @@ use std::time::Duration;
 use alfd_common::agent::NeuralActor;
 use alfd_common::checkpoint::Cadence;
 use alfd_common::environment_loop::{self, Actor as _, GenericActor, LoopError, Schedule};
+use alfd_common::evaluate::evaluate_greedy;
 use alfd_common::rng::{derive_seed, seeded};
-use alfd_common::runner::evaluate_greedy;
 use alfd_harness::{BadInput, ProcessArgs, Session};
 use alfd_wire::{Doorbell, Process, Progress, Role, MAX_ACTORS};
 use tracing::info;
@@ -154,57 +154,52 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         cadence_from,
     );
     let quota = args.episodes.map(|n| n.saturating_add(start.episodes));
-    let mut on_episode = |record: &mut alfd_common::record::EpisodeRecord,
-                          actor: &GenericActor<WireAdder, WireVariables>| {
-        // Actor 0 evaluates, with the weights it acts on (as the single-process run does).
-        if me.id == 0 && cfg.evaluation.due(record.episode) {
-            record.eval_return = evaluate_greedy(
-                actor.core.network(),
-                eval_env.as_mut(),
-                cfg.evaluation.episodes,
-                eval_seed,
-            )?;
-        }
-        progress
-            .send(Progress::episode(me.incarnation, *record))
-            .map_err(LoopError::link)?;
-        Ok(ControlFlow::Continue(()))
-    };
     let (mut ckpts, mut ckpt_time) = (0u32, Duration::ZERO);
-    // One episode at a time, so that the environment can be saved between two.
-    let end = loop {
-        let end = environment_loop::run_from(
-            env.as_mut(),
-            &mut actor,
-            &mut expert,
-            Schedule {
-                env_seed: derive_seed(cfg.seed, &env_stream),
-                episodes: Some(quota.map_or(start.episodes + 1, |q| q.min(start.episodes + 1))),
-                steps: None,
-                actor_id: me.id,
-            },
-            start,
-            &mut on_episode,
-        )?;
-        start = end.progress;
-        if end.stopped.is_some() || quota.is_some_and(|q| start.episodes >= q) {
-            break end;
-        }
-        let global_step = actor.global_step(start.steps);
-        if cadence.episode_end(global_step) {
-            saved.push(checkpoint::ActorCheckpoint {
-                progress: start,
-                global_step,
-                core: actor.core.snapshot(),
-                env: env.snapshot(),
-                expert: expert.view().clone(),
-            });
-            let t = std::time::Instant::now();
-            checkpoint::save(run_dir, me.id, &saved, &config_toml)?;
-            ckpt_time += t.elapsed();
-            ckpts += 1;
-        }
-    };
+    let end = environment_loop::run_from(
+        env.as_mut(),
+        &mut actor,
+        &mut expert,
+        Schedule {
+            env_seed: derive_seed(cfg.seed, &env_stream),
+            episodes: quota,
+            steps: None,
+            actor_id: me.id,
+        },
+        start,
+        |e| {
+            // Actor 0 evaluates, with the weights it acts on (as the single-process run does).
+            if me.id == 0 && cfg.evaluation.due(e.record.episode) {
+                e.record.eval_return = evaluate_greedy(
+                    e.actor.core.network(),
+                    eval_env.as_mut(),
+                    cfg.evaluation.episodes,
+                    eval_seed,
+                )?;
+            }
+            progress
+                .send(Progress::episode(me.incarnation, *e.record))
+                .map_err(LoopError::link)?;
+            // Between two episodes (not after its share's last), every `checkpoint_every`
+            // updates' worth of global steps.
+            let global_step = e.actor.global_step(e.progress.steps);
+            let last = quota.is_some_and(|q| e.progress.episodes >= q);
+            if !last && cadence.episode_end(global_step) {
+                saved.push(checkpoint::ActorCheckpoint {
+                    progress: e.progress,
+                    global_step,
+                    core: e.actor.core.snapshot(),
+                    env: e.env.snapshot(),
+                    expert: e.expert.view().clone(),
+                });
+                let t = std::time::Instant::now();
+                checkpoint::save(run_dir, me.id, &saved, &config_toml)
+                    .map_err(LoopError::observer)?;
+                ckpt_time += t.elapsed();
+                ckpts += 1;
+            }
+            Ok(ControlFlow::Continue(()))
+        },
+    )?;
     info!(
         reason = end.stopped.map_or("done", |s| s.0),
         episodes = end.progress.episodes,

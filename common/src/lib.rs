@@ -11,6 +11,7 @@ pub mod config;
 pub mod demo_model;
 pub mod env;
 pub mod environment_loop;
+pub mod evaluate;
 pub mod math;
 pub mod n_step;
 pub mod nn;

@@ -8,14 +8,15 @@ use std::ops::ControlFlow;
 use serde::{Deserialize, Serialize};
 
 use crate::agent::{
-    ActorSnapshot, Demonstrator, ExpertCore, ExpertSnapshot, LearnerSnapshot, NetworkDemonstrator,
-    NeuralActor, NeuralLearner, TabularAgent, TabularSnapshot,
+    ActorSnapshot, Demonstrator, ExpertCore, ExpertSnapshot, LearnerSnapshot, NeuralActor,
+    NeuralLearner, TabularAgent, TabularSnapshot,
 };
 use crate::checkpoint::StateMismatch;
 use crate::config::ExperimentConfig;
-use crate::env::{vector_env, CartPole, CliffWalk, Env, EnvError, EnvState, VectorEnv};
+use crate::env::{vector_env, CliffWalk, Env, EnvState, VectorEnv};
 use crate::environment_loop::in_process::{LearnerHandle, LocalExpert};
 use crate::environment_loop::{self, GenericActor, Progress, Schedule};
+use crate::evaluate::evaluate_greedy;
 use crate::nn::Mlp;
 use crate::record::EpisodeRecord;
 use crate::rng::{derive_seed, seeded};
@@ -129,26 +130,11 @@ impl<S> Checkpoints<'_, S> {
         }
     }
 
-    /// The episode limit of the segment that starts after `done` episodes.
-    fn segment_end(&self, done: u32, limit: Option<u32>) -> Option<u32> {
-        match self.every {
-            None => limit,
-            Some(n) => {
-                let next = (done / n.max(1) + 1) * n.max(1);
-                Some(limit.map_or(next, |l| l.min(next)))
-            }
-        }
+    /// Whether to save after `done` episodes: every `every` episodes, not after the run's last
+    /// (`limit`).
+    fn due(&self, done: u32, limit: Option<u32>) -> bool {
+        self.every.is_some_and(|n| done % n.max(1) == 0) && limit.is_none_or(|l| done < l)
     }
-}
-
-/// The expert's side of a config: budget B, demonstration model, shaping schedule.
-pub fn expert_core(cfg: &ExperimentConfig, num_actions: usize) -> ExpertCore {
-    ExpertCore::new(
-        cfg.budget(),
-        cfg.expert.model,
-        num_actions,
-        cfg.shaping.schedule(),
-    )
 }
 
 /// The schedule of the single-process run (actor 0, the `env` seed stream).
@@ -158,41 +144,6 @@ fn schedule(cfg: &ExperimentConfig) -> Schedule {
         episodes: cfg.episode_limit(),
         steps: cfg.step_limit(),
         actor_id: 0,
-    }
-}
-
-/// Plays `cfg`'s run in segments between checkpoints with [`environment_loop::run_from`]:
-/// `segment(schedule, progress, stopped)` plays one, `save(progress)` is called between two.
-fn in_segments<S>(
-    cfg: &ExperimentConfig,
-    checkpoints: &Checkpoints<'_, S>,
-    mut progress: Progress,
-    mut segment: impl FnMut(Schedule, Progress, &mut bool) -> environment_loop::RunEnd,
-    mut save: impl FnMut(Progress) -> ControlFlow<()>,
-) {
-    loop {
-        let schedule = Schedule {
-            episodes: checkpoints.segment_end(progress.episodes, cfg.episode_limit()),
-            ..schedule(cfg)
-        };
-        let mut stopped = false;
-        let end = segment(schedule, progress, &mut stopped);
-        progress = end.progress;
-        let over = stopped
-            || end.stopped.is_some()
-            || checkpoints.every.is_none()
-            || cfg.episode_limit().is_some_and(|n| progress.episodes >= n);
-        if over || save(progress).is_break() {
-            return;
-        }
-    }
-}
-
-fn continue_unless(stop: bool) -> ControlFlow<()> {
-    if stop {
-        ControlFlow::Break(())
-    } else {
-        ControlFlow::Continue(())
     }
 }
 
@@ -232,7 +183,7 @@ pub fn run_tabular_checkpointed(
         env.num_actions(),
         seeded(derive_seed(cfg.seed, "agent")),
     );
-    let core = expert_core(cfg, env.num_actions());
+    let core = ExpertCore::for_config(cfg, env.num_actions());
     let mut expert = LocalExpert::new(core, demonstrator, &cfg.expert.name, false);
     let mut records = Vec::new();
     let mut progress = Progress::default();
@@ -244,35 +195,33 @@ pub fn run_tabular_checkpointed(
         records.clone_from(&s.records);
         progress = s.progress;
     }
-    let records = std::cell::RefCell::new(records);
-    let state = std::cell::RefCell::new((env, agent, expert));
-    in_segments(
-        cfg,
-        &checkpoints,
+    let limit = cfg.episode_limit();
+    environment_loop::run_from(
+        &mut env,
+        &mut agent,
+        &mut expert,
+        schedule(cfg),
         progress,
-        |schedule, progress, stopped| {
-            let (env, agent, expert) = &mut *state.borrow_mut();
-            environment_loop::run_from(env, agent, expert, schedule, progress, |r, agent| {
-                records.borrow_mut().push(*r);
-                *stopped |= on_episode(r, agent).is_break();
-                Ok(continue_unless(*stopped))
-            })
-            .expect("an in-process tabular run cannot fail")
+        |e| {
+            records.push(*e.record);
+            if on_episode(e.record, e.actor).is_break() {
+                return Ok(ControlFlow::Break(()));
+            }
+            if !checkpoints.due(e.progress.episodes, limit) {
+                return Ok(ControlFlow::Continue(()));
+            }
+            Ok(save(&TabularRunState {
+                progress: e.progress,
+                records: records.clone(),
+                agent: e.actor.snapshot(),
+                env: e.env.snapshot(),
+                expert: e.expert.core.snapshot(),
+            }))
         },
-        |progress| {
-            let (env, agent, expert) = &*state.borrow();
-            save(&TabularRunState {
-                progress,
-                records: records.borrow().clone(),
-                agent: agent.snapshot(),
-                env: env.snapshot(),
-                expert: expert.core.snapshot(),
-            })
-        },
-    );
-    let (_, agent, expert) = state.into_inner();
+    )
+    .expect("an in-process tabular run cannot fail");
     Ok(TabularRun {
-        records: records.into_inner(),
+        records,
         greedy_policy: agent.greedy_policy(),
         agent,
         demos: expert.core.snapshot().demos,
@@ -365,7 +314,7 @@ pub fn run_neural_on(
         actions,
         seeded(derive_seed(cfg.seed, "actor-0")),
     );
-    let mut expert_core = expert_core(cfg, actions);
+    let mut expert_core = ExpertCore::for_config(cfg, actions);
     let mut records = Vec::new();
     let mut progress = Progress::default();
     if let Some(s) = checkpoints.from {
@@ -378,178 +327,51 @@ pub fn run_neural_on(
         progress = s.progress;
     }
     let handle = LearnerHandle::new(learner);
-    let actor = GenericActor::new(core, handle.adder(), handle.variables());
-    let expert = LocalExpert::new(
+    let mut actor = GenericActor::new(core, handle.adder(), handle.variables());
+    let mut expert = LocalExpert::new(
         expert_core,
         demonstrator,
         &cfg.expert.name,
         cfg.shaping_enabled(),
     );
     let eval_seed = derive_seed(cfg.seed, "eval");
-    let records = std::cell::RefCell::new(records);
-    let failure = std::cell::RefCell::new(None);
-    let state = std::cell::RefCell::new((env, actor, expert));
-    in_segments(
-        cfg,
-        &checkpoints,
+    let limit = cfg.episode_limit();
+    environment_loop::run_from(
+        env.as_mut(),
+        &mut actor,
+        &mut expert,
+        schedule(cfg),
         progress,
-        |schedule, progress, stopped| {
-            let (env, actor, expert) = &mut *state.borrow_mut();
-            environment_loop::run_from(
-                env.as_mut(),
-                actor,
-                expert,
-                schedule,
-                progress,
-                |r, actor| {
-                    if cfg.evaluation.due(r.episode) {
-                        r.eval_return = evaluate_greedy(
-                            actor.core.network(),
-                            eval_env.as_mut(),
-                            cfg.evaluation.episodes,
-                            eval_seed,
-                        )?;
-                    }
-                    records.borrow_mut().push(*r);
-                    *stopped |= on_episode(r, handle.learner().network()).is_break();
-                    Ok(continue_unless(*stopped))
-                },
-            )
-            .unwrap_or_else(|e| {
-                // Only an environment or expert in another process fails: the run stops here.
-                *failure.borrow_mut() = Some(e);
-                environment_loop::RunEnd {
-                    progress,
-                    stopped: Some(environment_loop::Stop("failed")),
-                }
-            })
-        },
-        |progress| {
-            let (env, actor, expert) = &*state.borrow();
-            save(&NeuralRunState {
-                progress,
-                records: records.borrow().clone(),
+        |e| {
+            if cfg.evaluation.due(e.record.episode) {
+                e.record.eval_return = evaluate_greedy(
+                    e.actor.core.network(),
+                    eval_env.as_mut(),
+                    cfg.evaluation.episodes,
+                    eval_seed,
+                )?;
+            }
+            records.push(*e.record);
+            if on_episode(e.record, handle.learner().network()).is_break() {
+                return Ok(ControlFlow::Break(()));
+            }
+            if !checkpoints.due(e.progress.episodes, limit) {
+                return Ok(ControlFlow::Continue(()));
+            }
+            Ok(save(&NeuralRunState {
+                progress: e.progress,
+                records: records.clone(),
                 learner: handle.learner().snapshot(),
-                actor: actor.core.snapshot(),
-                env: env.snapshot(),
-                expert: expert.core.snapshot(),
-            })
+                actor: e.actor.core.snapshot(),
+                env: e.env.snapshot(),
+                expert: e.expert.core.snapshot(),
+            }))
         },
-    );
-    if let Some(e) = failure.into_inner() {
-        return Err(RunError::Loop(e));
-    }
-    let (_, actor, expert) = state.into_inner();
+    )?;
     drop(actor);
     Ok(NeuralRun {
-        records: records.into_inner(),
+        records,
         network: handle.into_inner().network().clone(),
         expert: expert.core,
     })
-}
-
-/// Mean return of `episodes` episodes of `env` played greedily by `net` (on the mean of its
-/// heads' Q-values), the first reset seeded with `seed`: the `eval_return` of a record.
-pub fn evaluate_greedy(
-    net: &Mlp,
-    env: &mut VectorEnv,
-    episodes: u32,
-    seed: u64,
-) -> Result<f64, EnvError> {
-    Ok(q_range(net, env, episodes, seed)?.mean_return)
-}
-
-/// The Q-values a network takes on its own greedy episodes ([`q_range`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct QRange {
-    /// The smallest and the largest Q-value of any head and action at any state visited.
-    pub min: f64,
-    pub max: f64,
-    /// The mean return of the episodes.
-    pub mean_return: f64,
-}
-
-/// Plays `episodes` greedy episodes of `env` with `net` (on the mean of its heads), the first
-/// reset seeded with `seed`: their mean return ([`evaluate_greedy`]) and the range of every
-/// Q-value computed on the way, a check for divergence against [`value_bounds`].
-pub fn q_range(
-    net: &Mlp,
-    env: &mut VectorEnv,
-    episodes: u32,
-    seed: u64,
-) -> Result<QRange, EnvError> {
-    let (mut min, mut max) = (f64::INFINITY, f64::NEG_INFINITY);
-    let mut policy = NetworkDemonstrator::new(net.clone());
-    let returns = evaluate(env, episodes as usize, seed, |obs| {
-        let action = policy.act(obs);
-        for &v in policy.last_q() {
-            min = min.min(f64::from(v));
-            max = max.max(f64::from(v));
-        }
-        action
-    })?;
-    Ok(QRange {
-        min,
-        max,
-        mean_return: returns.iter().sum::<f64>() / returns.len().max(1) as f64,
-    })
-}
-
-/// The range every true value lies in when each step's reward is in `[r_min, r_max]` and the
-/// discount is `gamma < 1`: `[min(0, r_min), max(0, r_max)] / (1 - gamma)` (an episode may end
-/// at any step, so 0 is always reachable). CartPole-1000 at γ = 0.995: `[0, 200]`.
-pub fn value_bounds((r_min, r_max): (f64, f64), gamma: f64) -> (f64, f64) {
-    (
-        r_min.min(0.0) / (1.0 - gamma),
-        r_max.max(0.0) / (1.0 - gamma),
-    )
-}
-
-/// Returns of `episodes` episodes of `env` played by `act`, the first reset seeded with `seed`;
-/// the environment's error if a step fails (one in another process that died, say).
-pub fn evaluate<E: Env + ?Sized>(
-    env: &mut E,
-    episodes: usize,
-    seed: u64,
-    mut act: impl FnMut(&E::Observation) -> usize,
-) -> Result<Vec<f64>, EnvError> {
-    (0..episodes)
-        .map(|i| {
-            let mut obs = env.reset(if i == 0 { Some(seed) } else { None });
-            let mut ret = 0.0;
-            loop {
-                let step = env.step(act(&obs))?;
-                ret += step.reward;
-                let done = step.done();
-                obs = step.observation;
-                if done {
-                    return Ok(ret);
-                }
-            }
-        })
-        .collect()
-}
-
-/// Returns of `episodes` CartPole episodes (limit `max_steps`) played by `policy`.
-pub fn evaluate_cartpole(
-    policy: &mut dyn Demonstrator<[f32]>,
-    episodes: usize,
-    seed: u64,
-    max_steps: usize,
-) -> Vec<f64> {
-    evaluate(&mut CartPole::new(max_steps), episodes, seed, |obs| {
-        policy.act(obs)
-    })
-    .expect("the native CartPole steps every action of a live episode")
-}
-
-/// Returns of `episodes` CliffWalk episodes played by `policy` on a clone of `env`.
-pub fn evaluate_cliffwalk(
-    policy: &mut dyn Demonstrator<usize>,
-    env: &CliffWalk,
-    episodes: usize,
-    seed: u64,
-) -> Vec<f64> {
-    evaluate(&mut env.clone(), episodes, seed, |s| policy.act(s))
-        .expect("the native CliffWalk steps every action of a live episode")
 }

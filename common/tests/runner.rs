@@ -241,8 +241,8 @@ fn single_head_never_queries_because_one_head_has_no_divergence() {
 fn q_range_reports_every_q_value_of_the_greedy_episodes() {
     use alfd_common::config::EnvName;
     use alfd_common::env::vector_env_named;
+    use alfd_common::evaluate::{evaluate_greedy, q_range, value_bounds};
     use alfd_common::nn::{Mlp, Params};
-    use alfd_common::runner::{evaluate_greedy, q_range, value_bounds};
 
     let mut params = Params::zeros(4, 8, 4);
     params

@@ -6,10 +6,9 @@ use std::path::{Path, PathBuf};
 use alfd_common::agent::{NetworkDemonstrator, TablePolicy};
 use alfd_common::config::{EnvName, ExperimentConfig};
 use alfd_common::env::vector_env_named;
+use alfd_common::evaluate::{evaluate, evaluate_cartpole, evaluate_cliffwalk};
 use alfd_common::record::ReturnStats;
-use alfd_common::runner::{
-    evaluate, evaluate_cartpole, evaluate_cliffwalk, run_neural, run_tabular,
-};
+use alfd_common::runner::{run_neural, run_tabular};
 use alfd_expert::registry::{self, ExpertEntry};
 use anyhow::Context as _;
 

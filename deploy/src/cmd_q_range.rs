@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 
 use alfd_common::config::ExperimentConfig;
 use alfd_common::env::vector_env;
+use alfd_common::evaluate::{q_range, value_bounds, QRange};
 use alfd_common::nn::Mlp;
-use alfd_common::runner::{q_range, value_bounds, QRange};
 
 use crate::usage::usage;
 

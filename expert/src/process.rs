@@ -15,7 +15,6 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use alfd_common::agent::{Demonstrator, ExpertCore};
-use alfd_common::runner::expert_core;
 use alfd_harness::python::Adapter;
 use alfd_harness::{BadInput, ProcessArgs, Session};
 use alfd_wire::{
@@ -81,7 +80,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let source = source(args, cfg.env.name, &name, me, schema, actions)?;
     let wire = args.process.connect(me, schema)?;
     let session = Session::join(&wire, Doorbell::Expert, runtime.handshake_timeout())?;
-    let core = expert_core(cfg, actions);
+    let core = ExpertCore::for_config(cfg, actions);
     let page = match source {
         Source::Person => Some(start_page(
             args,

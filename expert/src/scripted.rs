@@ -171,7 +171,7 @@ impl Scripted {
 mod tests {
     use super::*;
     use alfd_common::env::{Acrobot, MountainCar};
-    use alfd_common::runner::evaluate;
+    use alfd_common::evaluate::evaluate;
 
     /// Mean return of `name` over `episodes` episodes from `seed` (as `alfd expert eval NAME
     /// --episodes EPISODES --seed SEED` prints it).

@@ -139,6 +139,16 @@ impl ExpertCore {
         }
     }
 
+    /// The expert's side of a config: budget B, demonstration model, shaping schedule.
+    pub fn for_config(cfg: &crate::config::ExperimentConfig, num_actions: usize) -> Self {
+        Self::new(
+            cfg.budget(),
+            cfg.expert.model,
+            num_actions,
+            cfg.shaping.schedule(),
+        )
+    }
+
     /// Restores the demonstrations of an earlier expert process (its `demos.jsonl`): the budget
     /// left and the model are those they imply.
     pub fn restore(&mut self, records: Vec<DemoRecord>) -> Result<(), DemoModelError> {

@@ -41,6 +41,9 @@ pub enum LoopError {
     Env(EnvError),
     #[error(transparent)]
     Link(Box<dyn std::error::Error + Send + Sync>),
+    /// An observer of an episode's end failed (a checkpoint that could not be written).
+    #[error("{0}")]
+    Observer(Box<dyn std::error::Error + Send + Sync>),
 }
 
 impl From<EnvError> for LoopError {
@@ -53,6 +56,11 @@ impl LoopError {
     /// Wraps a transport's error.
     pub fn link(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> Self {
         Self::Link(e.into())
+    }
+
+    /// Wraps the error of an episode's observer.
+    pub fn observer(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> Self {
+        Self::Observer(e.into())
     }
 }
 
@@ -288,15 +296,26 @@ pub struct RunEnd {
     pub stopped: Option<Stop>,
 }
 
+/// What the observers of an episode's end see: its record (they may fill in its `eval_return`),
+/// where the run stands (the start of a run continued from here), and the environment, actor and
+/// expert as they are between this episode and the next (what a checkpoint saves).
+pub struct EpisodeEnd<'a, E: ?Sized, Ac, X> {
+    pub record: &'a mut EpisodeRecord,
+    pub progress: Progress,
+    pub env: &'a E,
+    pub actor: &'a Ac,
+    pub expert: &'a X,
+}
+
 /// Plays episodes of `env` with `actor`, asking `expert` where the query rule fires: Algorithm 1,
-/// one step at a time. `on_episode` sees every finished episode's record (and may fill in its
-/// `eval_return`) and the actor, and may stop the run with `Break`.
+/// one step at a time. `on_episode` sees every episode's end ([`EpisodeEnd`]: evaluation,
+/// progress, checkpoints) and may stop the run with `Break`.
 pub fn run<E, Ac, X>(
     env: &mut E,
     actor: &mut Ac,
     expert: &mut X,
     schedule: Schedule,
-    on_episode: impl FnMut(&mut EpisodeRecord, &Ac) -> Result<ControlFlow<()>>,
+    on_episode: impl FnMut(EpisodeEnd<'_, E, Ac, X>) -> Result<ControlFlow<()>>,
 ) -> Result<RunEnd>
 where
     E: Env + ?Sized,
@@ -329,7 +348,7 @@ pub fn run_from<E, Ac, X>(
     expert: &mut X,
     schedule: Schedule,
     start: Progress,
-    mut on_episode: impl FnMut(&mut EpisodeRecord, &Ac) -> Result<ControlFlow<()>>,
+    mut on_episode: impl FnMut(EpisodeEnd<'_, E, Ac, X>) -> Result<ControlFlow<()>>,
 ) -> Result<RunEnd>
 where
     E: Env + ?Sized,
@@ -358,7 +377,17 @@ where
             }
         };
         episode += 1;
-        if on_episode(&mut record, actor)?.is_break() {
+        let end = EpisodeEnd {
+            record: &mut record,
+            progress: Progress {
+                episodes: episode,
+                steps,
+            },
+            env: &*env,
+            actor: &*actor,
+            expert: &*expert,
+        };
+        if on_episode(end)?.is_break() {
             break;
         }
     }
