@@ -12,7 +12,10 @@ use std::time::Duration;
 
 use alfd_common::agent::NeuralActor;
 use alfd_common::checkpoint::Cadence;
-use alfd_common::environment_loop::{self, Actor as _, GenericActor, LoopError, Schedule};
+use alfd_common::env::VectorEnv;
+use alfd_common::environment_loop::{
+    self, Actor as _, EpisodeEnd, GenericActor, LoopError, Schedule,
+};
 use alfd_common::evaluate::evaluate_greedy;
 use alfd_common::rng::{derive_seed, seeded};
 use alfd_harness::{BadInput, ProcessArgs, Session};
@@ -60,83 +63,47 @@ pub fn seed_streams(actor_id: u16, incarnation: u64) -> (String, String) {
 
 /// Runs the actor until the launcher says stop or a termination signal arrives.
 pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        (args.actor_id as usize) < MAX_ACTORS,
-        "--actor-id must be below {MAX_ACTORS}, got {}",
-        args.actor_id
-    );
-    anyhow::ensure!(args.incarnation >= 1, "--incarnation must be at least 1");
+    let me = identity(args)?;
     let setup = args.process.load()?;
     let (cfg, runtime) = (&setup.config, &setup.runtime);
     // A Gymnasium environment is served by this actor's adapter (started here, stopped with it).
     let mut adapter = None;
     let mut env = setup.actor_env(&mut adapter, &args.process, args.actor_id, schema)?;
     let (obs_dim, actions) = (env.observation_dim(), env.num_actions());
-    let me = Identity {
-        id: args.actor_id,
-        incarnation: args.incarnation,
-    };
     let (actor_stream, env_stream) = seed_streams(me.id, me.incarnation);
 
     let wire = args
         .process
         .connect(Process::new(Role::Actor, me.id), schema)?;
     let session = Session::join(&wire, Doorbell::Actor(me.id), runtime.handshake_timeout())?;
+    let rng = seeded(derive_seed(cfg.seed, &actor_stream));
     let mut core = NeuralActor::new(
         &cfg.agent,
         &cfg.query,
         cfg.shaping.kind,
         obs_dim,
         actions,
-        seeded(derive_seed(cfg.seed, &actor_stream)),
+        rng,
     );
     let mut variables = WireVariables::new(&session)?;
     let mut adder = WireAdder::new(&session, me, runtime.window, obs_dim, cfg.agent.heads())?;
-    let schedule = cfg.shaping_enabled().then(|| cfg.shaping.schedule());
-    let mut expert = WireExpert::new(
-        &session,
-        me,
-        cfg.budget(),
-        schedule,
-        runtime.query_timeout(),
-    )?
-    .with_human_timeout(runtime.query_timeout_for(alfd_harness::HUMAN_EXPERT));
-    // A restored actor continues where its checkpoint stands (the weights come from the learner,
-    // restored from the checkpoint that pairs with this one).
+    let mut expert = wire_expert(&session, me, &setup)?;
+    // A restored actor continues where its checkpoint stands.
     let run_dir = &args.process.run_dir;
     let config_toml = std::fs::read_to_string(run_dir.join("config.toml"))
         .map_err(|e| BadInput(format!("cannot read the run's config.toml: {e}")))?;
-    let mut saved = checkpoint::ActorCheckpoints::default();
+    let restored = args
+        .restore_step
+        .map(|step| restore(run_dir, me.id, step, &config_toml))
+        .transpose()?;
     let mut start = environment_loop::Progress::default();
-    let mut cadence_from = 0;
-    if let Some(step) = args.restore_step {
-        let file = checkpoint::load(run_dir, me.id, &config_toml)?.ok_or_else(|| {
-            BadInput(format!(
-                "--restore-step {step}: {} does not exist",
-                checkpoint::path(run_dir, me.id).display()
-            ))
-        })?;
-        let c = file.at(step).ok_or_else(|| {
-            BadInput(format!(
-                "--restore-step {step}: {} holds no state at that step",
-                checkpoint::path(run_dir, me.id).display()
-            ))
-        })?;
-        core.restore(&c.core)
-            .map_err(|e| BadInput(format!("actor checkpoint: {e}")))?;
-        env.restore(&c.env)
-            .map_err(|e| BadInput(format!("actor checkpoint: {e}")))?;
+    if let Some(c) = &restored {
+        let bad = |e: &dyn std::fmt::Display| BadInput(format!("actor checkpoint: {e}"));
+        core.restore(&c.core).map_err(|e| bad(&e))?;
+        env.restore(&c.env).map_err(|e| bad(&e))?;
         adder.restored(c.progress.steps);
         expert.restore_view(c.expert.clone());
         start = c.progress;
-        cadence_from = c.global_step;
-        info!(
-            episodes = start.episodes,
-            steps = start.steps,
-            global_step = step,
-            "restored from the checkpoint"
-        );
-        saved.push(c.clone());
     }
     variables.first(&session, &mut core, runtime.handshake_timeout())?;
     info!(
@@ -149,12 +116,9 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let mut actor = GenericActor::new(core, adder, variables);
     let mut eval_env = setup.actor_env(&mut adapter, &args.process, args.actor_id, schema)?;
     let eval_seed = derive_seed(cfg.seed, "eval");
-    let mut cadence = Cadence::new(
-        Cadence::steps_for_updates(runtime.checkpoint_every, cfg.agent.updates_per_step),
-        cadence_from,
-    );
     let quota = args.episodes.map(|n| n.saturating_add(start.episodes));
-    let (mut ckpts, mut ckpt_time) = (0u32, Duration::ZERO);
+    let every = Cadence::steps_for_updates(runtime.checkpoint_every, cfg.agent.updates_per_step);
+    let mut checkpoints = Checkpoints::new(run_dir, me.id, &config_toml, every, quota, restored);
     let end = environment_loop::run_from(
         env.as_mut(),
         &mut actor,
@@ -179,27 +143,28 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             progress
                 .send(Progress::episode(me.incarnation, *e.record))
                 .map_err(LoopError::link)?;
-            // Between two episodes (not after its share's last), every `checkpoint_every`
-            // updates' worth of global steps.
-            let global_step = e.actor.global_step(e.progress.steps);
-            let last = quota.is_some_and(|q| e.progress.episodes >= q);
-            if !last && cadence.episode_end(global_step) {
-                saved.push(checkpoint::ActorCheckpoint {
-                    progress: e.progress,
-                    global_step,
-                    core: e.actor.core.snapshot(),
-                    env: e.env.snapshot(),
-                    expert: e.expert.view().clone(),
-                });
-                let t = std::time::Instant::now();
-                checkpoint::save(run_dir, me.id, &saved, &config_toml)
-                    .map_err(LoopError::observer)?;
-                ckpt_time += t.elapsed();
-                ckpts += 1;
-            }
+            checkpoints.episode_end(&e).map_err(LoopError::observer)?;
             Ok(ControlFlow::Continue(()))
         },
     )?;
+    log_end(&end, &actor, &expert, &checkpoints);
+    if end.stopped.is_none() {
+        // Its share played: it stays until the launcher says stop, since messages of a process
+        // that has exited may never reach their receiver (its episodes, its last transitions).
+        info!("played its share of the episodes; waiting for the run to end");
+        let reason = wait_for_stop(&session)?;
+        info!(reason, "actor leaving");
+    }
+    Ok(())
+}
+
+/// How the actor's run ended, with what waiting and checkpoints cost it.
+fn log_end(
+    end: &environment_loop::RunEnd,
+    actor: &GenericActor<WireAdder<'_, '_>, WireVariables<'_>>,
+    expert: &WireExpert<'_, '_>,
+    checkpoints: &Checkpoints<'_>,
+) {
     info!(
         reason = end.stopped.map_or("done", |s| s.0),
         episodes = end.progress.episodes,
@@ -207,25 +172,149 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         timeouts = expert.timeouts,
         credit_waits = actor.adder.credit_waits,
         credit_wait_s = actor.adder.credit_wait.as_secs_f64(),
-        checkpoints = ckpts,
-        checkpoint_write_s = ckpt_time.as_secs_f64(),
+        checkpoints = checkpoints.written,
+        checkpoint_write_s = checkpoints.time.as_secs_f64(),
         "actor stopping"
     );
-    if end.stopped.is_none() {
-        // Its share played: it stays until the launcher says stop, since messages of a process
-        // that has exited may never reach their receiver (its episodes, its last transitions).
-        info!("played its share of the episodes; waiting for the run to end");
-        let reason = loop {
-            if let Some(stop) = session.should_stop()? {
-                break stop.0;
-            }
-            if let Some(stop) = session.wait(Duration::from_millis(100))? {
-                break stop.0;
-            }
-        };
-        info!(reason, "actor leaving");
+}
+
+/// This actor's id and incarnation, checked.
+fn identity(args: &Args) -> anyhow::Result<Identity> {
+    anyhow::ensure!(
+        (args.actor_id as usize) < MAX_ACTORS,
+        "--actor-id must be below {MAX_ACTORS}, got {}",
+        args.actor_id
+    );
+    anyhow::ensure!(args.incarnation >= 1, "--incarnation must be at least 1");
+    Ok(Identity {
+        id: args.actor_id,
+        incarnation: args.incarnation,
+    })
+}
+
+/// The expert as this actor's client: budget, shaping schedule and timeouts of the run.
+fn wire_expert<'s, 'w>(
+    session: &'s Session<'w>,
+    me: Identity,
+    setup: &alfd_harness::Setup,
+) -> anyhow::Result<WireExpert<'s, 'w>> {
+    let (cfg, runtime) = (&setup.config, &setup.runtime);
+    let schedule = cfg.shaping_enabled().then(|| cfg.shaping.schedule());
+    Ok(
+        WireExpert::new(session, me, cfg.budget(), schedule, runtime.query_timeout())?
+            .with_human_timeout(runtime.query_timeout_for(alfd_harness::HUMAN_EXPERT)),
+    )
+}
+
+/// The actor's checkpoints: every `checkpoint_every` updates' worth of global steps, between two
+/// episodes, each appended to `RUN_DIR/actor-<id>.ckpt` with the earlier ones it keeps.
+struct Checkpoints<'a> {
+    cadence: Cadence,
+    saved: checkpoint::ActorCheckpoints,
+    /// The episodes this actor plays (none is saved after its last).
+    quota: Option<u32>,
+    run_dir: &'a std::path::Path,
+    id: u16,
+    config_toml: &'a str,
+    written: u32,
+    time: Duration,
+}
+
+type ActorEnd<'e, 's, 'w> = EpisodeEnd<
+    'e,
+    VectorEnv,
+    GenericActor<WireAdder<'s, 'w>, WireVariables<'w>>,
+    WireExpert<'s, 'w>,
+>;
+
+impl<'a> Checkpoints<'a> {
+    /// Every `every` global steps, continuing from the checkpoint `restored` from.
+    fn new(
+        run_dir: &'a std::path::Path,
+        id: u16,
+        config_toml: &'a str,
+        every: u64,
+        quota: Option<u32>,
+        restored: Option<checkpoint::ActorCheckpoint>,
+    ) -> Self {
+        Self {
+            cadence: Cadence::new(every, restored.as_ref().map_or(0, |c| c.global_step)),
+            saved: checkpoint::ActorCheckpoints {
+                slots: restored.into_iter().collect(),
+            },
+            quota,
+            run_dir,
+            id,
+            config_toml,
+            written: 0,
+            time: Duration::ZERO,
+        }
     }
-    Ok(())
+
+    /// An episode ended: saves the state between it and the next if the cadence says so.
+    fn episode_end(&mut self, e: &ActorEnd<'_, '_, '_>) -> anyhow::Result<()> {
+        if self.quota.is_some_and(|q| e.progress.episodes >= q) {
+            return Ok(());
+        }
+        let global_step = e.actor.global_step(e.progress.steps);
+        if !self.cadence.episode_end(global_step) {
+            return Ok(());
+        }
+        self.saved.push(checkpoint::ActorCheckpoint {
+            progress: e.progress,
+            global_step,
+            core: e.actor.core.snapshot(),
+            env: e.env.snapshot(),
+            expert: e.expert.view().clone(),
+        });
+        let t = std::time::Instant::now();
+        checkpoint::save(self.run_dir, self.id, &self.saved, self.config_toml)?;
+        self.time += t.elapsed();
+        self.written += 1;
+        Ok(())
+    }
+}
+
+/// The state `RUN_DIR/actor-<id>.ckpt` holds for global step `step` (the weights come from the
+/// learner, restored from the checkpoint that pairs with this one).
+fn restore(
+    run_dir: &std::path::Path,
+    id: u16,
+    step: u64,
+    config_toml: &str,
+) -> anyhow::Result<checkpoint::ActorCheckpoint> {
+    let path = checkpoint::path(run_dir, id);
+    let file = checkpoint::load(run_dir, id, config_toml)?.ok_or_else(|| {
+        BadInput(format!(
+            "--restore-step {step}: {} does not exist",
+            path.display()
+        ))
+    })?;
+    let c = file.at(step).ok_or_else(|| {
+        BadInput(format!(
+            "--restore-step {step}: {} holds no state at that step",
+            path.display()
+        ))
+    })?;
+    info!(
+        episodes = c.progress.episodes,
+        steps = c.progress.steps,
+        global_step = step,
+        "restored from the checkpoint"
+    );
+    Ok(c.clone())
+}
+
+/// Waits until the launcher says stop or a termination signal arrives; the reason.
+fn wait_for_stop(session: &Session<'_>) -> anyhow::Result<&'static str> {
+    loop {
+        if let Some(stop) = session.should_stop()? {
+            return Ok(stop.0);
+        }
+        if let Some(stop) = session.wait(Duration::from_millis(100))? {
+            return Ok(stop.0);
+        }
+    }
 }
 
 #[cfg(test)]
