@@ -5,6 +5,7 @@
 //! services under the actors' own headers; what they need (credits, weights, the demonstration
 //! model, control, answers) goes out over zenoh as it is published here.
 
+use std::collections::hash_map::Entry;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -13,14 +14,15 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use alfd_wire::{
-    DemoModelHeader, Doorbell, IncomingQuery, PendingQuery, Process, QueryClient, Role, Sender,
-    TransitionBatch, Wake, Wire, WireError, MAX_ACTORS, SCHEMA_VERSION,
+    DemoModelHeader, Doorbell, IncomingQuery, PendingQuery, Process, QueryClient, QueryResponse,
+    Role, Sender, TransitionBatch, Wake, Wire, WireError, MAX_ACTORS, SCHEMA_VERSION,
 };
 use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
 use zenoh::sample::SampleKind;
 use zenoh::Wait as _;
 
+use crate::desk::{Answer, ExpertDesk};
 use crate::endpoint::Endpoint;
 use crate::error::{zenoh_error, BridgeError, Result};
 use crate::frame::{self, ExpertOrder, Frame};
@@ -115,114 +117,9 @@ impl Hub {
         let (post, inbox) = inbox(&opts.run_id, 1);
         let stop = Arc::new(AtomicBool::new(false));
 
-        // Joins: a query on `alfd/<run>/join`.
-        let queryable = {
-            let roster = Arc::clone(&roster);
-            let events_tx = events_tx.clone();
-            let run_id = opts.run_id.clone();
-            let config_toml = opts.config_toml.clone();
-            let runtime_toml = opts.runtime_toml.clone();
-            session
-                .declare_queryable(keys::join(&opts.run_id))
-                .callback(move |query| {
-                    let reply = answer_join(
-                        query.payload().map(|p| p.to_bytes().into_owned()),
-                        &roster,
-                        &run_id,
-                        &config_toml,
-                        &runtime_toml,
-                    );
-                    if let (JoinReply::Joined(j), Some(r)) = (&reply, &request_of(&query)) {
-                        let _ = events_tx.send(HubEvent::Joined {
-                            join_id: r.join_id.clone(),
-                            host: r.host.clone(),
-                            actors: j.actors.clone(),
-                            expert: r.expert.clone(),
-                        });
-                    }
-                    match frame::encode(SCHEMA_VERSION, &reply) {
-                        Ok(bytes) => {
-                            let _ = query.reply(query.key_expr().clone(), bytes).wait();
-                        }
-                        Err(e) => warn!("cannot answer a join: {e}"),
-                    }
-                })
-                .wait()
-                .map_err(zenoh_error)?
-        };
-
-        // Restarts: a remote host's actor crashed, and the host asks for a new incarnation.
-        let restarts = {
-            let roster = Arc::clone(&roster);
-            let events_tx = events_tx.clone();
-            session
-                .declare_queryable(keys::restart(&opts.run_id))
-                .callback(move |query| {
-                    let request = query
-                        .payload()
-                        .map(|p| frame::decode::<RestartRequest>(SCHEMA_VERSION, &p.to_bytes()));
-                    let reply = match request {
-                        Some(Ok(r)) => match roster.lock().expect("roster").restart(&r.join_id, r.actor) {
-                            Ok(incarnation) => {
-                                let _ = events_tx.send(HubEvent::Restarted {
-                                    join_id: r.join_id,
-                                    actor: r.actor,
-                                    incarnation,
-                                });
-                                RestartReply::Restart(incarnation)
-                            }
-                            Err(why) => {
-                                warn!(join_id = %r.join_id, actor = r.actor, "restart refused: {why}");
-                                RestartReply::Refused(why)
-                            }
-                        },
-                        Some(Err(e)) => RestartReply::Refused(e.to_string()),
-                        None => RestartReply::Refused("a restart without a request".to_owned()),
-                    };
-                    match frame::encode(SCHEMA_VERSION, &reply) {
-                        Ok(bytes) => {
-                            let _ = query.reply(query.key_expr().clone(), bytes).wait();
-                        }
-                        Err(e) => warn!("cannot answer a restart: {e}"),
-                    }
-                })
-                .wait()
-                .map_err(zenoh_error)?
-        };
-
-        // Members: each joined host holds a liveliness token; when it goes, so do its actors.
-        let members = {
-            let roster = Arc::clone(&roster);
-            let post = post.clone();
-            let events_tx = events_tx.clone();
-            let prefix = keys::member(&opts.run_id, "");
-            session
-                .liveliness()
-                .declare_subscriber(keys::member(&opts.run_id, "*"))
-                .callback(move |sample| {
-                    let key = sample.key_expr().as_str();
-                    let join_id = key.strip_prefix(&prefix).unwrap_or(key).to_owned();
-                    match sample.kind() {
-                        SampleKind::Put => {
-                            debug!(%join_id, "remote host up");
-                            post.send(Mail::Joined);
-                        }
-                        SampleKind::Delete => {
-                            post.send(Mail::Left(join_id.clone()));
-                            let left = roster.lock().expect("roster").leave(&join_id);
-                            if !left.actors.is_empty() || left.expert {
-                                let _ = events_tx.send(HubEvent::Left {
-                                    join_id,
-                                    actors: left.actors,
-                                    expert: left.expert,
-                                });
-                            }
-                        }
-                    }
-                })
-                .wait()
-                .map_err(zenoh_error)?
-        };
+        let queryable = joins(&session, &opts, &roster, &events_tx)?;
+        let restarts = restarts(&session, &opts.run_id, &roster, &events_tx)?;
+        let members = members(&session, &opts.run_id, &roster, &post, &events_tx)?;
         let token = session
             .liveliness()
             .declare_token(keys::hub(&opts.run_id))
@@ -312,6 +209,131 @@ impl Drop for Hub {
     }
 }
 
+/// Joins: a query on `alfd/<run>/join`, answered by the roster.
+fn joins(
+    session: &zenoh::Session,
+    opts: &HubOptions,
+    roster: &Arc<Mutex<Roster>>,
+    events_tx: &mpsc::Sender<HubEvent>,
+) -> Result<zenoh::query::Queryable<()>> {
+    let roster = Arc::clone(&roster);
+    let events_tx = events_tx.clone();
+    let run_id = opts.run_id.clone();
+    let config_toml = opts.config_toml.clone();
+    let runtime_toml = opts.runtime_toml.clone();
+    session
+        .declare_queryable(keys::join(&opts.run_id))
+        .callback(move |query| {
+            let reply = answer_join(
+                query.payload().map(|p| p.to_bytes().into_owned()),
+                &roster,
+                &run_id,
+                &config_toml,
+                &runtime_toml,
+            );
+            if let (JoinReply::Joined(j), Some(r)) = (&reply, &request_of(&query)) {
+                let _ = events_tx.send(HubEvent::Joined {
+                    join_id: r.join_id.clone(),
+                    host: r.host.clone(),
+                    actors: j.actors.clone(),
+                    expert: r.expert.clone(),
+                });
+            }
+            match frame::encode(SCHEMA_VERSION, &reply) {
+                Ok(bytes) => {
+                    let _ = query.reply(query.key_expr().clone(), bytes).wait();
+                }
+                Err(e) => warn!("cannot answer a join: {e}"),
+            }
+        })
+        .wait()
+        .map_err(zenoh_error)
+}
+
+/// Restarts: a remote host's actor crashed, and the host asks for a new incarnation.
+fn restarts(
+    session: &zenoh::Session,
+    run_id: &str,
+    roster: &Arc<Mutex<Roster>>,
+    events_tx: &mpsc::Sender<HubEvent>,
+) -> Result<zenoh::query::Queryable<()>> {
+    let roster = Arc::clone(&roster);
+    let events_tx = events_tx.clone();
+    session
+        .declare_queryable(keys::restart(&run_id))
+        .callback(move |query| {
+            let request = query
+                .payload()
+                .map(|p| frame::decode::<RestartRequest>(SCHEMA_VERSION, &p.to_bytes()));
+            let reply = match request {
+                Some(Ok(r)) => match roster.lock().expect("roster").restart(&r.join_id, r.actor) {
+                    Ok(incarnation) => {
+                        let _ = events_tx.send(HubEvent::Restarted {
+                            join_id: r.join_id,
+                            actor: r.actor,
+                            incarnation,
+                        });
+                        RestartReply::Restart(incarnation)
+                    }
+                    Err(why) => {
+                        warn!(join_id = %r.join_id, actor = r.actor, "restart refused: {why}");
+                        RestartReply::Refused(why)
+                    }
+                },
+                Some(Err(e)) => RestartReply::Refused(e.to_string()),
+                None => RestartReply::Refused("a restart without a request".to_owned()),
+            };
+            match frame::encode(SCHEMA_VERSION, &reply) {
+                Ok(bytes) => {
+                    let _ = query.reply(query.key_expr().clone(), bytes).wait();
+                }
+                Err(e) => warn!("cannot answer a restart: {e}"),
+            }
+        })
+        .wait()
+        .map_err(zenoh_error)
+}
+
+/// Members: each joined host holds a liveliness token; when it goes, so do its actors.
+fn members(
+    session: &zenoh::Session,
+    run_id: &str,
+    roster: &Arc<Mutex<Roster>>,
+    post: &Post,
+    events_tx: &mpsc::Sender<HubEvent>,
+) -> Result<zenoh::pubsub::Subscriber<()>> {
+    let roster = Arc::clone(&roster);
+    let post = post.clone();
+    let events_tx = events_tx.clone();
+    let prefix = keys::member(&run_id, "");
+    session
+        .liveliness()
+        .declare_subscriber(keys::member(&run_id, "*"))
+        .callback(move |sample| {
+            let key = sample.key_expr().as_str();
+            let join_id = key.strip_prefix(&prefix).unwrap_or(key).to_owned();
+            match sample.kind() {
+                SampleKind::Put => {
+                    debug!(%join_id, "remote host up");
+                    post.send(Mail::Joined);
+                }
+                SampleKind::Delete => {
+                    post.send(Mail::Left(join_id.clone()));
+                    let left = roster.lock().expect("roster").leave(&join_id);
+                    if !left.actors.is_empty() || left.expert {
+                        let _ = events_tx.send(HubEvent::Left {
+                            join_id,
+                            actors: left.actors,
+                            expert: left.expert,
+                        });
+                    }
+                }
+            }
+        })
+        .wait()
+        .map_err(zenoh_error)
+}
+
 fn request_of(query: &zenoh::query::Query) -> Option<JoinRequest> {
     let bytes = query.payload()?.to_bytes();
     frame::decode(SCHEMA_VERSION, &bytes).ok()
@@ -372,210 +394,257 @@ fn forward(
     let mut bells = vec![Doorbell::Bridge];
     bells.extend((0..MAX_ACTORS as u16).map(Doorbell::Actor));
     let waiter = wire.waiter_on(&bells)?;
-    let credits = wire.credits_receiver()?;
-    let weights = wire.weights_receiver()?;
-    let model = wire.demo_model_receiver()?;
-    let control = wire.control_receiver()?;
-    let mut progress = wire.progress_sender()?;
-    let learner = wire.bell(Doorbell::Learner)?;
-    let expert = wire.bell(Doorbell::Expert)?;
-    let launcher = wire.bell(Doorbell::Launcher)?;
-    // One publisher per remote actor, as each actor has its own on one host (the learner's
-    // buffer is per publisher).
-    let mut transitions: HashMap<u32, Sender<'_, TransitionBatch>> = HashMap::new();
-    let mut clients: HashMap<u32, QueryClient<'_>> = HashMap::new();
-    let mut pending: HashMap<u32, (PendingQuery<'_>, u64, Instant)> = HashMap::new();
-    // A remote expert's side on this host: the hub serves the queries while it is active, and
-    // publishes its model here.
-    let server = wire.query_server()?;
-    let mut held: HashMap<u32, IncomingQuery<'_>> = HashMap::new();
-    let mut remote_model = None;
-    // Generation → the host serving it; a generation whose host left writes nothing more.
-    let mut remote_experts: HashMap<u16, String> = HashMap::new();
-    // Lines of the run's demos.jsonl while a remote expert is active, and its newest model
-    // while that model counts demonstrations not yet written here (its answers are on their
-    // way): published here only once they are on disk.
-    let mut written = 0usize;
-    let mut early_model: Option<(DemoModelHeader, Vec<u8>)> = None;
-    let mut active = 0u32;
-    let mut actor_bells = alfd_wire::ActorBells::new(&wire);
-    let mut newest = Newest::default();
-    let mut params = Vec::new();
-    let mut bytes = Vec::new();
-    let mut refused = 0u64;
-    let put = |b: &[u8]| down.put(b.to_vec()).wait().map_err(zenoh_error);
-
+    let mut hub = Forwarder::new(&wire, opts, down, events)?;
     while !stop.load(Ordering::Relaxed) {
         if waiter.wait(TICK)? == Wake::Signal {
             // The launcher handles the signal; this thread goes on until told to stop.
             std::thread::sleep(TICK);
         }
-        // Up: from remote hosts into this host's services.
         while let Ok(mail) = inbox.mail.try_recv() {
-            let b = match mail {
-                Mail::Joined => {
-                    for f in [
-                        &newest.control,
-                        &newest.credits,
-                        &newest.weights,
-                        &newest.model,
-                    ]
+            hub.mail(mail)?;
+        }
+        hub.queries_for_remote_expert()?;
+        hub.down()?;
+        hub.poll_answers()?;
+    }
+    Ok(())
+}
+
+/// The hub thread's ports and state: this host's services on one side, zenoh's `down`
+/// publisher on the other, and the remote expert's [`ExpertDesk`].
+struct Forwarder<'w, 'a> {
+    wire: &'w Wire,
+    opts: &'a HubOptions,
+    down: &'a zenoh::pubsub::Publisher<'static>,
+    events: &'a mpsc::Sender<HubEvent>,
+    credits: alfd_wire::Receiver<'w, alfd_wire::Credits>,
+    weights: alfd_wire::WeightsReceiver<'w>,
+    model: alfd_wire::DemoModelReceiver<'w>,
+    control: alfd_wire::Receiver<'w, alfd_wire::Control>,
+    progress: Sender<'w, alfd_wire::Progress>,
+    learner: alfd_wire::Bell,
+    expert: alfd_wire::Bell,
+    launcher: alfd_wire::Bell,
+    /// One publisher per remote actor, as each actor has its own on one host (the learner's
+    /// buffer is per publisher).
+    transitions: HashMap<u32, Sender<'w, TransitionBatch>>,
+    clients: HashMap<u32, QueryClient<'w>>,
+    /// Remote actors' queries to this host's expert: the pending answer, the query's sequence
+    /// number, when it was asked.
+    pending: HashMap<u32, (PendingQuery<'w>, u64, Instant)>,
+    /// A remote expert's side on this host: the hub serves the queries while it is active, and
+    /// publishes its model here.
+    server: alfd_wire::QueryServer<'w>,
+    desk: ExpertDesk<IncomingQuery<'w>>,
+    remote_model: Option<alfd_wire::DemoModelSender<'w>>,
+    actor_bells: alfd_wire::ActorBells<'w>,
+    newest: Newest,
+    params: Vec<f32>,
+    bytes: Vec<u8>,
+    refused: u64,
+}
+
+impl<'w, 'a> Forwarder<'w, 'a> {
+    fn new(
+        wire: &'w Wire,
+        opts: &'a HubOptions,
+        down: &'a zenoh::pubsub::Publisher<'static>,
+        events: &'a mpsc::Sender<HubEvent>,
+    ) -> Result<Self> {
+        Ok(Self {
+            wire,
+            opts,
+            down,
+            events,
+            credits: wire.credits_receiver()?,
+            weights: wire.weights_receiver()?,
+            model: wire.demo_model_receiver()?,
+            control: wire.control_receiver()?,
+            progress: wire.progress_sender()?,
+            learner: wire.bell(Doorbell::Learner)?,
+            expert: wire.bell(Doorbell::Expert)?,
+            launcher: wire.bell(Doorbell::Launcher)?,
+            transitions: HashMap::new(),
+            clients: HashMap::new(),
+            pending: HashMap::new(),
+            server: wire.query_server()?,
+            desk: ExpertDesk::default(),
+            remote_model: None,
+            actor_bells: alfd_wire::ActorBells::new(wire),
+            newest: Newest::default(),
+            params: Vec::new(),
+            bytes: Vec::new(),
+            refused: 0,
+        })
+    }
+
+    fn put(&self, b: &[u8]) -> Result<()> {
+        self.down.put(b.to_vec()).wait().map_err(zenoh_error)
+    }
+
+    fn put_frame(&self, f: &Frame) -> Result<Vec<u8>> {
+        let b = frame::encode(SCHEMA_VERSION, f)?;
+        self.put(&b)?;
+        Ok(b)
+    }
+
+    /// Up: what zenoh delivered, into this host's services.
+    fn mail(&mut self, mail: Mail) -> Result<()> {
+        match mail {
+            Mail::Joined => {
+                let n = &self.newest;
+                for f in [&n.control, &n.credits, &n.weights, &n.model]
                     .into_iter()
                     .flatten()
-                    .chain(&newest.orders)
-                    {
-                        put(f)?;
-                    }
-                    continue;
+                    .chain(&n.orders)
+                {
+                    self.put(f)?;
                 }
-                Mail::Order(order) => {
-                    if let ExpertOrder::Start {
-                        generation,
-                        join_id,
-                        ..
-                    } = &order
-                    {
-                        remote_experts.insert(*generation, join_id.clone());
-                    }
-                    let f = frame::encode(SCHEMA_VERSION, &Frame::Order(order))?;
-                    put(&f)?;
-                    newest.orders.push(f);
-                    continue;
+            }
+            Mail::Order(order) => {
+                if let ExpertOrder::Start {
+                    generation,
+                    join_id,
+                    ..
+                } = &order
+                {
+                    self.desk.started(*generation, join_id);
                 }
-                Mail::Left(join_id) => {
-                    remote_experts.retain(|generation, j| {
-                        let gone = *j == join_id;
-                        if gone {
-                            info!(generation, %join_id, "the remote expert's host left");
-                        }
-                        !gone
-                    });
-                    continue;
+                let f = self.put_frame(&Frame::Order(order))?;
+                self.newest.orders.push(f);
+            }
+            Mail::Left(join_id) => {
+                for generation in self.desk.host_left(&join_id) {
+                    info!(generation, %join_id, "the remote expert's host left");
                 }
-                Mail::Exited { .. } => continue,
-                Mail::Frame(b) => b,
-            };
-            let f = match frame::decode::<Frame>(SCHEMA_VERSION, &b) {
-                Ok(f) => f,
+            }
+            Mail::Exited { .. } => {}
+            Mail::Frame(b) => match frame::decode::<Frame>(SCHEMA_VERSION, &b) {
+                Ok(f) => self.frame(f)?,
                 Err(e) => {
-                    refused += 1;
-                    if refused.is_power_of_two() {
-                        warn!(refused, "frame from a remote host dropped: {e}");
+                    self.refused += 1;
+                    if self.refused.is_power_of_two() {
+                        warn!(
+                            refused = self.refused,
+                            "frame from a remote host dropped: {e}"
+                        );
                     }
-                    continue;
                 }
-            };
-            let sent = match f {
-                Frame::Transitions(batch) => {
-                    let tx = match transitions.entry(batch.actor) {
-                        std::collections::hash_map::Entry::Occupied(o) => o.into_mut(),
-                        std::collections::hash_map::Entry::Vacant(v) => {
-                            v.insert(wire.transitions_sender()?)
-                        }
-                    };
-                    tx.forward(batch).map(|_| learner.ring())
-                }
-                Frame::Progress(p) => progress.forward(p).map(|_| launcher.ring()),
-                Frame::Query(q) => {
-                    let client = match clients.entry(q.actor) {
-                        std::collections::hash_map::Entry::Occupied(o) => o.into_mut(),
-                        std::collections::hash_map::Entry::Vacant(v) => {
-                            v.insert(wire.query_client()?)
-                        }
-                    };
-                    let ask = client.ask(q)?;
-                    // A newer query of the same actor replaces the older one (it gave up).
-                    pending.insert(q.actor, (ask, q.header.seq, Instant::now()));
-                    Ok(expert.ring())
-                }
-                Frame::DemoModel(h, b) if remote_experts.contains_key(&(h.expert as u16)) => {
-                    if h.demos as usize > written {
-                        // It counts an answer still on its way: published once that is written.
-                        early_model = Some((h, b));
-                        continue;
-                    }
-                    let tx = match &mut remote_model {
-                        Some(tx) => tx,
-                        None => remote_model.insert(wire.demo_model_sender()?),
-                    };
-                    tx.forward(h, &b).map(|_| Ok(0))
-                }
-                Frame::ExpertAnswer(r, _) if !remote_experts.contains_key(&(r.expert as u16)) => {
-                    warn!(
-                        generation = r.expert,
-                        index = r.demo_index,
-                        "an answer of a remote expert whose host left; not written, not answered"
-                    );
-                    continue;
-                }
-                Frame::ExpertAnswer(r, demo) => {
-                    // On disk here before any actor sees it: no link loss can lose it.
-                    if let Some(line) = demo {
-                        if let Err(e) = crate::demos::append(&opts.demos_path, r.demo_index, &line)
-                        {
-                            warn!("a remote expert's demonstration refused: {e}; not answered");
-                            continue;
-                        }
-                        written = r.demo_index as usize + 1;
-                        // Its model, which counts it, before its answer (as on one host).
-                        if let Some((h, b)) =
-                            early_model.take_if(|(h, _)| h.demos as usize <= written)
-                        {
-                            let tx = match &mut remote_model {
-                                Some(tx) => tx,
-                                None => remote_model.insert(wire.demo_model_sender()?),
-                            };
-                            if let Err(e) = tx.forward(h, &b) {
-                                warn!("{e}; a remote expert's model dropped");
-                            }
-                        }
-                    }
-                    let Some(q) = held.remove(&r.actor) else {
-                        continue;
-                    };
-                    if q.request().header.seq != r.request_seq {
-                        held.insert(r.actor, q);
-                        continue;
-                    }
-                    let actor = r.actor;
-                    q.answer(r).map(|_| {
-                        u16::try_from(actor).map_or(Ok(0), |id| actor_bells.ring(id).map(|()| 0))
-                    })
-                }
-                Frame::ExpertExited {
+            },
+        }
+        Ok(())
+    }
+
+    /// A frame from a remote host.
+    fn frame(&mut self, f: Frame) -> Result<()> {
+        let sent = match f {
+            Frame::Transitions(batch) => {
+                let tx = match self.transitions.entry(batch.actor) {
+                    Entry::Occupied(o) => o.into_mut(),
+                    Entry::Vacant(v) => v.insert(self.wire.transitions_sender()?),
+                };
+                tx.forward(batch).map(|_| self.learner.ring())
+            }
+            Frame::Progress(p) => self.progress.forward(p).map(|_| self.launcher.ring()),
+            Frame::Query(q) => {
+                let client = match self.clients.entry(q.actor) {
+                    Entry::Occupied(o) => o.into_mut(),
+                    Entry::Vacant(v) => v.insert(self.wire.query_client()?),
+                };
+                let ask = client.ask(q)?;
+                // A newer query of the same actor replaces the older one (it gave up).
+                self.pending
+                    .insert(q.actor, (ask, q.header.seq, Instant::now()));
+                Ok(self.expert.ring())
+            }
+            Frame::DemoModel(h, b) => match self.desk.model(h, b) {
+                Some((h, b)) => self.publish_model(h, &b).map(|()| Ok(0)),
+                None => return Ok(()),
+            },
+            Frame::ExpertAnswer(r, demo) => return self.expert_answer(r, demo),
+            Frame::ExpertExited {
+                generation,
+                how,
+                code,
+            } => {
+                self.desk.exited(generation);
+                let _ = self.events.send(HubEvent::ExpertExited {
                     generation,
                     how,
                     code,
-                } => {
-                    remote_experts.remove(&generation);
-                    early_model = None;
-                    let _ = events.send(HubEvent::ExpertExited {
-                        generation,
-                        how,
-                        code,
-                    });
-                    launcher.ring().map(Ok)
-                }
-                other => {
-                    debug!(service = other.service(), "a down frame came up; dropped");
-                    continue;
-                }
-            };
-            match sent {
-                Ok(rang) => {
-                    rang?;
-                }
-                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
-                Err(e) => return Err(e.into()),
+                });
+                self.launcher.ring().map(Ok)
+            }
+            other => {
+                debug!(service = other.service(), "a down frame came up; dropped");
+                return Ok(());
+            }
+        };
+        match sent {
+            Ok(rang) => {
+                rang?;
+                Ok(())
+            }
+            Err(e @ WireError::SchemaMismatch { .. }) => {
+                warn!("{e}; dropped");
+                Ok(())
+            }
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    fn publish_model(
+        &mut self,
+        h: DemoModelHeader,
+        b: &[u8],
+    ) -> std::result::Result<(), WireError> {
+        let tx = match &mut self.remote_model {
+            Some(tx) => tx,
+            None => self.remote_model.insert(self.wire.demo_model_sender()?),
+        };
+        tx.forward(h, b)
+    }
+
+    /// A remote expert's answer: its demonstration on disk here before any actor sees it (no
+    /// link loss can lose it), then the model that counts it, then the answer.
+    fn expert_answer(&mut self, r: QueryResponse, demo: Option<String>) -> Result<()> {
+        if let Err(why) = self.desk.check_answer(&r, demo.as_deref()) {
+            warn!("{why}; not written, not answered");
+            return Ok(());
+        }
+        if let Some(line) = &demo {
+            if let Err(e) = crate::demos::append(&self.opts.demos_path, r.demo_index, line) {
+                warn!("a remote expert's demonstration refused: {e}; not answered");
+                return Ok(());
             }
         }
-        // Queries to a remote expert: held here while it is active, the others let go (this
-        // host's expert answers them).
+        let (model, answer) = self.desk.answered(r, demo.is_some());
+        if let Some((h, b)) = model {
+            if let Err(e) = self.publish_model(h, &b) {
+                warn!("{e}; a remote expert's model dropped");
+            }
+        }
+        match answer {
+            Answer::Dropped(why) => debug!("{why}; answer not sent"),
+            Answer::Deliver { query, response } => {
+                let actor = response.actor;
+                query.answer(response)?;
+                if let Ok(id) = u16::try_from(actor) {
+                    self.actor_bells.ring(id)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Queries to a remote expert: held here while it is active, the others let go (this host's
+    /// expert answers them).
+    fn queries_for_remote_expert(&mut self) -> Result<()> {
         loop {
-            match server.receive() {
-                Ok(Some(q)) if remote_experts.contains_key(&(active as u16)) => {
-                    put(&frame::encode(SCHEMA_VERSION, &Frame::Query(*q.request()))?)?;
-                    held.insert(q.request().actor, q);
+            match self.server.receive() {
+                Ok(Some(q)) if self.desk.holds_queries() => {
+                    self.put_frame(&Frame::Query(*q.request()))?;
+                    self.desk.hold(q.request().actor, q);
                 }
                 Ok(Some(_)) => {}
                 Ok(None) => break,
@@ -583,61 +652,58 @@ fn forward(
                 Err(e) => return Err(e.into()),
             }
         }
-        held.retain(|_, q| q.is_connected());
-        // Down: what this host publishes, to every remote host.
-        if let Some(c) = credits.latest()? {
-            let f = frame::encode(SCHEMA_VERSION, &Frame::Credits(c))?;
-            put(&f)?;
-            newest.credits = Some(f);
+        self.desk.prune(|q| q.is_connected());
+        Ok(())
+    }
+
+    /// Down: what this host publishes, to every remote host.
+    fn down(&mut self) -> Result<()> {
+        if let Some(c) = self.credits.latest()? {
+            self.newest.credits = Some(self.put_frame(&Frame::Credits(c))?);
         }
-        if let Some(h) = weights.latest_into(&mut params)? {
-            let f = frame::encode(SCHEMA_VERSION, &Frame::Weights(h, params.clone()))?;
-            put(&f)?;
-            newest.weights = Some(f);
+        if let Some(h) = self.weights.latest_into(&mut self.params)? {
+            let f = Frame::Weights(h, self.params.clone());
+            self.newest.weights = Some(self.put_frame(&f)?);
         }
-        if let Some(h) = model.latest_into(&mut bytes)? {
-            let f = frame::encode(SCHEMA_VERSION, &Frame::DemoModel(h, bytes.clone()))?;
-            put(&f)?;
-            newest.model = Some(f);
+        if let Some(h) = self.model.latest_into(&mut self.bytes)? {
+            let f = Frame::DemoModel(h, self.bytes.clone());
+            self.newest.model = Some(self.put_frame(&f)?);
         }
-        if let Some(c) = control.latest()? {
-            if c.active_expert != active {
-                active = c.active_expert;
-                let generation = active as u16;
-                if remote_experts.contains_key(&generation) {
-                    // Every expert before it has exited and all its answers are written: the
-                    // remote expert reads this back when it becomes active.
-                    let text = crate::demos::read(&opts.demos_path)?;
-                    written = text.lines().count();
-                    early_model = None;
-                    info!(
-                        generation,
-                        bytes = text.len(),
-                        "demos.jsonl to the remote expert"
-                    );
-                    put(&frame::encode(
-                        SCHEMA_VERSION,
-                        &Frame::DemoLog { generation, text },
-                    )?)?;
-                }
+        if let Some(c) = self.control.latest()? {
+            if let Some(generation) = self.desk.control(c.active_expert) {
+                // Every expert before it has exited and all its answers are written: the
+                // remote expert reads this back when it becomes active.
+                let text = crate::demos::read(&self.opts.demos_path)?;
+                self.desk.log_sent(text.lines().count());
+                info!(
+                    generation,
+                    bytes = text.len(),
+                    "demos.jsonl to the remote expert"
+                );
+                self.put_frame(&Frame::DemoLog { generation, text })?;
             }
-            let f = frame::encode(SCHEMA_VERSION, &Frame::Control(c))?;
-            put(&f)?;
-            newest.control = Some(f);
+            self.newest.control = Some(self.put_frame(&Frame::Control(c))?);
         }
-        if let Some(tx) = &remote_model {
+        if let Some(tx) = &self.remote_model {
             tx.update_connections()?;
         }
+        Ok(())
+    }
+
+    /// Answers of this host's expert to remote actors' queries, up to them; a query unanswered
+    /// within the query timeout is dropped (its actor gave up already).
+    fn poll_answers(&mut self) -> Result<()> {
         let mut answered = Vec::new();
-        for (actor, (p, seq, asked)) in pending.iter_mut() {
+        for (actor, (p, seq, asked)) in self.pending.iter_mut() {
             match p.poll() {
                 Ok(Some(mut r)) => {
                     r.request_seq = *seq;
                     r.actor = *actor;
-                    put(&frame::encode(SCHEMA_VERSION, &Frame::Answer(r))?)?;
+                    let b = frame::encode(SCHEMA_VERSION, &Frame::Answer(r))?;
+                    self.down.put(b).wait().map_err(zenoh_error)?;
                     answered.push(*actor);
                 }
-                Ok(None) if asked.elapsed() > opts.query_timeout => answered.push(*actor),
+                Ok(None) if asked.elapsed() > self.opts.query_timeout => answered.push(*actor),
                 Ok(None) => {}
                 Err(e) => {
                     warn!("{e}; answer dropped");
@@ -646,8 +712,8 @@ fn forward(
             }
         }
         for a in answered {
-            pending.remove(&a);
+            self.pending.remove(&a);
         }
+        Ok(())
     }
-    Ok(())
 }

@@ -24,6 +24,7 @@
 //! One run id is one key prefix, so two runs never see each other's messages.
 
 mod demos;
+mod desk;
 mod endpoint;
 mod error;
 mod expert_host;
