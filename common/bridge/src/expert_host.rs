@@ -6,6 +6,7 @@
 //! answers go up, each answer with its demonstration, which the learner's host writes to the
 //! run's `demos.jsonl` before any actor sees it.
 
+use std::collections::hash_map::Entry;
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -14,8 +15,8 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use alfd_wire::{
-    outcome, Doorbell, PendingQuery, Process, QueryClient, Role, Wake, Wire, WireError, MAX_ACTORS,
-    SCHEMA_VERSION,
+    outcome, Doorbell, PendingQuery, Process, QueryClient, QueryResponse, Role, Wake, Wire,
+    WireError, MAX_ACTORS, SCHEMA_VERSION,
 };
 use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
@@ -181,9 +182,61 @@ struct Me {
     demos: PathBuf,
 }
 
+/// What a frame from the learner's host asks of this host, given the generations the run gave
+/// its expert (`mine`, updated here): the pure part of [`forward`]'s down direction.
+#[derive(Debug, PartialEq)]
+enum Route {
+    /// The launcher's control, for this host's expert.
+    Control(alfd_wire::Control),
+    /// An order for this host's expert process.
+    Order(ExpertHostOrder),
+    /// The run's `demos.jsonl`, for this host's expert before it becomes active.
+    DemoLog { generation: u16, text: String },
+    /// An actor's query, for this host's expert.
+    Query(alfd_wire::QueryRequest),
+    /// Not for this host (another host's order, a generation not its own, a query while it
+    /// serves none, a frame that only goes up).
+    Ignore,
+}
+
+fn route(join_id: &str, mine: &mut HashSet<u16>, f: Frame) -> Route {
+    match f {
+        Frame::Control(c) => Route::Control(c),
+        Frame::Order(ExpertOrder::Start {
+            join_id: j,
+            generation,
+            name,
+        }) if j == join_id => {
+            if mine.insert(generation) {
+                info!(generation, expert = %name, "the run takes this host's expert");
+                Route::Order(ExpertHostOrder::Start { generation, name })
+            } else {
+                Route::Ignore
+            }
+        }
+        Frame::Order(ExpertOrder::Kill { generation }) if mine.contains(&generation) => {
+            Route::Order(ExpertHostOrder::Kill { generation })
+        }
+        Frame::Order(ExpertOrder::Refuse { join_id: j, why }) if j == join_id => {
+            Route::Order(ExpertHostOrder::Refused(why))
+        }
+        Frame::DemoLog { generation, text } if mine.contains(&generation) => {
+            Route::DemoLog { generation, text }
+        }
+        Frame::Query(q) if !mine.is_empty() => Route::Query(q),
+        _ => Route::Ignore,
+    }
+}
+
+/// The expert's answers in the order it wrote them (the pending map has no order): the
+/// learner's host appends a demonstration only as its file's next line, so one sent ahead of its
+/// predecessor would be refused, and every one after it. Answers without a demonstration first.
+fn in_written_order(answers: &mut [QueryResponse]) {
+    answers.sort_by_key(|r| (r.outcome == outcome::ANSWERED, r.demo_index));
+}
+
 /// The bridge's thread: blocks on its own doorbell (zenoh delivered something), the
 /// launcher's (the expert reports) and the actors' (the expert answered).
-#[allow(clippy::too_many_arguments)]
 fn forward(
     me: &Me,
     inbox: crate::inbox::Inbox,
@@ -197,19 +250,20 @@ fn forward(
     let mut bells = vec![Doorbell::Bridge, Doorbell::Launcher];
     bells.extend((0..MAX_ACTORS as u16).map(Doorbell::Actor));
     let waiter = wire.waiter_on(&bells)?;
-    let mut control = wire.control_sender()?;
-    let progress = wire.progress_receiver()?;
-    let model = wire.demo_model_receiver()?;
-    let expert = wire.bell(Doorbell::Expert)?;
-    let mut clients: HashMap<u32, QueryClient<'_>> = HashMap::new();
-    let mut pending: HashMap<u32, (PendingQuery<'_>, u64)> = HashMap::new();
-    // The generations the run gave this host's expert.
-    let mut mine: HashSet<u16> = HashSet::new();
-    let mut bytes = Vec::new();
-    let put = |f: &Frame| -> Result<()> {
-        up.put(frame::encode(SCHEMA_VERSION, f)?)
-            .wait()
-            .map_err(zenoh_error)
+    let mut host = HostForwarder {
+        me,
+        wire: &wire,
+        up,
+        heard,
+        orders,
+        control: wire.control_sender()?,
+        progress: wire.progress_receiver()?,
+        model: wire.demo_model_receiver()?,
+        expert: wire.bell(Doorbell::Expert)?,
+        clients: HashMap::new(),
+        pending: HashMap::new(),
+        mine: HashSet::new(),
+        bytes: Vec::new(),
     };
     let _ = ready.send(());
     loop {
@@ -220,94 +274,152 @@ fn forward(
         }
         let mut exits = Vec::new();
         while let Ok(mail) = inbox.mail.try_recv() {
-            let b = match mail {
-                Mail::Frame(b) => b,
+            match mail {
+                Mail::Frame(b) => host.down(&b)?,
                 Mail::Exited {
                     generation,
                     how,
                     code,
-                } => {
-                    exits.push(Frame::ExpertExited {
-                        generation,
-                        how,
-                        code,
-                    });
-                    continue;
-                }
-                Mail::Joined | Mail::Order(_) | Mail::Left(_) => continue,
-            };
-            let f = match frame::decode::<Frame>(SCHEMA_VERSION, &b) {
-                Ok(f) => f,
-                Err(e) => {
-                    warn!("frame from the learner's host dropped: {e}");
-                    continue;
-                }
-            };
-            let done = match f {
-                Frame::Control(c) => {
-                    heard.beat();
-                    control.forward(c)
-                }
-                Frame::Order(ExpertOrder::Start {
-                    join_id,
+                } => exits.push(Frame::ExpertExited {
                     generation,
-                    name,
-                }) if join_id == me.join_id => {
-                    if mine.insert(generation) {
-                        info!(generation, expert = %name, "the run takes this host's expert");
-                        let _ = orders.send(ExpertHostOrder::Start { generation, name });
-                    }
-                    continue;
-                }
-                Frame::Order(ExpertOrder::Kill { generation }) if mine.contains(&generation) => {
-                    let _ = orders.send(ExpertHostOrder::Kill { generation });
-                    continue;
-                }
-                Frame::Order(ExpertOrder::Refuse { join_id, why }) if join_id == me.join_id => {
-                    let _ = orders.send(ExpertHostOrder::Refused(why));
-                    continue;
-                }
-                Frame::DemoLog { generation, text } if mine.contains(&generation) => {
-                    // Before the control message that makes it active (one publisher, in order).
-                    crate::demos::replace(&me.demos, &text)?;
-                    debug!(generation, bytes = text.len(), "the run's demos.jsonl");
-                    continue;
-                }
-                Frame::Query(q) if !mine.is_empty() => {
-                    let client = match clients.entry(q.actor) {
-                        std::collections::hash_map::Entry::Occupied(o) => o.into_mut(),
-                        std::collections::hash_map::Entry::Vacant(v) => {
-                            v.insert(wire.query_client()?)
-                        }
-                    };
-                    // A newer query of the same actor replaces the older one (it gave up).
-                    pending.insert(q.actor, (client.ask(q)?, q.header.seq));
-                    Ok(())
-                }
-                _ => continue,
-            };
-            match done {
-                Ok(()) => {
-                    expert.ring()?;
-                }
-                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
-                Err(e) => return Err(e.into()),
+                    how,
+                    code,
+                }),
+                Mail::Joined | Mail::Order(_) | Mail::Left(_) => {}
             }
         }
-        // Up, in the order the expert did things: its status reports are taken first and sent
-        // last, so an `exiting` never overtakes an answer sent before it; the model before the
-        // answers (the actor shapes the step it asked about with it, as on one host).
+        host.up(exits)?;
+        host.control.update_connections()?;
+        if last {
+            return Ok(());
+        }
+    }
+}
+
+/// The expert host thread's ports and state.
+struct HostForwarder<'w, 'a> {
+    me: &'a Me,
+    wire: &'w Wire,
+    up: &'a zenoh::pubsub::Publisher<'static>,
+    heard: &'a Heartbeat,
+    orders: &'a mpsc::Sender<ExpertHostOrder>,
+    control: alfd_wire::Sender<'w, alfd_wire::Control>,
+    progress: alfd_wire::Receiver<'w, alfd_wire::Progress>,
+    model: alfd_wire::DemoModelReceiver<'w>,
+    expert: alfd_wire::Bell,
+    clients: HashMap<u32, QueryClient<'w>>,
+    pending: HashMap<u32, (PendingQuery<'w>, u64)>,
+    /// The generations the run gave this host's expert.
+    mine: HashSet<u16>,
+    bytes: Vec<u8>,
+}
+
+impl HostForwarder<'_, '_> {
+    fn put(&self, f: &Frame) -> Result<()> {
+        self.up
+            .put(frame::encode(SCHEMA_VERSION, f)?)
+            .wait()
+            .map_err(zenoh_error)
+    }
+
+    /// Down: a frame from the learner's host, into this host's services.
+    fn down(&mut self, b: &[u8]) -> Result<()> {
+        let f = match frame::decode::<Frame>(SCHEMA_VERSION, b) {
+            Ok(f) => f,
+            Err(e) => {
+                warn!("frame from the learner's host dropped: {e}");
+                return Ok(());
+            }
+        };
+        let done = match route(&self.me.join_id, &mut self.mine, f) {
+            Route::Control(c) => {
+                self.heard.beat();
+                self.control.forward(c)
+            }
+            Route::Order(order) => {
+                let _ = self.orders.send(order);
+                return Ok(());
+            }
+            Route::DemoLog { generation, text } => {
+                // Before the control message that makes it active (one publisher, in order).
+                crate::demos::replace(&self.me.demos, &text)?;
+                debug!(generation, bytes = text.len(), "the run's demos.jsonl");
+                return Ok(());
+            }
+            Route::Query(q) => {
+                let client = match self.clients.entry(q.actor) {
+                    Entry::Occupied(o) => o.into_mut(),
+                    Entry::Vacant(v) => v.insert(self.wire.query_client()?),
+                };
+                // A newer query of the same actor replaces the older one (it gave up).
+                self.pending.insert(q.actor, (client.ask(q)?, q.header.seq));
+                Ok(())
+            }
+            Route::Ignore => return Ok(()),
+        };
+        match done {
+            Ok(()) => {
+                self.expert.ring()?;
+            }
+            Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
+            Err(e) => return Err(e.into()),
+        }
+        Ok(())
+    }
+
+    /// Up, in the order the expert did things: its status reports are taken first and sent
+    /// last, so an `exiting` never overtakes an answer sent before it; the model before the
+    /// answers (the actor shapes the step it asked about with it, as on one host); the expert's
+    /// exits at the very end.
+    fn up(&mut self, exits: Vec<Frame>) -> Result<()> {
         let mut reports = Vec::new();
         loop {
-            match progress.receive() {
+            match self.progress.receive() {
                 Ok(Some(p)) => reports.push(p),
                 Ok(None) => break,
                 Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
                 Err(e) => return Err(e.into()),
             }
         }
+        let mut answers = self.answers();
+        in_written_order(&mut answers);
+        if let Some(h) = self.model.latest_into(&mut self.bytes)? {
+            if self.mine.contains(&(h.expert as u16)) {
+                self.put(&Frame::DemoModel(h, self.bytes.clone()))?;
+            }
+        }
+        for r in answers {
+            let demo = if r.outcome == outcome::ANSWERED {
+                let text = crate::demos::read(&self.me.demos)?;
+                let Some(line) = text.lines().nth(r.demo_index as usize) else {
+                    warn!(
+                        index = r.demo_index,
+                        "an answer without its demonstration; dropped"
+                    );
+                    continue;
+                };
+                Some(line.to_owned())
+            } else {
+                None
+            };
+            self.put(&Frame::ExpertAnswer(r, demo))?;
+        }
+        for p in reports {
+            self.put(&Frame::Progress(p))?;
+        }
+        for f in exits {
+            if let Frame::ExpertExited { generation, .. } = &f {
+                self.mine.remove(generation);
+            }
+            self.put(&f)?;
+        }
+        Ok(())
+    }
+
+    /// The answers the expert gave since the last look.
+    fn answers(&mut self) -> Vec<QueryResponse> {
         let mut answers = Vec::new();
-        pending.retain(|&actor, (p, seq)| match p.poll() {
+        self.pending.retain(|&actor, (p, seq)| match p.poll() {
             Ok(Some(mut r)) => {
                 r.request_seq = *seq;
                 r.actor = actor;
@@ -320,45 +432,83 @@ fn forward(
                 false
             }
         });
-        // Up in the order the expert wrote them (the pending map has no order): the learner's
-        // host appends a demonstration only as its file's next line, so one sent ahead of its
-        // predecessor would be refused, and every one after it.
-        answers.sort_by_key(|r| (r.outcome == outcome::ANSWERED, r.demo_index));
-        if let Some(h) = model.latest_into(&mut bytes)? {
-            if mine.contains(&(h.expert as u16)) {
-                put(&Frame::DemoModel(h, bytes.clone()))?;
-            }
-        }
-        for r in answers {
-            let demo = if r.outcome == outcome::ANSWERED {
-                let text = crate::demos::read(&me.demos)?;
-                match text.lines().nth(r.demo_index as usize) {
-                    Some(line) => Some(line.to_owned()),
-                    None => {
-                        warn!(
-                            index = r.demo_index,
-                            "an answer without its demonstration; dropped"
-                        );
-                        continue;
-                    }
-                }
-            } else {
-                None
-            };
-            put(&Frame::ExpertAnswer(r, demo))?;
-        }
-        for p in reports {
-            put(&Frame::Progress(p))?;
-        }
-        for f in exits {
-            if let Frame::ExpertExited { generation, .. } = &f {
-                mine.remove(generation);
-            }
-            put(&f)?;
-        }
-        control.update_connections()?;
-        if last {
-            return Ok(());
-        }
+        answers
+    }
+}
+
+#[cfg(test)]
+mod route_tests {
+    use super::*;
+
+    fn start(join_id: &str, generation: u16) -> Frame {
+        Frame::Order(ExpertOrder::Start {
+            join_id: join_id.into(),
+            generation,
+            name: "scripted".into(),
+        })
+    }
+
+    #[test]
+    fn only_this_hosts_orders_and_generations_are_taken() {
+        let mut mine = HashSet::new();
+        // A query before the run gave this host a generation: not for it.
+        let q = alfd_wire::QueryRequest::default();
+        assert_eq!(route("me", &mut mine, Frame::Query(q)), Route::Ignore);
+        // Another host's start, and a kill of a generation not its own: ignored.
+        assert_eq!(route("me", &mut mine, start("other", 2)), Route::Ignore);
+        let kill = || Frame::Order(ExpertOrder::Kill { generation: 2 });
+        assert_eq!(route("me", &mut mine, kill()), Route::Ignore);
+        // Its own start, once (an order sent again to a host that rejoins starts nothing more).
+        assert_eq!(
+            route("me", &mut mine, start("me", 2)),
+            Route::Order(ExpertHostOrder::Start {
+                generation: 2,
+                name: "scripted".into()
+            })
+        );
+        assert_eq!(route("me", &mut mine, start("me", 2)), Route::Ignore);
+        assert_eq!(
+            route("me", &mut mine, kill()),
+            Route::Order(ExpertHostOrder::Kill { generation: 2 })
+        );
+        assert!(matches!(
+            route("me", &mut mine, Frame::Query(q)),
+            Route::Query(_)
+        ));
+        let log = |generation| Frame::DemoLog {
+            generation,
+            text: "x\n".into(),
+        };
+        assert_eq!(route("me", &mut mine, log(3)), Route::Ignore);
+        assert!(matches!(
+            route("me", &mut mine, log(2)),
+            Route::DemoLog { generation: 2, .. }
+        ));
+    }
+
+    #[test]
+    fn answers_go_up_in_the_order_their_demonstrations_were_written() {
+        let answer = |outcome, demo_index| QueryResponse {
+            outcome,
+            demo_index,
+            ..QueryResponse::default()
+        };
+        let mut a = vec![
+            answer(outcome::ANSWERED, 7),
+            answer(outcome::BUDGET_EXHAUSTED, 0),
+            answer(outcome::ANSWERED, 5),
+            answer(outcome::ANSWERED, 6),
+        ];
+        in_written_order(&mut a);
+        let order: Vec<(u32, u32)> = a.iter().map(|r| (r.outcome, r.demo_index)).collect();
+        assert_eq!(
+            order,
+            vec![
+                (outcome::BUDGET_EXHAUSTED, 0),
+                (outcome::ANSWERED, 5),
+                (outcome::ANSWERED, 6),
+                (outcome::ANSWERED, 7)
+            ]
+        );
     }
 }
