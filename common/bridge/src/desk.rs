@@ -36,8 +36,8 @@ pub(crate) struct ExpertDesk<Q> {
     written: usize,
     /// The newest model of a remote expert, while it counts demonstrations not yet written.
     early_model: Option<(DemoModelHeader, Vec<u8>)>,
-    /// Queries held for the remote expert, by actor.
-    held: HashMap<u32, Q>,
+    /// Queries held for the remote expert.
+    held: HeldQueries<Q>,
 }
 
 impl<Q> Default for ExpertDesk<Q> {
@@ -47,7 +47,7 @@ impl<Q> Default for ExpertDesk<Q> {
             active: 0,
             written: 0,
             early_model: None,
-            held: HashMap::new(),
+            held: HeldQueries::default(),
         }
     }
 }
@@ -90,12 +90,12 @@ impl<Q> ExpertDesk<Q> {
 
     /// A query of `actor` held for the remote expert (it replaces the actor's older one).
     pub(crate) fn hold(&mut self, actor: u32, query: Q) {
-        self.held.insert(actor, query);
+        self.held.hold(actor, query);
     }
 
     /// Forgets the held queries whose actors stopped waiting.
     pub(crate) fn prune(&mut self, still_waiting: impl Fn(&Q) -> bool) {
-        self.held.retain(|_, q| still_waiting(q));
+        self.held.prune(still_waiting);
     }
 
     /// The control names `active` the active generation. Returns the generation whose host must
@@ -169,15 +169,67 @@ impl<Q> ExpertDesk<Q> {
                 .early_model
                 .take_if(|(h, _)| h.demos as usize <= self.written);
         }
-        let answer = match self.held.remove(&r.actor) {
-            None => Answer::Dropped(format!("actor {} no longer waits", r.actor)),
-            Some(q) if q.seq() != r.request_seq => {
-                self.held.insert(r.actor, q);
-                Answer::Dropped(format!("an answer to an older query of actor {}", r.actor))
-            }
-            Some(query) => Answer::Deliver { query, response: r },
+        let answer = match self.held.take(&r) {
+            Ok(query) => Answer::Deliver { query, response: r },
+            Err(why) => Answer::Dropped(why),
         };
         (model, answer)
+    }
+}
+
+/// Queries held for an answer from another host, one per actor (an actor's newer query
+/// replaces its older one: it gave up on that).
+#[derive(Debug)]
+pub(crate) struct HeldQueries<Q>(HashMap<u32, Q>);
+
+impl<Q> Default for HeldQueries<Q> {
+    fn default() -> Self {
+        Self(HashMap::new())
+    }
+}
+
+impl<Q> HeldQueries<Q> {
+    pub(crate) fn hold(&mut self, actor: u32, query: Q) {
+        self.0.insert(actor, query);
+    }
+
+    /// Forgets the queries whose actors stopped waiting.
+    pub(crate) fn prune(&mut self, still_waiting: impl Fn(&Q) -> bool) {
+        self.0.retain(|_, q| still_waiting(q));
+    }
+
+    /// The query `r` answers, or why there is none (its actor no longer waits, or `r` answers
+    /// an older query of that actor: the newer one stays held).
+    pub(crate) fn take(&mut self, r: &QueryResponse) -> Result<Q, String>
+    where
+        Q: HasSeq,
+    {
+        match self.0.remove(&r.actor) {
+            None => Err(format!("actor {} no longer waits", r.actor)),
+            Some(q) if q.seq() != r.request_seq => {
+                self.0.insert(r.actor, q);
+                Err(format!("an answer to an older query of actor {}", r.actor))
+            }
+            Some(q) => Ok(q),
+        }
+    }
+}
+
+/// Every message waiting on a port (`next` takes one), each handed to `each`; a message of
+/// another schema version is dropped with a warning.
+pub(crate) fn drain<T>(
+    mut next: impl FnMut() -> std::result::Result<Option<T>, alfd_wire::WireError>,
+    mut each: impl FnMut(T) -> crate::Result<()>,
+) -> crate::Result<()> {
+    loop {
+        match next() {
+            Ok(Some(x)) => each(x)?,
+            Ok(None) => return Ok(()),
+            Err(e @ alfd_wire::WireError::SchemaMismatch { .. }) => {
+                tracing::warn!("{e}; dropped");
+            }
+            Err(e) => return Err(e.into()),
+        }
     }
 }
 

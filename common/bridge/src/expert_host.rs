@@ -22,6 +22,7 @@ use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
 use zenoh::Wait as _;
 
+use crate::desk::drain;
 use crate::error::{zenoh_error, Result};
 use crate::frame::{self, ExpertOrder, Frame};
 use crate::inbox::{inbox, Mail, Post};
@@ -373,14 +374,13 @@ impl HostForwarder<'_, '_> {
     /// exits at the very end.
     fn up(&mut self, exits: Vec<Frame>) -> Result<()> {
         let mut reports = Vec::new();
-        loop {
-            match self.progress.receive() {
-                Ok(Some(p)) => reports.push(p),
-                Ok(None) => break,
-                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
-                Err(e) => return Err(e.into()),
-            }
-        }
+        drain(
+            || self.progress.receive(),
+            |p| {
+                reports.push(p);
+                Ok(())
+            },
+        )?;
         let mut answers = self.answers();
         in_written_order(&mut answers);
         if let Some(h) = self.model.latest_into(&mut self.bytes)? {

@@ -22,7 +22,7 @@ use zenoh::qos::CongestionControl;
 use zenoh::sample::SampleKind;
 use zenoh::Wait as _;
 
-use crate::desk::{Answer, ExpertDesk};
+use crate::desk::{drain, Answer, ExpertDesk};
 use crate::endpoint::Endpoint;
 use crate::error::{zenoh_error, BridgeError, Result};
 use crate::frame::{self, ExpertOrder, Frame};
@@ -640,18 +640,19 @@ impl<'w, 'a> Forwarder<'w, 'a> {
     /// Queries to a remote expert: held here while it is active, the others let go (this host's
     /// expert answers them).
     fn queries_for_remote_expert(&mut self) -> Result<()> {
-        loop {
-            match self.server.receive() {
-                Ok(Some(q)) if self.desk.holds_queries() => {
-                    self.put_frame(&Frame::Query(*q.request()))?;
-                    self.desk.hold(q.request().actor, q);
+        let (server, desk) = (&self.server, &mut self.desk);
+        let down = self.down;
+        drain(
+            || server.receive(),
+            |q| {
+                if desk.holds_queries() {
+                    let f = frame::encode(SCHEMA_VERSION, &Frame::Query(*q.request()))?;
+                    down.put(f).wait().map_err(zenoh_error)?;
+                    desk.hold(q.request().actor, q);
                 }
-                Ok(Some(_)) => {}
-                Ok(None) => break,
-                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
-                Err(e) => return Err(e.into()),
-            }
-        }
+                Ok(())
+            },
+        )?;
         self.desk.prune(|q| q.is_connected());
         Ok(())
     }

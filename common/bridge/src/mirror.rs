@@ -4,7 +4,6 @@
 //! and the launcher for them: what they send goes to the learner's host over zenoh, what comes
 //! back is published here under the sender's own header.
 
-use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -17,6 +16,7 @@ use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
 use zenoh::Wait as _;
 
+use crate::desk::{drain, HeldQueries};
 use crate::endpoint::Endpoint;
 use crate::error::{zenoh_error, BridgeError, Result};
 use crate::frame::{self, Frame};
@@ -283,7 +283,7 @@ fn forward(
     let mut model = wire.demo_model_sender()?;
     let mut weights = None;
     let mut bells = ActorBells::new(&wire);
-    let mut held: HashMap<u32, IncomingQuery<'_>> = HashMap::new();
+    let mut held: HeldQueries<IncomingQuery<'_>> = HeldQueries::default();
     let mut refused = 0u64;
     let put = |f: &Frame| -> Result<()> {
         up.put(frame::encode(SCHEMA_VERSION, f)?)
@@ -327,14 +327,9 @@ fn forward(
                 }
                 Frame::DemoModel(h, bytes) => model.forward(h, &bytes).map(|_| false),
                 Frame::Answer(r) => {
-                    let Some(q) = held.remove(&r.actor) else {
+                    let Ok(q) = held.take(&r) else {
                         continue;
                     };
-                    if q.request().header.seq != r.request_seq {
-                        // An answer to an older query of this actor: keep waiting for this one.
-                        held.insert(r.actor, q);
-                        continue;
-                    }
                     q.answer(r)?;
                     if let Ok(id) = u16::try_from(r.actor) {
                         bells.ring(id)?;
@@ -359,34 +354,17 @@ fn forward(
             }
         }
         // Up: what the actors here sent.
-        loop {
-            match transitions.receive() {
-                Ok(Some(b)) => put(&Frame::Transitions(b))?,
-                Ok(None) => break,
-                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
-                Err(e) => return Err(e.into()),
-            }
-        }
-        loop {
-            match progress.receive() {
-                Ok(Some(p)) => put(&Frame::Progress(p))?,
-                Ok(None) => break,
-                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
-                Err(e) => return Err(e.into()),
-            }
-        }
-        loop {
-            match queries.receive() {
-                Ok(Some(q)) => {
-                    put(&Frame::Query(*q.request()))?;
-                    held.insert(q.request().actor, q);
-                }
-                Ok(None) => break,
-                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
-                Err(e) => return Err(e.into()),
-            }
-        }
-        held.retain(|_, q| q.is_connected());
+        drain(|| transitions.receive(), |b| put(&Frame::Transitions(b)))?;
+        drain(|| progress.receive(), |p| put(&Frame::Progress(p)))?;
+        drain(
+            || queries.receive(),
+            |q| {
+                put(&Frame::Query(*q.request()))?;
+                held.hold(q.request().actor, q);
+                Ok(())
+            },
+        )?;
+        held.prune(|q| q.is_connected());
         // Actors that started since the last publication get the newest of each (history 1).
         credits.update_connections()?;
         control.update_connections()?;
