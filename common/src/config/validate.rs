@@ -41,6 +41,18 @@ fn valid_gym_id(id: &str) -> bool {
 impl ExperimentConfig {
     /// Checks every value; the error names the field.
     pub fn validate(&self) -> Result<()> {
+        self.validate_run()?;
+        self.validate_env()?;
+        self.validate_agent()?;
+        self.validate_agent_learning()?;
+        self.validate_agent_training()?;
+        self.validate_query()?;
+        self.validate_budget()?;
+        Ok(())
+    }
+
+    /// The run's length and evaluation.
+    fn validate_run(&self) -> Result<()> {
         if self.episodes == 0 && self.steps == 0 {
             return Err(invalid(
                 "episodes",
@@ -50,6 +62,11 @@ impl ExperimentConfig {
         if self.evaluation.every > 0 && self.evaluation.episodes == 0 {
             return Err(invalid("evaluation.episodes", "must be at least 1"));
         }
+        Ok(())
+    }
+
+    /// The `[env]` section.
+    fn validate_env(&self) -> Result<()> {
         let e = &self.env;
         if !(e.p_success > 0.0 && e.p_success <= 1.0) {
             return Err(invalid(
@@ -87,6 +104,12 @@ impl ExperimentConfig {
         if e.name != EnvName::Cliffwalk && e.map.is_some() {
             return Err(invalid("env.map", "applies to cliffwalk only"));
         }
+        Ok(())
+    }
+
+    /// The `[agent]` section: heads, exploration, replay.
+    fn validate_agent(&self) -> Result<()> {
+        let e = &self.env;
         let a = &self.agent;
         if a.heads() == 0 {
             return Err(invalid("agent.heads", "K must be at least 1"));
@@ -132,6 +155,12 @@ impl ExperimentConfig {
                 ),
             ));
         }
+        Ok(())
+    }
+
+    /// The `[agent]` section: exploration, learning rate, bootstrap, replay.
+    fn validate_agent_learning(&self) -> Result<()> {
+        let a = &self.agent;
         if !(a.temperature > 0.0 && a.temperature.is_finite()) {
             return Err(invalid(
                 "agent.temperature",
@@ -195,6 +224,12 @@ impl ExperimentConfig {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// The `[agent]` section: the update's settings.
+    fn validate_agent_training(&self) -> Result<()> {
+        let a = &self.agent;
         if !(a.tau > 0.0 && a.tau <= 1.0) {
             return Err(invalid(
                 "agent.tau",
@@ -276,6 +311,11 @@ impl ExperimentConfig {
                 "applies to the neural agents (dqn, bdqn); the Q-tables have no prior network",
             ));
         }
+        Ok(())
+    }
+
+    /// The `[query]` section.
+    fn validate_query(&self) -> Result<()> {
         let q = &self.query;
         if q.queue_len == 0 {
             return Err(invalid("query.queue_len", "L_q must be at least 1"));
@@ -305,6 +345,12 @@ impl ExperimentConfig {
                 "rule `random` asks at the steps of a recorded run: give its demos.jsonl",
             ));
         }
+        Ok(())
+    }
+
+    /// The `[budget]`, `[shaping]` and `[expert]` sections.
+    fn validate_budget(&self) -> Result<()> {
+        let a = &self.agent;
         if self.budget.total < 0 {
             return Err(invalid(
                 "budget.total",
