@@ -8,12 +8,12 @@ range.
 Quantities:
 - the learner's train step: the 4-64-64-4 network (K = 2 heads of A = 2 actions), batch 64,
   online forward, target forward, SmoothL1 TD loss masked per head, backward, Adam (ours:
-  Criterion's `train_step_k2_a2_b64` in common/benches/core.rs; theirs: the same step in PyTorch);
+  Criterion's `train_step_k2_a2_b64` in common/core/benches/core.rs; theirs: the same step in PyTorch);
 - the actor's act step: one observation through the network, a softmax per head, their
   Jensen-Shannon divergence and the greedy action (ours: `act_step_k2_a2`, which also runs the
   query rule; theirs: PyTorch);
 - environment steps per second of CartPole, MountainCar-v0 and Acrobot-v1, a fixed random-looking
-  action sequence, reset when an episode ends (ours: common/benches/envs.rs; theirs: Gymnasium's
+  action sequence, reset when an episode ends (ours: common/core/benches/envs.rs; theirs: Gymnasium's
   environments made with `gymnasium.make`, in this process);
 - end to end: DQN on CartPole with the paper's settings, environment steps per second of the
   training loop's wall-clock (ours: `alfd local`, whose summary reports that wall-clock; theirs:

@@ -66,7 +66,7 @@ pub struct EnvState {
 /// `reset(Some(seed))` reseeds the environment's generator, `reset(None)` continues with it, as in
 /// Gymnasium. The same seed and the same actions always give the same trajectory. An environment
 /// that was never seeded behaves as if seeded with 0 (the core never draws entropy from the OS).
-/// `common/tests/env_conformance.rs` checks every implementation against this contract.
+/// `common/core/tests/env_conformance.rs` checks every implementation against this contract.
 pub trait Env {
     type Observation: Clone + std::fmt::Debug;
 

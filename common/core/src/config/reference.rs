@@ -300,9 +300,10 @@ mod tests {
         }
         assert!(!md.contains("schedule_steps"), "a key TOML never holds");
         // Every key a shipped preset sets is documented.
-        let preset: toml::Table = include_str!("../../../deploy/configs/recommended/cartpole.toml")
-            .parse()
-            .unwrap();
+        let preset: toml::Table =
+            include_str!("../../../../deploy/configs/recommended/cartpole.toml")
+                .parse()
+                .unwrap();
         for (k, v) in &preset {
             match v {
                 toml::Value::Table(t) => {

@@ -18,7 +18,7 @@ use proptest::prelude::*;
 
 /// The shipped configs, read from the repository at test time.
 fn shipped_configs() -> Vec<(PathBuf, String)> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../deploy/configs");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../deploy/configs");
     let mut out = Vec::new();
     for dir in [root.clone(), root.join("recommended")] {
         let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)
@@ -280,7 +280,8 @@ fn good_checkpoint() -> &'static [u8] {
     static BYTES: OnceLock<Vec<u8>> = OnceLock::new();
     BYTES.get_or_init(|| {
         let text = std::fs::read_to_string(
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../deploy/configs/cartpole-bdqn.toml"),
+            PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+                .join("../../deploy/configs/cartpole-bdqn.toml"),
         )
         .unwrap();
         let overrides = [

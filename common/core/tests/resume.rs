@@ -17,7 +17,7 @@ use alfd_common::runner::{
 
 fn cfg(name: &str, overrides: &[&str]) -> ExperimentConfig {
     let text = std::fs::read_to_string(format!(
-        "{}/../deploy/configs/{name}.toml",
+        "{}/../../deploy/configs/{name}.toml",
         env!("CARGO_MANIFEST_DIR")
     ))
     .unwrap();

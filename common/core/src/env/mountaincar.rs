@@ -2,7 +2,7 @@
 //! float64 internal state, float32 observations, and the 200-step limit of `gym.make`.
 //!
 //! The dynamics are checked against trajectories recorded from Gymnasium 1.4.0 to 1e-9
-//! (`common/tests/gymnasium_reference.rs`). The reward is sparse: -1 on every step until the
+//! (`common/core/tests/gymnasium_reference.rs`). The reward is sparse: -1 on every step until the
 //! car reaches the flag, so a policy that never gets there scores -200.
 
 use rand::Rng as _;

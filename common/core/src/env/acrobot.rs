@@ -3,7 +3,7 @@
 //! [-π, π] and velocities clipped after the step, float64 internal state, float32 observations.
 //!
 //! The dynamics are checked against trajectories recorded from Gymnasium 1.4.0 to 1e-9
-//! (`common/tests/gymnasium_reference.rs`). The reward is sparse: -1 per step, 0 on the step that
+//! (`common/core/tests/gymnasium_reference.rs`). The reward is sparse: -1 per step, 0 on the step that
 //! lifts the tip above the bar, so a policy that never gets there scores -500.
 
 use std::f64::consts::PI;

@@ -2,7 +2,7 @@
 //! same order of operations, float64 internal state, float32 observations.
 //!
 //! The dynamics are checked against trajectories recorded from Gymnasium 1.4.0 to 1e-9
-//! (`common/tests/gymnasium_reference.rs`). The one deliberate difference from `gym.make`: the
+//! (`common/core/tests/gymnasium_reference.rs`). The one deliberate difference from `gym.make`: the
 //! episode limit defaults to 1000 steps (the paper's) instead of 500.
 
 use rand::Rng as _;

@@ -11,7 +11,7 @@ use alfd_common::runner::{run_neural, run_tabular};
 
 fn config(name: &str) -> String {
     std::fs::read_to_string(format!(
-        "{}/../deploy/configs/{name}.toml",
+        "{}/../../deploy/configs/{name}.toml",
         env!("CARGO_MANIFEST_DIR")
     ))
     .unwrap()
