@@ -12,7 +12,7 @@ use alfd_common::runner::{run_neural, run_tabular};
 use alfd_expert::registry::{self, ExpertEntry};
 use anyhow::Context as _;
 
-use crate::cmd_local::write;
+use crate::output::write;
 use crate::usage::usage;
 
 #[derive(Debug, clap::Args)]

@@ -102,8 +102,8 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(format!("join-{}-{pid}", joined.run_id)));
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    crate::cmd_local::write(&dir, "config.toml", joined.config_toml.as_bytes())?;
-    crate::cmd_local::write(
+    crate::output::write(&dir, "config.toml", joined.config_toml.as_bytes())?;
+    crate::output::write(
         &dir,
         alfd_harness::RUNTIME_FILE,
         joined.runtime_toml.as_bytes(),
@@ -125,7 +125,7 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
         "connect": endpoint.to_string(),
         "actors": joined.actors,
     });
-    crate::cmd_local::write(
+    crate::output::write(
         &dir,
         "join.json",
         serde_json::to_string_pretty(&record)?.as_bytes(),

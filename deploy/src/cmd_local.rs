@@ -19,6 +19,7 @@ use alfd_common::runner::{
 use anyhow::Context as _;
 
 use crate::checkpoint_file::{self, CheckpointFile};
+use crate::output::write;
 use crate::report::{self, Output};
 use crate::usage::usage;
 use crate::{run_dir, setup};
@@ -381,9 +382,4 @@ fn progress_bar(cfg: &ExperimentConfig, show: bool) -> indicatif::ProgressBar {
         .progress_chars("=> "),
     );
     bar
-}
-
-/// Writes `dir/name` whole (see [`alfd_harness::write_atomically`]).
-pub fn write(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
-    alfd_harness::write_atomically(&dir.join(name), bytes)
 }

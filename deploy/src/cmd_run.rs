@@ -201,7 +201,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
 pub fn finish(plan: &Plan, output: Output) -> anyhow::Result<()> {
     let run_dir = &plan.run_dir;
     let summary = launcher::launch(plan)?;
-    crate::cmd_local::write(
+    crate::output::write(
         run_dir,
         "summary.json",
         serde_json::to_string_pretty(&summary)?.as_bytes(),
@@ -250,7 +250,7 @@ pub fn swap(args: SwapArgs) -> anyhow::Result<()> {
         id: id.clone(),
         expert: args.expert.clone(),
     };
-    crate::cmd_local::write(
+    crate::output::write(
         &args.run,
         SWAP_REQUEST,
         serde_json::to_string(&request)?.as_bytes(),

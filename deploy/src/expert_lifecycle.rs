@@ -20,7 +20,14 @@
 
 use std::time::{Duration, Instant};
 
-use crate::launcher::SwapRequest;
+use serde::{Deserialize, Serialize};
+
+/// A request to swap the expert (`swap-expert.request.json`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SwapRequest {
+    pub id: String,
+    pub expert: String,
+}
 
 /// How long a new expert may take to report `standby`.
 pub const START_TIMEOUT: Duration = Duration::from_secs(60);

@@ -18,6 +18,7 @@ mod cmd_sweep;
 mod expert_lifecycle;
 mod launcher;
 mod local_remote;
+mod output;
 mod report;
 mod run_dir;
 mod setup;

@@ -417,6 +417,7 @@ impl AgentConfig {
 }
 
 pub use crate::query::RuleKind;
+pub use crate::shaping::ShapingKind;
 pub use env::{EnvConfig, EnvName};
 pub use query::QueryConfig;
 
@@ -501,19 +502,6 @@ pub struct ShapingConfig {
     pub kind: ShapingKind,
 }
 
-/// Which shaping.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
-)]
-#[serde(rename_all = "lowercase")]
-pub enum ShapingKind {
-    /// Eq. 4, for a while (see `shaping.stop_multiple`).
-    #[default]
-    Paper,
-    /// Potential-based shaping with the demonstration model, for the whole run.
-    Potential,
-}
-
 fn default_lambda() -> f64 {
     0.75
 }
@@ -573,7 +561,7 @@ impl ExperimentConfig {
     }
 
     /// Parses a config for the multi-process runtime, which runs the neural agents (on any
-    /// environment with vector observations, see [`crate::env::vector_env`]).
+    /// environment with vector observations).
     pub fn for_multi_process(text: &str) -> Result<Self> {
         let cfg = Self::from_toml(text)?;
         if cfg.agent.kind.is_tabular() {

@@ -29,8 +29,8 @@ pub struct NStep {
 }
 
 impl NStep {
-    /// n-step transitions with discount `gamma`; `n` in `1..=255` (the config allows up to
-    /// [`MAX_N_STEP`](crate::config::MAX_N_STEP)).
+    /// n-step transitions with discount `gamma`; `n` in `1..=255` (the config allows fewer:
+    /// `agent.n_step` is checked against its own maximum).
     pub fn new(n: u32, gamma: f64) -> Self {
         assert!(
             (1..=u32::from(u8::MAX)).contains(&n),

@@ -1,5 +1,5 @@
 //! The family of K-head Q-functions behind one trait: K Q-tables in the tabular case, one network
-//! with K heads in the neural case (`crate::agent::neural`).
+//! with K heads in the neural case (the neural agents).
 //!
 //! Values are laid out head-major, `q[k * A + a] = Q_k(s, a)`, the layout of the network's output
 //! layer, of [`crate::policy::js_divergence`] and of the bootstrap masks.

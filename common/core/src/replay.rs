@@ -21,7 +21,7 @@ pub struct Transition {
     pub demo: bool,
     /// Environment steps from `state` to `next_state`: 1 for a one-step transition; n for an
     /// n-step one, whose `reward` is the discounted sum `Σ_{i<n} γ^i r_i` of the n rewards and
-    /// whose target bootstraps with `γ^n` (see [`crate::n_step`]).
+    /// whose target bootstraps with `γ^n` (the n-step window makes them).
     pub horizon: u8,
 }
 

@@ -1,6 +1,19 @@
 //! Reward shaping with the demonstration model (paper section 3.5, eq. 4), and when it is on.
 
-pub use crate::config::ShapingKind;
+use serde::{Deserialize, Serialize};
+
+/// Which shaping.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum ShapingKind {
+    /// Eq. 4, for a while (see `shaping.stop_multiple`).
+    #[default]
+    Paper,
+    /// Potential-based shaping with the demonstration model, for the whole run.
+    Potential,
+}
 
 /// Eq. 4: `r̂ = r + λ [1 − (p(a|s, demo model) − π(a|s))²]`.
 pub fn shaped_reward(reward: f64, lambda: f64, p_demo: f64, pi: f64) -> f64 {

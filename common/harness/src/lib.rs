@@ -5,6 +5,7 @@
 //! environments and external experts (`python`), start-up (logging, the schema-version
 //! hook: `startup`), and durable file writes (`fs`).
 
+mod bad_input;
 mod fs;
 mod process;
 pub mod python;
@@ -12,10 +13,9 @@ mod runtime;
 mod session;
 mod startup;
 
+pub use bad_input::{bad_input, exit_code, BadInput};
 pub use fs::{load_checkpoint, save_checkpoint, test_dir, write_atomically, write_private};
-pub use process::{
-    bad_input, check_wire_limits, exit_code, main, read_text, BadInput, ProcessArgs, Setup,
-};
+pub use process::{check_wire_limits, main, read_text, ProcessArgs, Setup};
 pub use runtime::{
     RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY, DEFAULT_HUMAN_QUERY_TIMEOUT_MS,
     HUMAN_EXPERT, RUNTIME_FILE,

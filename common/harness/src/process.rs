@@ -11,19 +11,9 @@ use std::sync::Arc;
 use alfd_wire::{Process, Role, Wire, MAX_HEADS, MAX_OBS_DIM};
 use anyhow::Context as _;
 
+use crate::bad_input::{exit_code, BadInput};
 use crate::python::{Adapter, AdapterEnv};
 use crate::runtime::{RuntimeConfig, RUNTIME_FILE};
-
-/// Bad input (a config, a file, a flag, a name), already phrased for the user: every binary
-/// exits with code 2 on it (see [`exit_code`]), and 1 on anything else.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{0}")]
-pub struct BadInput(pub String);
-
-/// Shorthand for `anyhow::Error::new(BadInput(msg))`: `Err(bad_input(format!(..)))?`.
-pub fn bad_input(msg: impl Into<String>) -> anyhow::Error {
-    anyhow::Error::new(BadInput(msg.into()))
-}
 
 /// The arguments every process takes.
 #[derive(Debug, Clone, clap::Args)]
@@ -167,23 +157,6 @@ pub fn check_wire_limits(obs_dim: usize, heads: usize) -> Result<(), BadInput> {
         )));
     }
     Ok(())
-}
-
-/// The exit code of every binary for an error: 2 when the user's input caused it ([`BadInput`],
-/// or the core's errors about a config, a map or CliffWalk's parameters anywhere in its chain),
-/// 1 otherwise.
-pub fn exit_code(err: &anyhow::Error) -> i32 {
-    let user_fault = |e: &(dyn std::error::Error + 'static)| {
-        e.is::<BadInput>()
-            || e.is::<alfd_common::config::ConfigError>()
-            || e.is::<alfd_common::env::cliffwalk::MapError>()
-            || e.is::<alfd_common::env::cliffwalk::CliffWalkError>()
-    };
-    if err.chain().any(user_fault) {
-        2
-    } else {
-        1
-    }
 }
 
 /// The `main` of a process binary: logs to `RUN_DIR/LOG.log`, learns the schema version it

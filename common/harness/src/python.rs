@@ -14,7 +14,7 @@ use alfd_wire::{Process, RemoteClient, RemoteEnv};
 use anyhow::Context as _;
 use serde::{Deserialize, Serialize};
 
-use crate::process::BadInput;
+use crate::bad_input::BadInput;
 
 /// Where the adapter and its requirements are: `$ALFD_PYTHON_DIR`, else `deploy/python` of the
 /// sources this binary was built from.

@@ -44,7 +44,8 @@ use alfd_common::record::ReturnStats;
 use anyhow::Context as _;
 
 use crate::cmd_demo_model_policy::{self, PolicyRun};
-use crate::cmd_local::{self, write};
+use crate::cmd_local;
+use crate::output::{png_from_svg, write};
 use crate::report::{Output, SweepReport};
 use crate::usage::usage;
 use alfd_common::record::RunSummary;
@@ -565,7 +566,7 @@ fn budget_section(ctx: &Ctx, table: &budget::Table) -> anyhow::Result<String> {
         let name = format!("{}-by-budget-{tag}", exp.name);
         write(ctx.out, &format!("{name}.svg"), svg.as_bytes())?;
         files.push(format!("{name}.svg"));
-        if let Some(png) = plot::png_from_svg(&svg)? {
+        if let Some(png) = png_from_svg(&svg)? {
             write(ctx.out, &format!("{name}.png"), &png)?;
             files.push(format!("{name}.png"));
         }
@@ -685,7 +686,7 @@ fn write_plot_as(
     let mut files = vec![format!("{stem}.svg")];
     write(ctx.out, &files[0], svg.as_bytes())?;
     let png_name = format!("{stem}.png");
-    match plot::png_from_svg(&svg)? {
+    match png_from_svg(&svg)? {
         Some(png) => {
             write(ctx.out, &png_name, &png)?;
             files.push(png_name);

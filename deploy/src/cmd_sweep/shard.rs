@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 
 use super::experiment::Experiment;
 use super::{is_complete, run_dir};
-use crate::cmd_local::write;
+use crate::output::write;
 use crate::report::Output;
 use crate::usage::usage;
 

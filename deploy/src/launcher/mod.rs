@@ -118,12 +118,7 @@ fn one() -> u32 {
 /// so that a resumed run's actors draw new seed streams.
 pub const INCARNATIONS_PER_LAUNCH: u64 = 1_000_000;
 
-/// `swap-expert.request.json`.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct SwapRequest {
-    pub id: String,
-    pub expert: String,
-}
+pub use crate::expert_lifecycle::SwapRequest;
 
 /// `swap-expert.response.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -197,9 +192,9 @@ pub fn launch(plan: &Plan) -> anyhow::Result<RunSummary> {
     std::fs::create_dir_all(&plan.run_dir)
         .with_context(|| format!("cannot create run directory {}", plan.run_dir.display()))?;
     if !plan.resume {
-        crate::cmd_local::write(&plan.run_dir, "config.toml", plan.cfg.to_toml().as_bytes())?;
+        crate::output::write(&plan.run_dir, "config.toml", plan.cfg.to_toml().as_bytes())?;
     }
-    crate::cmd_local::write(
+    crate::output::write(
         &plan.run_dir,
         RUNTIME_FILE,
         plan.runtime.to_toml().as_bytes(),
@@ -212,7 +207,7 @@ pub fn launch(plan: &Plan) -> anyhow::Result<RunSummary> {
         schema_version: wire::SCHEMA_VERSION,
         launches: plan.launches,
     };
-    crate::cmd_local::write(
+    crate::output::write(
         &plan.run_dir,
         "run.json",
         serde_json::to_string_pretty(&info)?.as_bytes(),
@@ -858,7 +853,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         if !ok {
             warn!(message = %r.message, "expert swap failed");
         }
-        crate::cmd_local::write(
+        crate::output::write(
             &self.plan.run_dir,
             SWAP_RESPONSE,
             serde_json::to_string_pretty(&r)?.as_bytes(),

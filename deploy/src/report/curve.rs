@@ -1,5 +1,5 @@
 //! A run's learning curve, `RUN_DIR/curve.svg` (plotters; text as SVG `<text>`, no font needed)
-//! and `RUN_DIR/curve.png` (rasterised with resvg by the sweep's `png_from_svg`, written only
+//! and `RUN_DIR/curve.png` (rasterised with resvg by `crate::output::png_from_svg`, written only
 //! when a font is found). Top panel: the return of each episode (thin), its 20-episode moving
 //! average (thick), the greedy evaluations (dots), the expert's measured return (dashed), and
 //! the shaping window (shaded: episodes with shaped steps). Bottom panel: demonstrations used,
@@ -15,7 +15,6 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::ExpertReference;
-use crate::cmd_local;
 
 const WIDTH: u32 = 960;
 const HEIGHT: u32 = 720;
@@ -66,9 +65,9 @@ pub(crate) fn write(
         budget: cfg.budget(),
     };
     let svg = svg(&curve)?;
-    cmd_local::write(dir, "curve.svg", svg.as_bytes())?;
-    match crate::cmd_sweep::plot::png_from_svg(&svg)? {
-        Some(png) => cmd_local::write(dir, "curve.png", &png)?,
+    crate::output::write(dir, "curve.svg", svg.as_bytes())?;
+    match crate::output::png_from_svg(&svg)? {
+        Some(png) => crate::output::write(dir, "curve.png", &png)?,
         None => match std::fs::remove_file(dir.join("curve.png")) {
             Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
                 return Err(e).context("cannot remove the stale curve.png")

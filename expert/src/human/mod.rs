@@ -4,7 +4,7 @@
 //! button or key, or a decline. Live updates go out as server-sent events (`GET /events`);
 //! `GET /state` gives the same JSON once; `POST /answer {"id", "action"}` and
 //! `POST /decline {"id"}` send the person's decision to the expert process, which answers the
-//! actor (see `crate::process`: budget, `demos.jsonl` and the model are handled there, as for
+//! actor (see the process module: budget, `demos.jsonl` and the model are handled there, as for
 //! every other expert).
 //!
 //! The page answers only its person: every path lives under a secret token made when the page

@@ -9,9 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::agent::{Decision, Explorer};
 use crate::checkpoint::StateMismatch;
 use crate::config::{AgentConfig, AgentKind, QueryConfig};
-use crate::demo_model::DemoModel;
 use crate::env::Step;
-use crate::environment_loop::{Actor, Result};
 use crate::math;
 use crate::policy::argmax;
 use crate::qfunction::{QFunction, TabularQ};
@@ -235,35 +233,20 @@ impl TabularAgent {
     }
 }
 
-/// The tabular agents learn from each step as they take it. SARSA's target needs the action
-/// taken at `s'`, so SARSA learns from a step when the next one is observed (or at once when the
-/// episode ends there). The tabular study does not shape the reward (section 5.1.1).
-impl Actor<usize> for TabularAgent {
-    fn begin_episode(&mut self) {
-        TabularAgent::begin_episode(self);
-    }
-
-    fn select(&mut self, obs: &usize, step: u64, budget_left: bool) -> Decision {
-        self.decide(*obs, step, budget_left)
-    }
-
-    fn observe(
-        &mut self,
-        obs: &usize,
-        action: usize,
-        step: &Step<usize>,
-        demo: bool,
-        _shaping: Option<(&DemoModel, f64)>,
-    ) -> Result<bool> {
+impl TabularAgent {
+    /// Learns from a step as it is taken. SARSA's target needs the action taken at `s'`, so
+    /// SARSA learns from a step when the next one is observed (or at once when the episode ends
+    /// there).
+    pub fn observe_step(&mut self, obs: usize, action: usize, step: &Step<usize>, demo: bool) {
         if demo && self.rule.reads(Signal::Novelty) {
-            self.note_demo(*obs);
+            self.note_demo(obs);
         }
         if let Some((s, a, r, s_next)) = self.pending.take() {
             self.learn(s, a, r, s_next, false, Some(action));
         }
         if step.done() {
             self.learn(
-                *obs,
+                obs,
                 action,
                 step.reward,
                 step.observation,
@@ -271,11 +254,10 @@ impl Actor<usize> for TabularAgent {
                 None,
             );
         } else if self.kind == AgentKind::Sarsa {
-            self.pending = Some((*obs, action, step.reward, step.observation));
+            self.pending = Some((obs, action, step.reward, step.observation));
         } else {
-            self.learn(*obs, action, step.reward, step.observation, false, None);
+            self.learn(obs, action, step.reward, step.observation, false, None);
         }
-        Ok(false)
     }
 }
 

@@ -20,7 +20,7 @@ pub mod in_process;
 
 use std::ops::ControlFlow;
 
-use crate::agent::{Decision, NeuralActor};
+use crate::agent::{Decision, NeuralActor, TabularAgent};
 use crate::demo_model::DemoModel;
 use crate::env::{Env, EnvError, Step};
 use crate::n_step::NStep;
@@ -268,6 +268,31 @@ impl<A: Adder, V: VariableSource> Actor<Vec<f32>> for GenericActor<A, V> {
     fn end_episode(&mut self) -> Result<()> {
         // Nothing waits here: the episode's last step flushed the potential and n-step windows.
         self.adder.end_episode()
+    }
+}
+
+/// The tabular agents learn from each step as they take it
+/// ([`TabularAgent::observe_step`]). The tabular study does not shape the reward (section
+/// 5.1.1).
+impl Actor<usize> for TabularAgent {
+    fn begin_episode(&mut self) {
+        TabularAgent::begin_episode(self);
+    }
+
+    fn select(&mut self, obs: &usize, step: u64, budget_left: bool) -> Decision {
+        self.decide(*obs, step, budget_left)
+    }
+
+    fn observe(
+        &mut self,
+        obs: &usize,
+        action: usize,
+        step: &Step<usize>,
+        demo: bool,
+        _shaping: Option<(&DemoModel, f64)>,
+    ) -> Result<bool> {
+        self.observe_step(*obs, action, step, demo);
+        Ok(false)
     }
 }
 

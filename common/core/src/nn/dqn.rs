@@ -34,7 +34,7 @@
 //! - `max_grad_norm`: the gradient scaled to at most this global L2 norm (PyTorch's
 //!   `clip_grad_norm_`) before Adam's step.
 //!
-//! A batch of n-step transitions (`Batch::horizons`, see [`crate::n_step`]) bootstraps transition
+//! A batch of n-step transitions (`Batch::horizons`, made by the n-step window) bootstraps transition
 //! `i` with `gamma^h_i` instead of `gamma`; its reward is already the discounted sum of the `h_i`
 //! rewards.
 
