@@ -89,5 +89,8 @@ pub use remote::{
     remote_kind, remote_limits, remote_status, Liveness, RemoteClient, RemoteDemonstrator,
     RemoteEnv, RemoteRequest, RemoteResponse, RemoteSpec, MAX_REMOTE_VALUES, REMOTE_MESSAGE_LEN,
 };
-pub use services::{quiet_transport_logs, Wire};
+pub use services::{
+    quiet_transport_logs, Channel, Wire, CHANNELS, CONTROL, CREDITS, DEMO_MODEL, PROGRESS,
+    TRANSITIONS, WEIGHTS,
+};
 pub use wakeups::{ActorBells, Bell, Doorbell, Waiter, Wake};

@@ -37,6 +37,103 @@ pub fn quiet_transport_logs() {
     set_log_level_from_env_or(LogLevel::Warn);
 }
 
+/// A publish-subscribe channel of a run: its service's name and limits, the same in every
+/// process (a process opening a service with other limits would be refused).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Channel {
+    /// The service's name within the run.
+    pub name: &'static str,
+    pub publishers: usize,
+    pub subscribers: usize,
+    /// Samples a new subscriber gets on connecting (the newest ones).
+    pub history: usize,
+    /// Samples a subscriber's buffer holds.
+    pub buffer: usize,
+    /// A full buffer drops its oldest sample (else the publisher is refused).
+    pub safe_overflow: bool,
+}
+
+/// Actors' transitions to the learner: never dropped (credits keep them within the buffer).
+pub const TRANSITIONS: Channel = Channel {
+    name: "transitions",
+    publishers: 2 * MAX_ACTORS + 4,
+    subscribers: 4,
+    history: 0,
+    buffer: TRANSITIONS_BUFFER,
+    safe_overflow: false,
+};
+
+/// The learner's grants to the actors: only the newest matters.
+pub const CREDITS: Channel = Channel {
+    name: "credits",
+    publishers: 2,
+    subscribers: 2 * MAX_ACTORS + 4,
+    history: 1,
+    buffer: 2,
+    safe_overflow: true,
+};
+
+/// The learner's weights: only the newest matters.
+pub const WEIGHTS: Channel = Channel {
+    name: "weights",
+    publishers: 2,
+    subscribers: 2 * MAX_ACTORS + 4,
+    history: 1,
+    buffer: 2,
+    safe_overflow: true,
+};
+
+/// The expert's demonstration model: only the newest matters (a swap makes a second publisher).
+pub const DEMO_MODEL: Channel = Channel {
+    name: "demo-model",
+    publishers: 4,
+    subscribers: 2 * MAX_ACTORS + 4,
+    history: 1,
+    buffer: 2,
+    safe_overflow: true,
+};
+
+/// Every process's episodes and status to the launcher: never dropped.
+pub const PROGRESS: Channel = Channel {
+    name: "progress",
+    publishers: MAX_NODES,
+    subscribers: 4,
+    history: 0,
+    buffer: 256,
+    safe_overflow: false,
+};
+
+/// The launcher's control (stop, the active expert): only the newest matters.
+pub const CONTROL: Channel = Channel {
+    name: "control",
+    publishers: 2,
+    subscribers: MAX_NODES,
+    history: 1,
+    buffer: 4,
+    safe_overflow: true,
+};
+
+/// Every publish-subscribe channel of a run.
+pub const CHANNELS: [Channel; 6] = [TRANSITIONS, CREDITS, WEIGHTS, DEMO_MODEL, PROGRESS, CONTROL];
+
+type PubSubFactory<P, H> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, P, H>;
+type PubSubBuilder<P, H> = iceoryx2::service::builder::publish_subscribe::Builder<P, H, Transport>;
+
+/// A publish-subscribe service builder with `c`'s limits.
+fn limits<P, H>(b: PubSubBuilder<P, H>, c: &Channel) -> PubSubBuilder<P, H>
+where
+    P: fmt::Debug + IceoryxSend + ?Sized,
+    H: fmt::Debug + ZeroCopySend,
+{
+    b.max_publishers(c.publishers)
+        .max_subscribers(c.subscribers)
+        .max_nodes(MAX_NODES)
+        .history_size(c.history)
+        .subscriber_max_buffer_size(c.buffer)
+        .enable_safe_overflow(c.safe_overflow)
+}
+
 /// A process's connection to its run: an iceoryx2 node with the run's config, and who we are.
 pub struct Wire {
     node: Node<Transport>,
@@ -147,92 +244,43 @@ impl Wire {
 
     // --- one builder per service: every process opens it with these settings ---------------
 
-    fn transitions_service(
-        &self,
-    ) -> Result<
-        iceoryx2::service::port_factory::publish_subscribe::PortFactory<
-            Transport,
-            TransitionBatch,
-            (),
-        >,
-    > {
-        let name = self.service_name("transitions")?;
-        self.node
+    fn transitions_service(&self) -> Result<PubSubFactory<TransitionBatch, ()>> {
+        let name = self.service_name(TRANSITIONS.name)?;
+        let b = self
+            .node
             .service_builder(&name)
-            .publish_subscribe::<TransitionBatch>()
-            .max_publishers(2 * MAX_ACTORS + 4)
-            .max_subscribers(4)
-            .max_nodes(MAX_NODES)
-            .history_size(0)
-            .subscriber_max_buffer_size(TRANSITIONS_BUFFER)
-            .enable_safe_overflow(false)
+            .publish_subscribe::<TransitionBatch>();
+        limits(b, &TRANSITIONS)
             .open_or_create()
             .map_err(transport("open", name.to_string()))
     }
 
-    fn credits_service(
-        &self,
-    ) -> Result<
-        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, Credits, ()>,
-    > {
-        let name = self.service_name("credits")?;
-        self.node
+    fn credits_service(&self) -> Result<PubSubFactory<Credits, ()>> {
+        let name = self.service_name(CREDITS.name)?;
+        let b = self
+            .node
             .service_builder(&name)
-            .publish_subscribe::<Credits>()
-            .max_publishers(2)
-            .max_subscribers(2 * MAX_ACTORS + 4)
-            .max_nodes(MAX_NODES)
-            .history_size(1)
-            .subscriber_max_buffer_size(2)
-            .enable_safe_overflow(true)
+            .publish_subscribe::<Credits>();
+        limits(b, &CREDITS)
             .open_or_create()
             .map_err(transport("open", name.to_string()))
     }
 
-    fn weights_service(
-        &self,
-    ) -> Result<
-        iceoryx2::service::port_factory::publish_subscribe::PortFactory<
-            Transport,
-            [f32],
-            WeightsHeader,
-        >,
-    > {
-        let name = self.service_name("weights")?;
-        self.node
+    fn weights_service(&self) -> Result<PubSubFactory<[f32], WeightsHeader>> {
+        let name = self.service_name(WEIGHTS.name)?;
+        let b = self
+            .node
             .service_builder(&name)
-            .publish_subscribe::<[f32]>()
-            .user_header::<WeightsHeader>()
-            .max_publishers(2)
-            .max_subscribers(2 * MAX_ACTORS + 4)
-            .max_nodes(MAX_NODES)
-            .history_size(1)
-            .subscriber_max_buffer_size(2)
-            .enable_safe_overflow(true)
+            .publish_subscribe::<[f32]>();
+        limits(b.user_header::<WeightsHeader>(), &WEIGHTS)
             .open_or_create()
             .map_err(transport("open", name.to_string()))
     }
 
-    fn demo_model_service(
-        &self,
-    ) -> Result<
-        iceoryx2::service::port_factory::publish_subscribe::PortFactory<
-            Transport,
-            [u8],
-            DemoModelHeader,
-        >,
-    > {
-        let name = self.service_name("demo-model")?;
-        self.node
-            .service_builder(&name)
-            .publish_subscribe::<[u8]>()
-            .user_header::<DemoModelHeader>()
-            .max_publishers(4)
-            .max_subscribers(2 * MAX_ACTORS + 4)
-            .max_nodes(MAX_NODES)
-            .history_size(1)
-            .subscriber_max_buffer_size(2)
-            .enable_safe_overflow(true)
+    fn demo_model_service(&self) -> Result<PubSubFactory<[u8], DemoModelHeader>> {
+        let name = self.service_name(DEMO_MODEL.name)?;
+        let b = self.node.service_builder(&name).publish_subscribe::<[u8]>();
+        limits(b.user_header::<DemoModelHeader>(), &DEMO_MODEL)
             .open_or_create()
             .map_err(transport("open", name.to_string()))
     }
@@ -263,40 +311,24 @@ impl Wire {
             .map_err(transport("open", name.to_string()))
     }
 
-    fn progress_service(
-        &self,
-    ) -> Result<
-        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, Progress, ()>,
-    > {
-        let name = self.service_name("progress")?;
-        self.node
+    fn progress_service(&self) -> Result<PubSubFactory<Progress, ()>> {
+        let name = self.service_name(PROGRESS.name)?;
+        let b = self
+            .node
             .service_builder(&name)
-            .publish_subscribe::<Progress>()
-            .max_publishers(MAX_NODES)
-            .max_subscribers(4)
-            .max_nodes(MAX_NODES)
-            .history_size(0)
-            .subscriber_max_buffer_size(256)
-            .enable_safe_overflow(false)
+            .publish_subscribe::<Progress>();
+        limits(b, &PROGRESS)
             .open_or_create()
             .map_err(transport("open", name.to_string()))
     }
 
-    fn control_service(
-        &self,
-    ) -> Result<
-        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, Control, ()>,
-    > {
-        let name = self.service_name("control")?;
-        self.node
+    fn control_service(&self) -> Result<PubSubFactory<Control, ()>> {
+        let name = self.service_name(CONTROL.name)?;
+        let b = self
+            .node
             .service_builder(&name)
-            .publish_subscribe::<Control>()
-            .max_publishers(2)
-            .max_subscribers(MAX_NODES)
-            .max_nodes(MAX_NODES)
-            .history_size(1)
-            .subscriber_max_buffer_size(4)
-            .enable_safe_overflow(true)
+            .publish_subscribe::<Control>();
+        limits(b, &CONTROL)
             .open_or_create()
             .map_err(transport("open", name.to_string()))
     }
@@ -541,5 +573,32 @@ impl Wire {
     #[cfg(test)]
     pub(crate) fn query_servers(&self) -> Result<usize> {
         Ok(self.query_service()?.dynamic_config().number_of_servers())
+    }
+}
+
+#[cfg(test)]
+mod channel_tests {
+    use super::*;
+
+    #[test]
+    fn every_channel_has_its_own_name_and_room_for_every_process() {
+        let mut names: Vec<&str> = CHANNELS.iter().map(|c| c.name).collect();
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), CHANNELS.len());
+        for c in CHANNELS {
+            // Every actor (and its restart) on one side, the learner, launcher, expert and
+            // bridge on the other.
+            assert!(
+                c.publishers.max(c.subscribers) >= 2 * MAX_ACTORS + 4,
+                "{c:?}"
+            );
+            assert!(c.buffer >= 1 && c.history <= c.buffer, "{c:?}");
+        }
+        // The channels that must never drop a sample do not overflow: the learner's
+        // transitions (held within the credits) and the launcher's episodes.
+        for c in [TRANSITIONS, PROGRESS] {
+            assert!(!c.safe_overflow && c.history == 0, "{c:?}");
+        }
     }
 }
