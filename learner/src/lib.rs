@@ -133,7 +133,20 @@ fn serve(
     write_atomically(&path, &m.learner().network().to_safetensors_bytes())?;
     info!(path = %path.display(), "final weights saved");
     if m.final_checkpoint(runtime.window) {
-        shell.checkpoint(&m)?;
+        // The run's learning is done and its weights are saved: a final checkpoint that cannot
+        // be written (a full disk) leaves the last one in place rather than failing the run.
+        if let Err(e) = shell.checkpoint(&m) {
+            let path = checkpoint::path(run_dir);
+            let kept = if path.exists() {
+                "keeps the last one"
+            } else {
+                "does not exist: `alfd resume` cannot continue this run"
+            };
+            tracing::error!(
+                "the final checkpoint could not be written: {e:#}; {} {kept}",
+                path.display()
+            );
+        }
     } else {
         info!("lockstep with one actor: the last checkpoint (at an episode end) is kept");
     }

@@ -7,7 +7,7 @@ use anyhow::Context as _;
 
 /// Writes `bytes` to `path` whole: a temporary file beside it, fsync, rename, fsync of the
 /// directory. A crash leaves either the old file or the new one, never half of one; every error
-/// is returned.
+/// is returned, and a write that fails (a full disk) removes its temporary file.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     write_atomically_with_mode(path, bytes, 0o644)
 }
@@ -35,11 +35,14 @@ fn write_atomically_with_mode(path: &Path, bytes: &[u8], mode: u32) -> anyhow::R
         .mode(mode)
         .open(&tmp)
         .with_context(|| format!("cannot write {}", tmp.display()))?;
-    f.write_all(bytes)
-        .and_then(|()| f.sync_all())
-        .with_context(|| format!("cannot write {}", tmp.display()))?;
+    let written = f.write_all(bytes).and_then(|()| f.sync_all());
     drop(f);
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
+    if let Err(e) = written.and_then(|()| std::fs::rename(&tmp, path)) {
+        // A full disk (ENOSPC) must not stay full of our half-written file: the old file is
+        // untouched, the temporary one goes.
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e).with_context(|| format!("cannot write {}", path.display()));
+    }
     std::fs::File::open(dir)
         .and_then(|d| d.sync_all())
         .with_context(|| format!("cannot sync directory {}", dir.display()))?;
@@ -91,6 +94,26 @@ mod tests {
         );
         let e = write_atomically(&dir.join("missing/y.json"), b"z").unwrap_err();
         assert!(format!("{e:#}").contains("missing"), "{e:#}");
+    }
+
+    #[test]
+    fn a_write_that_fails_leaves_no_temporary_file_behind() {
+        let tmp = test_dir("fs-fail");
+        let dir = tmp.path();
+        // The rename cannot replace a directory holding a file (as a full disk fails the
+        // write): an error naming the path, the directory as it was, no `.NAME.tmp` left.
+        let target = dir.join("state");
+        std::fs::create_dir(&target).unwrap();
+        std::fs::write(target.join("inside"), b"kept").unwrap();
+        let e = write_atomically(&target, b"new").unwrap_err();
+        assert!(format!("{e:#}").contains("cannot write"), "{e:#}");
+        let mut names: Vec<_> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(names, vec!["state".to_owned()]);
+        assert_eq!(std::fs::read(target.join("inside")).unwrap(), b"kept");
     }
 }
 

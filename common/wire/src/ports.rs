@@ -216,18 +216,7 @@ impl DemoModelSender<'_> {
     /// Publishes a model another process published, under its header as it is (a bridge).
     pub fn forward(&mut self, header: DemoModelHeader, bytes: &[u8]) -> Result<()> {
         self.wire.check("demo-model", &header.header)?;
-        let mut sample = self
-            .port
-            .loan_slice_uninit(bytes.len().max(1))
-            .map_err(transport("loan on", "demo-model"))?;
-        *sample.user_header_mut() = header;
-        let sample = if bytes.is_empty() {
-            sample.write_from_slice(&[0u8])
-        } else {
-            sample.write_from_slice(bytes)
-        };
-        sample.send().map_err(transport("send on", "demo-model"))?;
-        Ok(())
+        self.send(header, bytes)
     }
 
     /// Publishes `bytes` (the model, serialized) under `header` (whose `header` and `len` are
@@ -235,18 +224,23 @@ impl DemoModelSender<'_> {
     pub fn publish(&mut self, mut header: DemoModelHeader, bytes: &[u8]) -> Result<()> {
         header.header = self.wire.header(self.seq);
         header.len = bytes.len() as u64;
+        self.send(header, bytes)?;
+        self.seq += 1;
+        Ok(())
+    }
+
+    /// Sends `bytes` under `header` (an empty model as one byte: iceoryx2 loans no empty slice).
+    fn send(&mut self, header: DemoModelHeader, bytes: &[u8]) -> Result<()> {
         let mut sample = self
             .port
             .loan_slice_uninit(bytes.len().max(1))
             .map_err(transport("loan on", "demo-model"))?;
         *sample.user_header_mut() = header;
-        let sample = if bytes.is_empty() {
-            sample.write_from_slice(&[0u8])
-        } else {
-            sample.write_from_slice(bytes)
-        };
-        sample.send().map_err(transport("send on", "demo-model"))?;
-        self.seq += 1;
+        let payload = if bytes.is_empty() { &[0u8][..] } else { bytes };
+        sample
+            .write_from_slice(payload)
+            .send()
+            .map_err(transport("send on", "demo-model"))?;
         Ok(())
     }
 
