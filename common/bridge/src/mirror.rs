@@ -278,13 +278,18 @@ fn forward(
     let transitions = wire.transitions_receiver()?;
     let progress = wire.progress_receiver()?;
     let queries = wire.query_server()?;
-    let mut credits = wire.credits_sender()?;
-    let mut control = wire.control_sender()?;
-    let mut model = wire.demo_model_sender()?;
-    let mut weights = None;
-    let mut bells = ActorBells::new(&wire);
-    let mut held: HeldQueries<IncomingQuery<'_>> = HeldQueries::default();
-    let mut refused = 0u64;
+    let mut here = Here {
+        wire: &wire,
+        ids,
+        heard,
+        credits: wire.credits_sender()?,
+        control: wire.control_sender()?,
+        model: wire.demo_model_sender()?,
+        weights: None,
+        bells: ActorBells::new(&wire),
+        held: HeldQueries::default(),
+        refused: 0,
+    };
     let put = |f: &Frame| -> Result<()> {
         up.put(frame::encode(SCHEMA_VERSION, f)?)
             .wait()
@@ -298,64 +303,14 @@ fn forward(
         }
         // Down: from the learner's host to the actors here.
         while let Ok(mail) = inbox.mail.try_recv() {
-            let Mail::Frame(b) = mail else { continue };
-            let f = match frame::decode::<Frame>(SCHEMA_VERSION, &b) {
-                Ok(f) => f,
-                Err(e) => {
-                    refused += 1;
-                    if refused.is_power_of_two() {
-                        warn!(refused, "frame from the learner's host dropped: {e}");
-                    }
-                    continue;
-                }
-            };
-            let done = match f {
-                Frame::Credits(c) => credits.forward(c).map(|_| true),
-                Frame::Control(c) => {
-                    heard.beat();
-                    control.forward(c).map(|_| true)
-                }
-                Frame::Weights(h, params) => {
-                    if weights.is_none() {
-                        weights = Some(wire.weights_sender(params.len())?);
-                    }
-                    weights
-                        .as_mut()
-                        .expect("created")
-                        .forward(h, &params)
-                        .map(|_| false)
-                }
-                Frame::DemoModel(h, bytes) => model.forward(h, &bytes).map(|_| false),
-                Frame::Answer(r) => {
-                    let Ok(q) = held.take(&r) else {
-                        continue;
-                    };
-                    q.answer(r)?;
-                    if let Ok(id) = u16::try_from(r.actor) {
-                        bells.ring(id)?;
-                    }
-                    continue;
-                }
-                other => {
-                    debug!(service = other.service(), "an up frame came down; dropped");
-                    continue;
-                }
-            };
-            match done {
-                // Credits and control wake the actors that may wait for them.
-                Ok(true) => {
-                    for &id in ids {
-                        bells.ring(id)?;
-                    }
-                }
-                Ok(false) => {}
-                Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
-                Err(e) => return Err(e.into()),
+            if let Mail::Frame(b) = mail {
+                here.down(&b)?;
             }
         }
         // Up: what the actors here sent.
         drain(|| transitions.receive(), |b| put(&Frame::Transitions(b)))?;
         drain(|| progress.receive(), |p| put(&Frame::Progress(p)))?;
+        let held = &mut here.held;
         drain(
             || queries.receive(),
             |q| {
@@ -365,13 +320,92 @@ fn forward(
             },
         )?;
         held.prune(|q| q.is_connected());
-        // Actors that started since the last publication get the newest of each (history 1).
-        credits.update_connections()?;
-        control.update_connections()?;
-        model.update_connections()?;
-        if let Some(w) = &weights {
-            w.update_connections()?;
-        }
+        here.update_connections()?;
     }
     Ok(())
+}
+
+/// The mirror's side of this host's services: what comes down goes to the actors here.
+struct Here<'w, 'a> {
+    wire: &'w Wire,
+    ids: &'a [u16],
+    heard: &'a Heartbeat,
+    credits: alfd_wire::Sender<'w, alfd_wire::Credits>,
+    control: alfd_wire::Sender<'w, alfd_wire::Control>,
+    model: alfd_wire::DemoModelSender<'w>,
+    weights: Option<alfd_wire::WeightsSender<'w>>,
+    bells: ActorBells<'w>,
+    /// The actors' queries, waiting for the answer from the learner's host.
+    held: HeldQueries<IncomingQuery<'w>>,
+    refused: u64,
+}
+
+impl Here<'_, '_> {
+    /// A frame from the learner's host, into this host's services.
+    fn down(&mut self, b: &[u8]) -> Result<()> {
+        let f = match frame::decode::<Frame>(SCHEMA_VERSION, b) {
+            Ok(f) => f,
+            Err(e) => {
+                self.refused += 1;
+                if self.refused.is_power_of_two() {
+                    warn!(
+                        refused = self.refused,
+                        "frame from the learner's host dropped: {e}"
+                    );
+                }
+                return Ok(());
+            }
+        };
+        let done = match f {
+            Frame::Credits(c) => self.credits.forward(c).map(|_| true),
+            Frame::Control(c) => {
+                self.heard.beat();
+                self.control.forward(c).map(|_| true)
+            }
+            Frame::Weights(h, params) => {
+                let tx = match &mut self.weights {
+                    Some(tx) => tx,
+                    None => self.weights.insert(self.wire.weights_sender(params.len())?),
+                };
+                tx.forward(h, &params).map(|_| false)
+            }
+            Frame::DemoModel(h, bytes) => self.model.forward(h, &bytes).map(|_| false),
+            Frame::Answer(r) => {
+                if let Ok(q) = self.held.take(&r) {
+                    q.answer(r)?;
+                    if let Ok(id) = u16::try_from(r.actor) {
+                        self.bells.ring(id)?;
+                    }
+                }
+                return Ok(());
+            }
+            other => {
+                debug!(service = other.service(), "an up frame came down; dropped");
+                return Ok(());
+            }
+        };
+        match done {
+            // Credits and control wake the actors that may wait for them.
+            Ok(true) => {
+                for &id in self.ids {
+                    self.bells.ring(id)?;
+                }
+            }
+            Ok(false) => {}
+            Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
+            Err(e) => return Err(e.into()),
+        }
+        Ok(())
+    }
+
+    /// Actors that started since the last publication get the newest of each (history 1).
+    fn update_connections(&self) -> Result<()> {
+        self.credits.update_connections()?;
+        self.control.update_connections()?;
+        self.model.update_connections()?;
+        if let Some(w) = &self.weights {
+            w.update_connections()?;
+        }
+        Ok(())
+    }
 }

@@ -1,0 +1,218 @@
+"""The core benchmarks of deploy/bench/core.sh: the train step's CPU time per step, and the
+demonstration model (fit on B demonstrations, then 100 queries) against scikit-learn, measured
+interleaved in one sitting. Writes OUT/summary.md (the tables BENCHMARKS.md shows) and
+OUT/results.json (every measurement).
+
+Ours is the whole `alfd demo-model` command (start, read, fit, 100 queries, print); scikit-learn's
+is the fit and the predictions in this process (reading the same files, after its import), so the
+ratio leans in scikit-learn's favour by our process start.
+"""
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import random
+import resource
+import statistics
+import subprocess
+import tempfile
+import time
+
+import numpy as np
+import sklearn
+from sklearn.kernel_ridge import KernelRidge
+from sklearn.svm import SVC
+
+ALFD = "target/release/alfd"
+TRAIN_STEPS = "target/release/examples/train_steps"
+SIZES = [500, 1000, 2000, 3000]
+SVM_SIZES = [500, 1000, 3000]
+QUERIES = 100
+
+
+def machine():
+    model = "unknown"
+    with open("/proc/cpuinfo") as f:
+        for line in f:
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    return {
+        "cpu": model,
+        "cores": os.cpu_count(),
+        "memory_gib": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30),
+        "python": platform.python_version(),
+        "scikit_learn": sklearn.__version__,
+        "numpy": np.__version__,
+        "date": datetime.date.today().isoformat(),
+    }
+
+
+def cpu_seconds(cmd):
+    """The child's user + system CPU time, and its stdout."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), out
+
+
+def states(n, rng):
+    """CartPole-like states, and a sensible expert's actions on them."""
+    xs = [
+        [rng.uniform(-2.4, 2.4), rng.uniform(-3, 3), rng.uniform(-0.21, 0.21), rng.uniform(-3.5, 3.5)]
+        for _ in range(n)
+    ]
+    return xs, [int(s[2] + 0.5 * s[3] > 0) for s in xs]
+
+
+def write_jsonl(path, rows):
+    with open(path, "w") as f:
+        for r in rows:
+            f.write(json.dumps(r) + "\n")
+
+
+def sklearn_krr(demos, queries):
+    t = time.perf_counter()
+    d = [json.loads(line) for line in open(demos)]
+    q = np.array([json.loads(line)["state"] for line in open(queries)])
+    x = np.array([r["state"] for r in d])
+    y = np.eye(2)[[r["action"] for r in d]]
+    raw = KernelRidge(alpha=0.1, kernel="rbf", gamma=0.1).fit(x, y).predict(q)
+    return time.perf_counter() - t, raw
+
+
+def sklearn_svc(demos, queries):
+    t = time.perf_counter()
+    d = [json.loads(line) for line in open(demos)]
+    q = np.array([json.loads(line)["state"] for line in open(queries)])
+    x = np.array([r["state"] for r in d])
+    y = np.array([r["action"] for r in d])
+    SVC(C=10, kernel="rbf", gamma=0.1, probability=True, random_state=0).fit(x, y).predict_proba(q)
+    return time.perf_counter() - t
+
+
+def ours(kind, demos, queries):
+    t = time.perf_counter()
+    out = subprocess.run(
+        [ALFD, "demo-model", "--kind", kind, "--demos", demos, "--query", queries],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
+    took = time.perf_counter() - t
+    return took, [json.loads(line)["raw"] for line in out.splitlines() if line.startswith("{")]
+
+
+def span(xs, fmt):
+    return f"{fmt(statistics.median(xs))} ({fmt(min(xs))}-{fmt(max(xs))})"
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("--out", required=True)
+    p.add_argument("--rounds", type=int, default=3)
+    args = p.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+    load_before = os.getloadavg()[0]
+    rng = random.Random(20261201)
+    tmp = tempfile.mkdtemp(prefix="alfd-bench-core-")
+    qs, _ = states(QUERIES, rng)
+    queries = os.path.join(tmp, "queries.jsonl")
+    write_jsonl(queries, [{"state": s} for s in qs])
+    demos = {}
+    for n in SIZES:
+        xs, acts = states(n, rng)
+        demos[n] = os.path.join(tmp, f"demos-{n}.jsonl")
+        write_jsonl(demos[n], [{"state": s, "action": a} for s, a in zip(xs, acts)])
+
+    train = {64: [], 128: []}
+    steps = {64: 20000, 128: 10000}
+    krr = {n: {"ours": [], "sklearn": [], "max_diff": 0.0} for n in SIZES}
+    svm = {n: {"ours": [], "sklearn": []} for n in SVM_SIZES}
+    for r in range(args.rounds):
+        print(f"core.py: round {r + 1} of {args.rounds}", flush=True)
+        for hidden in train:
+            cpu, _ = cpu_seconds([TRAIN_STEPS, str(steps[hidden]), str(hidden)])
+            train[hidden].append(cpu / steps[hidden] * 1e6)
+        for n in SIZES:
+            # Alternate which goes first, so neither always meets a warmer cache.
+            pair = [("ours", None), ("sklearn", None)]
+            for who, _ in pair if r % 2 == 0 else reversed(pair):
+                if who == "ours":
+                    t, raw_ours = ours("krr", demos[n], queries)
+                else:
+                    t, raw_sk = sklearn_krr(demos[n], queries)
+                krr[n][who].append(t)
+            diff = float(np.max(np.abs(np.array(raw_ours) - raw_sk)))
+            krr[n]["max_diff"] = max(krr[n]["max_diff"], diff)
+        for n in SVM_SIZES:
+            svm[n]["ours"].append(ours("svm", demos[n], queries)[0])
+            svm[n]["sklearn"].append(sklearn_svc(demos[n], queries))
+    load_after = os.getloadavg()[0]
+
+    m = machine()
+    m["load_average_before"] = round(load_before, 2)
+    m["load_average_after"] = round(load_after, 2)
+    m["rounds"] = args.rounds
+    results = {"machine": m, "train_step_us": train, "train_steps": steps, "krr_s": krr, "svm_s": svm}
+    with open(os.path.join(args.out, "results.json"), "w") as f:
+        json.dump(results, f, indent=1, sort_keys=True)
+
+    us = lambda x: f"{x:.1f} µs"  # noqa: E731
+    s = lambda x: f"{x:.3f} s"  # noqa: E731
+    lines = [
+        "# Core benchmarks",
+        "",
+        "Written by `bash deploy/bench/core.sh`; every number is in `results.json`.",
+        "",
+        "## Machine",
+        "",
+        f"{m['cpu']}, {m['cores']} cores, {m['memory_gib']} GiB; {m['date']}; "
+        f"load average {m['load_average_before']} before, {m['load_average_after']} after; "
+        f"{m['rounds']} rounds, each figure the median (min-max) over them. Peer: scikit-learn "
+        f"{m['scikit_learn']}, NumPy {m['numpy']}, Python {m['python']}.",
+        "",
+        "## Train step",
+        "",
+        "One `nn::train_step` (online and target forward, Huber TD loss, backward, Adam; K = 2 "
+        "heads, A = 2 actions, batch 64): the CPU time of `train_steps N HIDDEN` (the example "
+        "`common/core/examples/train_steps.rs`) divided by N.",
+        "",
+        "| hidden | CPU time per step | steps per run |",
+        "|---:|---:|---:|",
+    ]
+    for hidden in train:
+        lines.append(f"| {hidden} | {span(train[hidden], us)} | {steps[hidden]:,} |")
+    lines += [
+        "",
+        "## Demonstration model",
+        "",
+        "Fit on B CartPole-like demonstrations (two actions), then 100 queries: ours is the "
+        "whole `alfd demo-model` command, scikit-learn's the fit and predictions in its process "
+        "(reading the same files). KRR: `KernelRidge(alpha=0.1, kernel=\"rbf\", gamma=0.1)` on "
+        "one-hot actions; SVM: `SVC(C=10, gamma=0.1, probability=True)`. \"max |Δ|\": the "
+        "largest difference between the two KRR's outputs on the queries.",
+        "",
+        "| demonstrations | KRR ours | KRR scikit-learn | ours / theirs | max \\|Δ\\| | SVM ours | SVC scikit-learn | ours / theirs |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for n in SIZES:
+        k = krr[n]
+        ratio = statistics.median(k["ours"]) / statistics.median(k["sklearn"])
+        row = f"| {n:,} | {span(k['ours'], s)} | {span(k['sklearn'], s)} | {ratio:.2f} | {k['max_diff']:.1e} |"
+        if n in svm:
+            v = svm[n]
+            vr = statistics.median(v["ours"]) / statistics.median(v["sklearn"])
+            row += f" {span(v['ours'], s)} | {span(v['sklearn'], s)} | {vr:.2f} |"
+        else:
+            row += " | | |"
+        lines.append(row)
+    with open(os.path.join(args.out, "summary.md"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+    print(f"core.py: wrote {args.out}/summary.md and results.json")
+
+
+if __name__ == "__main__":
+    main()
