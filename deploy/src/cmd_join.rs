@@ -50,19 +50,7 @@ pub struct JoinArgs {
 }
 
 pub fn run(args: JoinArgs) -> anyhow::Result<()> {
-    let endpoint = alfd_bridge::Endpoint::parse(&args.connect)
-        .map_err(|e| usage(format!("--connect: {e}")))?;
-    let actors = args
-        .actors
-        .unwrap_or(if args.expert.is_some() { 0 } else { 1 });
-    if actors > MAX_ACTORS || (actors == 0 && args.expert.is_none()) {
-        return Err(usage(format!(
-            "--actors must be in 1..={MAX_ACTORS} (0 only with --expert), got {actors}"
-        )));
-    }
-    if args.expert.as_deref().is_some_and(|e| e.trim().is_empty()) {
-        return Err(usage("--expert: an empty name"));
-    }
+    let (endpoint, actors) = checked(&args)?;
     let bin_dir = launcher::bin_dir()?;
     for bin in ["alfd-actor", "alfd-expert"] {
         anyhow::ensure!(
@@ -71,17 +59,8 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
             bin_dir.display()
         );
     }
-    let host = hostname();
     let pid = std::process::id();
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.subsec_nanos());
-    let request = alfd_bridge::JoinRequest {
-        join_id: format!("{host}-{pid}-{nanos}"),
-        host: host.clone(),
-        actors: actors as u16,
-        expert: args.expert.clone(),
-    };
+    let request = join_request(&args, actors);
     let schema = alfd_harness::schema_version_from_env().map_err(usage)?;
     let remote = alfd_bridge::join(
         &endpoint,
@@ -101,35 +80,14 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
         .dir
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(format!("join-{}-{pid}", joined.run_id)));
-    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    crate::output::write(&dir, "config.toml", joined.config_toml.as_bytes())?;
-    crate::output::write(
-        &dir,
-        alfd_harness::RUNTIME_FILE,
-        joined.runtime_toml.as_bytes(),
-    )?;
-    // This host's copy of the run: a run id (so an iceoryx2 prefix) of its own.
+    // This host's copy of the run: a run id (so an iceoryx2 prefix) of its own; the expert's
+    // copy apart from the actors' (their queries go through the learner's host, where its
+    // demonstrations are written first).
     let secs = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
-    let mirror_id = format!("j{secs}-{pid}");
-    // The expert's copy of the run, apart from the actors' (their queries go through the
-    // learner's host, where its demonstrations are written first).
-    let expert_host_id = format!("k{secs}-{pid}");
-    // How to find this host's part of the run afterwards (`alfd clean` takes the mirror's id).
-    let record = serde_json::json!({
-        "run_id": joined.run_id,
-        "mirror_run_id": mirror_id,
-        "expert_host_run_id": args.expert.as_ref().map(|_| &expert_host_id),
-        "expert": args.expert,
-        "connect": endpoint.to_string(),
-        "actors": joined.actors,
-    });
-    crate::output::write(
-        &dir,
-        "join.json",
-        serde_json::to_string_pretty(&record)?.as_bytes(),
-    )?;
+    let (mirror_id, expert_host_id) = (format!("j{secs}-{pid}"), format!("k{secs}-{pid}"));
+    write_join_files(&args, &endpoint, &joined, &dir, &mirror_id, &expert_host_id)?;
     let result = {
         let expert_host = match &args.expert {
             Some(_) => Some(
@@ -186,6 +144,70 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
         }
     }
     result
+}
+
+/// The endpoint and the number of actors `args` ask for, checked.
+fn checked(args: &JoinArgs) -> anyhow::Result<(alfd_bridge::Endpoint, usize)> {
+    let endpoint = alfd_bridge::Endpoint::parse(&args.connect)
+        .map_err(|e| usage(format!("--connect: {e}")))?;
+    let actors = args
+        .actors
+        .unwrap_or(if args.expert.is_some() { 0 } else { 1 });
+    if actors > MAX_ACTORS || (actors == 0 && args.expert.is_none()) {
+        return Err(usage(format!(
+            "--actors must be in 1..={MAX_ACTORS} (0 only with --expert), got {actors}"
+        )));
+    }
+    if args.expert.as_deref().is_some_and(|e| e.trim().is_empty()) {
+        return Err(usage("--expert: an empty name"));
+    }
+    Ok((endpoint, actors))
+}
+
+/// This host's request to join: an id unique to this process, its actors and its expert.
+fn join_request(args: &JoinArgs, actors: usize) -> alfd_bridge::JoinRequest {
+    let host = hostname();
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    alfd_bridge::JoinRequest {
+        join_id: format!("{host}-{}-{nanos}", std::process::id()),
+        host,
+        actors: actors as u16,
+        expert: args.expert.clone(),
+    }
+}
+
+/// The run's `config.toml` and `runtime.toml` in `dir`, and `join.json`: how to find this
+/// host's part of the run afterwards (`alfd clean` takes the mirror's id).
+fn write_join_files(
+    args: &JoinArgs,
+    endpoint: &alfd_bridge::Endpoint,
+    joined: &alfd_bridge::Joined,
+    dir: &std::path::Path,
+    mirror_id: &str,
+    expert_host_id: &str,
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    crate::output::write(dir, "config.toml", joined.config_toml.as_bytes())?;
+    crate::output::write(
+        dir,
+        alfd_harness::RUNTIME_FILE,
+        joined.runtime_toml.as_bytes(),
+    )?;
+    let record = serde_json::json!({
+        "run_id": joined.run_id,
+        "mirror_run_id": mirror_id,
+        "expert_host_run_id": args.expert.as_ref().map(|_| expert_host_id),
+        "expert": args.expert,
+        "connect": endpoint.to_string(),
+        "actors": joined.actors,
+    });
+    crate::output::write(
+        dir,
+        "join.json",
+        serde_json::to_string_pretty(&record)?.as_bytes(),
+    )
 }
 
 /// This host's part of a run: its bridges and where its processes go.
@@ -265,147 +287,44 @@ impl Host<'_> {
     /// Starts the actors once the run's control message came through, the expert when the run
     /// says so, and waits for them.
     fn run(&self) -> anyhow::Result<()> {
-        let joined = self.joined;
-        let deadline = Instant::now() + Duration::from_secs(20);
-        while self.silence().is_none() {
-            anyhow::ensure!(
-                Instant::now() < deadline && !self.ended(),
-                "no word from the run {} through the link within 20 s",
-                joined.run_id
-            );
-            if self.wire.termination_requested() {
-                bail!("interrupted before the actors started");
-            }
-            std::thread::sleep(Duration::from_millis(20));
+        self.wait_for_the_link()?;
+        let mut here = Processes::default();
+        for &(id, incarnation) in &self.joined.actors {
+            here.actors.push((id, self.start_actor(id, incarnation)?));
         }
-        let mut actors: Vec<(u16, Child)> = Vec::new();
-        for &(id, incarnation) in &joined.actors {
-            actors.push((id, self.start_actor(id, incarnation)?));
-        }
-        if !actors.is_empty() {
+        if !here.actors.is_empty() {
             eprintln!(
                 "joined run {}: actors {:?} here (logs in {})",
-                joined.run_id,
-                joined.actors.iter().map(|a| a.0).collect::<Vec<_>>(),
+                self.joined.run_id,
+                self.joined.actors.iter().map(|a| a.0).collect::<Vec<_>>(),
                 self.dir.display()
             );
         }
-        // This host's expert: the generation running here, and whether one ever ran.
-        let mut expert: Option<(u16, Child)> = None;
-        let mut served = false;
-        let mut failed = Vec::new();
-        let mut stopping: Option<String> = None;
-        let mut signalled = false;
         loop {
             std::thread::sleep(Duration::from_millis(50));
-            let mut i = 0;
-            while i < actors.len() {
-                match actors[i].1.try_wait()? {
-                    None => i += 1,
-                    Some(status) => {
-                        let (id, _) = actors.remove(i);
-                        if status.success() {
-                            info!(actor = id, "stopped");
-                            continue;
-                        }
-                        let how = crate::launcher::describe_status(status);
-                        warn!(actor = id, "{how}");
-                        match self.restart_actor(id, stopping.is_some()) {
-                            Ok(Some(child)) => {
-                                actors.insert(i, (id, child));
-                                i += 1;
-                            }
-                            Ok(None) => {}
-                            Err(e) => failed.push(format!(
-                                "actor-{id} {how}, not restarted: {e:#}; see {}",
-                                self.dir.join(format!("actor-{id}.log")).display()
-                            )),
-                        }
-                    }
-                }
-            }
-            if let Some((generation, child)) = &mut expert {
-                if let Some(status) = child.try_wait()? {
-                    let generation = *generation;
-                    let how = crate::launcher::describe_status(status);
-                    info!(generation, "this host's expert {how}");
-                    if let Some(e) = self.expert_host {
-                        e.exited(generation, how, status.code());
-                    }
-                    expert = None;
-                }
-            }
+            self.reap_actors(&mut here)?;
+            self.reap_expert(&mut here)?;
             for order in self.expert_host.map(|e| e.orders()).unwrap_or_default() {
-                match order {
-                    alfd_bridge::ExpertHostOrder::Start { .. } if stopping.is_some() => {}
-                    alfd_bridge::ExpertHostOrder::Start { generation, name } => {
-                        if let Some((_, mut old)) = expert.take() {
-                            let _ = old.kill();
-                            let _ = old.wait();
-                        }
-                        let child = self.start(
-                            "alfd-expert",
-                            &format!("expert-{generation}"),
-                            &[
-                                format!("--generation={generation}"),
-                                format!("--expert={name}"),
-                                format!("--run-id={}", self.expert_host_id),
-                            ],
-                        )?;
-                        info!(generation, expert = %name, pid = child.id(), "expert started");
-                        eprintln!(
-                            "serving as the expert of run {} ({name}, generation {generation}; \
-                             log in {})",
-                            joined.run_id,
-                            self.dir.join(format!("expert-{generation}.log")).display()
-                        );
-                        expert = Some((generation, child));
-                        served = true;
-                    }
-                    alfd_bridge::ExpertHostOrder::Kill { generation } => {
-                        if let Some((g, child)) = &mut expert {
-                            if *g == generation {
-                                warn!(generation, "the run kills this host's expert");
-                                let _ = child.kill();
-                            }
-                        }
-                    }
-                    alfd_bridge::ExpertHostOrder::Refused(why) => {
-                        stopping.get_or_insert_with(|| format!("refused: {why}"));
-                    }
-                }
+                self.carry_out(order, &mut here)?;
             }
-            let why = if self.wire.termination_requested() {
-                Some("interrupted".to_owned())
-            } else if self.ended() || self.silence().is_some_and(|s| s >= LINK_SILENCE) {
-                Some("lost the link to the learner's host".to_owned())
-            } else {
-                None
-            };
-            if let (Some(why), None) = (why, &stopping) {
+            if let (Some(why), None) = (self.reason_to_stop(), &here.stopping) {
                 warn!("{why}: stopping the processes here");
-                stopping = Some(why);
+                here.stopping = Some(why);
             }
-            if stopping.is_some() && !signalled {
-                signalled = true;
-                let pids = actors
-                    .iter()
-                    .map(|a| &a.1)
-                    .chain(expert.as_ref().map(|e| &e.1));
-                for c in pids {
-                    let _ = Command::new("kill")
-                        .args(["-TERM", &c.id().to_string()])
-                        .status();
-                }
+            if here.stopping.is_some() && !here.signalled {
+                here.signal_all();
             }
             // Done when nothing runs here and nothing more will: the actors stopped, and this
             // host's expert served and stopped (or none was asked for).
-            let expert_done = self.expert_host.is_none() || (served && expert.is_none());
-            if actors.is_empty() && expert.is_none() && (expert_done || stopping.is_some()) {
+            let expert_done = self.expert_host.is_none() || (here.served && here.expert.is_none());
+            if here.actors.is_empty()
+                && here.expert.is_none()
+                && (expert_done || here.stopping.is_some())
+            {
                 break;
             }
         }
-        if let Some(why) = stopping {
+        if let Some(why) = here.stopping {
             if let Some(refusal) = why.strip_prefix("refused: ") {
                 return Err(usage(format!(
                     "the run does not take this host's expert: {refusal}"
@@ -413,8 +332,160 @@ impl Host<'_> {
             }
             bail!("{why}");
         }
-        anyhow::ensure!(failed.is_empty(), "{}", failed.join("; "));
+        anyhow::ensure!(here.failed.is_empty(), "{}", here.failed.join("; "));
         Ok(())
+    }
+
+    /// Waits (at most 20 s) until the learner's host is heard of through a bridge.
+    fn wait_for_the_link(&self) -> anyhow::Result<()> {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while self.silence().is_none() {
+            anyhow::ensure!(
+                Instant::now() < deadline && !self.ended(),
+                "no word from the run {} through the link within 20 s",
+                self.joined.run_id
+            );
+            if self.wire.termination_requested() {
+                bail!("interrupted before the actors started");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        Ok(())
+    }
+
+    /// The actors that ended: a crashed one is restarted (within the run's restarts).
+    fn reap_actors(&self, here: &mut Processes) -> anyhow::Result<()> {
+        let mut i = 0;
+        while i < here.actors.len() {
+            let Some(status) = here.actors[i].1.try_wait()? else {
+                i += 1;
+                continue;
+            };
+            let (id, _) = here.actors.remove(i);
+            if status.success() {
+                info!(actor = id, "stopped");
+                continue;
+            }
+            let how = crate::launcher::describe_status(status);
+            warn!(actor = id, "{how}");
+            match self.restart_actor(id, here.stopping.is_some()) {
+                Ok(Some(child)) => {
+                    here.actors.insert(i, (id, child));
+                    i += 1;
+                }
+                Ok(None) => {}
+                Err(e) => here.failed.push(format!(
+                    "actor-{id} {how}, not restarted: {e:#}; see {}",
+                    self.dir.join(format!("actor-{id}.log")).display()
+                )),
+            }
+        }
+        Ok(())
+    }
+
+    /// This host's expert, if it ended: the run hears it through the expert host.
+    fn reap_expert(&self, here: &mut Processes) -> anyhow::Result<()> {
+        let Some((generation, child)) = &mut here.expert else {
+            return Ok(());
+        };
+        if let Some(status) = child.try_wait()? {
+            let generation = *generation;
+            let how = crate::launcher::describe_status(status);
+            info!(generation, "this host's expert {how}");
+            if let Some(e) = self.expert_host {
+                e.exited(generation, how, status.code());
+            }
+            here.expert = None;
+        }
+        Ok(())
+    }
+
+    /// The run's order about this host's expert.
+    fn carry_out(
+        &self,
+        order: alfd_bridge::ExpertHostOrder,
+        here: &mut Processes,
+    ) -> anyhow::Result<()> {
+        match order {
+            alfd_bridge::ExpertHostOrder::Start { .. } if here.stopping.is_some() => {}
+            alfd_bridge::ExpertHostOrder::Start { generation, name } => {
+                if let Some((_, mut old)) = here.expert.take() {
+                    let _ = old.kill();
+                    let _ = old.wait();
+                }
+                let child = self.start(
+                    "alfd-expert",
+                    &format!("expert-{generation}"),
+                    &[
+                        format!("--generation={generation}"),
+                        format!("--expert={name}"),
+                        format!("--run-id={}", self.expert_host_id),
+                    ],
+                )?;
+                info!(generation, expert = %name, pid = child.id(), "expert started");
+                eprintln!(
+                    "serving as the expert of run {} ({name}, generation {generation}; log in {})",
+                    self.joined.run_id,
+                    self.dir.join(format!("expert-{generation}.log")).display()
+                );
+                here.expert = Some((generation, child));
+                here.served = true;
+            }
+            alfd_bridge::ExpertHostOrder::Kill { generation } => {
+                if let Some((g, child)) = &mut here.expert {
+                    if *g == generation {
+                        warn!(generation, "the run kills this host's expert");
+                        let _ = child.kill();
+                    }
+                }
+            }
+            alfd_bridge::ExpertHostOrder::Refused(why) => {
+                here.stopping
+                    .get_or_insert_with(|| format!("refused: {why}"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Why the processes here must stop now, if they must.
+    fn reason_to_stop(&self) -> Option<String> {
+        if self.wire.termination_requested() {
+            Some("interrupted".to_owned())
+        } else if self.ended() || self.silence().is_some_and(|s| s >= LINK_SILENCE) {
+            Some("lost the link to the learner's host".to_owned())
+        } else {
+            None
+        }
+    }
+}
+
+/// The processes of this host's part of the run, and how it stands.
+#[derive(Default)]
+struct Processes {
+    actors: Vec<(u16, Child)>,
+    /// This host's expert: the generation running here.
+    expert: Option<(u16, Child)>,
+    /// Whether an expert ever ran here.
+    served: bool,
+    failed: Vec<String>,
+    stopping: Option<String>,
+    signalled: bool,
+}
+
+impl Processes {
+    /// SIGTERM to every process here, once.
+    fn signal_all(&mut self) {
+        self.signalled = true;
+        let children = self
+            .actors
+            .iter()
+            .map(|a| &a.1)
+            .chain(self.expert.as_ref().map(|e| &e.1));
+        for c in children {
+            let _ = Command::new("kill")
+                .args(["-TERM", &c.id().to_string()])
+                .status();
+        }
     }
 }
 
