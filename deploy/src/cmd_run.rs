@@ -93,30 +93,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             "`alfd run` runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
         ));
     }
-    // A Gymnasium environment is made once in Python now: a wrong space is refused before
-    // anything starts, and its sizes go to runtime.toml for the learner and the expert.
-    let env_spec = if cfg.env.name.is_remote() {
-        let spec = alfd_harness::python::probe_env(&cfg.env).map_err(|e| {
-            if alfd_harness::exit_code(&e) == 2 {
-                usage(format!("{e:#}"))
-            } else {
-                e
-            }
-        })?;
-        alfd_harness::check_wire_limits(spec.obs_dim, cfg.agent.heads())
-            .map_err(|e| usage(e.to_string()))?;
-        Some(spec)
-    } else {
-        let env = alfd_common::env::vector_env(&cfg.env).ok_or_else(|| {
-            usage(format!(
-                "`alfd run` needs an environment with vector observations, not {:?}",
-                cfg.env.name
-            ))
-        })?;
-        alfd_harness::check_wire_limits(env.observation_dim(), cfg.agent.heads())
-            .map_err(|e| usage(e.to_string()))?;
-        None
-    };
+    let env_spec = env_spec(&cfg)?;
     let listen = args
         .listen
         .as_deref()
@@ -135,25 +112,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             args.actors
         )));
     }
-    let runtime = RuntimeConfig {
-        window: args.window.unwrap_or(if listen.is_some() { 32 } else { 1 }),
-        query_timeout_ms: args.query_timeout_ms,
-        human_query_timeout_ms: args.human_query_timeout_ms,
-        human_port: args.human_port,
-        weights_every: args.weights_every,
-        checkpoint_every: args.checkpoint_every,
-        env_spec,
-        ..RuntimeConfig::default()
-    };
-    runtime.validate().map_err(|e| {
-        usage(format!(
-            "{e} (flag --{})",
-            match e {
-                alfd_harness::RuntimeConfigError::Invalid { field, .. } => field.replace('_', "-"),
-                _ => String::new(),
-            }
-        ))
-    })?;
+    let runtime = runtime_config(&args, listen.is_some(), env_spec)?;
     // Fail before starting anything if the expert is unknown.
     setup::check_demonstrator(&cfg)?;
     if cfg.expert.name == alfd_expert::human::HUMAN && args.human_port != 0 {
@@ -194,6 +153,65 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         listen,
     };
     finish(&plan, output)
+}
+
+/// The sizes of a Gymnasium environment, probed once in Python now (a wrong space is refused
+/// before anything starts; its sizes go to runtime.toml for the learner and the expert), or
+/// `None` for a native one; either way checked against the wire's limits.
+fn env_spec(
+    cfg: &alfd_common::config::ExperimentConfig,
+) -> anyhow::Result<Option<alfd_harness::python::EnvSpec>> {
+    if cfg.env.name.is_remote() {
+        let spec = alfd_harness::python::probe_env(&cfg.env).map_err(|e| {
+            if alfd_harness::exit_code(&e) == 2 {
+                usage(format!("{e:#}"))
+            } else {
+                e
+            }
+        })?;
+        alfd_harness::check_wire_limits(spec.obs_dim, cfg.agent.heads())
+            .map_err(|e| usage(e.to_string()))?;
+        Ok(Some(spec))
+    } else {
+        let env = alfd_common::env::vector_env(&cfg.env).ok_or_else(|| {
+            usage(format!(
+                "`alfd run` needs an environment with vector observations, not {:?}",
+                cfg.env.name
+            ))
+        })?;
+        alfd_harness::check_wire_limits(env.observation_dim(), cfg.agent.heads())
+            .map_err(|e| usage(e.to_string()))?;
+        Ok(None)
+    }
+}
+
+/// The runtime settings every process reads, from `alfd run`'s flags, validated (the error names
+/// the flag).
+fn runtime_config(
+    args: &RunArgs,
+    listen: bool,
+    env_spec: Option<alfd_harness::python::EnvSpec>,
+) -> anyhow::Result<RuntimeConfig> {
+    let runtime = RuntimeConfig {
+        window: args.window.unwrap_or(if listen { 32 } else { 1 }),
+        query_timeout_ms: args.query_timeout_ms,
+        human_query_timeout_ms: args.human_query_timeout_ms,
+        human_port: args.human_port,
+        weights_every: args.weights_every,
+        checkpoint_every: args.checkpoint_every,
+        env_spec,
+        ..RuntimeConfig::default()
+    };
+    runtime.validate().map_err(|e| {
+        usage(format!(
+            "{e} (flag --{})",
+            match e {
+                alfd_harness::RuntimeConfigError::Invalid { field, .. } => field.replace('_', "-"),
+                _ => String::new(),
+            }
+        ))
+    })?;
+    Ok(runtime)
 }
 
 /// Runs `plan` to its end, writes `summary.json` and reports (the learning curve, the JSON
