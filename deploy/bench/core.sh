@@ -14,20 +14,8 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 venv="${ALFD_BENCH_CORE_VENV:-.venv-bench-core}"
 requirements="deploy/bench/core-requirements.txt"
-python="${ALFD_BENCH_PYTHON:-python3}"
-if ! "$python" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
-    echo "core.sh: needs Python 3.11 (the pinned wheels are for CPython 3.11); set ALFD_BENCH_PYTHON" >&2
-    exit 2
-fi
-stamp="$venv/.requirements.sha256"
-want="$(sha256sum "$requirements" | cut -d' ' -f1)"
-if [[ ! -x "$venv/bin/python" || ! -f "$stamp" || "$(cat "$stamp")" != "$want" ]]; then
-    echo "core.sh: installing scikit-learn into $venv (once)" >&2
-    [[ -x "$venv/bin/python" ]] || "$python" -m venv "$venv"
-    "$venv/bin/python" -m pip install --quiet --no-deps -r "$requirements"
-    "$venv/bin/python" -c 'import sklearn, numpy, scipy'
-    echo "$want" >"$stamp"
-fi
+source deploy/bench/venv.sh
+bench_venv core.sh "$venv" "$requirements" 'import sklearn, numpy, scipy'
 echo "core.sh: building alfd and the train-step example (release)" >&2
 cargo build --release --quiet -p alfd-deploy --bin alfd
 cargo build --release --quiet -p alfd-common --example train_steps

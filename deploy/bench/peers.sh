@@ -15,31 +15,10 @@ cd "$(dirname "$0")/../.."
 venv="${ALFD_BENCH_VENV:-.venv-bench}"
 requirements="deploy/bench/requirements.txt"
 
-python="${ALFD_BENCH_PYTHON:-}"
-if [[ -z "$python" ]]; then
-    for candidate in python3.11 python3; do
-        if command -v "$candidate" >/dev/null &&
-            "$candidate" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
-            python="$candidate"
-            break
-        fi
-    done
-fi
-if [[ -z "$python" ]]; then
-    echo "peers.sh: needs Python 3.11 (the pinned wheels are for CPython 3.11); set ALFD_BENCH_PYTHON" >&2
-    exit 2
-fi
-
-stamp="$venv/.requirements.sha256"
-want="$(sha256sum "$requirements" | cut -d' ' -f1)"
-if [[ ! -x "$venv/bin/python" || ! -f "$stamp" || "$(cat "$stamp")" != "$want" ]]; then
-    echo "peers.sh: installing the Python peers into $venv (once; about 3 GB)" >&2
-    [[ -x "$venv/bin/python" ]] || "$python" -m venv "$venv"
-    # --no-deps: the list is torch's dependency closure pinned, less what CPU code never loads.
-    "$venv/bin/python" -m pip install --quiet --no-deps -r "$requirements"
-    "$venv/bin/python" -c 'import torch, gymnasium, numpy'
-    echo "$want" >"$stamp"
-fi
+# --no-deps: the list is torch's dependency closure pinned, less what CPU code never loads
+# (about 3 GB).
+source deploy/bench/venv.sh
+bench_venv peers.sh "$venv" "$requirements" 'import torch, gymnasium, numpy'
 
 echo "peers.sh: building alfd and the Criterion benches (release)" >&2
 cargo build --release --quiet -p alfd-deploy --bin alfd
