@@ -131,6 +131,7 @@ fn a_sweep_replays_another_seed_s_js_steps_in_its_random_method() {
         &exp,
         format!(
             "title = \"rules\"\nseeds = 2\nepisodes = 60\nby_budget = true\n\
+             learner_episodes_only = true\n\
              [[method]]\nname = \"random-b10\"\nlabel = \"random\"\nconfig = \"{c}\"\n\
              set = [\"query.rule=random\", \"budget.total=10\", \
              \"query.schedule={{out}}/runs/js-b10/{{other_seed}}/demos.jsonl\"]\n\
@@ -171,5 +172,10 @@ fn a_sweep_replays_another_seed_s_js_steps_in_its_random_method() {
     assert!(rows.iter().any(|r| r.starts_with("random,10,2,")), "{csv}");
     let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
     assert!(md.contains("## Query rules by budget"), "{md}");
+    // The runs table says what its learner-only columns leave out.
+    assert!(
+        md.contains("With `learner_episodes_only`, \"last 50\" count only the episodes"),
+        "{md}"
+    );
     assert!(out.join("rules-by-budget-eval.svg").exists());
 }

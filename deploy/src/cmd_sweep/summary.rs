@@ -558,6 +558,20 @@ fn runs_table(md: &mut String, exp: &Experiment, results: &[MethodResult]) {
          seeds, next to the optimal one (value iteration).\n",
         last = exp.last
     );
+    if exp.learner_episodes_only {
+        let steps = if exp.x == XAxis::Steps {
+            " and \"steps\""
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            md,
+            "With `learner_episodes_only`, \"last {last}\"{steps} count only the episodes the \
+             expert did not act in: for a rule that asks in the late episodes too, they are \
+             early ones, so its final greedy evaluation is the number to read.\n",
+            last = exp.last
+        );
+    }
     let mut header = format!("| method | last {} | demos | s/run | run-s |", exp.last);
     let mut rule = String::from("|---|---:|---:|---:|---:|");
     if exp.x == XAxis::Steps {
