@@ -11,16 +11,12 @@ use alfd_common::agent::DemoRecord;
 /// A `demos.jsonl` that cannot be used as it is. Nothing is ever removed from the file.
 #[derive(Debug, thiserror::Error)]
 pub enum DemoLogError {
-    #[error("cannot read {path}: {source}")]
-    Read {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("cannot append to {path}: {source}")]
-    Write {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    /// The I/O error is in the message (not a `source`, which a report printing the chain
+    /// would repeat).
+    #[error("cannot read {path}: {io}")]
+    Read { path: PathBuf, io: std::io::Error },
+    #[error("cannot append to {path}: {io}")]
+    Write { path: PathBuf, io: std::io::Error },
     #[error("{path} line {line}: {reason}")]
     Malformed {
         path: PathBuf,
@@ -35,10 +31,10 @@ pub fn read(path: &Path) -> Result<Vec<DemoRecord>, DemoLogError> {
     let text = match std::fs::read_to_string(path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(source) => {
+        Err(io) => {
             return Err(DemoLogError::Read {
                 path: path.to_owned(),
-                source,
+                io,
             })
         }
     };
@@ -128,7 +124,7 @@ impl DemoLog {
             .open(path)
             .map_err(|source| DemoLogError::Write {
                 path: path.to_owned(),
-                source,
+                io: source,
             })?;
         Ok(Self {
             file,
@@ -136,23 +132,43 @@ impl DemoLog {
         })
     }
 
-    /// Appends `record` as one line and waits until it is on disk (fsync).
+    /// Appends `record` as one line and waits until it is on disk (fsync). A write that fails
+    /// (a full disk) takes back what it wrote of the line, so the file stays whole lines and the
+    /// next expert reads it.
     pub fn append(&mut self, record: &DemoRecord) -> Result<(), DemoLogError> {
         let mut line = serde_json::to_vec(record).expect("a DemoRecord always serialises");
         line.push(b'\n');
-        self.file
+        let before = self.file.metadata().map(|m| m.len());
+        let written = self
+            .file
             .write_all(&line)
-            .and_then(|()| self.file.sync_data())
-            .map_err(|source| DemoLogError::Write {
-                path: self.path.clone(),
-                source,
-            })
+            .and_then(|()| self.file.sync_data());
+        if let (Err(_), Ok(len)) = (&written, before) {
+            let _ = self.file.set_len(len);
+        }
+        written.map_err(|source| DemoLogError::Write {
+            path: self.path.clone(),
+            io: source,
+        })
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_full_disk_is_an_error_naming_the_file() {
+        // Writes to /dev/full fail with ENOSPC, as on a full disk.
+        let mut log = DemoLog::open(Path::new("/dev/full")).unwrap();
+        let e = log.append(&record(0)).unwrap_err();
+        let text = e.to_string();
+        assert!(text.contains("/dev/full"), "{text}");
+        assert!(
+            matches!(&e, DemoLogError::Write { io, .. } if io.raw_os_error() == Some(28)),
+            "{e:?}"
+        );
+    }
 
     fn record(index: u32) -> DemoRecord {
         DemoRecord {

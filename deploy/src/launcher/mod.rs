@@ -536,7 +536,22 @@ impl<'a, 'w> Launcher<'a, 'w> {
             ..p.episode.0
         };
         self.demos_used = r.demos_used;
-        writeln!(self.csv, "{}", r.csv_row())?;
+        // A write that fails (a full disk) takes back what it wrote of the row, so the file
+        // stays whole rows for `alfd resume`.
+        let before = self.csv.metadata().map(|m| m.len());
+        if let Err(e) = writeln!(self.csv, "{}", r.csv_row()) {
+            if let Ok(len) = before {
+                let _ = self.csv.set_len(len);
+                let _ = std::io::Seek::seek(&mut self.csv, std::io::SeekFrom::Start(len));
+            }
+            return Err(e).with_context(|| {
+                format!(
+                    "cannot append episode {} to {}",
+                    r.episode,
+                    self.plan.run_dir.join("episodes.csv").display()
+                )
+            });
+        }
         self.recorded += 1;
         self.returns.push_back(r.ret);
         if self.returns.len() > 20 {
