@@ -3,12 +3,12 @@
 # BENCHMARKS.md (`alfd docs` copies the tables): the train step (CPU time per step) and the
 # demonstration model against scikit-learn, measured interleaved in one sitting.
 #
-#   bash deploy/bench/core.sh            # 3 rounds, about 5 minutes after the first install
+#   bash deploy/bench/core.sh            # 3 rounds, under a minute after the first install
 #   bash deploy/bench/core.sh --rounds 5
 #
 # Run it on an idle machine: the table records the load average it ran under. On first use it
 # makes .venv-bench-core/ (or $ALFD_BENCH_CORE_VENV) with Python 3.11 and installs
-# deploy/bench/core-requirements.txt from PyPI (about 100 MB).
+# deploy/bench/core-requirements.txt from PyPI (about 300 MB on disk).
 set -euo pipefail
 
 cd "$(dirname "$0")/../.."

@@ -3,7 +3,6 @@
 //! demonstration, flushed and fsync'd before the answer goes out; a new expert reads the file back.
 
 use std::fs::{File, OpenOptions};
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use alfd_common::agent::DemoRecord;
@@ -138,17 +137,9 @@ impl DemoLog {
     pub fn append(&mut self, record: &DemoRecord) -> Result<(), DemoLogError> {
         let mut line = serde_json::to_vec(record).expect("a DemoRecord always serialises");
         line.push(b'\n');
-        let before = self.file.metadata().map(|m| m.len());
-        let written = self
-            .file
-            .write_all(&line)
-            .and_then(|()| self.file.sync_data());
-        if let (Err(_), Ok(len)) = (&written, before) {
-            let _ = self.file.set_len(len);
-        }
-        written.map_err(|source| DemoLogError::Write {
+        alfd_harness::append_whole(&mut self.file, &line, true).map_err(|io| DemoLogError::Write {
             path: self.path.clone(),
-            io: source,
+            io,
         })
     }
 }

@@ -13,7 +13,7 @@
 //! - a query whose actor stopped waiting spends no budget; a decision for a query that is no
 //!   longer waiting (answered, abandoned, or dropped by a swap) is ignored;
 //! - queries waiting for a person are answered "declined" when this expert stops answering, and
-//!   "budget exhausted" once the budget is spent.
+//!   "budget exhausted" by the answer that spends the last of the budget.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -272,7 +272,7 @@ impl<Q> ExpertMachine<Q> {
                     budget_left: self.core.budget().remaining(),
                     ..self.response()
                 };
-                vec![
+                let mut out = vec![
                     Action::Record(record),
                     Action::PublishModel,
                     Action::Reply {
@@ -280,7 +280,16 @@ impl<Q> ExpertMachine<Q> {
                         actor,
                         response,
                     },
-                ]
+                ];
+                // The last of the budget: nothing more to ask the person, the rest act on their
+                // own now.
+                if self.core.budget().is_exhausted() {
+                    let waiting: Vec<_> = self.waiting.drain(..).collect();
+                    for (shown, query) in waiting {
+                        out.push(self.refuse(query, shown.actor));
+                    }
+                }
+                out
             }
             None => vec![self.refuse(query, actor)],
         }
@@ -313,20 +322,12 @@ impl<Q> ExpertMachine<Q> {
         out
     }
 
-    /// Forgets the waiting queries whose actor stopped waiting (`still_waiting` says which), and,
-    /// once the budget is spent, refuses the rest.
-    pub fn prune(&mut self, still_waiting: impl Fn(&Q) -> bool) -> Vec<Action<Q>> {
+    /// Forgets the waiting queries whose actor stopped waiting (`still_waiting` says which): no
+    /// answer is spent on them.
+    pub fn prune(&mut self, still_waiting: impl Fn(&Q) -> bool) {
         let before = self.waiting.len();
         self.waiting.retain(|(_, q)| still_waiting(q));
         self.counts.abandoned += (before - self.waiting.len()) as u64;
-        if !self.core.budget().is_exhausted() {
-            return Vec::new();
-        }
-        let waiting: Vec<_> = self.waiting.drain(..).collect();
-        waiting
-            .into_iter()
-            .map(|(shown, query)| self.refuse(query, shown.actor))
-            .collect()
     }
 
     /// The time: a status report every [`STATUS_EVERY`].
@@ -642,15 +643,15 @@ mod tests {
         m.query(11, q(1, 2));
         m.query(12, q(2, 3));
         // Actor 0 stopped waiting: forgotten, counted as abandoned, nothing sent.
-        assert_eq!(m.prune(|&id| id != 10), vec![]);
+        m.prune(|&id| id != 10);
         assert_eq!(m.counts().abandoned, 1);
+        let shown: Vec<u64> = m.waiting().iter().map(|s| s.id).collect();
+        assert_eq!(shown, vec![2, 3]);
+        // The answer that spends the budget refuses the rest rather than leave them waiting.
         assert_eq!(
             replies(&m.decision(2, Some(0))),
-            vec![(11, outcome::ANSWERED)]
+            vec![(11, outcome::ANSWERED), (12, outcome::BUDGET_EXHAUSTED)]
         );
-        // The budget is spent: the rest are refused rather than left waiting.
-        let out = m.prune(|_| true);
-        assert_eq!(replies(&out), vec![(12, outcome::BUDGET_EXHAUSTED)]);
         assert!(m.waiting().is_empty());
         // A query arriving now is refused, not shown.
         assert_eq!(

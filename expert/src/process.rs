@@ -273,25 +273,24 @@ impl<'w> Shell<'w> {
         }
     }
 
-    /// The person's decisions, the queries whose actors stopped waiting, and the page's state.
+    /// The queries whose actors stopped waiting, the person's decisions, and the page's state.
     fn poll_page(&mut self, m: &mut Machine<'w>) -> anyhow::Result<()> {
         let Some(decisions) = self.page.as_ref().map(HumanPage::decisions) else {
             return Ok(());
         };
-        let pruned = m.prune(|q| q.is_connected());
-        self.apply(m, pruned)?;
+        // The actors that gave up waiting (their timeout) are no longer shown, nor answered.
+        m.prune(|q| q.is_connected());
         for d in decisions {
             let answered = m.decision(d.id, d.action);
+            // The first reply answers the decision (refusals of the rest may follow it).
             if let Some(Action::Reply {
                 actor, response, ..
-            }) = answered.last()
+            }) = answered.iter().find(|a| matches!(a, Action::Reply { .. }))
             {
                 info!(actor, outcome = response.outcome, "the person decided");
             }
             self.apply(m, answered)?;
         }
-        let pruned = m.prune(|q| q.is_connected());
-        self.apply(m, pruned)?;
         let page = self.page.as_ref().expect("checked above");
         page.set_waiting(&m.waiting());
         let (core, c) = (m.core(), m.counts());

@@ -16,6 +16,8 @@ use std::collections::HashMap;
 
 use alfd_wire::{DemoModelHeader, QueryResponse};
 
+use crate::link::{HasSeq, HeldQueries};
+
 /// What the hub's thread does with a remote expert's answer.
 #[derive(Debug, PartialEq)]
 pub(crate) enum Answer<Q> {
@@ -174,73 +176,6 @@ impl<Q> ExpertDesk<Q> {
             Err(why) => Answer::Dropped(why),
         };
         (model, answer)
-    }
-}
-
-/// Queries held for an answer from another host, one per actor (an actor's newer query
-/// replaces its older one: it gave up on that).
-#[derive(Debug)]
-pub(crate) struct HeldQueries<Q>(HashMap<u32, Q>);
-
-impl<Q> Default for HeldQueries<Q> {
-    fn default() -> Self {
-        Self(HashMap::new())
-    }
-}
-
-impl<Q> HeldQueries<Q> {
-    pub(crate) fn hold(&mut self, actor: u32, query: Q) {
-        self.0.insert(actor, query);
-    }
-
-    /// Forgets the queries whose actors stopped waiting.
-    pub(crate) fn prune(&mut self, still_waiting: impl Fn(&Q) -> bool) {
-        self.0.retain(|_, q| still_waiting(q));
-    }
-
-    /// The query `r` answers, or why there is none (its actor no longer waits, or `r` answers
-    /// an older query of that actor: the newer one stays held).
-    pub(crate) fn take(&mut self, r: &QueryResponse) -> Result<Q, String>
-    where
-        Q: HasSeq,
-    {
-        match self.0.remove(&r.actor) {
-            None => Err(format!("actor {} no longer waits", r.actor)),
-            Some(q) if q.seq() != r.request_seq => {
-                self.0.insert(r.actor, q);
-                Err(format!("an answer to an older query of actor {}", r.actor))
-            }
-            Some(q) => Ok(q),
-        }
-    }
-}
-
-/// Every message waiting on a port (`next` takes one), each handed to `each`; a message of
-/// another schema version is dropped with a warning.
-pub(crate) fn drain<T>(
-    mut next: impl FnMut() -> std::result::Result<Option<T>, alfd_wire::WireError>,
-    mut each: impl FnMut(T) -> crate::Result<()>,
-) -> crate::Result<()> {
-    loop {
-        match next() {
-            Ok(Some(x)) => each(x)?,
-            Ok(None) => return Ok(()),
-            Err(e @ alfd_wire::WireError::SchemaMismatch { .. }) => {
-                tracing::warn!("{e}; dropped");
-            }
-            Err(e) => return Err(e.into()),
-        }
-    }
-}
-
-/// A held query's sequence number (what an answer names).
-pub(crate) trait HasSeq {
-    fn seq(&self) -> u64;
-}
-
-impl HasSeq for alfd_wire::IncomingQuery<'_> {
-    fn seq(&self) -> u64 {
-        self.request().header.seq
     }
 }
 

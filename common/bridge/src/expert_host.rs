@@ -16,16 +16,16 @@ use std::time::Duration;
 
 use alfd_wire::{
     outcome, Doorbell, PendingQuery, Process, QueryClient, QueryResponse, Role, Wake, Wire,
-    WireError, MAX_ACTORS, SCHEMA_VERSION,
+    MAX_ACTORS, SCHEMA_VERSION,
 };
 use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
 use zenoh::Wait as _;
 
-use crate::desk::drain;
 use crate::error::{zenoh_error, Result};
-use crate::frame::{self, ExpertOrder, Frame};
+use crate::frame::{ExpertOrder, Frame};
 use crate::inbox::{inbox, Mail, Post};
+use crate::link::{self, drain};
 use crate::mirror::Remote;
 use crate::worker::{self, Heartbeat};
 use crate::{keys, TICK};
@@ -265,6 +265,7 @@ fn forward(
         pending: HashMap::new(),
         mine: HashSet::new(),
         bytes: Vec::new(),
+        refused: 0,
     };
     let _ = ready.send(());
     loop {
@@ -313,24 +314,19 @@ struct HostForwarder<'w, 'a> {
     /// The generations the run gave this host's expert.
     mine: HashSet<u16>,
     bytes: Vec<u8>,
+    /// Frames from the learner's host that could not be read.
+    refused: u64,
 }
 
 impl HostForwarder<'_, '_> {
     fn put(&self, f: &Frame) -> Result<()> {
-        self.up
-            .put(frame::encode(SCHEMA_VERSION, f)?)
-            .wait()
-            .map_err(zenoh_error)
+        link::put(self.up, f)
     }
 
     /// Down: a frame from the learner's host, into this host's services.
     fn down(&mut self, b: &[u8]) -> Result<()> {
-        let f = match frame::decode::<Frame>(SCHEMA_VERSION, b) {
-            Ok(f) => f,
-            Err(e) => {
-                warn!("frame from the learner's host dropped: {e}");
-                return Ok(());
-            }
+        let Some(f) = link::take_in(b, &mut self.refused, "the learner's host") else {
+            return Ok(());
         };
         let done = match route(&self.me.join_id, &mut self.mine, f) {
             Route::Control(c) => {
@@ -358,12 +354,8 @@ impl HostForwarder<'_, '_> {
             }
             Route::Ignore => return Ok(()),
         };
-        match done {
-            Ok(()) => {
-                self.expert.ring()?;
-            }
-            Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
-            Err(e) => return Err(e.into()),
+        if link::forwarded(done)?.is_some() {
+            self.expert.ring()?;
         }
         Ok(())
     }
@@ -388,9 +380,14 @@ impl HostForwarder<'_, '_> {
                 self.put(&Frame::DemoModel(h, self.bytes.clone()))?;
             }
         }
+        // The expert's demonstrations, read once for all the answers that carry one.
+        let text = if answers.iter().any(|r| r.outcome == outcome::ANSWERED) {
+            crate::demos::read(&self.me.demos)?
+        } else {
+            String::new()
+        };
         for r in answers {
             let demo = if r.outcome == outcome::ANSWERED {
-                let text = crate::demos::read(&self.me.demos)?;
                 let Some(line) = text.lines().nth(r.demo_index as usize) else {
                     warn!(
                         index = r.demo_index,

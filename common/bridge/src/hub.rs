@@ -22,11 +22,12 @@ use zenoh::qos::CongestionControl;
 use zenoh::sample::SampleKind;
 use zenoh::Wait as _;
 
-use crate::desk::{drain, Answer, ExpertDesk};
+use crate::desk::{Answer, ExpertDesk};
 use crate::endpoint::Endpoint;
 use crate::error::{zenoh_error, BridgeError, Result};
 use crate::frame::{self, ExpertOrder, Frame};
 use crate::inbox::{inbox, Mail, Post};
+use crate::link::{self, drain};
 use crate::roster::{JoinReply, JoinRequest, Joined, RestartReply, RestartRequest, Roster};
 use crate::worker;
 use crate::{keys, TICK};
@@ -478,13 +479,10 @@ impl<'w, 'a> Forwarder<'w, 'a> {
         })
     }
 
-    fn put(&self, b: &[u8]) -> Result<()> {
-        self.down.put(b.to_vec()).wait().map_err(zenoh_error)
-    }
-
+    /// Sends `f` down; returns its bytes (kept as the newest of its service).
     fn put_frame(&self, f: &Frame) -> Result<Vec<u8>> {
         let b = frame::encode(SCHEMA_VERSION, f)?;
-        self.put(&b)?;
+        link::put_bytes(self.down, b.clone())?;
         Ok(b)
     }
 
@@ -498,7 +496,7 @@ impl<'w, 'a> Forwarder<'w, 'a> {
                     .flatten()
                     .chain(&n.orders)
                 {
-                    self.put(f)?;
+                    link::put_bytes(self.down, f.clone())?;
                 }
             }
             Mail::Order(order) => {
@@ -519,18 +517,11 @@ impl<'w, 'a> Forwarder<'w, 'a> {
                 }
             }
             Mail::Exited { .. } => {}
-            Mail::Frame(b) => match frame::decode::<Frame>(SCHEMA_VERSION, &b) {
-                Ok(f) => self.frame(f)?,
-                Err(e) => {
-                    self.refused += 1;
-                    if self.refused.is_power_of_two() {
-                        warn!(
-                            refused = self.refused,
-                            "frame from a remote host dropped: {e}"
-                        );
-                    }
+            Mail::Frame(b) => {
+                if let Some(f) = link::take_in(&b, &mut self.refused, "a remote host") {
+                    self.frame(f)?;
                 }
-            },
+            }
         }
         Ok(())
     }
@@ -580,17 +571,10 @@ impl<'w, 'a> Forwarder<'w, 'a> {
                 return Ok(());
             }
         };
-        match sent {
-            Ok(rang) => {
-                rang?;
-                Ok(())
-            }
-            Err(e @ WireError::SchemaMismatch { .. }) => {
-                warn!("{e}; dropped");
-                Ok(())
-            }
-            Err(e) => Err(e.into()),
+        if let Some(rang) = link::forwarded(sent)? {
+            rang?;
         }
+        Ok(())
     }
 
     fn publish_model(
@@ -646,8 +630,7 @@ impl<'w, 'a> Forwarder<'w, 'a> {
             || server.receive(),
             |q| {
                 if desk.holds_queries() {
-                    let f = frame::encode(SCHEMA_VERSION, &Frame::Query(*q.request()))?;
-                    down.put(f).wait().map_err(zenoh_error)?;
+                    link::put(down, &Frame::Query(*q.request()))?;
                     desk.hold(q.request().actor, q);
                 }
                 Ok(())
@@ -695,13 +678,13 @@ impl<'w, 'a> Forwarder<'w, 'a> {
     /// within the query timeout is dropped (its actor gave up already).
     fn poll_answers(&mut self) -> Result<()> {
         let mut answered = Vec::new();
+        let down = self.down;
         for (actor, (p, seq, asked)) in self.pending.iter_mut() {
             match p.poll() {
                 Ok(Some(mut r)) => {
                     r.request_seq = *seq;
                     r.actor = *actor;
-                    let b = frame::encode(SCHEMA_VERSION, &Frame::Answer(r))?;
-                    self.down.put(b).wait().map_err(zenoh_error)?;
+                    link::put(down, &Frame::Answer(r))?;
                     answered.push(*actor);
                 }
                 Ok(None) if asked.elapsed() > self.opts.query_timeout => answered.push(*actor),

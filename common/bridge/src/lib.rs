@@ -31,6 +31,7 @@ mod expert_host;
 mod frame;
 mod hub;
 mod inbox;
+mod link;
 mod mirror;
 mod roster;
 mod worker;

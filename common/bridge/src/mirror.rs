@@ -9,18 +9,16 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use alfd_wire::{
-    ActorBells, Doorbell, IncomingQuery, Process, Role, Wake, Wire, WireError, SCHEMA_VERSION,
-};
+use alfd_wire::{ActorBells, Doorbell, IncomingQuery, Process, Role, Wake, Wire, SCHEMA_VERSION};
 use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
 use zenoh::Wait as _;
 
-use crate::desk::{drain, HeldQueries};
 use crate::endpoint::Endpoint;
 use crate::error::{zenoh_error, BridgeError, Result};
 use crate::frame::{self, Frame};
 use crate::inbox::{inbox, Mail};
+use crate::link::{self, drain, HeldQueries};
 use crate::roster::{JoinReply, JoinRequest, Joined, RestartReply, RestartRequest};
 use crate::worker::{self, Heartbeat};
 use crate::{keys, TICK};
@@ -290,11 +288,7 @@ fn forward(
         held: HeldQueries::default(),
         refused: 0,
     };
-    let put = |f: &Frame| -> Result<()> {
-        up.put(frame::encode(SCHEMA_VERSION, f)?)
-            .wait()
-            .map_err(zenoh_error)
-    };
+    let put = |f: &Frame| link::put(up, f);
     let _ = ready.send(());
     while !stop.load(Ordering::Relaxed) {
         if waiter.wait(TICK * 4)? == Wake::Signal {
@@ -343,18 +337,8 @@ struct Here<'w, 'a> {
 impl Here<'_, '_> {
     /// A frame from the learner's host, into this host's services.
     fn down(&mut self, b: &[u8]) -> Result<()> {
-        let f = match frame::decode::<Frame>(SCHEMA_VERSION, b) {
-            Ok(f) => f,
-            Err(e) => {
-                self.refused += 1;
-                if self.refused.is_power_of_two() {
-                    warn!(
-                        refused = self.refused,
-                        "frame from the learner's host dropped: {e}"
-                    );
-                }
-                return Ok(());
-            }
+        let Some(f) = link::take_in(b, &mut self.refused, "the learner's host") else {
+            return Ok(());
         };
         let done = match f {
             Frame::Credits(c) => self.credits.forward(c).map(|_| true),
@@ -384,16 +368,11 @@ impl Here<'_, '_> {
                 return Ok(());
             }
         };
-        match done {
-            // Credits and control wake the actors that may wait for them.
-            Ok(true) => {
-                for &id in self.ids {
-                    self.bells.ring(id)?;
-                }
+        // Credits and control wake the actors that may wait for them.
+        if link::forwarded(done)? == Some(true) {
+            for &id in self.ids {
+                self.bells.ring(id)?;
             }
-            Ok(false) => {}
-            Err(e @ WireError::SchemaMismatch { .. }) => warn!("{e}; dropped"),
-            Err(e) => return Err(e.into()),
         }
         Ok(())
     }

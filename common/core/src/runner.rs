@@ -130,10 +130,23 @@ impl<S> Checkpoints<'_, S> {
         }
     }
 
-    /// Whether to save after `done` episodes: every `every` episodes, not after the run's last
-    /// (`limit`).
-    fn due(&self, done: u32, limit: Option<u32>) -> bool {
-        self.every.is_some_and(|n| done % n.max(1) == 0) && limit.is_none_or(|l| done < l)
+    /// After `done` episodes (the last one recorded): `stop` if the caller's observer says so,
+    /// else what `save` says of `state()` when a checkpoint is due (every `every` episodes, not
+    /// after the run's last, `limit`).
+    fn after_episode(
+        &self,
+        stop: ControlFlow<()>,
+        done: u32,
+        limit: Option<u32>,
+        save: &mut impl FnMut(&S) -> ControlFlow<()>,
+        state: impl FnOnce() -> S,
+    ) -> ControlFlow<()> {
+        let due =
+            self.every.is_some_and(|n| done % n.max(1) == 0) && limit.is_none_or(|l| done < l);
+        if stop.is_break() || !due {
+            return stop;
+        }
+        save(&state())
     }
 }
 
@@ -204,19 +217,18 @@ pub fn run_tabular_checkpointed(
         progress,
         |e| {
             records.push(*e.record);
-            if on_episode(e.record, e.actor).is_break() {
-                return Ok(ControlFlow::Break(()));
-            }
-            if !checkpoints.due(e.progress.episodes, limit) {
-                return Ok(ControlFlow::Continue(()));
-            }
-            Ok(save(&TabularRunState {
-                progress: e.progress,
-                records: records.clone(),
-                agent: e.actor.snapshot(),
-                env: e.env.snapshot(),
-                expert: e.expert.core.snapshot(),
-            }))
+            let stop = on_episode(e.record, e.actor);
+            Ok(
+                checkpoints.after_episode(stop, e.progress.episodes, limit, &mut save, || {
+                    TabularRunState {
+                        progress: e.progress,
+                        records: records.clone(),
+                        agent: e.actor.snapshot(),
+                        env: e.env.snapshot(),
+                        expert: e.expert.core.snapshot(),
+                    }
+                }),
+            )
         },
     )
     .expect("an in-process tabular run cannot fail");
@@ -352,20 +364,19 @@ pub fn run_neural_on(
                 )?;
             }
             records.push(*e.record);
-            if on_episode(e.record, handle.learner().network()).is_break() {
-                return Ok(ControlFlow::Break(()));
-            }
-            if !checkpoints.due(e.progress.episodes, limit) {
-                return Ok(ControlFlow::Continue(()));
-            }
-            Ok(save(&NeuralRunState {
-                progress: e.progress,
-                records: records.clone(),
-                learner: handle.learner().snapshot(),
-                actor: e.actor.core.snapshot(),
-                env: e.env.snapshot(),
-                expert: e.expert.core.snapshot(),
-            }))
+            let stop = on_episode(e.record, handle.learner().network());
+            Ok(
+                checkpoints.after_episode(stop, e.progress.episodes, limit, &mut save, || {
+                    NeuralRunState {
+                        progress: e.progress,
+                        records: records.clone(),
+                        learner: handle.learner().snapshot(),
+                        actor: e.actor.core.snapshot(),
+                        env: e.env.snapshot(),
+                        expert: e.expert.core.snapshot(),
+                    }
+                }),
+            )
         },
     )?;
     drop(actor);

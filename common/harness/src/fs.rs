@@ -49,6 +49,23 @@ fn write_atomically_with_mode(path: &Path, bytes: &[u8], mode: u32) -> anyhow::R
     Ok(())
 }
 
+/// Appends `line` to `file` whole (and with `sync`, waits until it is on disk): a write that
+/// fails part-way (a full disk) is taken back, so a file of lines never ends in half of one.
+pub fn append_whole(file: &mut std::fs::File, line: &[u8], sync: bool) -> std::io::Result<()> {
+    use std::io::Seek as _;
+    let before = file.metadata()?.len();
+    let written = file
+        .write_all(line)
+        .and_then(|()| if sync { file.sync_data() } else { Ok(()) });
+    if written.is_err() {
+        // Back to where the line began, for the next append too (a file not opened in append
+        // mode writes at its position).
+        let _ = file.set_len(before);
+        let _ = file.seek(std::io::SeekFrom::Start(before));
+    }
+    written
+}
+
 /// A test's scratch directory `alfd-NAME-XXXXXX` in the system's temporary directory, removed
 /// with everything in it when dropped (also while a failed test unwinds); kept, and named on
 /// stderr, when `ALFD_KEEP_TEST_DIRS=1`. The one helper every crate's tests use (tempfile is in
@@ -94,6 +111,23 @@ mod tests {
         );
         let e = write_atomically(&dir.join("missing/y.json"), b"z").unwrap_err();
         assert!(format!("{e:#}").contains("missing"), "{e:#}");
+    }
+
+    #[test]
+    fn lines_are_appended_whole_and_a_full_disk_is_the_error() {
+        let tmp = test_dir("fs-append");
+        let path = tmp.path().join("lines.txt");
+        let mut f = std::fs::File::create(&path).unwrap();
+        append_whole(&mut f, b"one\n", true).unwrap();
+        append_whole(&mut f, b"two\n", false).unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"one\ntwo\n");
+        // Writes to /dev/full fail with ENOSPC, as on a full disk.
+        let mut full = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let e = append_whole(&mut full, b"x\n", true).unwrap_err();
+        assert_eq!(e.raw_os_error(), Some(28), "{e}");
     }
 
     #[test]

@@ -14,7 +14,9 @@ mod session;
 mod startup;
 
 pub use bad_input::{bad_input, exit_code, BadInput};
-pub use fs::{load_checkpoint, save_checkpoint, test_dir, write_atomically, write_private};
+pub use fs::{
+    append_whole, load_checkpoint, save_checkpoint, test_dir, write_atomically, write_private,
+};
 pub use process::{check_wire_limits, main, read_text, ProcessArgs, Setup};
 pub use runtime::{
     RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY, DEFAULT_HUMAN_QUERY_TIMEOUT_MS,

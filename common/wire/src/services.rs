@@ -120,20 +120,6 @@ type PubSubFactory<P, H> =
     iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, P, H>;
 type PubSubBuilder<P, H> = iceoryx2::service::builder::publish_subscribe::Builder<P, H, Transport>;
 
-/// A publish-subscribe service builder with `c`'s limits.
-fn limits<P, H>(b: PubSubBuilder<P, H>, c: &Channel) -> PubSubBuilder<P, H>
-where
-    P: fmt::Debug + IceoryxSend + ?Sized,
-    H: fmt::Debug + ZeroCopySend,
-{
-    b.max_publishers(c.publishers)
-        .max_subscribers(c.subscribers)
-        .max_nodes(MAX_NODES)
-        .history_size(c.history)
-        .subscriber_max_buffer_size(c.buffer)
-        .enable_safe_overflow(c.safe_overflow)
-}
-
 /// A process's connection to its run: an iceoryx2 node with the run's config, and who we are.
 pub struct Wire {
     node: Node<Transport>,
@@ -244,44 +230,49 @@ impl Wire {
 
     // --- one builder per service: every process opens it with these settings ---------------
 
-    fn transitions_service(&self) -> Result<PubSubFactory<TransitionBatch, ()>> {
-        let name = self.service_name(TRANSITIONS.name)?;
+    /// The service `c` names in this run, and a builder of it with `c`'s limits (the payload
+    /// `P` and user header `H` are the caller's).
+    fn pubsub<P, H>(&self, c: &Channel) -> Result<(ServiceName, PubSubBuilder<P, H>)>
+    where
+        P: fmt::Debug + IceoryxSend + ?Sized,
+        H: fmt::Debug + ZeroCopySend,
+    {
+        let name = self.service_name(c.name)?;
         let b = self
             .node
             .service_builder(&name)
-            .publish_subscribe::<TransitionBatch>();
-        limits(b, &TRANSITIONS)
-            .open_or_create()
+            .publish_subscribe::<P>()
+            .user_header::<H>()
+            .max_publishers(c.publishers)
+            .max_subscribers(c.subscribers)
+            .max_nodes(MAX_NODES)
+            .history_size(c.history)
+            .subscriber_max_buffer_size(c.buffer)
+            .enable_safe_overflow(c.safe_overflow);
+        Ok((name, b))
+    }
+
+    fn transitions_service(&self) -> Result<PubSubFactory<TransitionBatch, ()>> {
+        let (name, b) = self.pubsub::<TransitionBatch, ()>(&TRANSITIONS)?;
+        b.open_or_create()
             .map_err(transport("open", name.to_string()))
     }
 
     fn credits_service(&self) -> Result<PubSubFactory<Credits, ()>> {
-        let name = self.service_name(CREDITS.name)?;
-        let b = self
-            .node
-            .service_builder(&name)
-            .publish_subscribe::<Credits>();
-        limits(b, &CREDITS)
-            .open_or_create()
+        let (name, b) = self.pubsub::<Credits, ()>(&CREDITS)?;
+        b.open_or_create()
             .map_err(transport("open", name.to_string()))
     }
 
     fn weights_service(&self) -> Result<PubSubFactory<[f32], WeightsHeader>> {
-        let name = self.service_name(WEIGHTS.name)?;
-        let b = self
-            .node
-            .service_builder(&name)
-            .publish_subscribe::<[f32]>();
-        limits(b.user_header::<WeightsHeader>(), &WEIGHTS)
-            .open_or_create()
+        let (name, b) = self.pubsub::<[f32], WeightsHeader>(&WEIGHTS)?;
+        b.open_or_create()
             .map_err(transport("open", name.to_string()))
     }
 
     fn demo_model_service(&self) -> Result<PubSubFactory<[u8], DemoModelHeader>> {
-        let name = self.service_name(DEMO_MODEL.name)?;
-        let b = self.node.service_builder(&name).publish_subscribe::<[u8]>();
-        limits(b.user_header::<DemoModelHeader>(), &DEMO_MODEL)
-            .open_or_create()
+        let (name, b) = self.pubsub::<[u8], DemoModelHeader>(&DEMO_MODEL)?;
+        b.open_or_create()
             .map_err(transport("open", name.to_string()))
     }
 
@@ -312,24 +303,14 @@ impl Wire {
     }
 
     fn progress_service(&self) -> Result<PubSubFactory<Progress, ()>> {
-        let name = self.service_name(PROGRESS.name)?;
-        let b = self
-            .node
-            .service_builder(&name)
-            .publish_subscribe::<Progress>();
-        limits(b, &PROGRESS)
-            .open_or_create()
+        let (name, b) = self.pubsub::<Progress, ()>(&PROGRESS)?;
+        b.open_or_create()
             .map_err(transport("open", name.to_string()))
     }
 
     fn control_service(&self) -> Result<PubSubFactory<Control, ()>> {
-        let name = self.service_name(CONTROL.name)?;
-        let b = self
-            .node
-            .service_builder(&name)
-            .publish_subscribe::<Control>();
-        limits(b, &CONTROL)
-            .open_or_create()
+        let (name, b) = self.pubsub::<Control, ()>(&CONTROL)?;
+        b.open_or_create()
             .map_err(transport("open", name.to_string()))
     }
 

@@ -267,12 +267,14 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
     let mut by_budget = budget::Table::new();
     for method in &exp.methods {
         let runs = read_runs(ctx.out, method, exp.seed_range())?;
+        let own;
         let curve_runs = if exp.learner_episodes_only {
-            with_episodes(&runs, summary::Episodes::without_expert)
+            own = with_episodes(&runs, summary::Episodes::without_expert);
+            &own
         } else {
-            runs.clone()
+            &runs
         };
-        results.push(summary::analyse(method, &curve_runs, exp)?);
+        results.push(summary::analyse(method, curve_runs, exp)?);
         if exp.by_budget {
             let cfg = method.config(exp.first_seed, exp.episodes)?;
             let cell = budget::cell(&runs, exp.eval_threshold, &method.name);

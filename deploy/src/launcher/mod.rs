@@ -34,7 +34,6 @@
 
 use std::collections::VecDeque;
 use std::fs::File;
-use std::io::Write as _;
 use std::os::unix::process::CommandExt as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -538,20 +537,14 @@ impl<'a, 'w> Launcher<'a, 'w> {
         self.demos_used = r.demos_used;
         // A write that fails (a full disk) takes back what it wrote of the row, so the file
         // stays whole rows for `alfd resume`.
-        let before = self.csv.metadata().map(|m| m.len());
-        if let Err(e) = writeln!(self.csv, "{}", r.csv_row()) {
-            if let Ok(len) = before {
-                let _ = self.csv.set_len(len);
-                let _ = std::io::Seek::seek(&mut self.csv, std::io::SeekFrom::Start(len));
-            }
-            return Err(e).with_context(|| {
-                format!(
-                    "cannot append episode {} to {}",
-                    r.episode,
-                    self.plan.run_dir.join("episodes.csv").display()
-                )
-            });
-        }
+        let row = format!("{}\n", r.csv_row());
+        alfd_harness::append_whole(&mut self.csv, row.as_bytes(), false).with_context(|| {
+            format!(
+                "cannot append episode {} to {}",
+                r.episode,
+                self.plan.run_dir.join("episodes.csv").display()
+            )
+        })?;
         self.recorded += 1;
         self.returns.push_back(r.ret);
         if self.returns.len() > 20 {

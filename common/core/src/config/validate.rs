@@ -107,7 +107,7 @@ impl ExperimentConfig {
         Ok(())
     }
 
-    /// The `[agent]` section: heads, exploration, replay.
+    /// The `[agent]` section: the kind (for the environment), K and γ.
     fn validate_agent(&self) -> Result<()> {
         let e = &self.env;
         let a = &self.agent;
@@ -158,7 +158,8 @@ impl ExperimentConfig {
         Ok(())
     }
 
-    /// The `[agent]` section: exploration, learning rate, bootstrap, replay.
+    /// The `[agent]` section: exploration, learning rate, bootstrap mask, replay and network
+    /// sizes, target updates, updates per step.
     fn validate_agent_learning(&self) -> Result<()> {
         let a = &self.agent;
         if !(a.temperature > 0.0 && a.temperature.is_finite()) {
@@ -227,7 +228,8 @@ impl ExperimentConfig {
         Ok(())
     }
 
-    /// The `[agent]` section: the update's settings.
+    /// The `[agent]` section: the update's options (Huber δ, τ, target bounds, gradient clipping,
+    /// demonstration fraction and margin loss, learning-rate annealing, n-step, prior scale).
     fn validate_agent_training(&self) -> Result<()> {
         let a = &self.agent;
         if !(a.tau > 0.0 && a.tau <= 1.0) {
