@@ -4,10 +4,10 @@
 use std::fmt;
 use std::time::Duration;
 
+use crate::connection::Wire;
 use crate::error::{Result, WireError};
 use crate::messages::{command, Control};
 use crate::ports::Receiver;
-use crate::services::Wire;
 use crate::wakeups::{Waiter, Wake};
 
 /// A process's view of the launcher's [`Control`]: the first message is the schema handshake,

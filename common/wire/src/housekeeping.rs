@@ -1,4 +1,4 @@
-//! Run housekeeping: run ids and their iceoryx2 prefix, the files a run leaves in the system,
+//! Run housekeeping: the files a run leaves in the system,
 //! and the removal of what dead processes and finished runs leave behind.
 
 use std::path::PathBuf;
@@ -6,36 +6,8 @@ use std::path::PathBuf;
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 
+use crate::connection::{run_config, run_prefix, validate_run_id, Transport};
 use crate::error::{transport, Result, WireError};
-use crate::services::Transport;
-
-/// Checks a run id: 1 to 64 ASCII letters, digits, `-` or `_`.
-pub fn validate_run_id(run_id: &str) -> Result<()> {
-    let ok = !run_id.is_empty()
-        && run_id.len() <= 64
-        && run_id
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
-    if ok {
-        Ok(())
-    } else {
-        Err(WireError::InvalidRunId(run_id.to_owned()))
-    }
-}
-
-/// The iceoryx2 file prefix of a run: every file it creates starts with this.
-pub fn run_prefix(run_id: &str) -> String {
-    format!("alfd_{run_id}_")
-}
-
-/// The iceoryx2 config of a run: the defaults (no config file is read), with the run's prefix.
-pub(crate) fn run_config(run_id: &str) -> Result<Config> {
-    validate_run_id(run_id)?;
-    let mut cfg = Config::default();
-    cfg.global.prefix = FileName::new(run_prefix(run_id).as_bytes())
-        .map_err(transport("name the prefix of", run_id))?;
-    Ok(cfg)
-}
 
 /// Files of run `run_id` left in iceoryx2's directories (`/tmp/iceoryx2`, `/dev/shm`). Empty once
 /// every process of the run has exited cleanly.
@@ -126,11 +98,13 @@ pub fn wait_for_run_end(run_id: &str, timeout: std::time::Duration) -> Result<Ve
 ///
 /// iceoryx2 0.10 creates the node counter without an owner, so no node removes it, and offers
 /// no public way to: the dead-node clean-up above (`Node::list`, `DeadNodeView`) leaves it, and
-/// `Node::force_remove_service` removes services only. The one remover is
-/// `iceoryx2::testing::remove_global_mgmt_segment` (`#[doc(hidden)]`, `unsafe`), called here
-/// and nowhere else.
+/// `Node::force_remove_service` removes services only. It is POSIX shared memory named
+/// `<prefix><40 hex digits>_node.<version>.global_mgmt` (`/dev/shm`), used only while a node is
+/// created; [`node_counters`] finds it by that exact form, so never another run's, even one whose
+/// id starts with this one's (the part after this run's prefix would hold a `_` or a non-hex
+/// letter). A test checks that no file of a closed run is left.
 pub fn close_run(run_id: &str) -> Result<()> {
-    let cfg = run_config(run_id)?;
+    validate_run_id(run_id)?;
     cleanup_dead_nodes(run_id)?;
     let alive = alive_nodes(run_id)?;
     if !alive.is_empty() {
@@ -139,26 +113,47 @@ pub fn close_run(run_id: &str) -> Result<()> {
             nodes: alive.join(", "),
         });
     }
-    #[allow(unsafe_code)]
-    // SAFETY: the contract is that no other process currently uses the same iceoryx2 domain.
-    // - The domain is `cfg`: default root path, prefix `alfd_<run_id>_`, used only by processes
-    //   of this run (`run_config` builds every config of the crate). The segment is removed by
-    //   its exact name, derived from `cfg` (`alfd_<run_id>_<hash>_node.0_10_0.global_mgmt` in
-    //   `/dev/shm`), so never another run's, even one whose id starts with this one's.
-    // - In iceoryx2 0.10 the segment is used only while a node is created (its unique id takes
-    //   the next counter value; the segment is opened, incremented and dropped), and no node of
-    //   the run is alive (dead ones were cleaned, live ones refused, just above).
-    // - No node is created between that check and the removal: the callers are the process
-    //   that started the run's processes (the launcher; `alfd-bench-ipc` for its own runs),
-    //   after its children exited and its own `Wire` was dropped; the learner of a run whose
-    //   launcher died (nobody is left to start a process of that run id: a resume uses a new
-    //   one), after its own `Wire` was dropped and the others left; `alfd clean` for runs
-    //   whose every node is dead; and tests after dropping every node. Should a late tool join in that window anyway, the segment is POSIX shared
-    //   memory, so its mapping stays valid after the unlink; node ids also carry the pid and the
-    //   creation time, so a counter restarting at 0 repeats none.
-    let removed = unsafe { iceoryx2::testing::remove_global_mgmt_segment::<Transport>(&cfg) };
-    removed.map_err(transport("remove the node counter of", run_id))?;
+    for counter in node_counters(run_id) {
+        match std::fs::remove_file(&counter) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => {
+                return Err(WireError::Transport {
+                    op: "remove the node counter of",
+                    service: format!("{run_id} ({})", counter.display()),
+                    detail: e.to_string(),
+                })
+            }
+        }
+    }
     Ok(())
+}
+
+/// The node counters of run `run_id` in `/dev/shm` (see [`close_run`]).
+fn node_counters(run_id: &str) -> Vec<PathBuf> {
+    let prefix = run_prefix(run_id);
+    let is_counter = |name: &str| {
+        let Some(rest) = name.strip_prefix(&prefix) else {
+            return false;
+        };
+        let Some((hash, tail)) = rest.split_once("_node.") else {
+            return false;
+        };
+        hash.len() == 40
+            && hash.bytes().all(|b| b.is_ascii_hexdigit())
+            && tail.ends_with(".global_mgmt")
+            && !tail.contains('/')
+    };
+    let Ok(entries) = std::fs::read_dir("/dev/shm") else {
+        return Vec::new();
+    };
+    let mut found: Vec<PathBuf> = entries
+        .flatten()
+        .filter(|e| is_counter(&e.file_name().to_string_lossy()))
+        .map(|e| e.path())
+        .collect();
+    found.sort();
+    found
 }
 
 /// Whether `run_id` has the form the launcher gives run ids, `r<unix seconds>-<pid>`: the only

@@ -45,18 +45,20 @@
 //! # Where things are
 //! - `messages`: limits, [`Role`] and [`Process`], the [`Header`] and every message type.
 //! - `error`: [`WireError`] and [`Result`].
-//! - `services`: [`Wire`] (joining a run, one builder per service, the port constructors).
+//! - `connection`: [`Wire`] (joining a run as a process, run ids, the request to stop).
+//! - `services`: the channel table [`CHANNELS`], one builder per service, the port constructors.
 //! - `ports`: [`Sender`], [`Receiver`], the weights and demonstration-model slices, and both
 //!   sides of a query.
 //! - `remote`: services to Python adapters: [`RemoteEnv`] (an environment in another process)
 //!   and [`RemoteDemonstrator`] (an external expert).
 //! - `wakeups`: doorbells ([`Doorbell`], [`Bell`], [`ActorBells`]) and the [`Waiter`].
 //! - `control`: [`ControlWatch`], a process's view of the launcher.
-//! - `housekeeping`: run ids and prefixes, the files a run leaves, and their removal
+//! - `housekeeping`: the files a run leaves, and their removal
 //!   ([`cleanup_dead_nodes`], [`close_run`]).
 //!
 //! Processes start up through `alfd-harness` (logging, the schema hook), not through this crate.
 
+mod connection;
 mod control;
 mod error;
 mod housekeeping;
@@ -69,11 +71,12 @@ mod wakeups;
 #[cfg(test)]
 mod test_support;
 
+pub use connection::{quiet_transport_logs, run_prefix, validate_run_id, Wire};
 pub use control::{ControlWatch, CONTROL_PERIOD};
 pub use error::{Result, WireError};
 pub use housekeeping::{
     alive_nodes, clean_run, cleanup_dead_nodes, close_run, is_launcher_run_id, leftover_files,
-    run_prefix, runs_with_files, validate_run_id, wait_for_run_end, Cleaned,
+    runs_with_files, wait_for_run_end, Cleaned,
 };
 pub use messages::{
     command, flags, name_from_bytes, name_to_bytes, outcome, process_state, progress_kind, Control,
@@ -90,7 +93,6 @@ pub use remote::{
     RemoteEnv, RemoteRequest, RemoteResponse, RemoteSpec, MAX_REMOTE_VALUES, REMOTE_MESSAGE_LEN,
 };
 pub use services::{
-    quiet_transport_logs, Channel, Wire, CHANNELS, CONTROL, CREDITS, DEMO_MODEL, PROGRESS,
-    TRANSITIONS, WEIGHTS,
+    Channel, CHANNELS, CONTROL, CREDITS, DEMO_MODEL, PROGRESS, TRANSITIONS, WEIGHTS,
 };
 pub use wakeups::{ActorBells, Bell, Doorbell, Waiter, Wake};

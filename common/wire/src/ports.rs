@@ -12,9 +12,9 @@ use iceoryx2::port::server::Server;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 
+use crate::connection::{Transport, Wire};
 use crate::error::{transport, Result};
 use crate::messages::{DemoModelHeader, Message, QueryRequest, QueryResponse, WeightsHeader};
-use crate::services::{Transport, Wire};
 
 /// Sends messages of type `T`, stamping each with the schema version, the sender and a sequence
 /// number.

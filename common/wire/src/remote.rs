@@ -25,10 +25,9 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 
+use crate::connection::{run_config, Transport};
 use crate::error::{transport, Result, WireError};
-use crate::housekeeping::run_config;
 use crate::messages::{Header, Process, MAX_OBS_DIM};
-use crate::services::Transport;
 
 /// Values a remote message carries: an observation (at most [`MAX_OBS_DIM`]) or an
 /// environment's internal state.

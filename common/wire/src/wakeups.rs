@@ -10,9 +10,9 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 
+use crate::connection::{Transport, Wire, MAX_INTERRUPTED_CHECKS, TERMINATION_REQUESTED};
 use crate::error::{transport, Result};
 use crate::messages::MAX_ACTORS;
-use crate::services::{Transport, Wire, MAX_INTERRUPTED_CHECKS, TERMINATION_REQUESTED};
 
 /// Whom a doorbell wakes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
