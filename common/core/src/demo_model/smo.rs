@@ -29,71 +29,123 @@ const TAU: f64 = 1e-12;
 pub fn solve(k: &[f64], positive: &[bool], c: f64, eps: f64, max_iter: usize) -> Dual {
     let n = positive.len();
     assert_eq!(k.len(), n * n, "the kernel matrix is n × n");
-    let y: Vec<f64> = positive
-        .iter()
-        .map(|&p| if p { 1.0 } else { -1.0 })
-        .collect();
-    let kij = |i: usize, j: usize| k[i * n + j];
-    // The curvature of the objective along the pair (i, j), floored at TAU.
-    let curvature = |i: usize, j: usize| {
-        let a = kij(i, i) + kij(j, j) - 2.0 * kij(i, j);
+    let problem = Problem {
+        k,
+        n,
+        y: positive
+            .iter()
+            .map(|&p| if p { 1.0 } else { -1.0 })
+            .collect(),
+        c,
+    };
+    let mut alpha = vec![0.0; n];
+    // The objective's gradient Qα − e, at α = 0.
+    let mut grad = vec![-1.0; n];
+    let mut iterations = 0;
+    while iterations < max_iter {
+        let Some((i, j)) = problem.working_pair(&alpha, &grad, eps) else {
+            break;
+        };
+        iterations += 1;
+        let (old_i, old_j) = (alpha[i], alpha[j]);
+        problem.update_pair(&mut alpha, &grad, i, j);
+        problem.move_gradient(&mut grad, (i, alpha[i] - old_i), (j, alpha[j] - old_j));
+    }
+    if iterations == max_iter {
+        tracing::debug!(max_iter, "SMO: reached the maximal number of iterations");
+    }
+    let rho = problem.rho(&alpha, &grad);
+    let coef = alpha.iter().zip(&problem.y).map(|(a, y)| a * y).collect();
+    Dual {
+        coef,
+        rho,
+        iterations,
+    }
+}
+
+/// The dual's data: the kernel matrix, the labels `y = ±1` and the box `[0, C]`.
+struct Problem<'k> {
+    k: &'k [f64],
+    n: usize,
+    y: Vec<f64>,
+    c: f64,
+}
+
+impl Problem<'_> {
+    fn kij(&self, i: usize, j: usize) -> f64 {
+        self.k[i * self.n + j]
+    }
+
+    /// The curvature of the objective along the pair (i, j), floored at TAU.
+    fn curvature(&self, i: usize, j: usize) -> f64 {
+        let a = self.kij(i, i) + self.kij(j, j) - 2.0 * self.kij(i, j);
         if a > 0.0 {
             a
         } else {
             TAU
         }
-    };
-    let mut alpha = vec![0.0; n];
-    // The objective's gradient Qα − e, at α = 0.
-    let mut grad = vec![-1.0; n];
-    let up = |t: usize, a: f64| if y[t] > 0.0 { a < c } else { a > 0.0 };
-    let low = |t: usize, a: f64| if y[t] > 0.0 { a > 0.0 } else { a < c };
+    }
 
-    let mut iterations = 0;
-    while iterations < max_iter {
-        // i: the index in I_up with the largest −y_t G_t.
+    /// Whether α_t may move up along y_t (the set I_up).
+    fn up(&self, t: usize, a: f64) -> bool {
+        if self.y[t] > 0.0 {
+            a < self.c
+        } else {
+            a > 0.0
+        }
+    }
+
+    /// Whether α_t may move down along y_t (the set I_low).
+    fn low(&self, t: usize, a: f64) -> bool {
+        if self.y[t] > 0.0 {
+            a > 0.0
+        } else {
+            a < self.c
+        }
+    }
+
+    /// WSS 2: i, the index in I_up with the largest −y_t G_t; j, the index in I_low whose pair
+    /// with i decreases the objective most. None once the maximal violation is below `eps`.
+    fn working_pair(&self, alpha: &[f64], grad: &[f64], eps: f64) -> Option<(usize, usize)> {
+        let (y, n) = (&self.y, self.n);
         let mut gmax = f64::NEG_INFINITY;
         let mut i = usize::MAX;
         for t in 0..n {
-            if up(t, alpha[t]) && -y[t] * grad[t] >= gmax {
+            if self.up(t, alpha[t]) && -y[t] * grad[t] >= gmax {
                 gmax = -y[t] * grad[t];
                 i = t;
             }
         }
         if i == usize::MAX {
-            break;
+            return None;
         }
-        // j: the index in I_low whose pair with i decreases the objective most (second order),
-        // and gmax2, the largest y_t G_t over I_low.
+        // gmax2: the largest y_t G_t over I_low.
         let mut gmax2 = f64::NEG_INFINITY;
         let mut j = usize::MAX;
         let mut best = f64::INFINITY;
-        for t in 0..n {
-            if !low(t, alpha[t]) {
-                continue;
-            }
+        for t in (0..n).filter(|&t| self.low(t, alpha[t])) {
             let yg = y[t] * grad[t];
             if yg >= gmax2 {
                 gmax2 = yg;
             }
             let b = gmax + yg;
             if b > 0.0 {
-                let gain = -(b * b) / curvature(i, t);
+                let gain = -(b * b) / self.curvature(i, t);
                 if gain <= best {
                     best = gain;
                     j = t;
                 }
             }
         }
-        if gmax + gmax2 < eps || j == usize::MAX {
-            break;
-        }
-        iterations += 1;
+        (gmax + gmax2 >= eps && j != usize::MAX).then_some((i, j))
+    }
 
-        // The two-variable subproblem, clipped to the box (libsvm's update, with C_i = C_j = C).
-        let (old_i, old_j) = (alpha[i], alpha[j]);
-        let curvature = curvature(i, j);
-        if y[i] != y[j] {
+    /// The two-variable subproblem on (i, j), clipped to the box (libsvm's update, with
+    /// C_i = C_j = C).
+    fn update_pair(&self, alpha: &mut [f64], grad: &[f64], i: usize, j: usize) {
+        let c = self.c;
+        let curvature = self.curvature(i, j);
+        if self.y[i] != self.y[j] {
             let delta = (-grad[i] - grad[j]) / curvature;
             let diff = alpha[i] - alpha[j];
             alpha[i] += delta;
@@ -140,41 +192,38 @@ pub fn solve(k: &[f64], positive: &[bool], c: f64, eps: f64, max_iter: usize) ->
                 alpha[j] = sum;
             }
         }
-        let (di, dj) = (alpha[i] - old_i, alpha[j] - old_j);
-        for t in 0..n {
-            grad[t] += y[t] * (y[i] * kij(t, i) * di + y[j] * kij(t, j) * dj);
-        }
-    }
-    if iterations == max_iter {
-        tracing::debug!(max_iter, "SMO: reached the maximal number of iterations");
     }
 
-    // rho: the mean of y_t G_t over the free α; without any, the middle of its feasible range.
-    let (mut upper, mut lower) = (f64::INFINITY, f64::NEG_INFINITY);
-    let (mut free, mut free_sum) = (0usize, 0.0);
-    for t in 0..n {
-        let yg = y[t] * grad[t];
-        let at_upper = alpha[t] >= c;
-        let at_lower = alpha[t] <= 0.0;
-        if at_upper == at_lower {
-            free += 1;
-            free_sum += yg;
-        } else if at_upper == (y[t] < 0.0) {
-            upper = upper.min(yg);
-        } else {
-            lower = lower.max(yg);
+    /// G += Q[:, i] Δα_i + Q[:, j] Δα_j.
+    fn move_gradient(&self, grad: &mut [f64], (i, di): (usize, f64), (j, dj): (usize, f64)) {
+        let y = &self.y;
+        for (t, g) in grad.iter_mut().enumerate() {
+            *g += y[t] * (y[i] * self.kij(t, i) * di + y[j] * self.kij(t, j) * dj);
         }
     }
-    let rho = if free > 0 {
-        free_sum / free as f64
-    } else {
-        (upper + lower) / 2.0
-    };
-    let coef = alpha.iter().zip(&y).map(|(a, y)| a * y).collect();
-    Dual {
-        coef,
-        rho,
-        iterations,
+
+    /// rho: the mean of y_t G_t over the free α; without any, the middle of its feasible range.
+    fn rho(&self, alpha: &[f64], grad: &[f64]) -> f64 {
+        let (mut upper, mut lower) = (f64::INFINITY, f64::NEG_INFINITY);
+        let (mut free, mut free_sum) = (0usize, 0.0);
+        for t in 0..self.n {
+            let yg = self.y[t] * grad[t];
+            let at_upper = alpha[t] >= self.c;
+            let at_lower = alpha[t] <= 0.0;
+            if at_upper == at_lower {
+                free += 1;
+                free_sum += yg;
+            } else if at_upper == (self.y[t] < 0.0) {
+                upper = upper.min(yg);
+            } else {
+                lower = lower.max(yg);
+            }
+        }
+        if free > 0 {
+            free_sum / free as f64
+        } else {
+            (upper + lower) / 2.0
+        }
     }
 }
 
