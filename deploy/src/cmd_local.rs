@@ -4,17 +4,18 @@
 //! `checkpoint.bin` every N episodes, with `episodes.csv` and `demos.jsonl` as they are then, so
 //! that `alfd resume` can continue it.
 
+use std::cell::Cell;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use alfd_common::agent::DemoRecord;
+use alfd_common::agent::{DemoRecord, Demonstrator};
 use alfd_common::config::{EnvName, ExperimentConfig};
-use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration};
+use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration, CliffWalk};
 use alfd_common::record::{episodes_csv, EpisodeRecord, RunSummary};
 use alfd_common::runner::{
     run_neural_checkpointed, run_neural_on, run_tabular_checkpointed, Checkpoints, NeuralEnvs,
-    RunError, RunState,
+    NeuralRun, RunError, RunState,
 };
 use anyhow::Context as _;
 
@@ -228,119 +229,205 @@ pub(crate) fn run_pieces(
     if let (Some(f), Some(_)) = (&resumable.from, cfg.episode_limit()) {
         bar.set_position(u64::from(f.state.progress().episodes));
     }
-    let mut stopped = false;
-    let mut show = |r: &EpisodeRecord| {
+    let watch = Watch {
+        cfg,
+        out,
+        resumable,
+        bar,
+        stopped: Cell::new(false),
+        save_error: Cell::new(None),
+    };
+    let start = Instant::now();
+    let produced = match pieces {
+        Pieces::Tabular {
+            env,
+            mut demonstrator,
+        } => run_tabular(&watch, &env, demonstrator.as_mut())?,
+        Pieces::Remote => run_remote(&watch)?,
+        Pieces::Neural { mut demonstrator } => run_neural(&watch, demonstrator.as_mut())?,
+    };
+    let Some(produced) = produced else {
+        return Ok(None);
+    };
+    let wall = start.elapsed().as_secs_f64();
+    watch.bar.finish_and_clear();
+    write_outputs(out, produced, wall).map(Some)
+}
+
+/// What a run that ended leaves for its common output files.
+struct Produced {
+    records: Vec<EpisodeRecord>,
+    demos: Vec<DemoRecord>,
+    /// The value of the greedy policy at the start state (tabular runs).
+    greedy: Option<f64>,
+    /// The optimal value at the start state (tabular runs).
+    optimal: Option<f64>,
+}
+
+/// What a run's callbacks share: the progress bar, the checkpoints, and why the run stopped
+/// before its end.
+struct Watch<'a> {
+    cfg: &'a ExperimentConfig,
+    out: &'a Path,
+    resumable: Resumable,
+    bar: indicatif::ProgressBar,
+    /// Set when the run stops as asked (`--stop-after-episodes`).
+    stopped: Cell<bool>,
+    /// The checkpoint that could not be written, which stops the run.
+    save_error: Cell<Option<anyhow::Error>>,
+}
+
+impl Watch<'_> {
+    /// Shows episode `r` on the progress bar; breaks after `resumable.stop_after` episodes.
+    fn show(&self, r: &EpisodeRecord) -> ControlFlow<()> {
         let eval = if r.eval_return.is_nan() {
             String::new()
         } else {
             format!("  eval {:.1}", r.eval_return)
         };
-        bar.set_message(format!("return {:.1}{eval}  demos {}", r.ret, r.demos_used));
-        match cfg.episode_limit() {
-            Some(_) => bar.inc(1),
-            None => bar.set_position(r.total_steps),
+        self.bar
+            .set_message(format!("return {:.1}{eval}  demos {}", r.ret, r.demos_used));
+        match self.cfg.episode_limit() {
+            Some(_) => self.bar.inc(1),
+            None => self.bar.set_position(r.total_steps),
         }
-        if resumable.stop_after.is_some_and(|n| r.episode + 1 >= n) {
-            stopped = true;
+        if self
+            .resumable
+            .stop_after
+            .is_some_and(|n| r.episode + 1 >= n)
+        {
+            self.stopped.set(true);
             return ControlFlow::Break(());
         }
         ControlFlow::Continue(())
-    };
-    let mut save_error = None;
-    let mut save = |state: RunState| match resumable.save(out, state) {
-        Ok(()) => ControlFlow::Continue(()),
-        Err(e) => {
-            save_error = Some(e);
-            ControlFlow::Break(())
-        }
-    };
-    let start = Instant::now();
-    let (records, demos, greedy, optimal) = match pieces {
-        Pieces::Tabular {
-            env,
-            mut demonstrator,
-        } => {
-            let checkpoints = resumable.checkpoints(RunState::tabular, "tabular")?;
-            let run = run_tabular_checkpointed(
-                cfg,
-                (*env).clone(),
-                demonstrator.as_mut(),
-                checkpoints,
-                |s| save(RunState::Tabular(Box::new(s.clone()))),
-                |r, _| show(r),
-            )
-            .map_err(|e| usage(format!("cannot resume from the checkpoint: {e}")))?;
-            if interrupted(save_error, stopped)? {
-                return Ok(None);
+    }
+
+    /// Writes a checkpoint; breaks (keeping the error) when it cannot be written.
+    fn save(&self, state: RunState) -> ControlFlow<()> {
+        match self.resumable.save(self.out, state) {
+            Ok(()) => ControlFlow::Continue(()),
+            Err(e) => {
+                self.save_error.set(Some(e));
+                ControlFlow::Break(())
             }
-            let vi = value_iteration(&env, cfg.agent.gamma, 1e-10)?;
-            let greedy = policy_evaluation(&env, &run.greedy_policy, cfg.agent.gamma)?;
-            let s0 = env.map().start();
-            let table = serde_json::json!({ "actions": run.greedy_policy });
-            write(out, "policy.json", table.to_string().as_bytes())?;
-            (
-                run.records,
-                run.demos,
-                Some(greedy[s0]),
-                Some(vi.values[s0]),
-            )
         }
-        Pieces::Remote => {
-            let (_adapters, envs, mut demonstrator) = crate::local_remote::start(cfg, out)?;
-            let envs = match envs {
-                Some(envs) => envs,
-                None => NeuralEnvs {
-                    env: alfd_common::env::vector_env(&cfg.env).context("a vector environment")?,
-                    eval_env: alfd_common::env::vector_env(&cfg.env)
-                        .context("a vector environment")?,
-                },
-            };
-            let checkpoints = resumable.checkpoints(RunState::neural, "neural")?;
-            let run = run_neural_on(
-                cfg,
-                envs,
-                demonstrator.as_mut(),
-                checkpoints,
-                |s| save(RunState::Neural(Box::new(s.clone()))),
-                |r, _| show(r),
-            )
-            .map_err(|e| match e {
-                RunError::Mismatch(e) => usage(format!("cannot resume from the checkpoint: {e}")),
-                RunError::Loop(e) => anyhow::Error::new(e).context("the run failed"),
-            })?;
-            if interrupted(save_error, stopped)? {
-                return Ok(None);
-            }
-            write(
-                out,
-                "weights.safetensors",
-                &run.network.to_safetensors_bytes(),
-            )?;
-            (run.records, run.expert.demos().to_vec(), None, None)
-        }
-        Pieces::Neural { mut demonstrator } => {
-            let checkpoints = resumable.checkpoints(RunState::neural, "neural")?;
-            let run = run_neural_checkpointed(
-                cfg,
-                demonstrator.as_mut(),
-                checkpoints,
-                |s| save(RunState::Neural(Box::new(s.clone()))),
-                |r, _| show(r),
-            )
-            .map_err(|e| usage(format!("cannot resume from the checkpoint: {e}")))?;
-            if interrupted(save_error, stopped)? {
-                return Ok(None);
-            }
-            write(
-                out,
-                "weights.safetensors",
-                &run.network.to_safetensors_bytes(),
-            )?;
-            (run.records, run.expert.demos().to_vec(), None, None)
-        }
+    }
+
+    /// See [`interrupted`].
+    fn interrupted(&self) -> anyhow::Result<bool> {
+        interrupted(self.save_error.take(), self.stopped.get())
+    }
+}
+
+/// Runs a CliffWalk run and writes its `policy.json`; `None` when it stopped before its end.
+fn run_tabular(
+    watch: &Watch<'_>,
+    env: &CliffWalk,
+    demonstrator: &mut dyn Demonstrator<usize>,
+) -> anyhow::Result<Option<Produced>> {
+    let cfg = watch.cfg;
+    let checkpoints = watch.resumable.checkpoints(RunState::tabular, "tabular")?;
+    let run = run_tabular_checkpointed(
+        cfg,
+        env.clone(),
+        demonstrator,
+        checkpoints,
+        |s| watch.save(RunState::Tabular(Box::new(s.clone()))),
+        |r, _| watch.show(r),
+    )
+    .map_err(|e| usage(format!("cannot resume from the checkpoint: {e}")))?;
+    if watch.interrupted()? {
+        return Ok(None);
+    }
+    let vi = value_iteration(env, cfg.agent.gamma, 1e-10)?;
+    let greedy = policy_evaluation(env, &run.greedy_policy, cfg.agent.gamma)?;
+    let s0 = env.map().start();
+    let table = serde_json::json!({ "actions": run.greedy_policy });
+    write(watch.out, "policy.json", table.to_string().as_bytes())?;
+    Ok(Some(Produced {
+        records: run.records,
+        demos: run.demos,
+        greedy: Some(greedy[s0]),
+        optimal: Some(vi.values[s0]),
+    }))
+}
+
+/// Runs a neural run whose environment or expert lives in Python pieces that it starts (see
+/// `local_remote`), and writes its weights; `None` when it stopped before its end.
+fn run_remote(watch: &Watch<'_>) -> anyhow::Result<Option<Produced>> {
+    let cfg = watch.cfg;
+    let (_adapters, envs, mut demonstrator) = crate::local_remote::start(cfg, watch.out)?;
+    let envs = match envs {
+        Some(envs) => envs,
+        None => NeuralEnvs {
+            env: alfd_common::env::vector_env(&cfg.env).context("a vector environment")?,
+            eval_env: alfd_common::env::vector_env(&cfg.env).context("a vector environment")?,
+        },
     };
-    let wall = start.elapsed().as_secs_f64();
-    bar.finish_and_clear();
+    let checkpoints = watch.resumable.checkpoints(RunState::neural, "neural")?;
+    let run = run_neural_on(
+        cfg,
+        envs,
+        demonstrator.as_mut(),
+        checkpoints,
+        |s| watch.save(RunState::Neural(Box::new(s.clone()))),
+        |r, _| watch.show(r),
+    )
+    .map_err(|e| match e {
+        RunError::Mismatch(e) => usage(format!("cannot resume from the checkpoint: {e}")),
+        RunError::Loop(e) => anyhow::Error::new(e).context("the run failed"),
+    })?;
+    if watch.interrupted()? {
+        return Ok(None);
+    }
+    neural_outputs(watch.out, run).map(Some)
+}
+
+/// Runs a neural run in this process and writes its weights; `None` when it stopped before
+/// its end.
+fn run_neural(
+    watch: &Watch<'_>,
+    demonstrator: &mut dyn Demonstrator<[f32]>,
+) -> anyhow::Result<Option<Produced>> {
+    let checkpoints = watch.resumable.checkpoints(RunState::neural, "neural")?;
+    let run = run_neural_checkpointed(
+        watch.cfg,
+        demonstrator,
+        checkpoints,
+        |s| watch.save(RunState::Neural(Box::new(s.clone()))),
+        |r, _| watch.show(r),
+    )
+    .map_err(|e| usage(format!("cannot resume from the checkpoint: {e}")))?;
+    if watch.interrupted()? {
+        return Ok(None);
+    }
+    neural_outputs(watch.out, run).map(Some)
+}
+
+/// Writes a neural run's `weights.safetensors`.
+fn neural_outputs(out: &Path, run: NeuralRun) -> anyhow::Result<Produced> {
+    write(
+        out,
+        "weights.safetensors",
+        &run.network.to_safetensors_bytes(),
+    )?;
+    Ok(Produced {
+        records: run.records,
+        demos: run.expert.demos().to_vec(),
+        greedy: None,
+        optimal: None,
+    })
+}
+
+/// Writes `episodes.csv`, `demos.jsonl` and `summary.json` of a run that ended after `wall`
+/// seconds.
+fn write_outputs(out: &Path, produced: Produced, wall: f64) -> anyhow::Result<RunSummary> {
+    let Produced {
+        records,
+        demos,
+        greedy,
+        optimal,
+    } = produced;
     write(out, "episodes.csv", episodes_csv(&records).as_bytes())?;
     write(out, "demos.jsonl", &demos_jsonl(&demos)?)?;
     let summary = RunSummary {
@@ -353,7 +440,7 @@ pub(crate) fn run_pieces(
         "summary.json",
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
-    Ok(Some(summary))
+    Ok(summary)
 }
 
 /// Whether the run stopped as asked (`--stop-after-episodes`); a checkpoint that could not be

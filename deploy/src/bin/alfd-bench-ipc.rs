@@ -16,8 +16,8 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use alfd_common::replay::Transition;
 use alfd_wire::{
     self as wire, command, process_state, progress_kind, Control, ControlWatch, Credits, Doorbell,
-    Process, Progress, QueryRequest, QueryResponse, Role, TransitionBatch, Wake, Wire,
-    SCHEMA_VERSION, TRANSITIONS_PER_BATCH,
+    Process, Progress, QueryRequest, QueryResponse, Role, Sender, TransitionBatch, Waiter, Wake,
+    Wire, SCHEMA_VERSION, TRANSITIONS_PER_BATCH,
 };
 use anyhow::{bail, Context as _};
 
@@ -356,98 +356,138 @@ fn peer(bench: Bench, run_id: &str, n: usize, ring: bool) -> anyhow::Result<()> 
     })?;
     let mut control = ControlWatch::new(&me)?;
     control.handshake(&waiter, Duration::from_secs(10))?;
-    let mut progress = me.progress_sender()?;
-    let ready = Progress {
-        kind: progress_kind::STATUS,
-        state: process_state::RUNNING,
-        ..Progress::default()
+    let progress = me.progress_sender()?;
+    let mut side = PeerSide {
+        progress,
+        control,
+        waiter,
     };
     match bench {
         Bench::QueryPoll | Bench::QueryBlock => {
-            let server = me.query_server()?;
-            let actors = me.bell(Doorbell::Actor(0))?;
-            progress.send(ready)?;
-            let block = bench == Bench::QueryBlock;
-            while !control.shutdown_requested() {
-                let mut answered = false;
-                while let Some(q) = server.receive()? {
-                    q.answer(QueryResponse {
-                        outcome: wire::outcome::ANSWERED,
-                        action: 1,
-                        ..QueryResponse::default()
-                    })?;
-                    answered = true;
-                }
-                if answered && block {
-                    actors.ring()?;
-                }
-                if block {
-                    waiter.wait(Duration::from_millis(100))?;
-                }
-                control.poll()?;
-            }
+            answer_queries(&me, &mut side, bench == Bench::QueryBlock)
         }
-        Bench::Transitions => {
-            let mut tx = me.transitions_sender()?;
-            let credits = me.credits_receiver()?;
-            let learner = me.bell(Doorbell::Learner)?;
-            progress.send(ready)?;
-            let t = Transition {
-                state: vec![0.1, 0.2, 0.3, 0.4],
+        Bench::Transitions => send_transitions(&me, &mut side, n, ring),
+        Bench::Weights => broadcast_weights(&me, &mut side),
+    }
+}
+
+/// What the peer holds in every benchmark once connected (dropped in this order).
+struct PeerSide<'w> {
+    progress: Sender<'w, Progress>,
+    control: ControlWatch<'w>,
+    waiter: Waiter,
+}
+
+impl PeerSide<'_> {
+    /// Tells the measuring process that the peer is running.
+    fn ready(&mut self) -> anyhow::Result<()> {
+        self.progress.send(Progress {
+            kind: progress_kind::STATUS,
+            state: process_state::RUNNING,
+            ..Progress::default()
+        })?;
+        Ok(())
+    }
+}
+
+/// The expert's side of the query benchmarks: answers every query until shut down; `block`:
+/// rings the actor after answering and sleeps on the expert's doorbell between rounds.
+fn answer_queries(me: &Wire, side: &mut PeerSide<'_>, block: bool) -> anyhow::Result<()> {
+    let server = me.query_server()?;
+    let actors = me.bell(Doorbell::Actor(0))?;
+    side.ready()?;
+    while !side.control.shutdown_requested() {
+        let mut answered = false;
+        while let Some(q) = server.receive()? {
+            q.answer(QueryResponse {
+                outcome: wire::outcome::ANSWERED,
                 action: 1,
-                reward: 1.0,
-                next_state: vec![0.2, 0.3, 0.4, 0.5],
-                terminated: false,
-                mask: vec![1.0, 0.0],
-                demo: false,
-                horizon: 1,
-            };
-            let mut sent = 0u64;
-            let mut granted = 0u64;
-            let mut since_poll = 0u32;
-            while sent < n as u64 && !control.shutdown_requested() {
-                if let Some(c) = credits.latest()? {
-                    granted = c.granted_for(0, 1).unwrap_or(granted);
-                }
-                if sent + TRANSITIONS_PER_BATCH as u64 <= granted {
-                    let mut b = TransitionBatch::new(0, 1, 4, 2, sent)?;
-                    for _ in 0..TRANSITIONS_PER_BATCH {
-                        b.push(&t)?;
-                    }
-                    tx.send(b)?;
-                    if ring {
-                        learner.ring()?;
-                    }
-                    sent += TRANSITIONS_PER_BATCH as u64;
-                }
-                since_poll += 1;
-                if since_poll > 10_000 {
-                    control.poll()?;
-                    since_poll = 0;
-                }
-            }
-            while !control.shutdown_requested() {
-                waiter.wait(Duration::from_millis(20))?;
-                control.poll()?;
-            }
+                ..QueryResponse::default()
+            })?;
+            answered = true;
         }
-        Bench::Weights => {
-            let mut tx = me.weights_sender(WEIGHTS_LEN)?;
-            progress.send(ready)?;
-            let w: Vec<f32> = (0..WEIGHTS_LEN).map(|i| i as f32 * 1e-3).collect();
-            let mut version = 0u64;
-            while !control.shutdown_requested() {
-                version += 1;
-                tx.publish(version, unix_ns(), 0, &w)?;
-                // One broadcast every 100 µs, about the learner's pace.
-                let t = Instant::now();
-                while t.elapsed() < Duration::from_micros(100) {
-                    std::hint::spin_loop();
-                }
-                if version.is_multiple_of(100) {
-                    control.poll()?;
-                }
+        if answered && block {
+            actors.ring()?;
+        }
+        if block {
+            side.waiter.wait(Duration::from_millis(100))?;
+        }
+        side.control.poll()?;
+    }
+    Ok(())
+}
+
+/// The actor's side of the transitions benchmark: sends `n` transitions in batches as the
+/// learner's credits allow (ringing the learner after each with `ring`), then waits for the
+/// shutdown.
+fn send_transitions(
+    me: &Wire,
+    side: &mut PeerSide<'_>,
+    n: usize,
+    ring: bool,
+) -> anyhow::Result<()> {
+    let mut tx = me.transitions_sender()?;
+    let credits = me.credits_receiver()?;
+    let learner = me.bell(Doorbell::Learner)?;
+    side.ready()?;
+    let t = Transition {
+        state: vec![0.1, 0.2, 0.3, 0.4],
+        action: 1,
+        reward: 1.0,
+        next_state: vec![0.2, 0.3, 0.4, 0.5],
+        terminated: false,
+        mask: vec![1.0, 0.0],
+        demo: false,
+        horizon: 1,
+    };
+    let mut sent = 0u64;
+    let mut granted = 0u64;
+    let mut since_poll = 0u32;
+    while sent < n as u64 && !side.control.shutdown_requested() {
+        if let Some(c) = credits.latest()? {
+            granted = c.granted_for(0, 1).unwrap_or(granted);
+        }
+        if sent + TRANSITIONS_PER_BATCH as u64 <= granted {
+            let mut b = TransitionBatch::new(0, 1, 4, 2, sent)?;
+            for _ in 0..TRANSITIONS_PER_BATCH {
+                b.push(&t)?;
             }
+            tx.send(b)?;
+            if ring {
+                learner.ring()?;
+            }
+            sent += TRANSITIONS_PER_BATCH as u64;
+        }
+        since_poll += 1;
+        if since_poll > 10_000 {
+            side.control.poll()?;
+            since_poll = 0;
+        }
+    }
+    while !side.control.shutdown_requested() {
+        side.waiter.wait(Duration::from_millis(20))?;
+        side.control.poll()?;
+    }
+    Ok(())
+}
+
+/// The learner's side of the weights benchmark: broadcasts the weights every 100 µs until shut
+/// down.
+fn broadcast_weights(me: &Wire, side: &mut PeerSide<'_>) -> anyhow::Result<()> {
+    let mut tx = me.weights_sender(WEIGHTS_LEN)?;
+    side.ready()?;
+    let w: Vec<f32> = (0..WEIGHTS_LEN).map(|i| i as f32 * 1e-3).collect();
+    let mut version = 0u64;
+    while !side.control.shutdown_requested() {
+        version += 1;
+        tx.publish(version, unix_ns(), 0, &w)?;
+        // One broadcast every 100 µs, about the learner's pace.
+        let t = Instant::now();
+        while t.elapsed() < Duration::from_micros(100) {
+            std::hint::spin_loop();
+        }
+        if version.is_multiple_of(100) {
+            side.control.poll()?;
         }
     }
     Ok(())

@@ -268,101 +268,13 @@ impl Experiment {
     /// Every method's config is loaded and checked, and its expert looked up, so that a bad entry
     /// is refused before anything runs.
     pub fn load(path: &Path, seeds: Option<u64>, episodes: Option<u32>) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| {
-            usage(format!(
-                "cannot read experiment file {}: {e}",
-                path.display()
-            ))
-        })?;
-        let file: ExperimentFile = toml::from_str(&text).map_err(|e| {
-            usage(format!(
-                "invalid experiment file {}: {}",
-                path.display(),
-                e.to_string().trim()
-            ))
-        })?;
-        let name = path
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .filter(|s| valid_name(s))
-            .ok_or_else(|| {
-                usage(format!(
-                    "experiment file {}: its name must be made of letters, digits, '-', '_' or '.'",
-                    path.display()
-                ))
-            })?
-            .to_owned();
-        let bad = |msg: String| usage(format!("experiment file {}: {msg}", path.display()));
-        let seeds = seeds.unwrap_or(file.seeds);
-        if seeds == 0 {
-            return Err(bad("`seeds` (or --seeds) must be at least 1, got 0".into()));
-        }
-        if seeds > MAX_SEEDS {
-            return Err(bad(format!(
-                "`seeds` (or --seeds) is {seeds}; at most {MAX_SEEDS} are allowed (every run's config is prepared before the first starts)"
-            )));
-        }
-        let episodes = episodes.or(file.episodes);
-        if episodes == Some(0) {
-            return Err(bad("`episodes` must be at least 1, got 0".into()));
-        }
-        if file.methods.is_empty() {
-            return Err(bad("no [[method]] entries".into()));
-        }
-        if let Some(t) = file.thresholds.iter().find(|t| !t.is_finite()) {
-            return Err(bad(format!("threshold {t} is not a finite number")));
-        }
-        if file.last == 0 {
-            return Err(bad("`last` must be at least 1".into()));
-        }
-        if file.smooth == 0 {
-            return Err(bad("`smooth` must be at least 1".into()));
-        }
-        let y_range = match file.y_range {
-            None => None,
-            Some([lo, hi]) if lo.is_finite() && hi.is_finite() && lo < hi => {
-                if file.log_y && lo <= 0.0 {
-                    return Err(bad("`y_range` must be positive with `log_y`".into()));
-                }
-                Some((lo, hi))
-            }
-            Some([lo, hi]) => return Err(bad(format!("`y_range` [{lo}, {hi}] is not a range"))),
-        };
-        if file.x.is_some() && file.kind != ExperimentKind::Training {
-            return Err(bad("`x` belongs to training experiments".into()));
-        }
-        let dir = path.parent().unwrap_or(Path::new("."));
-        let mut names = BTreeSet::new();
-        let mut methods = Vec::with_capacity(file.methods.len());
-        for m in &file.methods {
-            if !valid_name(&m.name) {
-                return Err(bad(format!(
-                    "method name `{}` must be made of letters, digits, '-', '_' or '.' (it names a directory)",
-                    m.name
-                )));
-            }
-            if !names.insert(m.name.clone()) {
-                return Err(bad(format!("method `{}` is listed twice", m.name)));
-            }
-            let method = Method {
-                name: m.name.clone(),
-                label: m.label.clone().unwrap_or_else(|| m.name.clone()),
-                spec: match file.kind {
-                    ExperimentKind::Training => training_spec(m, dir)
-                        .map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?,
-                    ExperimentKind::DemoModelPolicy => policy_spec(m, dir)
-                        .map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?,
-                },
-            };
-            if file.kind == ExperimentKind::Training {
-                let cfg = method
-                    .config(0, episodes)
-                    .map_err(|e| bad(format!("{e:#}")))?;
-                setup::check_demonstrator(&cfg)
-                    .map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?;
-            }
-            methods.push(method);
-        }
+        let (name, file) = read_file(path)?;
+        let Checked {
+            seeds,
+            episodes,
+            y_range,
+        } = check(&file, path, seeds, episodes)?;
+        let methods = load_methods(&file, path, episodes)?;
         Ok(Self {
             name,
             title: file.title,
@@ -384,6 +296,144 @@ impl Experiment {
             methods,
         })
     }
+}
+
+/// The experiment file at `path` as parsed, with the experiment's name (the file stem).
+fn read_file(path: &Path) -> anyhow::Result<(String, ExperimentFile)> {
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        usage(format!(
+            "cannot read experiment file {}: {e}",
+            path.display()
+        ))
+    })?;
+    let file: ExperimentFile = toml::from_str(&text).map_err(|e| {
+        usage(format!(
+            "invalid experiment file {}: {}",
+            path.display(),
+            e.to_string().trim()
+        ))
+    })?;
+    let name = path
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .filter(|s| valid_name(s))
+        .ok_or_else(|| {
+            usage(format!(
+                "experiment file {}: its name must be made of letters, digits, '-', '_' or '.'",
+                path.display()
+            ))
+        })?
+        .to_owned();
+    Ok((name, file))
+}
+
+/// A usage error about the experiment file at `path`.
+fn invalid(path: &Path, msg: String) -> anyhow::Error {
+    usage(format!("experiment file {}: {msg}", path.display()))
+}
+
+/// The experiment's settings that [`check`] resolves.
+struct Checked {
+    seeds: u64,
+    episodes: Option<u32>,
+    y_range: Option<(f64, f64)>,
+}
+
+/// Validates the settings of `file` (at `path`) other than its methods; `seeds` and `episodes`
+/// override the file's.
+fn check(
+    file: &ExperimentFile,
+    path: &Path,
+    seeds: Option<u64>,
+    episodes: Option<u32>,
+) -> anyhow::Result<Checked> {
+    let bad = |msg: String| invalid(path, msg);
+    let seeds = seeds.unwrap_or(file.seeds);
+    if seeds == 0 {
+        return Err(bad("`seeds` (or --seeds) must be at least 1, got 0".into()));
+    }
+    if seeds > MAX_SEEDS {
+        return Err(bad(format!(
+            "`seeds` (or --seeds) is {seeds}; at most {MAX_SEEDS} are allowed (every run's config is prepared before the first starts)"
+        )));
+    }
+    let episodes = episodes.or(file.episodes);
+    if episodes == Some(0) {
+        return Err(bad("`episodes` must be at least 1, got 0".into()));
+    }
+    if file.methods.is_empty() {
+        return Err(bad("no [[method]] entries".into()));
+    }
+    if let Some(t) = file.thresholds.iter().find(|t| !t.is_finite()) {
+        return Err(bad(format!("threshold {t} is not a finite number")));
+    }
+    if file.last == 0 {
+        return Err(bad("`last` must be at least 1".into()));
+    }
+    if file.smooth == 0 {
+        return Err(bad("`smooth` must be at least 1".into()));
+    }
+    let y_range = match file.y_range {
+        None => None,
+        Some([lo, hi]) if lo.is_finite() && hi.is_finite() && lo < hi => {
+            if file.log_y && lo <= 0.0 {
+                return Err(bad("`y_range` must be positive with `log_y`".into()));
+            }
+            Some((lo, hi))
+        }
+        Some([lo, hi]) => return Err(bad(format!("`y_range` [{lo}, {hi}] is not a range"))),
+    };
+    if file.x.is_some() && file.kind != ExperimentKind::Training {
+        return Err(bad("`x` belongs to training experiments".into()));
+    }
+    Ok(Checked {
+        seeds,
+        episodes,
+        y_range,
+    })
+}
+
+/// The methods of `file` (at `path`), each validated; a training method's config is built (with
+/// `episodes`) and its demonstrator checked.
+fn load_methods(
+    file: &ExperimentFile,
+    path: &Path,
+    episodes: Option<u32>,
+) -> anyhow::Result<Vec<Method>> {
+    let bad = |msg: String| invalid(path, msg);
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut names = BTreeSet::new();
+    let mut methods = Vec::with_capacity(file.methods.len());
+    for m in &file.methods {
+        if !valid_name(&m.name) {
+            return Err(bad(format!(
+                "method name `{}` must be made of letters, digits, '-', '_' or '.' (it names a directory)",
+                m.name
+            )));
+        }
+        if !names.insert(m.name.clone()) {
+            return Err(bad(format!("method `{}` is listed twice", m.name)));
+        }
+        let spec = match file.kind {
+            ExperimentKind::Training => training_spec(m, dir),
+            ExperimentKind::DemoModelPolicy => policy_spec(m, dir),
+        }
+        .map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?;
+        let method = Method {
+            name: m.name.clone(),
+            label: m.label.clone().unwrap_or_else(|| m.name.clone()),
+            spec,
+        };
+        if file.kind == ExperimentKind::Training {
+            let cfg = method
+                .config(0, episodes)
+                .map_err(|e| bad(format!("{e:#}")))?;
+            setup::check_demonstrator(&cfg)
+                .map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?;
+        }
+        methods.push(method);
+    }
+    Ok(methods)
 }
 
 fn training_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {

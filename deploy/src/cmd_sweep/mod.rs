@@ -206,41 +206,11 @@ struct Job<'a> {
 
 fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
     let exp = ctx.exp;
-    // Every run's config first, seed-major so that an interrupted sweep has whole seeds done.
-    let mut pending = Vec::new();
-    let mut resumed = 0u64;
-    let mut total = 0u64;
-    for seed in exp.seed_range() {
-        for (m, method) in exp.methods.iter().enumerate() {
-            if let Mode::Shard(s) = ctx.mode {
-                if !s.owns(shard::index_of(exp, m, seed)) {
-                    continue;
-                }
-            }
-            total += 1;
-            let mut cfg = method.config(seed, exp.episodes)?;
-            // A matched control's schedule names another method's runs of this sweep: `{out}`
-            // is the sweep's directory, `{other_seed}` the sweep's next seed (the last one's is
-            // the first).
-            if let Some(path) = &mut cfg.query.schedule {
-                let other = exp.first_seed + (seed - exp.first_seed + 1) % exp.seeds;
-                *path = path
-                    .replace("{out}", &ctx.out.display().to_string())
-                    .replace("{other_seed}", &other.to_string());
-            }
-            let dir = run_dir(ctx.out, &method.name, seed);
-            if is_complete(&dir, &cfg)? {
-                resumed += 1;
-            } else {
-                pending.push(Job {
-                    method,
-                    seed,
-                    dir,
-                    cfg,
-                });
-            }
-        }
-    }
+    let Planned {
+        pending,
+        resumed,
+        total,
+    } = plan_training(ctx)?;
     if ctx.mode == Mode::Collect && !pending.is_empty() {
         anyhow::bail!(
             "--collect: {} runs are still missing in {} after copying the shards'",
@@ -262,44 +232,10 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
         return shard::finish(exp, s, ctx.out, ctx.output, pending_len, resumed, wall);
     }
 
-    let mut results = Vec::with_capacity(exp.methods.len());
-    let mut all_runs = Vec::with_capacity(exp.methods.len());
-    let mut by_budget = budget::Table::new();
-    for method in &exp.methods {
-        let runs = read_runs(ctx.out, method, exp.seed_range())?;
-        let own;
-        let curve_runs = if exp.learner_episodes_only {
-            own = with_episodes(&runs, summary::Episodes::without_expert);
-            &own
-        } else {
-            &runs
-        };
-        results.push(summary::analyse(method, curve_runs, exp)?);
-        if exp.by_budget {
-            let cfg = method.config(exp.first_seed, exp.episodes)?;
-            let cell = budget::cell(&runs, exp.eval_threshold, &method.name);
-            by_budget
-                .entry(budget::row_name(&cfg))
-                .or_default()
-                .insert(cfg.budget(), cell);
-        }
-        all_runs.push(runs);
-    }
-    let plotted = write_curves(ctx, &results, "curves.csv", &exp.name, "return")?;
+    let analysed = analyse_training(ctx)?;
+    let plotted = write_curves(ctx, &analysed.results, "curves.csv", &exp.name, "return")?;
     let wall = ctx.start.elapsed().as_secs_f64();
-    let mut md = summary::training_summary(ctx, &results, pending_len, resumed, wall, &plotted);
-    if exp.learner_episodes_only {
-        md.push_str(
-            "\nThe training-return curves, crossings, areas and final returns leave out the \
-             episodes in which the expert acted: they are the learner's own play.\n",
-        );
-    }
-    if exp.eval_curves {
-        md.push_str(&eval_curves(ctx, &all_runs)?);
-    }
-    if exp.by_budget {
-        md.push_str(&budget_section(ctx, &by_budget)?);
-    }
+    let md = training_markdown(ctx, &analysed, pending_len, resumed, wall, &plotted)?;
     write(ctx.out, "summary.md", md.as_bytes())?;
     let line = format!(
         "sweep {}: {} runs, {} run now, {} resumed (complete already), {:.1} s; see {}",
@@ -322,6 +258,132 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
         line,
     )
     .print(ctx.output)
+}
+
+/// The runs of a training sweep (of its shard, with `--shard`): those still to run, and how many
+/// are complete already out of how many.
+struct Planned<'a> {
+    pending: Vec<Job<'a>>,
+    resumed: u64,
+    total: u64,
+}
+
+/// Every run's config first, seed-major so that an interrupted sweep has whole seeds done.
+fn plan_training<'a>(ctx: &Ctx<'a>) -> anyhow::Result<Planned<'a>> {
+    let exp = ctx.exp;
+    let mut planned = Planned {
+        pending: Vec::new(),
+        resumed: 0,
+        total: 0,
+    };
+    for seed in exp.seed_range() {
+        for (m, method) in exp.methods.iter().enumerate() {
+            if let Mode::Shard(s) = ctx.mode {
+                if !s.owns(shard::index_of(exp, m, seed)) {
+                    continue;
+                }
+            }
+            planned.total += 1;
+            let cfg = job_config(ctx, method, seed)?;
+            let dir = run_dir(ctx.out, &method.name, seed);
+            if is_complete(&dir, &cfg)? {
+                planned.resumed += 1;
+            } else {
+                planned.pending.push(Job {
+                    method,
+                    seed,
+                    dir,
+                    cfg,
+                });
+            }
+        }
+    }
+    Ok(planned)
+}
+
+/// The config of `method`'s run with `seed` in this sweep.
+fn job_config(ctx: &Ctx, method: &Method, seed: u64) -> anyhow::Result<ExperimentConfig> {
+    let exp = ctx.exp;
+    let mut cfg = method.config(seed, exp.episodes)?;
+    // A matched control's schedule names another method's runs of this sweep: `{out}` is the
+    // sweep's directory, `{other_seed}` the sweep's next seed (the last one's is the first).
+    if let Some(path) = &mut cfg.query.schedule {
+        let other = exp.first_seed + (seed - exp.first_seed + 1) % exp.seeds;
+        *path = path
+            .replace("{out}", &ctx.out.display().to_string())
+            .replace("{other_seed}", &other.to_string());
+    }
+    Ok(cfg)
+}
+
+/// What a training sweep's runs add up to, per method in the experiment's order.
+struct Analysed<'a> {
+    results: Vec<summary::MethodResult<'a>>,
+    /// Each method's runs, as read back.
+    all_runs: Vec<Vec<summary::Run>>,
+    /// The query-rule view, filled when the experiment asks for `by_budget`.
+    by_budget: budget::Table,
+}
+
+/// Reads back every method's runs and analyses them.
+fn analyse_training<'a>(ctx: &Ctx<'a>) -> anyhow::Result<Analysed<'a>> {
+    let exp = ctx.exp;
+    let mut analysed = Analysed {
+        results: Vec::with_capacity(exp.methods.len()),
+        all_runs: Vec::with_capacity(exp.methods.len()),
+        by_budget: budget::Table::new(),
+    };
+    for method in &exp.methods {
+        let runs = read_runs(ctx.out, method, exp.seed_range())?;
+        let own;
+        let curve_runs = if exp.learner_episodes_only {
+            own = with_episodes(&runs, summary::Episodes::without_expert);
+            &own
+        } else {
+            &runs
+        };
+        analysed
+            .results
+            .push(summary::analyse(method, curve_runs, exp)?);
+        if exp.by_budget {
+            let cfg = method.config(exp.first_seed, exp.episodes)?;
+            let cell = budget::cell(&runs, exp.eval_threshold, &method.name);
+            analysed
+                .by_budget
+                .entry(budget::row_name(&cfg))
+                .or_default()
+                .insert(cfg.budget(), cell);
+        }
+        analysed.all_runs.push(runs);
+    }
+    Ok(analysed)
+}
+
+/// The `summary.md` of a training sweep; writes the files of its evaluation-curve and
+/// query-rule sections when the experiment asks for them.
+fn training_markdown(
+    ctx: &Ctx,
+    analysed: &Analysed<'_>,
+    run_now: usize,
+    resumed: u64,
+    wall: f64,
+    plotted: &[String],
+) -> anyhow::Result<String> {
+    let exp = ctx.exp;
+    let mut md = summary::training_summary(ctx, &analysed.results, run_now, resumed, wall, plotted);
+    if exp.learner_episodes_only {
+        md.push_str(
+            "\nThe training-return curves, crossings, areas and final returns leave out the \
+             episodes in which the expert acted: they are the learner's own play.\n",
+        );
+    }
+    if exp.eval_curves {
+        md.push_str(&eval_curves(ctx, &analysed.all_runs)?);
+    }
+    if exp.by_budget {
+        md.push_str(&budget_section(ctx, &analysed.by_budget)?);
+    }
+    Ok(md)
 }
 
 /// The end of a sweep, for [`SweepReport::print`].
@@ -707,12 +769,34 @@ fn write_plot_as(
 fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
     let exp = ctx.exp;
     let total = exp.seeds * exp.methods.len() as u64;
+    let results = play_policies(ctx, total)?;
+    write(ctx.out, "returns.csv", returns_csv(&results).as_bytes())?;
+    let plotted = write_plot(ctx, &sorted_returns(&results), "run, sorted by return")?;
+    let wall = ctx.start.elapsed().as_secs_f64();
+    let md = policy_markdown(ctx, &results, wall, &plotted);
+    write(ctx.out, "summary.md", md.as_bytes())?;
+    let line = format!(
+        "sweep {}: {total} runs, {wall:.1} s; see {}",
+        exp.name,
+        ctx.out.join("summary.md").display()
+    );
+    let files = ["summary.md", "returns.csv"].map(str::to_owned);
+    let n = usize::try_from(total).unwrap_or(usize::MAX);
+    sweep_report(ctx, total, n, 0, wall, &files, &plotted, line).print(ctx.output)
+}
+
+/// Each method's runs of a demo-model-policy sweep, in the experiment's order.
+type PolicyResults<'a> = Vec<(&'a Method, Vec<PolicyRun>)>;
+
+/// Plays every seed of every method, showing progress over the `total` runs.
+fn play_policies<'a>(ctx: &Ctx<'a>, total: u64) -> anyhow::Result<PolicyResults<'a>> {
+    let exp = ctx.exp;
     let bar = if ctx.progress {
         indicatif::ProgressBar::new(total)
     } else {
         indicatif::ProgressBar::hidden()
     };
-    let mut results: Vec<(&Method, Vec<PolicyRun>)> = Vec::new();
+    let mut results: PolicyResults<'a> = Vec::new();
     for method in &exp.methods {
         let MethodSpec::DemoModelPolicy {
             expert,
@@ -733,14 +817,23 @@ fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
         results.push((method, runs));
     }
     bar.finish_and_clear();
+    Ok(results)
+}
+
+/// `returns.csv`: `method,seed,return,length` of every run.
+fn returns_csv(results: &PolicyResults) -> String {
     let mut csv = String::from("method,seed,return,length\n");
-    for (m, runs) in &results {
+    for (m, runs) in results {
         for r in runs {
             let _ = writeln!(csv, "{},{},{},{}", m.name, r.seed, r.ret, r.length);
         }
     }
-    write(ctx.out, "returns.csv", csv.as_bytes())?;
-    let series: Vec<plot::Series> = results
+    csv
+}
+
+/// Each method's returns in increasing order, against the run's rank.
+fn sorted_returns(results: &PolicyResults) -> Vec<plot::Series> {
+    results
         .iter()
         .map(|(m, runs)| {
             let mut y: Vec<f64> = runs.iter().map(|r| r.ret).collect();
@@ -753,9 +846,12 @@ fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
                 hi: Vec::new(),
             }
         })
-        .collect();
-    let plotted = write_plot(ctx, &series, "run, sorted by return")?;
-    let wall = ctx.start.elapsed().as_secs_f64();
+        .collect()
+}
+
+/// The `summary.md` of a demo-model-policy sweep that took `wall` seconds.
+fn policy_markdown(ctx: &Ctx, results: &PolicyResults, wall: f64, plotted: &[String]) -> String {
+    let exp = ctx.exp;
     let mut md = String::new();
     let _ = writeln!(
         md,
@@ -775,12 +871,23 @@ fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
         exp.last_seed()
     );
     let _ = writeln!(md, "Command: `{}`\n", ctx.command);
+    policy_table(&mut md, results);
+    let _ = writeln!(
+        md,
+        "\n{wall:.1} s wall-clock. Plot: {} (each run's return, sorted).",
+        plotted.join(", ")
+    );
+    md
+}
+
+/// The table of `summary.md` of a demo-model-policy sweep: one row per method.
+fn policy_table(md: &mut String, results: &PolicyResults) {
     let _ = writeln!(
         md,
         "| method | expert | demos | source | model | runs | median | mean | std | min | max |"
     );
     let _ = writeln!(md, "|---|---|---:|---|---|---:|---:|---:|---:|---:|---:|");
-    for (m, runs) in &results {
+    for (m, runs) in results {
         let MethodSpec::DemoModelPolicy {
             expert,
             model,
@@ -805,18 +912,4 @@ fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
             s.std
         );
     }
-    let _ = writeln!(
-        md,
-        "\n{wall:.1} s wall-clock. Plot: {} (each run's return, sorted).",
-        plotted.join(", ")
-    );
-    write(ctx.out, "summary.md", md.as_bytes())?;
-    let line = format!(
-        "sweep {}: {total} runs, {wall:.1} s; see {}",
-        exp.name,
-        ctx.out.join("summary.md").display()
-    );
-    let files = ["summary.md", "returns.csv"].map(str::to_owned);
-    let n = usize::try_from(total).unwrap_or(usize::MAX);
-    sweep_report(ctx, total, n, 0, wall, &files, &plotted, line).print(ctx.output)
 }

@@ -2,6 +2,7 @@
 //! write it), rasterised to PNG by `crate::output::png_from_svg`.
 
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -51,10 +52,10 @@ const PALETTE: [RGBColor; 10] = [
     RGBColor(23, 190, 207),
 ];
 
-/// The plot as an SVG document.
 /// Series of at most this many points get a marker at each.
 const MARKED_POINTS: usize = 12;
 
+/// The plot as an SVG document.
 pub fn svg(plot: &Plot) -> anyhow::Result<String> {
     let mut out = String::new();
     {
@@ -111,8 +112,7 @@ where
     Y: AsRangedCoord<Value = f64>,
     Y::CoordDescType: ValueFormatter<f64>,
 {
-    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("drawing the plot: {e}");
-    root.fill(&WHITE).map_err(err)?;
+    root.fill(&WHITE).map_err(drawing_error)?;
     let x_max = plot
         .series
         .iter()
@@ -124,7 +124,7 @@ where
         .x_label_area_size(48)
         .y_label_area_size(72)
         .build_cartesian_2d(0.0..x_max, y_spec)
-        .map_err(err)?;
+        .map_err(drawing_error)?;
     chart
         .configure_mesh()
         .x_desc(plot.x_desc)
@@ -136,64 +136,108 @@ where
         .light_line_style(RGBColor(235, 235, 235))
         .bold_line_style(RGBColor(205, 205, 205))
         .draw()
-        .map_err(err)?;
+        .map_err(drawing_error)?;
     let clamp = |v: f64| v.clamp(y_lo, y_hi);
     for (i, s) in plot.series.iter().enumerate() {
-        let color = PALETTE[i % PALETTE.len()];
-        let edges: Vec<(f64, f64, f64)> =
-            s.x.iter()
-                .zip(&s.lo)
-                .zip(&s.hi)
-                .filter(|((_, l), h)| l.is_finite() && h.is_finite())
-                .map(|((&x, &l), &h)| (x, clamp(l), clamp(h)))
-                .collect();
-        // A band needs two x values (one point has no area: nothing to draw).
-        if edges.len() >= 2 {
-            let band: Vec<(f64, f64)> = edges
-                .iter()
-                .map(|&(x, _, h)| (x, h))
-                .chain(edges.iter().rev().map(|&(x, l, _)| (x, l)))
-                .collect();
-            chart
-                .draw_series(std::iter::once(Polygon::new(
-                    band,
-                    color.mix(0.10).filled(),
-                )))
-                .map_err(err)?;
-        }
+        draw_band(&mut chart, s, PALETTE[i % PALETTE.len()], clamp)?;
     }
     for (i, s) in plot.series.iter().enumerate() {
-        let color = PALETTE[i % PALETTE.len()];
-        let points: Vec<(f64, f64)> = s.x.iter().zip(&s.y).map(|(&x, &y)| (x, clamp(y))).collect();
-        // Few points (a plot against B): each marked; one point: a marker alone, no line.
-        if (2..=MARKED_POINTS).contains(&points.len()) {
-            chart
-                .draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())))
-                .map_err(err)?;
-        }
-        let drawn = if points.len() >= 2 {
-            chart.draw_series(LineSeries::new(points, color.stroke_width(2)))
-        } else {
-            chart.draw_series(
-                points
-                    .into_iter()
-                    .map(|p| Circle::new(p, 4, color.filled())),
-            )
-        };
-        drawn
-            .map_err(err)?
-            // The legend box is sized from an estimate of the text's width that runs short for
-            // common fonts; trailing spaces (not rendered) widen it.
-            .label(format!("{}{}", s.label, " ".repeat(2 + s.label.len() / 5)))
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
-            });
+        draw_line(&mut chart, s, PALETTE[i % PALETTE.len()], clamp)?;
     }
+    draw_legend(&mut chart, plot)
+}
+
+/// A chart whose x axis is linear and whose y axis is `Y` (linear or log).
+type Chart<'a, DB, Y> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, Y>>;
+
+/// The error of a drawing step of the plot.
+fn drawing_error<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> anyhow::Error {
+    anyhow::anyhow!("drawing the plot: {e}")
+}
+
+/// The band of `s` in `color`, its edges brought into the y range by `clamp`.
+fn draw_band<'a, DB, Y>(
+    chart: &mut Chart<'a, DB, Y>,
+    s: &Series,
+    color: RGBColor,
+    clamp: impl Fn(f64) -> f64,
+) -> anyhow::Result<()>
+where
+    DB: DrawingBackend + 'a,
+    Y: Ranged<ValueType = f64>,
+{
+    let edges: Vec<(f64, f64, f64)> =
+        s.x.iter()
+            .zip(&s.lo)
+            .zip(&s.hi)
+            .filter(|((_, l), h)| l.is_finite() && h.is_finite())
+            .map(|((&x, &l), &h)| (x, clamp(l), clamp(h)))
+            .collect();
+    // A band needs two x values (one point has no area: nothing to draw).
+    if edges.len() >= 2 {
+        let band: Vec<(f64, f64)> = edges
+            .iter()
+            .map(|&(x, _, h)| (x, h))
+            .chain(edges.iter().rev().map(|&(x, l, _)| (x, l)))
+            .collect();
+        chart
+            .draw_series(std::iter::once(Polygon::new(
+                band,
+                color.mix(0.10).filled(),
+            )))
+            .map_err(drawing_error)?;
+    }
+    Ok(())
+}
+
+/// The line of `s` in `color` (markers when it has few points), its values brought into the y
+/// range by `clamp`, with its legend entry.
+fn draw_line<'a, DB, Y>(
+    chart: &mut Chart<'a, DB, Y>,
+    s: &Series,
+    color: RGBColor,
+    clamp: impl Fn(f64) -> f64,
+) -> anyhow::Result<()>
+where
+    DB: DrawingBackend + 'a,
+    Y: Ranged<ValueType = f64>,
+{
+    let points: Vec<(f64, f64)> = s.x.iter().zip(&s.y).map(|(&x, &y)| (x, clamp(y))).collect();
+    // Few points (a plot against B): each marked; one point: a marker alone, no line.
+    if (2..=MARKED_POINTS).contains(&points.len()) {
+        chart
+            .draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())))
+            .map_err(drawing_error)?;
+    }
+    let drawn = if points.len() >= 2 {
+        chart.draw_series(LineSeries::new(points, color.stroke_width(2)))
+    } else {
+        chart.draw_series(
+            points
+                .into_iter()
+                .map(|p| Circle::new(p, 4, color.filled())),
+        )
+    };
+    drawn
+        .map_err(drawing_error)?
+        // The legend box is sized from an estimate of the text's width that runs short for
+        // common fonts; trailing spaces (not rendered) widen it.
+        .label(format!("{}{}", s.label, " ".repeat(2 + s.label.len() / 5)))
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3)));
+    Ok(())
+}
+
+/// The legend: the lines' entries, then the bands' description when the plot has one.
+fn draw_legend<'a, DB, Y>(chart: &mut Chart<'a, DB, Y>, plot: &Plot) -> anyhow::Result<()>
+where
+    DB: DrawingBackend + 'a,
+    Y: Ranged<ValueType = f64>,
+{
     if let Some(desc) = plot.band_desc {
         let grey = RGBColor(90, 90, 90);
         chart
             .draw_series(std::iter::empty::<Polygon<(f64, f64)>>())
-            .map_err(err)?
+            .map_err(drawing_error)?
             .label(format!("{desc}{}", " ".repeat(2 + desc.len() / 5)))
             .legend(move |(x, y)| {
                 Rectangle::new([(x, y - 5), (x + 24, y + 5)], grey.mix(0.25).filled())
@@ -211,7 +255,7 @@ where
         .background_style(WHITE.mix(0.85))
         .border_style(RGBColor(160, 160, 160))
         .draw()
-        .map_err(err)?;
+        .map_err(drawing_error)?;
     Ok(())
 }
 
@@ -226,7 +270,6 @@ fn format_number(v: f64) -> String {
     }
 }
 
-/// Font families the PNG prefers for `sans-serif`, in order, before any other installed family.
 #[cfg(test)]
 mod tests {
     use super::*;

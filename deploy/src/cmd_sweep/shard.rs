@@ -22,6 +22,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use alfd_common::checkpoint::fnv1a64;
+use alfd_common::config::ExperimentConfig;
 use anyhow::Context as _;
 use serde::{Deserialize, Serialize};
 
@@ -295,45 +296,31 @@ pub fn finish(
 /// `--collect`: checks the shard directories (see the module's doc) and copies their runs into
 /// `OUT/runs/`. Anything wrong with a shard is bad input naming its directory.
 pub fn collect(exp: &Experiment, dirs: &[PathBuf], out: &Path) -> anyhow::Result<()> {
+    let (n, seen) = check_shards(exp, dirs)?;
+    let copies = checked_copies(exp, n, &seen, out)?;
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create output directory {}", out.display()))?;
+    for (src, dst, cfg) in copies {
+        if is_complete(&dst, &cfg)? {
+            continue; // Collected before, or `OUT` is this shard's directory.
+        }
+        let _lock = crate::run_dir::lock(&dst)?;
+        copy_run(&src, &dst)?;
+    }
+    Ok(())
+}
+
+/// Checks that `dirs` are complete shards of `exp`, each shard of the split exactly once;
+/// returns the number of shards and each one's directory by index.
+fn check_shards<'d>(
+    exp: &Experiment,
+    dirs: &'d [PathBuf],
+) -> anyhow::Result<(u64, BTreeMap<u64, &'d Path>)> {
     let (hash, _) = fingerprint(exp)?;
     let mut count = None;
     let mut seen: BTreeMap<u64, &Path> = BTreeMap::new();
     for dir in dirs {
-        if !dir.is_dir() {
-            return Err(usage(format!(
-                "--collect {}: no such directory",
-                dir.display()
-            )));
-        }
-        let file = read_shard_file(dir)?.ok_or_else(|| {
-            usage(format!(
-                "--collect {}: not a shard (no {SHARD_FILE}; shards are made by `alfd sweep \
-                 --shard I/N`)",
-                dir.display()
-            ))
-        })?;
-        if file.experiment != exp.name || file.experiment_hash != hash {
-            return Err(usage(format!(
-                "--collect {}: a shard of another experiment (`{}`, hash {}) than the --config \
-                 one (`{}`, hash {hash}; give --seeds, --first-seed and --episodes as the shards had them)",
-                dir.display(),
-                file.experiment,
-                file.experiment_hash,
-                exp.name
-            )));
-        }
-        let n = *count.get_or_insert(file.shards);
-        if file.shards != n {
-            return Err(usage(format!(
-                "--collect {}: shard {}/{} of a split into {} shards, the others are of {n}",
-                dir.display(),
-                file.shard,
-                file.shards,
-                file.shards
-            )));
-        }
-        let shard = Shard::parse(&format!("{}/{}", file.shard, file.shards))
-            .map_err(|e| usage(format!("--collect {}: {e:#}", dir.display())))?;
+        let (file, shard) = read_shard(exp, &hash, dir, &mut count)?;
         if let Some(other) = seen.insert(shard.index, dir) {
             return Err(usage(format!(
                 "--collect {}: shard {shard} is given twice (also {})",
@@ -372,10 +359,66 @@ pub fn collect(exp: &Experiment, dirs: &[PathBuf], out: &Path) -> anyhow::Result
             given.join(", ")
         )));
     }
-    // Every run of every shard is complete and of this experiment's config, before anything is
-    // copied.
+    Ok((n, seen))
+}
+
+/// Reads the shard file of `dir` and checks that it is a shard of `exp` (whose fingerprint is
+/// `hash`) in a split into as many shards as `count` (set by the first shard read).
+fn read_shard(
+    exp: &Experiment,
+    hash: &str,
+    dir: &Path,
+    count: &mut Option<u64>,
+) -> anyhow::Result<(ShardFile, Shard)> {
+    if !dir.is_dir() {
+        return Err(usage(format!(
+            "--collect {}: no such directory",
+            dir.display()
+        )));
+    }
+    let file = read_shard_file(dir)?.ok_or_else(|| {
+        usage(format!(
+            "--collect {}: not a shard (no {SHARD_FILE}; shards are made by `alfd sweep \
+             --shard I/N`)",
+            dir.display()
+        ))
+    })?;
+    if file.experiment != exp.name || file.experiment_hash != hash {
+        return Err(usage(format!(
+            "--collect {}: a shard of another experiment (`{}`, hash {}) than the --config \
+             one (`{}`, hash {hash}; give --seeds, --first-seed and --episodes as the shards had them)",
+            dir.display(),
+            file.experiment,
+            file.experiment_hash,
+            exp.name
+        )));
+    }
+    let n = *count.get_or_insert(file.shards);
+    if file.shards != n {
+        return Err(usage(format!(
+            "--collect {}: shard {}/{} of a split into {} shards, the others are of {n}",
+            dir.display(),
+            file.shard,
+            file.shards,
+            file.shards
+        )));
+    }
+    let shard = Shard::parse(&format!("{}/{}", file.shard, file.shards))
+        .map_err(|e| usage(format!("--collect {}: {e:#}", dir.display())))?;
+    Ok((file, shard))
+}
+
+/// The copies (source, destination in `out`, config) of every run of the `n` shards in `seen`,
+/// after checking that each is complete and of this experiment's config: nothing is copied
+/// before every run is checked.
+fn checked_copies(
+    exp: &Experiment,
+    n: u64,
+    seen: &BTreeMap<u64, &Path>,
+    out: &Path,
+) -> anyhow::Result<Vec<(PathBuf, PathBuf, ExperimentConfig)>> {
     let mut copies = Vec::new();
-    for (&i, dir) in &seen {
+    for (&i, dir) in seen {
         for run in runs_of(exp, Shard { index: i, count: n }) {
             let m = exp
                 .methods
@@ -396,16 +439,7 @@ pub fn collect(exp: &Experiment, dirs: &[PathBuf], out: &Path) -> anyhow::Result
             copies.push((src, run_dir(out, &run.method, run.seed), cfg));
         }
     }
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("cannot create output directory {}", out.display()))?;
-    for (src, dst, cfg) in copies {
-        if is_complete(&dst, &cfg)? {
-            continue; // Collected before, or `OUT` is this shard's directory.
-        }
-        let _lock = crate::run_dir::lock(&dst)?;
-        copy_run(&src, &dst)?;
-    }
-    Ok(())
+    Ok(copies)
 }
 
 /// Copies a complete run's files from `src` into `dst` (created), `summary.json` last so that the

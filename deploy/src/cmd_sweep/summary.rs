@@ -426,6 +426,37 @@ pub fn training_summary(
         episodes
     );
     let _ = writeln!(md, "Command: `{}`\n", ctx.command);
+    curves_explanation(&mut md, exp, x_word, x_desc);
+    curves_table(&mut md, exp, results);
+    eval_table(&mut md, results);
+    runs_table(&mut md, exp, results);
+    let _ = writeln!(
+        md,
+        "\nSweep: {} runs ({ran} run now, {resumed} resumed), {} jobs, {wall:.1} s wall-clock.\n",
+        results.len() as u64 * exp.seeds,
+        ctx.jobs
+    );
+    let _ = writeln!(
+        md,
+        "Plot: {} — the line is the mean return over the seeds, the band its 95% bootstrap \
+         confidence interval{}.",
+        plotted.join(", "),
+        if exp.smooth > 1 {
+            format!(
+                ", both smoothed by a centred {}-{} moving average",
+                exp.smooth,
+                smooth_unit(exp.x)
+            )
+        } else {
+            String::new()
+        }
+    );
+    md
+}
+
+/// The "Learning curves" heading and what its table's numbers are, the x axis being `x_desc`
+/// counted in `x_word`s.
+fn curves_explanation(md: &mut String, exp: &Experiment, x_word: &str, x_desc: &str) {
     let _ = writeln!(md, "## Learning curves\n");
     let _ = writeln!(
         md,
@@ -451,55 +482,36 @@ pub fn training_summary(
             ),
         }
     );
-    curves_table(&mut md, exp, results);
-    if results.iter().any(|r| r.eval.is_some()) {
-        let _ = writeln!(
-            md,
-            "\n## Greedy evaluation\n\n\"eval seeds\": the seeds whose `episodes.csv` records an \
-             evaluation (`eval_return`); for each, its last one; \"final eval\": their mean, \
-             \"IQM final eval\": their interquartile mean, with 95% bootstrap intervals.\n"
-        );
-        let _ = writeln!(
-            md,
-            "| method | eval seeds | final eval | IQM final eval |\n|---|---:|---:|---:|"
-        );
-        for r in results {
-            let _ = match &r.eval {
-                Some(e) => writeln!(
-                    md,
-                    "| {} | {} | {} | {} |",
-                    r.method.name,
-                    e.seeds,
-                    estimate(&e.mean),
-                    estimate(&e.iqm)
-                ),
-                None => writeln!(md, "| {} | 0 | — | — |", r.method.name),
-            };
-        }
+}
+
+/// The "Greedy evaluation" section, when a method's runs record an evaluation.
+fn eval_table(md: &mut String, results: &[MethodResult]) {
+    if !results.iter().any(|r| r.eval.is_some()) {
+        return;
     }
-    runs_table(&mut md, exp, results);
     let _ = writeln!(
         md,
-        "\nSweep: {} runs ({ran} run now, {resumed} resumed), {} jobs, {wall:.1} s wall-clock.\n",
-        results.len() as u64 * exp.seeds,
-        ctx.jobs
+        "\n## Greedy evaluation\n\n\"eval seeds\": the seeds whose `episodes.csv` records an \
+         evaluation (`eval_return`); for each, its last one; \"final eval\": their mean, \
+         \"IQM final eval\": their interquartile mean, with 95% bootstrap intervals.\n"
     );
     let _ = writeln!(
         md,
-        "Plot: {} — the line is the mean return over the seeds, the band its 95% bootstrap \
-         confidence interval{}.",
-        plotted.join(", "),
-        if exp.smooth > 1 {
-            format!(
-                ", both smoothed by a centred {}-{} moving average",
-                exp.smooth,
-                smooth_unit(exp.x)
-            )
-        } else {
-            String::new()
-        }
+        "| method | eval seeds | final eval | IQM final eval |\n|---|---:|---:|---:|"
     );
-    md
+    for r in results {
+        let _ = match &r.eval {
+            Some(e) => writeln!(
+                md,
+                "| {} | {} | {} | {} |",
+                r.method.name,
+                e.seeds,
+                estimate(&e.mean),
+                estimate(&e.iqm)
+            ),
+            None => writeln!(md, "| {} | 0 | — | — |", r.method.name),
+        };
+    }
 }
 
 /// The learning-curve table: final, IQM final, AUC and the crossings of each method.

@@ -183,20 +183,43 @@ fn legend<'a, DB: DrawingBackend + 'a>(
 }
 
 fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Curve) -> anyhow::Result<()> {
-    let err =
-        |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("drawing the learning curve: {e}");
-    root.fill(&WHITE).map_err(err)?;
-    let root = root.titled(&c.title, ("sans-serif", 22)).map_err(err)?;
+    root.fill(&WHITE).map_err(drawing_error)?;
+    let root = root
+        .titled(&c.title, ("sans-serif", 22))
+        .map_err(drawing_error)?;
     let (_, h) = root.dim_in_pixel();
     let (top, bottom) = root.split_vertically(h as i32 * 64 / 100);
-    let x = |r: &EpisodeRecord| f64::from(r.episode);
     let x_max = c.records.last().map_or(1.0, |r| f64::from(r.episode + 1));
+    draw_returns(&top, c, x_max)?;
+    draw_demos(&bottom, c, x_max)
+}
+
+/// A panel of the picture.
+type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The error of a drawing step of the picture.
+fn drawing_error<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> anyhow::Error {
+    anyhow::anyhow!("drawing the learning curve: {e}")
+}
+
+/// The x of an episode's record.
+fn episode_x(r: &EpisodeRecord) -> f64 {
+    f64::from(r.episode)
+}
+
+/// The top panel: returns, their moving average, greedy evaluations, the expert's return and the
+/// shaping windows, over episodes `0..x_max`.
+fn draw_returns<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    c: &Curve,
+    x_max: f64,
+) -> anyhow::Result<()> {
     let returns: Vec<f64> = c.records.iter().map(|r| r.ret).collect();
     let evals: Vec<(f64, f64)> = c
         .records
         .iter()
         .filter(|r| r.eval_return.is_finite())
-        .map(|r| (x(r), r.eval_return))
+        .map(|r| (episode_x(r), r.eval_return))
         .collect();
     let all = returns
         .iter()
@@ -210,42 +233,25 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Curve) -> anyhow:
     // Room above the data for the legend.
     let hi = hi + (hi - lo) * 0.35;
 
-    let mut chart = panel(&top, x_max, (lo, hi), "return")?;
-    let windows = shaping_windows(c.records);
-    if !windows.is_empty() {
-        chart
-            .draw_series(windows.iter().map(|&(a, b)| {
-                Rectangle::new(
-                    [
-                        ((f64::from(a) - 0.5).max(0.0), lo),
-                        ((f64::from(b) + 0.5).min(x_max), hi),
-                    ],
-                    SHADE.mix(0.15).filled(),
-                )
-            }))
-            .map_err(err)?
-            .label(label("shaping window (episodes with shaped rewards)"))
-            .legend(|(x, y)| {
-                Rectangle::new([(x, y - 6), (x + 24, y + 6)], SHADE.mix(0.3).filled())
-            });
-    }
-    let points = c.records.iter().map(|r| (x(r), r.ret));
+    let mut chart = panel(area, x_max, (lo, hi), "return")?;
+    draw_shaping(&mut chart, c.records, x_max, (lo, hi))?;
+    let points = c.records.iter().map(|r| (episode_x(r), r.ret));
     chart
         .draw_series(LineSeries::new(points, RETURN.mix(0.45).stroke_width(1)))
-        .map_err(err)?
+        .map_err(drawing_error)?
         .label(label("return of each episode"))
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], RETURN.mix(0.45)));
     let smooth = moving_average(&returns, SMOOTH);
-    let points = c.records.iter().zip(smooth).map(|(r, m)| (x(r), m));
+    let points = c.records.iter().zip(smooth).map(|(r, m)| (episode_x(r), m));
     chart
         .draw_series(LineSeries::new(points, RETURN.stroke_width(3)))
-        .map_err(err)?
+        .map_err(drawing_error)?
         .label(label(&format!("{SMOOTH}-episode moving average")))
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], RETURN.stroke_width(3)));
     if !evals.is_empty() {
         chart
             .draw_series(evals.iter().map(|&p| Circle::new(p, 4, EVAL.filled())))
-            .map_err(err)?
+            .map_err(drawing_error)?
             .label(label("greedy evaluation"))
             .legend(|(x, y)| Circle::new((x + 12, y), 4, EVAL.filled()));
     }
@@ -257,20 +263,58 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Curve) -> anyhow:
                 6,
                 EXPERT.stroke_width(2),
             ))
-            .map_err(err)?
+            .map_err(drawing_error)?
             .label(label(&format!("expert {name}: {mean:.1} (measured)")))
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], EXPERT.stroke_width(2)));
     }
-    legend(&mut chart)?;
+    legend(&mut chart)
+}
 
+/// The shaping windows of `records`, shaded over the panel's y range `(lo, hi)`.
+fn draw_shaping<'a, DB: DrawingBackend + 'a>(
+    chart: &mut Chart<'a, DB>,
+    records: &[EpisodeRecord],
+    x_max: f64,
+    (lo, hi): (f64, f64),
+) -> anyhow::Result<()> {
+    let windows = shaping_windows(records);
+    if !windows.is_empty() {
+        chart
+            .draw_series(windows.iter().map(|&(a, b)| {
+                Rectangle::new(
+                    [
+                        ((f64::from(a) - 0.5).max(0.0), lo),
+                        ((f64::from(b) + 0.5).min(x_max), hi),
+                    ],
+                    SHADE.mix(0.15).filled(),
+                )
+            }))
+            .map_err(drawing_error)?
+            .label(label("shaping window (episodes with shaped rewards)"))
+            .legend(|(x, y)| {
+                Rectangle::new([(x, y - 6), (x + 24, y + 6)], SHADE.mix(0.3).filled())
+            });
+    }
+    Ok(())
+}
+
+/// The bottom panel: demonstrations used and the budget B, over episodes `0..x_max`.
+fn draw_demos<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    c: &Curve,
+    x_max: f64,
+) -> anyhow::Result<()> {
     let most = c.records.iter().map(|r| r.demos_used).max().unwrap_or(0);
     // Room above the budget's line for the legend.
     let y_max = (f64::from(most.max(c.budget)) * 1.5).max(1.0);
-    let mut chart = panel(&bottom, x_max, (0.0, y_max), "demonstrations")?;
-    let points = c.records.iter().map(|r| (x(r), f64::from(r.demos_used)));
+    let mut chart = panel(area, x_max, (0.0, y_max), "demonstrations")?;
+    let points = c
+        .records
+        .iter()
+        .map(|r| (episode_x(r), f64::from(r.demos_used)));
     chart
         .draw_series(LineSeries::new(points, DEMOS.stroke_width(2)))
-        .map_err(err)?
+        .map_err(drawing_error)?
         .label(label("demonstrations used"))
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], DEMOS.stroke_width(2)));
     let b = f64::from(c.budget);
@@ -281,11 +325,10 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Curve) -> anyhow:
             6,
             GREY.stroke_width(2),
         ))
-        .map_err(err)?
+        .map_err(drawing_error)?
         .label(label(&format!("budget B = {}", c.budget)))
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], GREY.stroke_width(2)));
-    legend(&mut chart)?;
-    Ok(())
+    legend(&mut chart)
 }
 
 #[cfg(test)]
