@@ -66,7 +66,7 @@ pub fn save(
     actor: u16,
     ckpts: &ActorCheckpoints,
     config_toml: &str,
-) -> anyhow::Result<()> {
+) -> alfd_harness::Result<()> {
     save_checkpoint(&path(run_dir, actor), ckpts, config_toml).map(drop)
 }
 
@@ -76,7 +76,7 @@ pub fn load(
     run_dir: &Path,
     actor: u16,
     config_toml: &str,
-) -> anyhow::Result<Option<ActorCheckpoints>> {
+) -> alfd_harness::Result<Option<ActorCheckpoints>> {
     load_checkpoint(
         &path(run_dir, actor),
         config_toml,

@@ -6,6 +6,7 @@
 
 pub mod checkpoint;
 pub mod links;
+pub mod machine;
 
 use std::ops::ControlFlow;
 use std::time::Duration;
@@ -22,7 +23,8 @@ use alfd_harness::{BadInput, ProcessArgs, Session};
 use alfd_wire::{Doorbell, Process, Progress, Role, MAX_ACTORS};
 use tracing::info;
 
-use crate::links::{Identity, WireAdder, WireExpert, WireVariables};
+use crate::links::{WireAdder, WireExpert, WireVariables};
+use crate::machine::Identity;
 
 /// `alfd-actor`: one actor process of a run (started by `alfd run`).
 #[derive(Debug, Clone, clap::Parser)]

@@ -14,43 +14,29 @@ use alfd_common::replay::Transition;
 use alfd_common::shaping::ShapingSchedule;
 use alfd_harness::Session;
 use alfd_wire::{
-    outcome, Bell, Credits, DemoModelReceiver, QueryClient, QueryRequest, QueryResponse, Receiver,
-    Sender, TransitionBatch, WeightsReceiver,
+    Bell, Credits, DemoModelReceiver, QueryClient, QueryRequest, Receiver, Sender, TransitionBatch,
+    WeightsReceiver,
 };
 use tracing::{debug, warn};
 
-/// Who this actor is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Identity {
-    pub id: u16,
-    pub incarnation: u64,
-}
-
-/// Control is looked at every this many steps (and during every wait).
-const CHECK_EVERY: u32 = 64;
-
-/// An actor out of credits that the learner does not know (a learner restarted from its
-/// checkpoint) flags itself again after this long.
-const RESYNC_AFTER: Duration = Duration::from_millis(250);
+use crate::machine::{Answer, Blocked, CreditGate, Gate, Identity, Poll, QueryWait};
 
 /// The learner as the actor's adder: transitions go out in batches, never beyond the credits the
 /// learner granted (see `alfd_wire`'s crate doc on credits).
 pub struct WireAdder<'s, 'w> {
     session: &'s Session<'w>,
     me: Identity,
-    window: u64,
+    gate: CreditGate,
     tx: Sender<'w, TransitionBatch>,
     learner: Bell,
     credits_rx: Receiver<'w, Credits>,
-    credits: Option<Credits>,
     batch: TransitionBatch,
     obs_dim: usize,
     heads: usize,
-    /// Sequence number of the next transition (= transitions this incarnation produced).
-    next_seq: u64,
     /// The actor's own steps before this incarnation (an actor restored from its checkpoint).
     steps_before: u64,
-    since_check: u32,
+    /// The shell's clock: the gate's time is measured from here.
+    epoch: Instant,
     pub credit_waits: u64,
     pub credit_wait: Duration,
 }
@@ -67,17 +53,15 @@ impl<'s, 'w> WireAdder<'s, 'w> {
         Ok(Self {
             session,
             me,
-            window,
+            gate: CreditGate::new(me, window),
             tx: wire.transitions_sender()?,
             learner: wire.bell(alfd_wire::Doorbell::Learner)?,
             credits_rx: wire.credits_receiver()?,
-            credits: None,
             batch: TransitionBatch::new(me.id, me.incarnation, obs_dim, heads, 0)?,
             obs_dim,
             heads,
-            next_seq: 0,
             steps_before: 0,
-            since_check: 0,
+            epoch: Instant::now(),
             credit_waits: 0,
             credit_wait: Duration::ZERO,
         })
@@ -90,28 +74,16 @@ impl<'s, 'w> WireAdder<'s, 'w> {
     }
 
     pub fn produced(&self) -> u64 {
-        self.next_seq
+        self.gate.next_seq()
     }
 
-    /// Steps this actor may send: its grant, or the implicit window before any grant.
-    fn granted(&self) -> u64 {
-        self.credits
-            .as_ref()
-            .and_then(|c| c.granted_for(self.me.id, self.me.incarnation))
-            .unwrap_or(0)
-            .max(self.window)
-    }
-
-    /// Whether the learner's newest credits say nothing of this incarnation.
-    fn unknown_to_learner(&self) -> bool {
-        self.credits
-            .as_ref()
-            .is_none_or(|c| c.granted_for(self.me.id, self.me.incarnation).is_none())
+    fn now(&self) -> Duration {
+        self.epoch.elapsed()
     }
 
     fn take_credits(&mut self) -> Result<()> {
         if let Some(c) = self.credits_rx.latest().map_err(LoopError::link)? {
-            self.credits = Some(c);
+            self.gate.credits(c);
         }
         Ok(())
     }
@@ -128,61 +100,65 @@ impl<'s, 'w> WireAdder<'s, 'w> {
             self.me.incarnation,
             self.obs_dim,
             self.heads,
-            self.next_seq,
+            self.gate.next_seq(),
         )
         .map_err(LoopError::link)?;
         Ok(())
     }
 }
 
+impl WireAdder<'_, '_> {
+    /// Out of credits: sends what is batched, flagged so that the learner rings when new credits
+    /// are there, and waits for them (flagging again as the gate says).
+    fn wait_for_credits(&mut self) -> Result<ControlFlow<Stop>> {
+        self.flush(true)?;
+        let blocked = Instant::now();
+        self.credit_waits += 1;
+        loop {
+            self.take_credits()?;
+            match self.gate.after_wait(self.now()) {
+                Blocked::Resume => break,
+                Blocked::Reflag => self.flush(true)?,
+                Blocked::Wait => {}
+            }
+            if let Some(stop) = self
+                .session
+                .wait(Duration::from_millis(100))
+                .map_err(LoopError::link)?
+            {
+                return Ok(ControlFlow::Break(stop));
+            }
+            if let Some(stop) = self.session.should_stop().map_err(LoopError::link)? {
+                return Ok(ControlFlow::Break(stop));
+            }
+        }
+        self.credit_wait += blocked.elapsed();
+        if blocked.elapsed() > Duration::from_millis(5) {
+            debug!(
+                waited_ms = blocked.elapsed().as_millis() as u64,
+                next_seq = self.gate.next_seq(),
+                granted = self.gate.granted(),
+                "long credit wait"
+            );
+        }
+        Ok(ControlFlow::Continue(()))
+    }
+}
+
 impl Adder for WireAdder<'_, '_> {
     fn reserve(&mut self) -> Result<ControlFlow<Stop>> {
-        if self.next_seq >= self.granted() {
+        if self.gate.next_seq() >= self.gate.granted() {
             self.take_credits()?;
         }
-        if self.next_seq >= self.granted() {
-            // Out of credits: send what is batched, flagged so that the learner rings when new
-            // credits are there, and wait.
-            self.flush(true)?;
-            let blocked = Instant::now();
-            let mut flagged = blocked;
-            self.credit_waits += 1;
-            loop {
-                self.take_credits()?;
-                if self.next_seq < self.granted() {
-                    break;
-                }
-                if self.unknown_to_learner() && flagged.elapsed() >= RESYNC_AFTER {
-                    // A learner restarted from its checkpoint does not know this actor, nor
-                    // that it waits: say so again (its book takes the actor from here).
-                    self.flush(true)?;
-                    flagged = Instant::now();
-                }
-                if let Some(stop) = self
-                    .session
-                    .wait(Duration::from_millis(100))
-                    .map_err(LoopError::link)?
-                {
-                    return Ok(ControlFlow::Break(stop));
-                }
-                if let Some(stop) = self.session.should_stop().map_err(LoopError::link)? {
-                    return Ok(ControlFlow::Break(stop));
-                }
+        let mut gate = self.gate.reserve(self.now());
+        if gate == Gate::Block {
+            if let ControlFlow::Break(stop) = self.wait_for_credits()? {
+                return Ok(ControlFlow::Break(stop));
             }
-            self.credit_wait += blocked.elapsed();
-            if blocked.elapsed() > Duration::from_millis(5) {
-                debug!(
-                    waited_ms = blocked.elapsed().as_millis() as u64,
-                    next_seq = self.next_seq,
-                    granted = self.granted(),
-                    "long credit wait"
-                );
-            }
+            gate = self.gate.resumed();
         }
         self.take_credits()?;
-        self.since_check += 1;
-        if self.since_check >= CHECK_EVERY {
-            self.since_check = 0;
+        if gate == Gate::CheckStopThenGo {
             if let Some(stop) = self.session.should_stop().map_err(LoopError::link)? {
                 return Ok(ControlFlow::Break(stop));
             }
@@ -195,7 +171,7 @@ impl Adder for WireAdder<'_, '_> {
         if episode_end {
             self.batch.mark_episode_end();
         }
-        self.next_seq += 1;
+        self.gate.added();
         if self.batch.is_full() {
             self.flush(false)?;
         }
@@ -207,10 +183,8 @@ impl Adder for WireAdder<'_, '_> {
     }
 
     fn global_step(&self, own_steps: u64) -> u64 {
-        self.credits.as_ref().map_or(own_steps, |c| {
-            let produced = own_steps.saturating_sub(self.steps_before);
-            c.global_step_for(self.me.id, self.me.incarnation, produced)
-        })
+        let produced = own_steps.saturating_sub(self.steps_before);
+        self.gate.global_step(produced, own_steps)
     }
 }
 
@@ -308,21 +282,6 @@ pub struct WireExpert<'s, 'w> {
     pub timeouts: u64,
 }
 
-/// What came of a query.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Answer {
-    Demo(QueryResponse),
-    BudgetExhausted,
-    /// No expert is active or connected: the actor acts on its own at once.
-    NoExpert,
-    /// The expert did not answer in time: the actor acted on its own.
-    Timeout,
-    /// The expert (a person) declined: the actor acts on its own; no budget was spent.
-    Declined,
-    /// No expert holds the query any more and no answer came: the actor acts on its own.
-    Dropped,
-}
-
 impl<'s, 'w> WireExpert<'s, 'w> {
     pub fn new(
         session: &'s Session<'w>,
@@ -414,36 +373,27 @@ impl<'s, 'w> WireExpert<'s, 'w> {
         } else {
             self.timeout
         };
-        let deadline = Instant::now() + timeout;
-        let answer = |r: QueryResponse| match r.outcome {
-            outcome::ANSWERED => Answer::Demo(r),
-            outcome::DECLINED => Answer::Declined,
-            _ => Answer::BudgetExhausted,
-        };
+        let epoch = Instant::now();
+        let wait = QueryWait::new(Duration::ZERO, timeout);
+        let mut interrupted = false;
         loop {
-            if let Some(r) = pending.poll().map_err(LoopError::link)? {
-                return Ok(answer(r));
-            }
-            if !pending.held() {
-                // No expert holds the query any more (it stopped, or stood by): an answer sent
-                // just before is taken, else nothing will come (a person's expert swapped out
-                // would otherwise keep the actor waiting minutes).
-                if let Some(r) = pending.poll().map_err(LoopError::link)? {
-                    return Ok(answer(r));
+            let response = pending.poll().map_err(LoopError::link)?;
+            let held = response.is_some() || pending.held();
+            // No expert holds the query any more (it stopped, or stood by): an answer sent just
+            // before is taken, else nothing will come (a person's expert swapped out would
+            // otherwise keep the actor waiting minutes).
+            let mut late = Ok(None);
+            let then = || {
+                late = pending.poll();
+                late.as_ref().ok().copied().flatten()
+            };
+            let poll = wait.poll(epoch.elapsed(), response, held, then, interrupted);
+            late.map_err(LoopError::link)?;
+            match poll {
+                Poll::Done(answer) => return Ok(answer),
+                Poll::Wait(d) => {
+                    interrupted = self.session.wait(d).map_err(LoopError::link)?.is_some();
                 }
-                return Ok(Answer::Dropped);
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                return Ok(Answer::Timeout);
-            }
-            if self
-                .session
-                .wait((deadline - now).min(Duration::from_millis(50)))
-                .map_err(LoopError::link)?
-                .is_some()
-            {
-                return Ok(Answer::Timeout);
             }
         }
     }
