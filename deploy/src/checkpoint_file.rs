@@ -33,7 +33,10 @@ pub fn to_bytes(file: &CheckpointFile, config_toml: &str) -> Vec<u8> {
 
 /// Writes `RUN_DIR/checkpoint.bin` whole.
 pub fn save(dir: &Path, file: &CheckpointFile, config_toml: &str) -> anyhow::Result<()> {
-    alfd_harness::write_atomically(&path(dir), &to_bytes(file, config_toml))
+    Ok(alfd_harness::write_atomically(
+        &path(dir),
+        &to_bytes(file, config_toml),
+    )?)
 }
 
 /// Reads `RUN_DIR/checkpoint.bin`, which must belong to the run of config `config_toml`.

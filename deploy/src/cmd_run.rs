@@ -162,13 +162,7 @@ fn env_spec(
     cfg: &alfd_common::config::ExperimentConfig,
 ) -> anyhow::Result<Option<alfd_harness::python::EnvSpec>> {
     if cfg.env.name.is_remote() {
-        let spec = alfd_harness::python::probe_env(&cfg.env).map_err(|e| {
-            if alfd_harness::exit_code(&e) == 2 {
-                usage(format!("{e:#}"))
-            } else {
-                e
-            }
-        })?;
+        let spec = alfd_harness::python::probe_env(&cfg.env)?;
         alfd_harness::check_wire_limits(spec.obs_dim, cfg.agent.heads())
             .map_err(|e| usage(e.to_string()))?;
         Ok(Some(spec))

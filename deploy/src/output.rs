@@ -15,7 +15,7 @@ use anyhow::Context as _;
 
 /// Writes `bytes` to `dir/name`, replacing the file whole (a reader never sees half of it).
 pub fn write(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
-    alfd_harness::write_atomically(&dir.join(name), bytes)
+    Ok(alfd_harness::write_atomically(&dir.join(name), bytes)?)
 }
 
 #[cfg(feature = "png")]

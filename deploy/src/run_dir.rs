@@ -139,6 +139,7 @@ fn try_lock(path: &Path) -> anyhow::Result<Result<DirLock, String>> {
 }
 
 #[cfg(test)]
+#[cfg(test)]
 pub(crate) use alfd_harness::test_dir;
 
 #[cfg(test)]

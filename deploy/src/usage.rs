@@ -2,7 +2,12 @@
 //! 2 on them and 1 on anything else, through the harness's one mechanism ([`alfd_harness::BadInput`]
 //! and [`alfd_harness::exit_code`]).
 
-pub use alfd_harness::{bad_input as usage, exit_code};
+pub use alfd_harness::exit_code;
+
+/// Bad input as an `anyhow::Error`: `Err(usage(format!(..)))?`.
+pub fn usage(msg: impl Into<String>) -> anyhow::Error {
+    anyhow::Error::new(alfd_harness::BadInput(msg.into()))
+}
 
 /// Whether `err` is the user's to fix (exit code 2).
 #[cfg(test)]

@@ -54,7 +54,7 @@ enum Source {
     BuiltIn(Box<dyn Demonstrator<[f32]> + Send>),
     External {
         adapter: Adapter,
-        remote: RemoteDemonstrator,
+        remote: Box<RemoteDemonstrator>,
     },
     Person,
 }
@@ -184,7 +184,10 @@ fn source(
     let adapter = Adapter::expert(policy, &args.process.run_id, &adapter_name, schema, &log)?;
     let remote =
         RemoteDemonstrator::new(adapter.connect(&args.process.run_id, me, schema)?, actions);
-    Ok(Source::External { adapter, remote })
+    Ok(Source::External {
+        adapter,
+        remote: Box::new(remote),
+    })
 }
 
 /// A person as the expert: the page is up from the start (standing by until active); its

@@ -28,21 +28,25 @@ pub fn path(run_dir: &Path) -> PathBuf {
 }
 
 /// The text of `RUN_DIR/config.toml`, to which a checkpoint belongs.
-pub fn config_text(run_dir: &Path) -> anyhow::Result<String> {
+pub fn config_text(run_dir: &Path) -> alfd_harness::Result<String> {
     let p = run_dir.join("config.toml");
     std::fs::read_to_string(&p)
         .map_err(|e| BadInput(format!("cannot read {}: {e}", p.display())).into())
 }
 
 /// Writes the checkpoint whole; returns its size in bytes.
-pub fn save(run_dir: &Path, ckpt: &LearnerCheckpoint, config_toml: &str) -> anyhow::Result<usize> {
+pub fn save(
+    run_dir: &Path,
+    ckpt: &LearnerCheckpoint,
+    config_toml: &str,
+) -> alfd_harness::Result<usize> {
     save_checkpoint(&path(run_dir), ckpt, config_toml)
 }
 
 /// Reads the checkpoint, if there is one; one that cannot be trusted (truncated, corrupt, of
 /// another version or another config) is [`BadInput`](alfd_harness::BadInput) saying which, and
 /// is left as it is.
-pub fn load(run_dir: &Path, config_toml: &str) -> anyhow::Result<Option<LearnerCheckpoint>> {
+pub fn load(run_dir: &Path, config_toml: &str) -> alfd_harness::Result<Option<LearnerCheckpoint>> {
     load_checkpoint(&path(run_dir), config_toml, "the learner was not restored")
 }
 

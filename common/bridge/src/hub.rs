@@ -217,7 +217,7 @@ fn joins(
     roster: &Arc<Mutex<Roster>>,
     events_tx: &mpsc::Sender<HubEvent>,
 ) -> Result<zenoh::query::Queryable<()>> {
-    let roster = Arc::clone(&roster);
+    let roster = Arc::clone(roster);
     let events_tx = events_tx.clone();
     let run_id = opts.run_id.clone();
     let config_toml = opts.config_toml.clone();
@@ -258,10 +258,10 @@ fn restarts(
     roster: &Arc<Mutex<Roster>>,
     events_tx: &mpsc::Sender<HubEvent>,
 ) -> Result<zenoh::query::Queryable<()>> {
-    let roster = Arc::clone(&roster);
+    let roster = Arc::clone(roster);
     let events_tx = events_tx.clone();
     session
-        .declare_queryable(keys::restart(&run_id))
+        .declare_queryable(keys::restart(run_id))
         .callback(move |query| {
             let request = query
                 .payload()
@@ -303,13 +303,13 @@ fn members(
     post: &Post,
     events_tx: &mpsc::Sender<HubEvent>,
 ) -> Result<zenoh::pubsub::Subscriber<()>> {
-    let roster = Arc::clone(&roster);
+    let roster = Arc::clone(roster);
     let post = post.clone();
     let events_tx = events_tx.clone();
-    let prefix = keys::member(&run_id, "");
+    let prefix = keys::member(run_id, "");
     session
         .liveliness()
-        .declare_subscriber(keys::member(&run_id, "*"))
+        .declare_subscriber(keys::member(run_id, "*"))
         .callback(move |sample| {
             let key = sample.key_expr().as_str();
             let join_id = key.strip_prefix(&prefix).unwrap_or(key).to_owned();

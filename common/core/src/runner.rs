@@ -141,8 +141,8 @@ impl<S> Checkpoints<'_, S> {
         save: &mut impl FnMut(&S) -> ControlFlow<()>,
         state: impl FnOnce() -> S,
     ) -> ControlFlow<()> {
-        let due =
-            self.every.is_some_and(|n| done % n.max(1) == 0) && limit.is_none_or(|l| done < l);
+        let due = self.every.is_some_and(|n| done.is_multiple_of(n.max(1)))
+            && limit.is_none_or(|l| done < l);
         if stop.is_break() || !due {
             return stop;
         }

@@ -3,22 +3,22 @@
 use std::io::Write as _;
 use std::path::Path;
 
-use anyhow::Context as _;
+use crate::bad_input::{Result, What as _};
 
 /// Writes `bytes` to `path` whole: a temporary file beside it, fsync, rename, fsync of the
 /// directory. A crash leaves either the old file or the new one, never half of one; every error
 /// is returned, and a write that fails (a full disk) removes its temporary file.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomically_with_mode(path, bytes, 0o644)
 }
 
 /// [`write_atomically`] into a file only its owner can read and write (mode 0600 from its
 /// creation on): for secrets such as the human expert's page token.
-pub fn write_private(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+pub fn write_private(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomically_with_mode(path, bytes, 0o600)
 }
 
-fn write_atomically_with_mode(path: &Path, bytes: &[u8], mode: u32) -> anyhow::Result<()> {
+fn write_atomically_with_mode(path: &Path, bytes: &[u8], mode: u32) -> Result<()> {
     use std::os::unix::fs::OpenOptionsExt as _;
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
@@ -26,7 +26,7 @@ fn write_atomically_with_mode(path: &Path, bytes: &[u8], mode: u32) -> anyhow::R
     };
     let name = path
         .file_name()
-        .with_context(|| format!("{} names no file", path.display()))?;
+        .ok_or_else(|| crate::BadInput(format!("{} names no file", path.display())))?;
     let tmp = dir.join(format!(".{}.tmp", name.to_string_lossy()));
     let _ = std::fs::remove_file(&tmp);
     let mut f = std::fs::OpenOptions::new()
@@ -34,18 +34,18 @@ fn write_atomically_with_mode(path: &Path, bytes: &[u8], mode: u32) -> anyhow::R
         .create_new(true)
         .mode(mode)
         .open(&tmp)
-        .with_context(|| format!("cannot write {}", tmp.display()))?;
+        .what(|| format!("cannot write {}", tmp.display()))?;
     let written = f.write_all(bytes).and_then(|()| f.sync_all());
     drop(f);
     if let Err(e) = written.and_then(|()| std::fs::rename(&tmp, path)) {
         // A full disk (ENOSPC) must not stay full of our half-written file: the old file is
         // untouched, the temporary one goes.
         let _ = std::fs::remove_file(&tmp);
-        return Err(e).with_context(|| format!("cannot write {}", path.display()));
+        return Err(e).what(|| format!("cannot write {}", path.display()));
     }
     std::fs::File::open(dir)
         .and_then(|d| d.sync_all())
-        .with_context(|| format!("cannot sync directory {}", dir.display()))?;
+        .what(|| format!("cannot sync directory {}", dir.display()))?;
     Ok(())
 }
 
@@ -68,8 +68,9 @@ pub fn append_whole(file: &mut std::fs::File, line: &[u8], sync: bool) -> std::i
 
 /// A test's scratch directory `alfd-NAME-XXXXXX` in the system's temporary directory, removed
 /// with everything in it when dropped (also while a failed test unwinds); kept, and named on
-/// stderr, when `ALFD_KEEP_TEST_DIRS=1`. The one helper every crate's tests use (tempfile is in
-/// every binary's graph already, through safetensors, so this costs the build nothing).
+/// stderr, when `ALFD_KEEP_TEST_DIRS=1`. The one helper every crate's tests use, behind the `testing`
+/// feature (which their dev-dependencies turn on).
+#[cfg(any(test, feature = "testing"))]
 pub fn test_dir(name: &str) -> tempfile::TempDir {
     let keep = std::env::var_os("ALFD_KEEP_TEST_DIRS").is_some_and(|v| v == "1");
     let dir = tempfile::Builder::new()
@@ -86,6 +87,46 @@ pub fn test_dir(name: &str) -> tempfile::TempDir {
         );
     }
     dir
+}
+
+/// Writes `state` to `path` whole in the core's checkpoint format, tied to the run's config
+/// (`config.toml`'s text); returns its size in bytes.
+pub fn save_checkpoint<T: serde::Serialize>(
+    path: &Path,
+    state: &T,
+    config_toml: &str,
+) -> Result<usize> {
+    use alfd_common::checkpoint::{config_hash, encode};
+    let bytes = encode(state, config_hash(config_toml));
+    write_atomically(path, &bytes)?;
+    Ok(bytes.len())
+}
+
+/// Reads a checkpoint written by [`save_checkpoint`], if there is one. One that cannot be trusted
+/// (truncated, corrupt, of another version or another config) is [`crate::BadInput`] saying which
+/// and what was not done (`refused`), and the file is left as it is.
+pub fn load_checkpoint<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    config_toml: &str,
+    refused: &str,
+) -> Result<Option<T>> {
+    use alfd_common::checkpoint::{config_hash, decode};
+    let bytes = match std::fs::read(path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => {
+            return Err(crate::BadInput(format!("cannot read {}: {e}", path.display())).into())
+        }
+    };
+    decode(&bytes, config_hash(config_toml))
+        .map(Some)
+        .map_err(|e| {
+            crate::BadInput(format!(
+                "{}: {e}; {refused} and the file was left as it is",
+                path.display()
+            ))
+            .into()
+        })
 }
 
 #[cfg(test)]
@@ -149,44 +190,4 @@ mod tests {
         assert_eq!(names, vec!["state".to_owned()]);
         assert_eq!(std::fs::read(target.join("inside")).unwrap(), b"kept");
     }
-}
-
-/// Writes `state` to `path` whole in the core's checkpoint format, tied to the run's config
-/// (`config.toml`'s text); returns its size in bytes.
-pub fn save_checkpoint<T: serde::Serialize>(
-    path: &Path,
-    state: &T,
-    config_toml: &str,
-) -> anyhow::Result<usize> {
-    use alfd_common::checkpoint::{config_hash, encode};
-    let bytes = encode(state, config_hash(config_toml));
-    write_atomically(path, &bytes)?;
-    Ok(bytes.len())
-}
-
-/// Reads a checkpoint written by [`save_checkpoint`], if there is one. One that cannot be trusted
-/// (truncated, corrupt, of another version or another config) is [`crate::BadInput`] saying which
-/// and what was not done (`refused`), and the file is left as it is.
-pub fn load_checkpoint<T: serde::de::DeserializeOwned>(
-    path: &Path,
-    config_toml: &str,
-    refused: &str,
-) -> anyhow::Result<Option<T>> {
-    use alfd_common::checkpoint::{config_hash, decode};
-    let bytes = match std::fs::read(path) {
-        Ok(b) => b,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => {
-            return Err(crate::BadInput(format!("cannot read {}: {e}", path.display())).into())
-        }
-    };
-    decode(&bytes, config_hash(config_toml))
-        .map(Some)
-        .map_err(|e| {
-            crate::BadInput(format!(
-                "{}: {e}; {refused} and the file was left as it is",
-                path.display()
-            ))
-            .into()
-        })
 }

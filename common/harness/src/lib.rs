@@ -13,10 +13,10 @@ mod runtime;
 mod session;
 mod startup;
 
-pub use bad_input::{bad_input, exit_code, BadInput};
-pub use fs::{
-    append_whole, load_checkpoint, save_checkpoint, test_dir, write_atomically, write_private,
-};
+pub use bad_input::{chain, describe, exit_code, BadInput, HarnessError, Result};
+#[cfg(any(test, feature = "testing"))]
+pub use fs::test_dir;
+pub use fs::{append_whole, load_checkpoint, save_checkpoint, write_atomically, write_private};
 pub use process::{check_wire_limits, main, read_text, ProcessArgs, Setup};
 pub use runtime::{
     RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY, DEFAULT_HUMAN_QUERY_TIMEOUT_MS,

@@ -9,9 +9,8 @@ use alfd_common::env::{vector_env, Env as _, VectorEnv};
 use std::sync::Arc;
 
 use alfd_wire::{Process, Role, Wire, MAX_HEADS, MAX_OBS_DIM};
-use anyhow::Context as _;
 
-use crate::bad_input::{exit_code, BadInput};
+use crate::bad_input::{describe, exit_code, BadInput, Result, What as _};
 use crate::python::{Adapter, AdapterEnv};
 use crate::runtime::{RuntimeConfig, RUNTIME_FILE};
 
@@ -35,7 +34,7 @@ pub struct Setup {
 
 impl ProcessArgs {
     /// Reads `RUN_DIR/config.toml` and `RUN_DIR/runtime.toml`; a bad file is [`BadInput`].
-    pub fn load(&self) -> anyhow::Result<Setup> {
+    pub fn load(&self) -> Result<Setup> {
         let config = read(&self.run_dir.join("config.toml"), |t| {
             let mut cfg = ExperimentConfig::for_multi_process(t).map_err(|e| e.to_string())?;
             cfg.load_schedule(read_text).map_err(|e| e.to_string())?;
@@ -50,8 +49,8 @@ impl ProcessArgs {
     }
 
     /// Joins the run as `me`, speaking schema version `schema`.
-    pub fn connect(&self, me: Process, schema: u32) -> anyhow::Result<Wire> {
-        Wire::connect(&self.run_id, me, schema).context("cannot join the run")
+    pub fn connect(&self, me: Process, schema: u32) -> Result<Wire> {
+        Wire::connect(&self.run_id, me, schema).what(|| "cannot join the run".to_owned())
     }
 }
 
@@ -61,7 +60,7 @@ pub fn read_text(path: &str) -> Result<String, String> {
     std::fs::read_to_string(path).map_err(|e| e.to_string())
 }
 
-fn read<T>(path: &Path, parse: impl FnOnce(&str) -> Result<T, String>) -> anyhow::Result<T> {
+fn read<T>(path: &Path, parse: impl FnOnce(&str) -> Result<T, String>) -> Result<T> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| BadInput(format!("cannot read {}: {e}", path.display())))?;
     Ok(parse(&text).map_err(|e| BadInput(format!("in {}: {e}", path.display())))?)
@@ -71,7 +70,7 @@ impl Setup {
     /// The environment's observation size and number of actions, checked against what the wire
     /// carries: a built-in environment's, or a Gymnasium environment's as `runtime.toml`
     /// recorded them when the run started.
-    pub fn env_dims(&self) -> anyhow::Result<(usize, usize)> {
+    pub fn env_dims(&self) -> Result<(usize, usize)> {
         if self.config.env.name.is_remote() {
             let spec = self.runtime.env_spec.ok_or_else(|| {
                 BadInput(format!(
@@ -95,7 +94,7 @@ impl Setup {
         process: &ProcessArgs,
         actor_id: u16,
         schema: u32,
-    ) -> anyhow::Result<Box<VectorEnv>> {
+    ) -> Result<Box<VectorEnv>> {
         if !self.config.env.name.is_remote() {
             return self.vector_env();
         }
@@ -131,7 +130,7 @@ impl Setup {
     }
 
     /// The config's built-in environment, checked against what the wire carries.
-    pub fn vector_env(&self) -> anyhow::Result<Box<VectorEnv>> {
+    pub fn vector_env(&self) -> Result<Box<VectorEnv>> {
         let env = vector_env(&self.config.env).ok_or_else(|| {
             BadInput(format!(
                 "{:?} has no vector observations; the multi-process runtime runs neural agents",
@@ -161,12 +160,12 @@ pub fn check_wire_limits(obs_dim: usize, heads: usize) -> Result<(), BadInput> {
 
 /// The `main` of a process binary: logs to `RUN_DIR/LOG.log`, learns the schema version it
 /// speaks, runs `run`, and exits 0, 1 or 2 (bad input).
-pub fn main<A>(
+pub fn main<A, E: AsRef<dyn std::error::Error + 'static>>(
     binary: &str,
     args: &A,
     process: &ProcessArgs,
     log: &str,
-    run: impl FnOnce(&A, u32) -> anyhow::Result<()>,
+    run: impl FnOnce(&A, u32) -> Result<(), E>,
 ) -> ! {
     crate::startup::init_process_logging(binary, &process.run_dir, log);
     crate::startup::portable_kernels_from_env();
@@ -177,8 +176,9 @@ pub fn main<A>(
     match run(args, schema) {
         Ok(()) => std::process::exit(0),
         Err(err) => {
-            tracing::error!("{err:#}");
-            eprintln!("{binary}: error: {err:#}");
+            let message = describe(err.as_ref());
+            tracing::error!("{message}");
+            eprintln!("{binary}: error: {message}");
             std::process::exit(exit_code(&err))
         }
     }

@@ -11,10 +11,9 @@ use std::time::{Duration, Instant};
 use alfd_common::config::EnvConfig;
 use alfd_common::env::{Env, EnvError, EnvState, Step};
 use alfd_wire::{Process, RemoteClient, RemoteEnv};
-use anyhow::Context as _;
 use serde::{Deserialize, Serialize};
 
-use crate::bad_input::BadInput;
+use crate::bad_input::{BadInput, HarnessError, Result, What as _};
 
 /// Where the adapter and its requirements are: `$ALFD_PYTHON_DIR`, else `deploy/python` of the
 /// sources this binary was built from.
@@ -28,7 +27,7 @@ pub fn python_dir() -> PathBuf {
 /// The Python interpreter of the adapter: `$ALFD_PYTHON`, else the project's virtual
 /// environment, made on first use by `deploy/python/setup-venv.sh`. No Python is bad input
 /// (the message says what to install).
-pub fn interpreter() -> anyhow::Result<PathBuf> {
+pub fn interpreter() -> Result<PathBuf> {
     if let Some(p) = std::env::var_os("ALFD_PYTHON") {
         return Ok(PathBuf::from(p));
     }
@@ -38,7 +37,7 @@ pub fn interpreter() -> anyhow::Result<PathBuf> {
         .stdin(Stdio::null())
         .stderr(Stdio::inherit())
         .output()
-        .with_context(|| format!("cannot run {}", script.display()))?;
+        .what(|| format!("cannot run {}", script.display()))?;
     if !out.status.success() {
         return Err(BadInput(format!(
             "{} could not set up Python for the Gymnasium adapter ({}); see the message above",
@@ -62,13 +61,13 @@ pub struct EnvSpec {
     pub max_episode_steps: usize,
 }
 
-fn env_args(env: &EnvConfig) -> anyhow::Result<Vec<String>> {
+fn env_args(env: &EnvConfig) -> Result<Vec<String>> {
     let id = env
         .id
         .clone()
         .ok_or_else(|| BadInput("env.id is needed for gymnasium".into()))?;
     let kwargs = serde_json::to_string(&env.kwargs.clone().unwrap_or_default())
-        .context("cannot write env.kwargs as JSON")?;
+        .what(|| "cannot write env.kwargs as JSON".to_owned())?;
     Ok(vec![
         "env".into(),
         format!("--id={id}"),
@@ -79,7 +78,7 @@ fn env_args(env: &EnvConfig) -> anyhow::Result<Vec<String>> {
 
 /// Makes the config's Gymnasium environment once in Python and returns its spec; a wrong space,
 /// an unknown id or bad kwargs is [`BadInput`] with the adapter's message.
-pub fn probe_env(env: &EnvConfig) -> anyhow::Result<EnvSpec> {
+pub fn probe_env(env: &EnvConfig) -> Result<EnvSpec> {
     let python = interpreter()?;
     let adapter = python_dir().join("alfd_adapter.py");
     let out = Command::new(&python)
@@ -88,13 +87,16 @@ pub fn probe_env(env: &EnvConfig) -> anyhow::Result<EnvSpec> {
         .arg("--check")
         .stdin(Stdio::null())
         .output()
-        .with_context(|| format!("cannot run {} {}", python.display(), adapter.display()))?;
+        .what(|| format!("cannot run {} {}", python.display(), adapter.display()))?;
     let stderr = String::from_utf8_lossy(&out.stderr).trim().to_owned();
     match out.status.code() {
         Some(0) => serde_json::from_slice(&out.stdout)
-            .with_context(|| format!("the adapter's spec is not JSON: {stderr}")),
+            .what(|| format!("the adapter's spec is not JSON: {stderr}")),
         Some(2) => Err(BadInput(stderr).into()),
-        _ => anyhow::bail!("the Gymnasium adapter failed ({}): {stderr}", out.status),
+        _ => Err(HarnessError::Child(format!(
+            "the Gymnasium adapter failed ({}): {stderr}",
+            out.status
+        ))),
     }
 }
 
@@ -107,20 +109,14 @@ pub struct Adapter {
 }
 
 impl Adapter {
-    fn spawn(
-        args: Vec<String>,
-        run_id: &str,
-        name: &str,
-        schema: u32,
-        log: &Path,
-    ) -> anyhow::Result<Self> {
+    fn spawn(args: Vec<String>, run_id: &str, name: &str, schema: u32, log: &Path) -> Result<Self> {
         let python = interpreter()?;
         let adapter = python_dir().join("alfd_adapter.py");
         let file = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
             .open(log)
-            .with_context(|| format!("cannot open {}", log.display()))?;
+            .what(|| format!("cannot open {}", log.display()))?;
         let child = Command::new(&python)
             .arg(&adapter)
             .args(args)
@@ -131,7 +127,7 @@ impl Adapter {
             .stdout(file.try_clone()?)
             .stderr(file)
             .spawn()
-            .with_context(|| format!("cannot start {} {}", python.display(), adapter.display()))?;
+            .what(|| format!("cannot start {} {}", python.display(), adapter.display()))?;
         tracing::info!(adapter = name, pid = child.id(), "adapter started");
         Ok(Self {
             child: Mutex::new(child),
@@ -141,25 +137,13 @@ impl Adapter {
     }
 
     /// Starts the adapter serving the config's Gymnasium environment as `remote/<name>`.
-    pub fn env(
-        env: &EnvConfig,
-        run_id: &str,
-        name: &str,
-        schema: u32,
-        log: &Path,
-    ) -> anyhow::Result<Self> {
+    pub fn env(env: &EnvConfig, run_id: &str, name: &str, schema: u32, log: &Path) -> Result<Self> {
         Self::spawn(env_args(env)?, run_id, name, schema, log)
     }
 
     /// Starts the adapter answering with the external demonstrator `policy`
     /// (`python:MODULE:FUNCTION` or `sb3:ALGO:PATH`) as `remote/<name>`.
-    pub fn expert(
-        policy: &str,
-        run_id: &str,
-        name: &str,
-        schema: u32,
-        log: &Path,
-    ) -> anyhow::Result<Self> {
+    pub fn expert(policy: &str, run_id: &str, name: &str, schema: u32, log: &Path) -> Result<Self> {
         let args = vec!["expert".to_owned(), format!("--policy={policy}")];
         Self::spawn(args, run_id, name, schema, log)
     }
@@ -180,7 +164,7 @@ impl Adapter {
     }
 
     /// Connects a client to this adapter, waiting while it starts (at most 60 s).
-    pub fn connect(&self, run_id: &str, me: Process, schema: u32) -> anyhow::Result<RemoteClient> {
+    pub fn connect(&self, run_id: &str, me: Process, schema: u32) -> Result<RemoteClient> {
         let client = RemoteClient::connect(
             run_id,
             &self.name,
@@ -252,7 +236,7 @@ impl AdapterEnv {
         run_id: &str,
         me: Process,
         schema: u32,
-    ) -> anyhow::Result<Self> {
+    ) -> Result<Self> {
         // A wait for an answer ends as soon as the adapter exits, naming why.
         let alive = adapter.clone();
         let client = adapter

@@ -4,9 +4,9 @@
 use std::cell::RefCell;
 use std::time::Duration;
 
+use crate::bad_input::{Result, What as _};
 use alfd_common::environment_loop::Stop;
 use alfd_wire::{Control, ControlWatch, Doorbell, Waiter, Wake, Wire, WireError};
-use anyhow::Context as _;
 
 /// How long the launcher may stay silent before a process gives up on the run (the launcher
 /// republishes its control message every `alfd_wire::CONTROL_PERIOD`).
@@ -57,12 +57,12 @@ impl std::fmt::Debug for Session<'_> {
 impl<'w> Session<'w> {
     /// Listens on `bell` and waits up to `handshake` for the launcher's first control message
     /// (where a process of another schema version is refused).
-    pub fn join(wire: &'w Wire, bell: Doorbell, handshake: Duration) -> anyhow::Result<Self> {
+    pub fn join(wire: &'w Wire, bell: Doorbell, handshake: Duration) -> Result<Self> {
         let waiter = wire.waiter(bell)?;
         let mut control = ControlWatch::new(wire)?;
         control
             .handshake(&waiter, handshake)
-            .context("no handshake with the launcher")?;
+            .what(|| "no handshake with the launcher".to_owned())?;
         Ok(Self {
             wire,
             waiter,

@@ -24,7 +24,10 @@ fn main() -> anyhow::Result<()> {
     let steps: usize = args.get(1).map_or(Ok(20_000), |s| s.parse())?;
     let queries: usize = args.get(2).map_or(Ok(5_000), |s| s.parse())?;
     let run_id = format!("bench-remote-{}", std::process::id());
-    let dir = alfd_harness::test_dir("bench-remote");
+    let dir = tempfile::Builder::new()
+        .prefix("alfd-bench-remote-")
+        .tempdir()
+        .context("cannot make a scratch directory")?;
     let me = Process::new(Role::Tool, 0);
     let cfg = EnvConfig {
         name: EnvName::Gymnasium,

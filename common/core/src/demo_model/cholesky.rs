@@ -37,7 +37,7 @@ fn factor_panel(a: &mut [f64], n: usize, kb: usize, end: usize) -> bool {
             let l = a[j + p * n];
             d -= l * l;
         }
-        if !(d > 0.0) {
+        if d <= 0.0 || d.is_nan() {
             return false;
         }
         let d = d.sqrt();
