@@ -17,8 +17,8 @@ use alfd_wire::{Process, Role, Wire, MAX_ACTORS, SCHEMA_VERSION};
 use anyhow::{bail, Context as _};
 use tracing::{info, warn};
 
-use crate::launcher;
 use crate::usage::usage;
+use alfd_launcher as launcher;
 
 /// The learner's host silent for this long (no control message through the link; it sends one
 /// every `alfd_wire::CONTROL_PERIOD`): the link is lost, and the actors here are stopped.
@@ -366,7 +366,7 @@ impl Host<'_> {
                 info!(actor = id, "stopped");
                 continue;
             }
-            let how = crate::launcher::describe_status(status);
+            let how = alfd_launcher::describe_status(status);
             warn!(actor = id, "{how}");
             match self.restart_actor(id, here.stopping.is_some()) {
                 Ok(Some(child)) => {
@@ -390,7 +390,7 @@ impl Host<'_> {
         };
         if let Some(status) = child.try_wait()? {
             let generation = *generation;
-            let how = crate::launcher::describe_status(status);
+            let how = alfd_launcher::describe_status(status);
             info!(generation, "this host's expert {how}");
             if let Some(e) = self.expert_host {
                 e.exited(generation, how, status.code());

@@ -104,7 +104,7 @@ fn resume_multi_process(
     config_toml: &str,
 ) -> anyhow::Result<()> {
     let dir = &args.run_dir;
-    let info = crate::launcher::read_run_info(dir).map_err(|e| usage(format!("{e:#}")))?;
+    let info = alfd_launcher::read_run_info(dir).map_err(|e| usage(alfd_harness::describe(&e)))?;
     // The processes of the stopped launch may still be saving (a launcher killed a moment ago):
     // wait for them to leave, then for the files they leave to go.
     let alive = alfd_wire::wait_for_run_end(&info.run_id, std::time::Duration::from_secs(30))
@@ -131,7 +131,7 @@ fn resume_multi_process(
                 dir.display()
             )))
         }
-        Err(e) => return Err(usage(format!("{e:#}"))),
+        Err(e) => return Err(usage(alfd_harness::describe(&e))),
     };
     let runtime_path = dir.join(alfd_harness::RUNTIME_FILE);
     let runtime = std::fs::read_to_string(&runtime_path)
@@ -141,16 +141,16 @@ fn resume_multi_process(
                 .map_err(|e| usage(format!("in {}: {e}", runtime_path.display())))
         })?;
     let restore_actors = actor_states(dir, config_toml, info.actors, &runtime, learner.env_steps)?;
-    let plan = crate::launcher::Plan {
+    let plan = alfd_launcher::Plan {
         cfg,
         actors: info.actors,
         run_dir: dir.clone(),
-        run_id: crate::launcher::new_run_id(),
+        run_id: alfd_launcher::new_run_id(),
         runtime,
         max_restarts: 5,
         progress: args.output().progress(),
         pin: false,
-        bin_dir: crate::launcher::bin_dir()?,
+        bin_dir: alfd_launcher::bin_dir()?,
         resume: true,
         launches: info.launches.saturating_add(1),
         restore_actors,
@@ -178,7 +178,7 @@ fn actor_states(
     for id in 0..actors as u16 {
         files.push(
             alfd_actor::checkpoint::load(dir, id, config_toml)
-                .map_err(|e| usage(format!("{e:#}")))?,
+                .map_err(|e| usage(alfd_harness::describe(&e)))?,
         );
     }
     if let [Some(file)] = &files[..] {

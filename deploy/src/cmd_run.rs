@@ -7,10 +7,12 @@ use std::time::{Duration, Instant};
 use alfd_harness::RuntimeConfig;
 use alfd_wire::MAX_ACTORS;
 
-use crate::launcher::{self, Plan, SwapRequest, SwapResponse, SWAP_REQUEST, SWAP_RESPONSE};
 use crate::report::{self, Output};
 use crate::usage::usage;
 use crate::{run_dir, setup};
+use alfd_launcher::{
+    self as launcher, Plan, SwapRequest, SwapResponse, SWAP_REQUEST, SWAP_RESPONSE,
+};
 
 /// The default experiment: the recommended CartPole-1000 preset (Bootstrapped DQN with 300 active
 /// demonstrations of the 1000 expert, 50,000 steps).
@@ -244,7 +246,7 @@ pub struct SwapArgs {
 
 /// Asks the launcher of a live run to replace its expert, and waits for the outcome.
 pub fn swap(args: SwapArgs) -> anyhow::Result<()> {
-    let info = launcher::read_run_info(&args.run).map_err(|e| usage(format!("{e:#}")))?;
+    let info = launcher::read_run_info(&args.run).map_err(|e| usage(alfd_harness::describe(&e)))?;
     // One swap at a time: a second one is refused at once, not queued.
     let _swap_lock = run_dir::lock_swaps(&args.run)?;
     // The new expert must exist for the run's environment.

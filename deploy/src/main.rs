@@ -15,8 +15,6 @@ mod cmd_q_range;
 mod cmd_resume;
 mod cmd_run;
 mod cmd_sweep;
-mod expert_lifecycle;
-mod launcher;
 mod local_remote;
 mod output;
 mod report;

@@ -391,6 +391,8 @@ fn the_core_does_no_io() {
 struct Graph {
     names: BTreeMap<String, String>,
     members: Vec<String>,
+    /// Per package id: the ids its own build depends on (no dev-dependencies).
+    normal: BTreeMap<String, Vec<String>>,
     deps: BTreeMap<String, Vec<String>>,
 }
 
@@ -448,6 +450,7 @@ impl Graph {
             .map(|id| id.as_str().unwrap().to_owned())
             .collect();
         let mut deps = BTreeMap::new();
+        let mut normal = BTreeMap::new();
         for node in meta["resolve"]["nodes"].as_array().expect("resolve.nodes") {
             let of_node: Vec<String> = node["dependencies"]
                 .as_array()
@@ -456,11 +459,26 @@ impl Graph {
                 .map(|d| d.as_str().unwrap().to_owned())
                 .collect();
             deps.insert(node["id"].as_str().unwrap().to_owned(), of_node);
+            // The dependencies a build of the package itself uses (kind null: neither dev nor
+            // build).
+            let built: Vec<String> = node["deps"]
+                .as_array()
+                .expect("deps")
+                .iter()
+                .filter(|d| {
+                    d["dep_kinds"]
+                        .as_array()
+                        .is_some_and(|k| k.iter().any(|k| k["kind"].is_null()))
+                })
+                .map(|d| d["pkg"].as_str().unwrap().to_owned())
+                .collect();
+            normal.insert(node["id"].as_str().unwrap().to_owned(), built);
         }
         Graph {
             names,
             members,
             deps,
+            normal,
         }
     }
 
@@ -473,6 +491,14 @@ impl Graph {
             .iter()
             .find(|id| self.name(id) == name)
             .unwrap_or_else(|| panic!("{name} is not a workspace member"))
+    }
+
+    /// What `name`'s own build depends on directly (no dev-dependencies).
+    fn normal(&self, name: &str) -> BTreeSet<&str> {
+        self.normal[self.id(name)]
+            .iter()
+            .map(|d| self.name(d))
+            .collect()
     }
 
     fn direct(&self, name: &str) -> BTreeSet<&str> {
@@ -570,6 +596,37 @@ fn the_dependency_graph_keeps_its_shape() {
         inside("alfd-harness")
     );
     assert_eq!(inside("alfd-bridge"), BTreeSet::from(["alfd-wire"]));
+    // The launcher is a library of the CLI (alfd-deploy), which no other crate depends on.
+    assert!(
+        inside("alfd-launcher").is_subset(&BTreeSet::from([
+            "alfd-common",
+            "alfd-wire",
+            "alfd-harness",
+            "alfd-bridge",
+            "alfd-expert"
+        ])),
+        "{:?}",
+        inside("alfd-launcher")
+    );
+    for m in &g.members {
+        assert!(
+            !g.direct(g.name(m)).contains("alfd-deploy"),
+            "{}",
+            g.name(m)
+        );
+    }
+
+    // Library crates report typed errors (thiserror); anyhow is for the binaries' code.
+    for lib in [
+        "alfd-common",
+        "alfd-wire",
+        "alfd-harness",
+        "alfd-bridge",
+        "alfd-launcher",
+    ] {
+        assert!(!g.normal(lib).contains("anyhow"), "{lib} depends on anyhow");
+        assert!(g.normal(lib).contains("thiserror"), "{lib}");
+    }
 }
 
 // ---------------------------------------------------------------------------------------------

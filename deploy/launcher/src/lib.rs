@@ -39,6 +39,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use crate::error::{bail, ensure, What as _};
 use alfd_common::config::ExperimentConfig;
 use alfd_common::record::{mean_return_last_50, EpisodeRecord, RunSummary, RuntimeSummary};
 use alfd_harness::{RuntimeConfig, RUNTIME_FILE};
@@ -46,11 +47,15 @@ use alfd_wire::{
     self as wire, command, process_state, progress_kind, ActorBells, Bell, Control, Doorbell,
     Process, Progress, Role, Wake, Wire, WireError, CONTROL_PERIOD,
 };
-use anyhow::{bail, Context as _};
 use serde::{Deserialize, Serialize};
 use tracing::{debug, info, warn};
 
 use crate::expert_lifecycle::{Action, Exit, ExpertLifecycle};
+
+mod error;
+pub mod expert_lifecycle;
+
+pub use error::{LaunchError, Result};
 
 mod children;
 mod episodes;
@@ -58,7 +63,7 @@ mod remote;
 
 use episodes::{open_episodes, shares};
 
-pub(crate) use children::describe as describe_status;
+pub use children::describe as describe_status;
 use children::{describe, last_error, pin, proc_binary, RateMeter};
 
 /// Everything a launch needs.
@@ -167,33 +172,34 @@ pub fn new_run_id() -> String {
 }
 
 /// Where the process binaries are: `ALFD_BIN_DIR`, else next to the running `alfd`.
-pub fn bin_dir() -> anyhow::Result<PathBuf> {
+pub fn bin_dir() -> Result<PathBuf> {
     if let Some(d) = std::env::var_os("ALFD_BIN_DIR") {
         return Ok(PathBuf::from(d));
     }
-    let exe = std::env::current_exe().context("cannot locate the running alfd binary")?;
+    let exe =
+        std::env::current_exe().what(|| "cannot locate the running alfd binary".to_owned())?;
     Ok(exe
         .parent()
-        .context("the alfd binary has no parent directory")?
+        .what(|| "the alfd binary has no parent directory".to_owned())?
         .to_owned())
 }
 
 /// Runs the plan to the end (or to Ctrl-C); an error names the process that failed.
-pub fn launch(plan: &Plan) -> anyhow::Result<RunSummary> {
+pub fn launch(plan: &Plan) -> Result<RunSummary> {
     for bin in ["alfd-learner", "alfd-actor", "alfd-expert"] {
         let p = plan.bin_dir.join(bin);
-        anyhow::ensure!(
+        ensure!(
             p.is_file(),
             "{bin} not found in {} (build every binary: `cargo build --release`, or use deploy/run.sh)",
             plan.bin_dir.display()
         );
     }
     std::fs::create_dir_all(&plan.run_dir)
-        .with_context(|| format!("cannot create run directory {}", plan.run_dir.display()))?;
+        .what(|| format!("cannot create run directory {}", plan.run_dir.display()))?;
     if !plan.resume {
-        crate::output::write(&plan.run_dir, "config.toml", plan.cfg.to_toml().as_bytes())?;
+        write(&plan.run_dir, "config.toml", plan.cfg.to_toml().as_bytes())?;
     }
-    crate::output::write(
+    write(
         &plan.run_dir,
         RUNTIME_FILE,
         plan.runtime.to_toml().as_bytes(),
@@ -206,7 +212,7 @@ pub fn launch(plan: &Plan) -> anyhow::Result<RunSummary> {
         schema_version: wire::SCHEMA_VERSION,
         launches: plan.launches,
     };
-    crate::output::write(
+    write(
         &plan.run_dir,
         "run.json",
         serde_json::to_string_pretty(&info)?.as_bytes(),
@@ -220,7 +226,7 @@ pub fn launch(plan: &Plan) -> anyhow::Result<RunSummary> {
             Process::new(Role::Launcher, 0),
             wire::SCHEMA_VERSION,
         )
-        .context("cannot create the run's iceoryx2 node")?;
+        .what(|| "cannot create the run's iceoryx2 node".to_owned())?;
         let mut launcher = Launcher::new(plan, &wire)?;
         let result = launcher.run();
         // Whatever happened, no child outlives the launcher.
@@ -286,7 +292,7 @@ struct Launcher<'a, 'w> {
 }
 
 impl<'a, 'w> Launcher<'a, 'w> {
-    fn new(plan: &'a Plan, wire: &'w Wire) -> anyhow::Result<Self> {
+    fn new(plan: &'a Plan, wire: &'w Wire) -> Result<Self> {
         let control = Control {
             command: command::RUN,
             active_expert: 0,
@@ -360,7 +366,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         })
     }
 
-    fn run(&mut self) -> anyhow::Result<RunSummary> {
+    fn run(&mut self) -> Result<RunSummary> {
         info!(run_id = %self.plan.run_id, actors = self.plan.actors, "run starting");
         self.spawn(Kind::Learner { incarnation: 1 })?;
         let first = self
@@ -379,7 +385,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             if self.seen.learner_state == process_state::RUNNING && self.experts.settled() {
                 break;
             }
-            anyhow::ensure!(
+            ensure!(
                 Instant::now() < deadline,
                 "the learner and the expert did not come up within 60 s (see learner.log, expert-1.log)"
             );
@@ -413,7 +419,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
     }
 
     /// Waits for news (at most 100 ms), takes in progress, keeps the heartbeat going.
-    fn tick(&mut self) -> anyhow::Result<Wake> {
+    fn tick(&mut self) -> Result<Wake> {
         let wake = self.waiter.wait(Duration::from_millis(100))?;
         self.drain_progress()?;
         self.check_hub()?;
@@ -424,7 +430,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         Ok(wake)
     }
 
-    fn publish_control(&mut self) -> anyhow::Result<()> {
+    fn publish_control(&mut self) -> Result<()> {
         self.control_tx.send(self.control)?;
         for b in &self.bells {
             b.ring()?;
@@ -434,7 +440,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         Ok(())
     }
 
-    fn drain_progress(&mut self) -> anyhow::Result<()> {
+    fn drain_progress(&mut self) -> Result<()> {
         loop {
             let p = match self.progress_rx.receive() {
                 Ok(Some(p)) => p,
@@ -500,7 +506,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         }
     }
 
-    fn record_episode(&mut self, p: &Progress) -> anyhow::Result<()> {
+    fn record_episode(&mut self, p: &Progress) -> Result<()> {
         if self.done()
             || self
                 .plan
@@ -538,7 +544,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         // A write that fails (a full disk) takes back what it wrote of the row, so the file
         // stays whole rows for `alfd resume`.
         let row = format!("{}\n", r.csv_row());
-        alfd_harness::append_whole(&mut self.csv, row.as_bytes(), false).with_context(|| {
+        alfd_harness::append_whole(&mut self.csv, row.as_bytes(), false).what(|| {
             format!(
                 "cannot append episode {} to {}",
                 r.episode,
@@ -593,7 +599,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         ));
     }
 
-    fn spawn(&mut self, kind: Kind) -> anyhow::Result<()> {
+    fn spawn(&mut self, kind: Kind) -> Result<()> {
         let plan = self.plan;
         let (bin, name, mut args) = match &kind {
             Kind::Learner { incarnation } => (
@@ -640,7 +646,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             .create(true)
             .append(true)
             .open(&log_path)
-            .with_context(|| format!("cannot open {}", log_path.display()))?;
+            .what(|| format!("cannot open {}", log_path.display()))?;
         let child = Command::new(plan.bin_dir.join(bin))
             .args(&args)
             .stdin(Stdio::null())
@@ -649,7 +655,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             // Its own process group: Ctrl-C reaches the launcher only, which stops the run in order.
             .process_group(0)
             .spawn()
-            .with_context(|| format!("cannot start {bin}"))?;
+            .what(|| format!("cannot start {bin}"))?;
         info!(process = %name, pid = child.id(), "started");
         if plan.pin {
             pin(child.id(), matches!(kind, Kind::Learner { .. }));
@@ -659,7 +665,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
     }
 
     /// Reaps exited children: restarts actors and the expert, fails the run for the learner.
-    fn check_children(&mut self) -> anyhow::Result<()> {
+    fn check_children(&mut self) -> Result<()> {
         let mut i = 0;
         while i < self.procs.len() {
             let Some(status) = self.procs[i].child.try_wait()? else {
@@ -747,7 +753,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
     }
 
     /// Carries out what the expert lifecycle decided.
-    fn apply(&mut self, actions: Vec<Action>) -> anyhow::Result<()> {
+    fn apply(&mut self, actions: Vec<Action>) -> Result<()> {
         for action in actions {
             debug!(?action, "expert lifecycle");
             match action {
@@ -823,7 +829,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
     }
 
     /// Takes a swap request, and lets the expert lifecycle's timeouts run.
-    fn check_swap(&mut self) -> anyhow::Result<()> {
+    fn check_swap(&mut self) -> Result<()> {
         let request_path = self.plan.run_dir.join(SWAP_REQUEST);
         if request_path.exists() {
             let text = std::fs::read_to_string(&request_path).unwrap_or_default();
@@ -848,7 +854,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         message: String,
         from: String,
         generation: u16,
-    ) -> anyhow::Result<()> {
+    ) -> Result<()> {
         let r = SwapResponse {
             id: request.id,
             ok,
@@ -861,7 +867,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         if !ok {
             warn!(message = %r.message, "expert swap failed");
         }
-        crate::output::write(
+        write(
             &self.plan.run_dir,
             SWAP_RESPONSE,
             serde_json::to_string_pretty(&r)?.as_bytes(),
@@ -869,7 +875,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
     }
 
     /// Tells every process to stop and waits for them (the learner saves its weights).
-    fn shutdown(&mut self) -> anyhow::Result<()> {
+    fn shutdown(&mut self) -> Result<()> {
         info!(
             episodes = self.recorded,
             remote_joins = self.remote_joins,
@@ -927,7 +933,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         if !failures.is_empty() {
             bail!("{}", failures.join("; "));
         }
-        anyhow::ensure!(
+        ensure!(
             self.plan.run_dir.join("weights.safetensors").is_file(),
             "the learner stopped without saving weights.safetensors; see {}",
             self.log_of("learner")
@@ -978,10 +984,15 @@ impl<'a, 'w> Launcher<'a, 'w> {
     }
 }
 
+/// Writes `bytes` to `dir/name`, replacing the file whole (a reader never sees half of it).
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> Result<()> {
+    Ok(alfd_harness::write_atomically(&dir.join(name), bytes)?)
+}
+
 /// Reads `run.json` of a run directory.
-pub fn read_run_info(run_dir: &Path) -> anyhow::Result<RunInfo> {
+pub fn read_run_info(run_dir: &Path) -> Result<RunInfo> {
     let path = run_dir.join("run.json");
     let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("{} is not a run directory (no run.json)", run_dir.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("malformed {}", path.display()))
+        .what(|| format!("{} is not a run directory (no run.json)", run_dir.display()))?;
+    serde_json::from_str(&text).what(|| format!("malformed {}", path.display()))
 }

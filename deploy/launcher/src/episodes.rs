@@ -4,7 +4,8 @@ use std::fs::File;
 use std::io::Write as _;
 use std::path::Path;
 
-use anyhow::Context as _;
+use crate::error::{bail, ensure, What as _};
+use crate::Result;
 
 use alfd_common::record::CSV_HEADER;
 
@@ -22,23 +23,19 @@ pub(super) fn shares(episodes: u64, actors: usize) -> [u32; alfd_wire::MAX_ACTOR
 /// `RUN_DIR/episodes.csv` opened for this launcher, and the (return, demonstrations used) of
 /// the rows already in it: a new run creates it with its header; a resumed run appends to it,
 /// after dropping a last line cut short by a crash.
-pub(super) fn open_episodes(
-    run_dir: &Path,
-    resume: bool,
-) -> anyhow::Result<(File, Vec<(f64, u32)>)> {
+pub(super) fn open_episodes(run_dir: &Path, resume: bool) -> Result<(File, Vec<(f64, u32)>)> {
     let path = run_dir.join("episodes.csv");
     if !resume {
-        let mut csv = File::create(&path).context("cannot create episodes.csv")?;
+        let mut csv = File::create(&path).what(|| "cannot create episodes.csv".to_owned())?;
         writeln!(csv, "{CSV_HEADER}")?;
         return Ok((csv, Vec::new()));
     }
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("cannot read {}", path.display()))?;
+    let text = std::fs::read_to_string(&path).what(|| format!("cannot read {}", path.display()))?;
     let whole = text.rfind('\n').map_or(0, |i| i + 1);
     let mut rows = Vec::new();
     for (n, line) in text[..whole].lines().enumerate() {
         if n == 0 {
-            anyhow::ensure!(
+            ensure!(
                 line == CSV_HEADER,
                 "{} has another header than this alfd writes",
                 path.display()
@@ -51,15 +48,15 @@ pub(super) fn open_episodes(
             fields.get(3).and_then(|f| f.parse::<u32>().ok()),
         );
         let (Some(ret), Some(demos)) = parsed else {
-            anyhow::bail!("{} line {}: not an episode row", path.display(), n + 1);
+            bail!("{} line {}: not an episode row", path.display(), n + 1);
         };
         rows.push((ret, demos));
     }
-    anyhow::ensure!(whole > 0, "{} has no header", path.display());
+    ensure!(whole > 0, "{} has no header", path.display());
     let csv = std::fs::OpenOptions::new()
         .write(true)
         .open(&path)
-        .with_context(|| format!("cannot open {}", path.display()))?;
+        .what(|| format!("cannot open {}", path.display()))?;
     csv.set_len(whole as u64)?;
     let mut csv = csv;
     use std::io::Seek as _;

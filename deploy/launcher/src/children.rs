@@ -44,7 +44,7 @@ pub(super) fn proc_binary(kind: &Kind, name: &str) -> String {
 }
 
 /// "exited with status 1", "was killed by signal 9".
-pub(crate) fn describe(status: ExitStatus) -> String {
+pub fn describe(status: ExitStatus) -> String {
     use std::os::unix::process::ExitStatusExt as _;
     match (status.code(), status.signal()) {
         (Some(c), _) => format!("exited with status {c}"),
@@ -131,7 +131,7 @@ mod tests {
             Some("/r/demos.jsonl line 79: not a demonstration record: EOF")
         );
         assert_eq!(error_line("INFO nothing wrong\n"), None);
-        let tmp = crate::run_dir::test_dir("last-error");
+        let tmp = alfd_harness::test_dir("last-error");
         let dir = tmp.path();
         let path = dir.join("expert-2.log");
         std::fs::write(&path, log).unwrap();

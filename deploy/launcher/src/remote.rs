@@ -6,7 +6,8 @@
 use std::collections::HashMap;
 use std::time::Instant;
 
-use anyhow::Context as _;
+use crate::error::What as _;
+use crate::Result;
 use tracing::{info, warn};
 
 use alfd_harness::RUNTIME_FILE;
@@ -28,13 +29,10 @@ pub(super) struct RemoteExperts {
 }
 
 impl Launcher<'_, '_> {
-    pub(super) fn start_hub(
-        &self,
-        endpoint: &alfd_bridge::Endpoint,
-    ) -> anyhow::Result<alfd_bridge::Hub> {
+    pub(super) fn start_hub(&self, endpoint: &alfd_bridge::Endpoint) -> Result<alfd_bridge::Hub> {
         let read = |name: &str| {
             std::fs::read_to_string(self.plan.run_dir.join(name))
-                .with_context(|| format!("cannot read {name} of the run"))
+                .what(|| format!("cannot read {name} of the run"))
         };
         alfd_bridge::Hub::start(alfd_bridge::HubOptions {
             endpoint: endpoint.clone(),
@@ -47,14 +45,14 @@ impl Launcher<'_, '_> {
             query_timeout: self.plan.runtime.query_timeout(),
             demos_path: self.plan.run_dir.join("demos.jsonl"),
         })
-        .with_context(|| format!("cannot listen on {endpoint} for remote actors"))
+        .what(|| format!("cannot listen on {endpoint} for remote actors"))
     }
 
     /// Takes in joins and departures of remote hosts. A host that left (its link dropped, its
     /// process died) took its actors with it: like crashed actors, their ids are free again and
     /// a host that joins gets them with new incarnations; the learner's credit book takes a new
     /// incarnation as a new actor.
-    pub(super) fn check_hub(&mut self) -> anyhow::Result<()> {
+    pub(super) fn check_hub(&mut self) -> Result<()> {
         let Some(hub) = &self.hub else { return Ok(()) };
         let running = self.control.command != command::SHUTDOWN;
         for event in hub.events() {
@@ -128,7 +126,7 @@ impl Launcher<'_, '_> {
         how: String,
         code: Option<i32>,
         running: bool,
-    ) -> anyhow::Result<()> {
+    ) -> Result<()> {
         let Some(join_id) = self.remote_experts.hosts.remove(&generation) else {
             return Ok(());
         };
