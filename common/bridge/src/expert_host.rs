@@ -10,8 +10,7 @@ use std::collections::hash_map::Entry;
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{mpsc, Arc};
-use std::thread::JoinHandle;
+use std::sync::mpsc;
 use std::time::Duration;
 
 use alfd_wire::{
@@ -27,7 +26,7 @@ use crate::frame::{ExpertOrder, Frame};
 use crate::inbox::{inbox, Mail, Post};
 use crate::link::{self, drain};
 use crate::mirror::Remote;
-use crate::worker::{self, Heartbeat};
+use crate::worker::{ForwardingThread, Heartbeat};
 use crate::{keys, TICK};
 
 /// What the run asks of `alfd join` about its expert.
@@ -43,12 +42,9 @@ pub enum ExpertHostOrder {
 
 /// A running expert host; stop it with [`ExpertHost::stop`] (or drop it).
 pub struct ExpertHost {
-    stop: Arc<AtomicBool>,
     post: Post,
     orders: mpsc::Receiver<ExpertHostOrder>,
-    thread: Option<JoinHandle<Result<()>>>,
-    heard: Heartbeat,
-    _token: Option<zenoh::liveliness::LivelinessToken>,
+    forwarder: ForwardingThread,
     _down: zenoh::pubsub::Subscriber<()>,
 }
 
@@ -84,48 +80,30 @@ impl ExpertHost {
             .congestion_control(CongestionControl::Block)
             .wait()
             .map_err(zenoh_error)?;
-        let stop = Arc::new(AtomicBool::new(false));
-        let heard = Heartbeat::new();
         let (orders_tx, orders) = mpsc::channel();
         let (ready_tx, ready_rx) = mpsc::channel();
-        let thread = {
-            let stop = Arc::clone(&stop);
-            let heard = heard.clone();
-            let me = Me {
-                run_id: host_run_id.to_owned(),
-                join_id: remote.join_id().to_owned(),
-                demos: run_dir.join("demos.jsonl"),
-            };
-            std::thread::Builder::new()
-                .name("expert-host".to_owned())
-                .spawn(move || {
-                    let r = forward(&me, inbox, &up, &stop, &heard, &orders_tx, ready_tx);
-                    if let Err(e) = &r {
-                        warn!("the expert host's bridge stopped: {e}");
-                    }
-                    r
-                })
-                .expect("a thread starts")
+        let me = Me {
+            run_id: host_run_id.to_owned(),
+            join_id: remote.join_id().to_owned(),
+            demos: run_dir.join("demos.jsonl"),
         };
+        let mut forwarder = ForwardingThread::spawn("expert host", move |stop, heard| {
+            forward(&me, inbox, &up, stop, heard, &orders_tx, ready_tx)
+        });
         let _ = ready_rx.recv_timeout(Duration::from_secs(10));
-        let token = if announce {
-            Some(
+        if announce {
+            forwarder.announce(
                 session
                     .liveliness()
                     .declare_token(keys::member(&run_id, remote.join_id()))
                     .wait()
                     .map_err(zenoh_error)?,
-            )
-        } else {
-            None
-        };
+            );
+        }
         Ok(Self {
-            stop,
             post,
             orders,
-            thread: Some(thread),
-            heard,
-            _token: token,
+            forwarder,
             _down: down,
         })
     }
@@ -147,32 +125,23 @@ impl ExpertHost {
 
     /// How long since the learner's host was last heard of (`None`: never yet).
     pub fn silence(&self) -> Option<Duration> {
-        self.heard.silence()
+        self.forwarder.silence()
     }
 
     /// Whether the bridge's thread ended (an error, said in the log).
     pub fn ended(&self) -> bool {
-        self.thread.as_ref().is_none_or(|t| t.is_finished())
+        self.forwarder.ended()
     }
 
     /// Stops forwarding (after what is under way) and leaves the run.
     pub fn stop(mut self) -> Result<()> {
-        self.halt()
-    }
-
-    fn halt(&mut self) -> Result<()> {
-        self.stop.store(true, Ordering::Relaxed);
-        let r = worker::join(&mut self.thread, "expert host");
-        if let Some(t) = self._token.take() {
-            let _ = t.undeclare().wait();
-        }
-        r
+        self.forwarder.halt()
     }
 }
 
 impl Drop for ExpertHost {
     fn drop(&mut self) {
-        let _ = self.halt();
+        let _ = self.forwarder.halt();
     }
 }
 

@@ -5,12 +5,10 @@
 //! back is published here under the sender's own header.
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use alfd_wire::{ActorBells, Doorbell, IncomingQuery, Process, Role, Wake, Wire, SCHEMA_VERSION};
-use tracing::{debug, info, warn};
+use tracing::{debug, info};
 use zenoh::qos::CongestionControl;
 use zenoh::Wait as _;
 
@@ -20,7 +18,7 @@ use crate::frame::{self, Frame};
 use crate::inbox::{inbox, Mail};
 use crate::link::{self, drain, HeldQueries};
 use crate::roster::{JoinReply, JoinRequest, Joined, RestartReply, RestartRequest};
-use crate::worker::{self, Heartbeat};
+use crate::worker::{ForwardingThread, Heartbeat};
 use crate::{keys, TICK};
 
 /// A remote host's connection to a run: the zenoh session and the run's answer to the join.
@@ -114,12 +112,9 @@ pub fn join(
 
 /// A running mirror; stop it with [`Mirror::stop`] (or drop it).
 pub struct Mirror {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<Result<()>>>,
-    /// When the learner's host was last heard of (its control messages, every
-    /// `alfd_wire::CONTROL_PERIOD`).
-    heard: Heartbeat,
-    _token: Option<zenoh::liveliness::LivelinessToken>,
+    /// The forwarding thread; it hears of the learner's host by its control messages, every
+    /// `alfd_wire::CONTROL_PERIOD`.
+    forwarder: ForwardingThread,
     _down: zenoh::pubsub::Subscriber<()>,
     session: zenoh::Session,
     run_id: String,
@@ -155,37 +150,23 @@ impl Mirror {
             .congestion_control(CongestionControl::Block)
             .wait()
             .map_err(zenoh_error)?;
-        let stop = Arc::new(AtomicBool::new(false));
-        let heard = Heartbeat::new();
         let (ready_tx, ready_rx) = std::sync::mpsc::channel();
-        let thread = {
-            let stop = Arc::clone(&stop);
-            let heard = heard.clone();
-            let mirror_run_id = mirror_run_id.to_owned();
-            let ids: Vec<u16> = joined.actors.iter().map(|a| a.0).collect();
-            std::thread::Builder::new()
-                .name("mirror".to_owned())
-                .spawn(move || {
-                    let r = forward(&mirror_run_id, &ids, inbox, &up, &stop, &heard, ready_tx);
-                    if let Err(e) = &r {
-                        warn!("the mirror stopped: {e}");
-                    }
-                    r
-                })
-                .expect("a thread starts")
-        };
+        let mirror_run_id = mirror_run_id.to_owned();
+        let ids: Vec<u16> = joined.actors.iter().map(|a| a.0).collect();
+        let mut forwarder = ForwardingThread::spawn("mirror", move |stop, heard| {
+            forward(&mirror_run_id, &ids, inbox, &up, stop, heard, ready_tx)
+        });
         // The mirror's services exist before the hub is told this host is up.
         let _ = ready_rx.recv_timeout(Duration::from_secs(10));
-        let token = session
-            .liveliness()
-            .declare_token(keys::member(&joined.run_id, &join_id))
-            .wait()
-            .map_err(zenoh_error)?;
+        forwarder.announce(
+            session
+                .liveliness()
+                .declare_token(keys::member(&joined.run_id, &join_id))
+                .wait()
+                .map_err(zenoh_error)?,
+        );
         Ok(Self {
-            stop,
-            thread: Some(thread),
-            heard,
-            _token: Some(token),
+            forwarder,
             _down: down,
             session,
             run_id: joined.run_id,
@@ -224,12 +205,12 @@ impl Mirror {
 
     /// How long since the learner's host was last heard of (`None`: never yet).
     pub fn silence(&self) -> Option<Duration> {
-        self.heard.silence()
+        self.forwarder.silence()
     }
 
     /// Whether the mirror's thread ended (an error, said in the log).
     pub fn ended(&self) -> bool {
-        self.thread.as_ref().is_none_or(|t| t.is_finished())
+        self.forwarder.ended()
     }
 
     /// Stops forwarding, leaves the run (the token goes) and closes the session.
@@ -238,11 +219,7 @@ impl Mirror {
     }
 
     fn halt(&mut self) -> Result<()> {
-        self.stop.store(true, Ordering::Relaxed);
-        let r = worker::join(&mut self.thread, "mirror");
-        if let Some(t) = self._token.take() {
-            let _ = t.undeclare().wait();
-        }
+        let r = self.forwarder.halt();
         let _ = self.session.close().wait();
         r
     }

@@ -1,7 +1,7 @@
 //! What the hub, the mirror and the expert host share: a forwarding thread told to stop by a
 //! flag and joined with its result, and the time the learner's host was last heard of.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -42,6 +42,75 @@ impl Heartbeat {
                     .saturating_sub(Duration::from_millis(ms)),
             ),
         }
+    }
+}
+
+/// A forwarding thread with its stop flag, the heartbeat it keeps, and the liveliness token
+/// that tells the other host this one is up (undeclared when the thread is halted).
+pub(crate) struct ForwardingThread {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<Result<()>>>,
+    heard: Heartbeat,
+    token: Option<zenoh::liveliness::LivelinessToken>,
+    /// What the thread is, for its name and its messages ("mirror", "expert host").
+    what: &'static str,
+}
+
+impl ForwardingThread {
+    /// Starts `body` on a thread of its own, with the stop flag and the heartbeat it keeps; an
+    /// error it ends with is logged ("the WHAT stopped: ...") and kept for [`ForwardingThread::halt`].
+    pub(crate) fn spawn(
+        what: &'static str,
+        body: impl FnOnce(&AtomicBool, &Heartbeat) -> Result<()> + Send + 'static,
+    ) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let heard = Heartbeat::new();
+        let thread = {
+            let stop = Arc::clone(&stop);
+            let heard = heard.clone();
+            std::thread::Builder::new()
+                .name(what.replace(' ', "-"))
+                .spawn(move || {
+                    let r = body(&stop, &heard);
+                    if let Err(e) = &r {
+                        tracing::warn!("the {what} stopped: {e}");
+                    }
+                    r
+                })
+                .expect("a thread starts")
+        };
+        Self {
+            stop,
+            thread: Some(thread),
+            heard,
+            token: None,
+            what,
+        }
+    }
+
+    /// Keeps `token` until the thread is halted.
+    pub(crate) fn announce(&mut self, token: zenoh::liveliness::LivelinessToken) {
+        self.token = Some(token);
+    }
+
+    /// How long since the learner's host was last heard of (`None`: never yet).
+    pub(crate) fn silence(&self) -> Option<Duration> {
+        self.heard.silence()
+    }
+
+    /// Whether the thread ended (an error, said in the log).
+    pub(crate) fn ended(&self) -> bool {
+        self.thread.as_ref().is_none_or(|t| t.is_finished())
+    }
+
+    /// Tells the thread to stop, joins it (its result), and withdraws the token.
+    pub(crate) fn halt(&mut self) -> Result<()> {
+        self.stop.store(true, Ordering::Relaxed);
+        let r = join(&mut self.thread, self.what);
+        if let Some(t) = self.token.take() {
+            let _ = zenoh::Wait::wait(t.undeclare());
+        }
+        r
     }
 }
 
