@@ -1,6 +1,6 @@
-"""The core benchmarks of deploy/bench/core.sh: the train step's CPU time per step, and the
-demonstration model (fit on B demonstrations, then 100 queries) against scikit-learn, measured
-interleaved in one sitting. Writes OUT/summary.md (the tables BENCHMARKS.md shows) and
+"""The core benchmarks of deploy/bench/core.sh: the train step's CPU time per step, the
+demonstration model (fit on B demonstrations, then 100 queries) against scikit-learn, and KRR's
+cost of one more demonstration (grown against fitted anew), measured interleaved in one sitting. Writes OUT/summary.md (the tables BENCHMARKS.md shows) and
 OUT/results.json (every measurement).
 
 Ours is the whole `alfd demo-model` command (start, read, fit, 100 queries, print); scikit-learn's
@@ -27,6 +27,8 @@ from sklearn.svm import SVC
 
 ALFD = "target/release/alfd"
 TRAIN_STEPS = "target/release/examples/train_steps"
+KRR_GROW = "target/release/examples/krr_grow"
+GROWN = 10
 SIZES = [500, 1000, 2000, 3000]
 SVM_SIZES = [500, 1000, 3000]
 QUERIES = 100
@@ -131,6 +133,7 @@ def main():
     steps = {64: 20000, 128: 10000}
     krr = {n: {"ours": [], "sklearn": [], "max_diff": 0.0} for n in SIZES}
     svm = {n: {"ours": [], "sklearn": []} for n in SVM_SIZES}
+    grow = {n: {"grow": [], "fit": [], "same_bits": True} for n in SIZES}
     for r in range(args.rounds):
         print(f"core.py: round {r + 1} of {args.rounds}", flush=True)
         for hidden in train:
@@ -147,6 +150,13 @@ def main():
                 krr[n][who].append(t)
             diff = float(np.max(np.abs(np.array(raw_ours) - raw_sk)))
             krr[n]["max_diff"] = max(krr[n]["max_diff"], diff)
+        for n in SIZES:
+            out = json.loads(subprocess.run(
+                [KRR_GROW, str(n), str(GROWN)], check=True, capture_output=True, text=True
+            ).stdout)
+            grow[n]["grow"].append(out["grow_s"])
+            grow[n]["fit"].append(out["fit_s"])
+            grow[n]["same_bits"] = grow[n]["same_bits"] and out["same_bits"]
         for n in SVM_SIZES:
             svm[n]["ours"].append(ours("svm", demos[n], queries)[0])
             svm[n]["sklearn"].append(sklearn_svc(demos[n], queries))
@@ -156,7 +166,8 @@ def main():
     m["load_average_before"] = round(load_before, 2)
     m["load_average_after"] = round(load_after, 2)
     m["rounds"] = args.rounds
-    results = {"machine": m, "train_step_us": train, "train_steps": steps, "krr_s": krr, "svm_s": svm}
+    results = {"machine": m, "train_step_us": train, "train_steps": steps, "krr_s": krr, "svm_s": svm,
+               "krr_grow_s": grow}
     with open(os.path.join(args.out, "results.json"), "w") as f:
         json.dump(results, f, indent=1, sort_keys=True)
 
@@ -209,6 +220,28 @@ def main():
         else:
             row += " | | |"
         lines.append(row)
+    ms = lambda x: f"{x * 1e3:.1f} ms"  # noqa: E731
+    lines += [
+        "",
+        "## One more demonstration",
+        "",
+        f"KRR's cost of a demonstration arriving at B: the factor grown by one row and the model "
+        f"solved from it (`KrrFactor::push` + `model`, the mean over {GROWN} arrivals from B on), "
+        f"against a fit anew on B + {GROWN} (`KrrFactor::fit` + `model`); in-process times of the "
+        "example `common/core/examples/krr_grow.rs`. \"same bits\": the grown model equals the "
+        "fitted one bit for bit. scikit-learn's `KernelRidge` has no update: it refits (its fit "
+        "column above).",
+        "",
+        "| demonstrations | grown by one | fitted anew | fitted / grown | same bits |",
+        "|---:|---:|---:|---:|:---:|",
+    ]
+    for n in SIZES:
+        g = grow[n]
+        ratio = statistics.median(g["fit"]) / statistics.median(g["grow"])
+        lines.append(
+            f"| {n:,} | {span(g['grow'], ms)} | {span(g['fit'], ms)} | {ratio:.0f} | "
+            f"{'yes' if g['same_bits'] else 'no'} |"
+        )
     with open(os.path.join(args.out, "summary.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
     print(f"core.py: wrote {args.out}/summary.md and results.json")

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Benchmarks of the core's hot paths, written to results/bench/ (summary.md, results.json) for
-# BENCHMARKS.md (`alfd docs` copies the tables): the train step (CPU time per step) and the
-# demonstration model against scikit-learn, measured interleaved in one sitting.
+# BENCHMARKS.md (`alfd docs` copies the tables): the train step (CPU time per step), the
+# demonstration model against scikit-learn, and KRR's cost of one more demonstration, measured
+# interleaved in one sitting.
 #
 #   bash deploy/bench/core.sh            # 3 rounds, under a minute after the first install
 #   bash deploy/bench/core.sh --rounds 5
@@ -18,5 +19,5 @@ source deploy/bench/venv.sh
 bench_venv core.sh "$venv" "$requirements" 'import sklearn, numpy, scipy'
 echo "core.sh: building alfd and the train-step example (release)" >&2
 cargo build --release --quiet -p alfd-deploy --bin alfd
-cargo build --release --quiet -p alfd-common --example train_steps
+cargo build --release --quiet -p alfd-common --example train_steps --example krr_grow
 exec "$venv/bin/python" deploy/bench/core.py --out results/bench "$@"

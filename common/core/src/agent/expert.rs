@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::StateMismatch;
 use crate::config::DemoModelChoice;
+use crate::demo_model::krr::KrrFactor;
 use crate::demo_model::{DemoModel, DemoModelError, DemoModelKind};
 use crate::nn::Mlp;
 use crate::policy::argmax;
@@ -117,6 +118,8 @@ pub struct ExpertCore {
     choice: DemoModelChoice,
     num_actions: usize,
     model: Option<DemoModel>,
+    /// With KRR: the kernel matrix's factor over `demos`, grown by a row per demonstration.
+    krr: Option<KrrFactor>,
     model_version: u64,
     schedule: ShapingSchedule,
 }
@@ -134,6 +137,7 @@ impl ExpertCore {
             choice,
             num_actions,
             model: None,
+            krr: None,
             model_version: 0,
             schedule,
         }
@@ -154,6 +158,7 @@ impl ExpertCore {
     pub fn restore(&mut self, records: Vec<DemoRecord>) -> Result<(), DemoModelError> {
         self.budget = Budget::with_used(self.budget.total(), records.len() as u32);
         self.demos = records;
+        self.krr = None;
         self.refit()
     }
 
@@ -229,13 +234,37 @@ impl ExpertCore {
         };
         if self.demos.is_empty() {
             self.model = None;
+            self.krr = None;
             return Ok(());
         }
-        let states: Vec<Vec<f64>> = self.demos.iter().map(|d| d.state.clone()).collect();
-        let actions: Vec<usize> = self.demos.iter().map(|d| d.action).collect();
-        self.model = Some(DemoModel::fit(kind, &states, &actions, self.num_actions)?);
+        self.model = Some(match kind {
+            DemoModelKind::Krr => DemoModel::Krr(self.grow_krr()?.model()),
+            DemoModelKind::Svm => {
+                let states: Vec<Vec<f64>> = self.demos.iter().map(|d| d.state.clone()).collect();
+                let actions: Vec<usize> = self.demos.iter().map(|d| d.action).collect();
+                DemoModel::fit(kind, &states, &actions, self.num_actions)?
+            }
+        });
         self.model_version += 1;
         Ok(())
+    }
+
+    /// The KRR factor over every demonstration: the one held, grown by the newest
+    /// demonstration (O(n²)), or factored anew (O(n³)) when it does not hold all the others;
+    /// the same bits either way.
+    fn grow_krr(&mut self) -> Result<&KrrFactor, DemoModelError> {
+        let n = self.demos.len();
+        match (&mut self.krr, self.demos.last()) {
+            (Some(f), Some(d)) if f.len() + 1 == n => f.push(&d.state, d.action)?,
+            (Some(f), _) if f.len() == n => {}
+            _ => {
+                self.krr = None;
+                let states: Vec<&[f64]> = self.demos.iter().map(|d| d.state.as_slice()).collect();
+                let actions: Vec<usize> = self.demos.iter().map(|d| d.action).collect();
+                self.krr = Some(KrrFactor::fit(&states, &actions, self.num_actions)?);
+            }
+        }
+        Ok(self.krr.as_ref().expect("factored above"))
     }
 
     pub fn budget(&self) -> Budget {

@@ -54,7 +54,10 @@ fn factor_panel(a: &mut [f64], n: usize, kb: usize, end: usize) -> bool {
 }
 
 /// Column `j` (below the block) minus the contribution of block columns `kb..end`:
-/// `a[j.., j] -= L[j.., kb..end] L[j, kb..end]ᵀ`, four columns of L at a time.
+/// `a[j.., j] -= L[j.., kb..end] L[j, kb..end]ᵀ`, four columns of L per pass over the column but
+/// one subtraction at a time in column order, so that every element of L is
+/// `(a_ij - l_i0 l_j0 - l_i1 l_j1 - ...) / l_jj` in that order: the bits of nalgebra's
+/// factorisation, and of a factor grown one row at a time (`krr::KrrFactor`).
 fn update_column(a: &mut [f64], n: usize, j: usize, kb: usize, end: usize) {
     let (left, right) = a.split_at_mut(j * n);
     let col = &mut right[j..n];
@@ -64,7 +67,7 @@ fn update_column(a: &mut [f64], n: usize, j: usize, kb: usize, end: usize) {
         let (l0, l1, l2, l3) = (l(p), l(p + 1), l(p + 2), l(p + 3));
         let (c0, c1, c2, c3) = (l0[0], l1[0], l2[0], l3[0]);
         for (i, x) in col.iter_mut().enumerate() {
-            *x -= (l0[i] * c0 + l1[i] * c1) + (l2[i] * c2 + l3[i] * c3);
+            *x = (((*x - l0[i] * c0) - l1[i] * c1) - l2[i] * c2) - l3[i] * c3;
         }
         p += 4;
     }
@@ -78,7 +81,8 @@ fn update_column(a: &mut [f64], n: usize, j: usize, kb: usize, end: usize) {
 }
 
 /// Solves `L Lᵀ x = b` in place for each column of `b` (column-major, `n × m`), with `l` from
-/// [`factor`].
+/// [`factor`]. The reference for `KrrFactor`'s solve, which reads L where it keeps it.
+#[cfg(test)]
 pub fn solve(l: &[f64], n: usize, b: &mut [f64]) {
     for col in b.chunks_exact_mut(n) {
         for j in 0..n {

@@ -1,13 +1,18 @@
 //! Kernel Ridge Regression on one-hot actions (paper section 3.4), as scikit-learn's
 //! `KernelRidge(alpha=0.1, kernel='rbf', gamma=0.1)`: dual coefficients `(K + alpha I)^-1 Y` by
-//! Cholesky, outputs `f(x) = k(x, X) dual_coef`. Up to [`BLOCKED_FROM`] demonstrations the
-//! factorisation is nalgebra's; from there the blocked one of `cholesky.rs`, several times faster
-//! on large matrices (BENCHMARKS.md) and equal to it within rounding.
+//! Cholesky, outputs `f(x) = k(x, X) dual_coef`.
+//!
+//! The Cholesky factor L is kept ([`KrrFactor`]) so that a new demonstration adds one row to it,
+//! O(n²) instead of the O(n³) of a new factorisation. Every way of computing L — nalgebra's (up to
+//! [`BLOCKED_FROM`] demonstrations), the blocked one of `cholesky.rs` (from there on, several times
+//! faster on large matrices, BENCHMARKS.md), and a row at a time — subtracts the same products in
+//! the same order, so a model grown one demonstration at a time is the model fitted on all of
+//! them at once, bit for bit.
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
-use super::{rbf, validate, DemoModelError};
+use super::{check_row, rbf, validate, DemoModelError, MAX_DEMOS};
 
 /// The ridge penalty added to the kernel's diagonal.
 pub const ALPHA: f64 = 0.1;
@@ -39,42 +44,7 @@ impl KernelRidge {
         actions: &[usize],
         num_actions: usize,
     ) -> Result<KernelRidge, DemoModelError> {
-        let (flat, state_dim) = validate(states, actions, num_actions)?;
-        let n = actions.len();
-        let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
-
-        let mut k = DMatrix::<f64>::zeros(n, n);
-        for i in 0..n {
-            for j in 0..=i {
-                let v = rbf(row(i), row(j));
-                k[(i, j)] = v;
-                k[(j, i)] = v;
-            }
-            k[(i, i)] += ALPHA;
-        }
-        let mut y = DMatrix::<f64>::zeros(n, num_actions);
-        for (i, &a) in actions.iter().enumerate() {
-            y[(i, a)] = 1.0;
-        }
-        let coef = solve_spd(k, y)?;
-        let mut dual_coef = Vec::with_capacity(n * num_actions);
-        for i in 0..n {
-            for a in 0..num_actions {
-                dual_coef.push(coef[(i, a)]);
-            }
-        }
-        tracing::debug!(
-            demos = n,
-            state_dim,
-            num_actions,
-            "fitted kernel ridge regression"
-        );
-        Ok(KernelRidge {
-            state_dim,
-            num_actions,
-            states: flat,
-            dual_coef,
-        })
+        Ok(KrrFactor::fit(states, actions, num_actions)?.model())
     }
 
     pub fn num_actions(&self) -> usize {
@@ -125,21 +95,193 @@ impl KernelRidge {
     }
 }
 
-/// `k⁻¹ y` for the symmetric positive-definite kernel matrix `k`, by Cholesky.
-fn solve_spd(k: DMatrix<f64>, y: DMatrix<f64>) -> Result<DMatrix<f64>, DemoModelError> {
-    let not_pd = || DemoModelError::Solver("K + alpha I is not positive definite".to_string());
-    let n = k.nrows();
-    if n < BLOCKED_FROM {
-        return Ok(k.cholesky().ok_or_else(not_pd)?.solve(&y));
+fn not_positive_definite() -> DemoModelError {
+    DemoModelError::Solver("K + alpha I is not positive definite".to_string())
+}
+
+/// The Cholesky factor L of `K + alpha I` over the demonstrations so far, with them: what a
+/// [`KernelRidge`] is solved from, grown by one row per demonstration ([`KrrFactor::push`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct KrrFactor {
+    state_dim: usize,
+    num_actions: usize,
+    /// Demonstrated states, row-major, `n * state_dim`.
+    states: Vec<f64>,
+    actions: Vec<usize>,
+    /// L row by row: row i holds its `i + 1` values up to the diagonal.
+    l: Vec<f64>,
+}
+
+impl KrrFactor {
+    /// Factors the kernel matrix of the demonstrations (nalgebra's Cholesky below
+    /// [`BLOCKED_FROM`] of them, the blocked one from there).
+    pub fn fit<S: AsRef<[f64]>>(
+        states: &[S],
+        actions: &[usize],
+        num_actions: usize,
+    ) -> Result<KrrFactor, DemoModelError> {
+        let (flat, state_dim) = validate(states, actions, num_actions)?;
+        let n = actions.len();
+        let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
+        let mut k = DMatrix::<f64>::zeros(n, n);
+        for i in 0..n {
+            for j in 0..=i {
+                let v = rbf(row(i), row(j));
+                k[(i, j)] = v;
+                k[(j, i)] = v;
+            }
+            k[(i, i)] += ALPHA;
+        }
+        let full: Vec<f64> = if n < BLOCKED_FROM {
+            let chol = k.cholesky().ok_or_else(not_positive_definite)?;
+            chol.l().data.into()
+        } else {
+            let mut l: Vec<f64> = k.data.into();
+            if !super::cholesky::factor(&mut l, n) {
+                return Err(not_positive_definite());
+            }
+            l
+        };
+        // Column-major n × n to rows up to the diagonal.
+        let mut l = Vec::with_capacity(n * (n + 1) / 2);
+        for i in 0..n {
+            l.extend((0..=i).map(|j| full[i + j * n]));
+        }
+        tracing::debug!(
+            demos = n,
+            state_dim,
+            num_actions,
+            "factored the kernel matrix"
+        );
+        Ok(KrrFactor {
+            state_dim,
+            num_actions,
+            states: flat,
+            actions: actions.to_vec(),
+            l,
+        })
     }
-    let cols = y.ncols();
-    let mut l: Vec<f64> = k.data.into();
-    if !super::cholesky::factor(&mut l, n) {
-        return Err(not_pd());
+
+    /// Demonstrations factored.
+    pub fn len(&self) -> usize {
+        self.actions.len()
     }
-    let mut x: Vec<f64> = y.data.into();
-    super::cholesky::solve(&l, n, &mut x);
-    Ok(DMatrix::from_vec(n, cols, x))
+
+    pub fn is_empty(&self) -> bool {
+        self.actions.is_empty()
+    }
+
+    /// Row `i` of L up to the diagonal.
+    fn row(&self, i: usize) -> &[f64] {
+        let start = i * (i + 1) / 2;
+        &self.l[start..start + i + 1]
+    }
+
+    /// Adds a demonstration: one new row of L, by forward substitution against the rows before
+    /// it (O(n²)). A state or action the factor cannot take is refused and changes nothing.
+    pub fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
+        let n = self.len();
+        check_row(n, state, self.state_dim)?;
+        if action >= self.num_actions {
+            return Err(DemoModelError::ActionOutOfRange {
+                row: n,
+                action,
+                num_actions: self.num_actions,
+            });
+        }
+        if n + 1 > MAX_DEMOS {
+            return Err(DemoModelError::TooManyDemos(n + 1));
+        }
+        let mut z = Vec::with_capacity(n + 1);
+        for (j, x) in self.states.chunks_exact(self.state_dim).enumerate() {
+            let lj = self.row(j);
+            let mut s = rbf(state, x);
+            for (l, zp) in lj[..j].iter().zip(&z) {
+                s -= l * zp;
+            }
+            z.push(s / lj[j]);
+        }
+        let mut d = rbf(state, state) + ALPHA;
+        for zp in &z {
+            d -= zp * zp;
+        }
+        if d <= 0.0 || d.is_nan() {
+            return Err(not_positive_definite());
+        }
+        z.push(d.sqrt());
+        self.l.extend_from_slice(&z);
+        self.states.extend_from_slice(state);
+        self.actions.push(action);
+        Ok(())
+    }
+
+    /// The regression on the demonstrations factored: `L Lᵀ C = Y` solved for the dual
+    /// coefficients, O(n²) per action: by nalgebra below [`BLOCKED_FROM`] demonstrations (the
+    /// numbers every smaller run keeps), from there on the rows where they are kept.
+    pub fn model(&self) -> KernelRidge {
+        let (n, m) = (self.len(), self.num_actions);
+        let mut coef = vec![0.0; n * m];
+        for (i, &a) in self.actions.iter().enumerate() {
+            coef[i * m + a] = 1.0;
+        }
+        if n < BLOCKED_FROM {
+            let mut l = DMatrix::<f64>::zeros(n, n);
+            for i in 0..n {
+                for (j, v) in self.row(i).iter().enumerate() {
+                    l[(i, j)] = *v;
+                }
+            }
+            let mut y = DMatrix::from_row_slice(n, m, &coef);
+            l.solve_lower_triangular_unchecked_mut(&mut y);
+            l.ad_solve_lower_triangular_unchecked_mut(&mut y);
+            for i in 0..n {
+                for a in 0..m {
+                    coef[i * m + a] = y[(i, a)];
+                }
+            }
+        } else {
+            self.solve_rows(&mut coef);
+        }
+        self.with_coef(coef)
+    }
+
+    fn with_coef(&self, dual_coef: Vec<f64>) -> KernelRidge {
+        KernelRidge {
+            state_dim: self.state_dim,
+            num_actions: self.num_actions,
+            states: self.states.clone(),
+            dual_coef,
+        }
+    }
+
+    /// `L Lᵀ X = Y` in place for `x`, row-major `n × actions` (Y in, X out), reading L a row at a
+    /// time where it is stored (no `n × n` matrix is made): forward substitution row by row,
+    /// back substitution from the last row up.
+    fn solve_rows(&self, x: &mut [f64]) {
+        let (n, m) = (self.len(), self.num_actions);
+        for i in 0..n {
+            let row = self.row(i);
+            let (done, rest) = x.split_at_mut(i * m);
+            let xi = &mut rest[..m];
+            for (j, l) in row[..i].iter().enumerate() {
+                for (v, xj) in xi.iter_mut().zip(&done[j * m..(j + 1) * m]) {
+                    *v -= l * xj;
+                }
+            }
+            xi.iter_mut().for_each(|v| *v /= row[i]);
+        }
+        for i in (0..n).rev() {
+            let row = self.row(i);
+            let (before, rest) = x.split_at_mut(i * m);
+            let xi = &mut rest[..m];
+            xi.iter_mut().for_each(|v| *v /= row[i]);
+            for (j, l) in row[..i].iter().enumerate() {
+                for (v, xv) in before[j * m..(j + 1) * m].iter_mut().zip(xi.iter()) {
+                    *v -= l * xv;
+                }
+            }
+        }
+    }
 }
 
 /// p(a|s) from the regression outputs, as described at [`KernelRidge::probs`].
@@ -234,6 +376,88 @@ mod tests {
                 assert!((got - expected[(i, a)]).abs() < 1e-8, "coef {i},{a}");
             }
         }
+    }
+
+    /// `n` scattered two-dimensional demonstrations of three actions.
+    fn scattered(n: usize) -> (Vec<[f64; 2]>, Vec<usize>) {
+        let states = (0..n)
+            .map(|i| {
+                [
+                    ((i * 7919) % 997) as f64 / 50.0,
+                    ((i * 104_729) % 991) as f64 / 50.0,
+                ]
+            })
+            .collect();
+        (states, (0..n).map(|i| (i * 7) % 3).collect())
+    }
+
+    #[test]
+    fn a_model_grown_a_demonstration_at_a_time_is_the_fitted_one_bit_for_bit() {
+        // Across the switch to the blocked factorisation, and past several of its blocks.
+        let n = BLOCKED_FROM + 2 * super::super::cholesky::BLOCK + 7;
+        let (states, actions) = scattered(n);
+        let mut grown = KrrFactor::fit(&states[..3], &actions[..3], 3).unwrap();
+        for i in 3..n {
+            grown.push(&states[i], actions[i]).unwrap();
+            if [10, BLOCKED_FROM - 1, BLOCKED_FROM, n - 1].contains(&i) {
+                let fitted = KrrFactor::fit(&states[..=i], &actions[..=i], 3).unwrap();
+                assert_eq!(grown, fitted, "the factor of {} demonstrations", i + 1);
+                assert_eq!(grown.model(), fitted.model(), "{} demonstrations", i + 1);
+            }
+        }
+    }
+
+    #[test]
+    fn the_solve_on_the_kept_rows_agrees_with_the_column_solve() {
+        let n = BLOCKED_FROM + 9;
+        let (states, actions) = scattered(n);
+        let f = KrrFactor::fit(&states, &actions, 3).unwrap();
+        let mut l = vec![0.0; n * n];
+        for i in 0..n {
+            for (j, v) in f.row(i).iter().enumerate() {
+                l[i + j * n] = *v;
+            }
+        }
+        let mut y = vec![0.0; n * 3];
+        for (i, &a) in actions.iter().enumerate() {
+            y[i + a * n] = 1.0;
+        }
+        super::super::cholesky::solve(&l, n, &mut y);
+        let m = f.model();
+        for i in 0..n {
+            for a in 0..3 {
+                let (got, want) = (m.dual_coef[i * 3 + a], y[i + a * n]);
+                assert!(
+                    (got - want).abs() <= 1e-9 * want.abs().max(1.0),
+                    "{i},{a}: {got} {want}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_demonstration_the_factor_cannot_take_is_refused_and_changes_nothing() {
+        let mut f = KrrFactor::fit(&[[0.0, 0.0]], &[1], 2).unwrap();
+        let before = f.clone();
+        assert!(matches!(
+            f.push(&[1.0], 0),
+            Err(DemoModelError::DimensionMismatch { .. })
+        ));
+        assert!(matches!(
+            f.push(&[1.0, 2.0], 2),
+            Err(DemoModelError::ActionOutOfRange { action: 2, .. })
+        ));
+        assert!(f.push(&[f64::NAN, 0.0], 0).is_err());
+        // The same state again: K + alpha I stays positive definite (the ridge).
+        assert_eq!(f, before);
+        f.push(&[0.0, 0.0], 0).unwrap();
+        assert_eq!(f.len(), 2);
+        // Two equal states with opposite actions: each output is 1 / (2 + alpha).
+        let out = f.model().raw(&[0.0, 0.0]);
+        assert!(
+            (out[0] - 1.0 / 2.1).abs() < 1e-15 && (out[1] - 1.0 / 2.1).abs() < 1e-15,
+            "{out:?}"
+        );
     }
 
     #[test]

@@ -1,10 +1,11 @@
 //! The demonstration model of the paper (section 3.4): p(a|s) learned from the demonstrated
 //! (state, action) pairs, by Kernel Ridge Regression or by a kernel SVM with Platt scaling.
 //!
-//! The model is refit from scratch whenever a demonstration arrives; it is published from the
-//! expert process to the actors as postcard bytes, so every fitted model is plain data
+//! The model is renewed whenever a demonstration arrives (KRR by one more row of its kept
+//! Cholesky factor, [`krr::KrrFactor`]; the SVM fitted anew); it is published from the expert
+//! process to the actors as postcard bytes, so every fitted model is plain data
 //! (`Serialize`/`Deserialize`, no solver state) and exactly reproducible: the same demonstrations
-//! always give the same model, bit for bit.
+//! always give the same model, bit for bit, however it was reached.
 //!
 //! Both models use the RBF kernel `k(x, y) = exp(-gamma |x - y|^2)` with `gamma = 0.1`, as the
 //! paper (and the scikit-learn reference `kernel_models.json`) does.
@@ -22,9 +23,9 @@ use serde::{Deserialize, Serialize};
 /// The RBF kernel width used by both models, `k(x, y) = exp(-GAMMA |x - y|^2)`.
 pub const GAMMA: f64 = 0.1;
 
-/// The most demonstrations a model is fitted on. Both models hold the `n × n` kernel matrix:
-/// 10,000 demonstrations take 800 MB and a KRR fit about three minutes on a 2-core machine; many
-/// more would exhaust memory (50,000: 20 GB).
+/// The most demonstrations a model is fitted on. A fit holds the `n × n` kernel matrix
+/// (10,000 demonstrations: 800 MB; KRR keeps half of it, its factor, for the rest of the run);
+/// many more would exhaust memory (50,000: 20 GB).
 pub const MAX_DEMOS: usize = 10_000;
 
 /// The most actions a model gives probabilities for (the environments have at most 4).
