@@ -107,7 +107,14 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         expert.restore_view(c.expert.clone());
         start = c.progress;
     }
-    variables.first(&session, &mut core, runtime.handshake_timeout())?;
+    if let Some(stop) = variables.first(&session, &mut core, runtime.handshake_timeout())? {
+        // A restarted actor the run's end overtook: nothing to play, nothing lost.
+        info!(
+            reason = stop.0,
+            "stopped before the learner's first weights arrived"
+        );
+        return Ok(());
+    }
     info!(
         actor = me.id,
         incarnation = me.incarnation,
@@ -145,7 +152,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
             progress
                 .send(Progress::episode(me.incarnation, *e.record))
                 .map_err(LoopError::link)?;
-            checkpoints.episode_end(&e).map_err(LoopError::observer)?;
+            checkpoints.episode_end(&e);
             Ok(ControlFlow::Continue(()))
         },
     )?;
@@ -253,14 +260,16 @@ impl<'a> Checkpoints<'a> {
         }
     }
 
-    /// An episode ended: saves the state between it and the next if the cadence says so.
-    fn episode_end(&mut self, e: &ActorEnd<'_, '_, '_>) -> anyhow::Result<()> {
+    /// An episode ended: saves the state between it and the next if the cadence says so. A
+    /// checkpoint that cannot be written (a full disk) is said in the log and the actor goes
+    /// on: the file keeps its earlier states whole, and the next one is tried at the cadence.
+    fn episode_end(&mut self, e: &ActorEnd<'_, '_, '_>) {
         if self.quota.is_some_and(|q| e.progress.episodes >= q) {
-            return Ok(());
+            return;
         }
         let global_step = e.actor.global_step(e.progress.steps);
         if !self.cadence.episode_end(global_step) {
-            return Ok(());
+            return;
         }
         self.saved.push(checkpoint::ActorCheckpoint {
             progress: e.progress,
@@ -270,10 +279,16 @@ impl<'a> Checkpoints<'a> {
             expert: e.expert.view().clone(),
         });
         let t = std::time::Instant::now();
-        checkpoint::save(self.run_dir, self.id, &self.saved, self.config_toml)?;
+        if let Err(e) = checkpoint::save(self.run_dir, self.id, &self.saved, self.config_toml) {
+            tracing::warn!(
+                "checkpoint not written ({}); the earlier states stay, the next is tried at the \
+                 cadence",
+                alfd_harness::describe(&e)
+            );
+            return;
+        }
         self.time += t.elapsed();
         self.written += 1;
-        Ok(())
     }
 }
 

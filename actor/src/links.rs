@@ -203,34 +203,29 @@ impl<'w> WireVariables<'w> {
     }
 
     /// Waits for the learner's first weights (the learner's initial network, as the
-    /// single-process run starts from it) and puts them into `actor`.
+    /// single-process run starts from it) and puts them into `actor`; the stop, if the launcher
+    /// said stop (or a termination signal came) first.
     pub fn first(
         &mut self,
         session: &Session<'_>,
         actor: &mut NeuralActor,
         timeout: Duration,
-    ) -> anyhow::Result<()> {
+    ) -> anyhow::Result<Option<Stop>> {
         let start = Instant::now();
         loop {
             if let Some(h) = self.rx.latest_into(&mut self.params)? {
                 actor.set_weights(&self.params, h.version)?;
-                return Ok(());
+                return Ok(None);
             }
             if let Some(stop) = session.should_stop()? {
-                anyhow::bail!(
-                    "stopped ({}) before the learner's first weights arrived",
-                    stop.0
-                );
+                return Ok(Some(stop));
             }
             anyhow::ensure!(
                 start.elapsed() < timeout,
                 "no weights from the learner within {timeout:?}"
             );
             if let Some(stop) = session.wait(Duration::from_millis(50))? {
-                anyhow::bail!(
-                    "stopped ({}) before the learner's first weights arrived",
-                    stop.0
-                );
+                return Ok(Some(stop));
             }
         }
     }

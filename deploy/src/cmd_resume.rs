@@ -147,7 +147,7 @@ fn resume_multi_process(
         run_dir: dir.clone(),
         run_id: alfd_launcher::new_run_id(),
         runtime,
-        max_restarts: 5,
+        max_restarts: info.max_restarts,
         progress: args.output().progress(),
         pin: false,
         bin_dir: alfd_launcher::bin_dir()?,

@@ -73,8 +73,9 @@ pub struct RunArgs {
     /// restarted from its last checkpoint, and `alfd resume` continues from them.
     #[arg(long, default_value_t = alfd_harness::DEFAULT_CHECKPOINT_EVERY)]
     pub checkpoint_every: u64,
-    /// Restarts allowed per actor, of the expert and of the learner, before the run fails.
-    #[arg(long, default_value_t = 5)]
+    /// Restarts allowed per actor, of the expert and of the learner, before the run fails (kept
+    /// by `alfd resume`).
+    #[arg(long, default_value_t = alfd_launcher::DEFAULT_MAX_RESTARTS)]
     pub max_restarts: u32,
     /// Pin the learner to CPU 0 and the other processes to the other CPUs (`taskset`); helps on
     /// an otherwise idle machine, hurts on a shared one.

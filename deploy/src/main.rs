@@ -1,6 +1,7 @@
 //! `alfd`: the command line of the project. Each subcommand is a small module; this file parses
 //! arguments, installs logging, and maps errors to exit codes (2 for bad input, 1 otherwise).
 
+mod chaos;
 mod checkpoint_file;
 mod cmd_clean;
 mod cmd_config;
@@ -47,6 +48,9 @@ enum Command {
     Join(cmd_join::JoinArgs),
     /// Replace the expert of a live run (make before break).
     SwapExpert(cmd_run::SwapArgs),
+    /// A multi-process run under faults drawn from a seed (kill -9, SIGSTOP, expert swaps, the
+    /// launcher killed and resumed, a full disk), then its invariants checked.
+    Chaos(chaos::ChaosArgs),
     /// Environments: roll out CartPole, MountainCar or Acrobot from a state, show a CliffWalk map.
     Env(cmd_env::EnvArgs),
     /// Demonstrators: list them, evaluate one.
@@ -84,6 +88,7 @@ fn main() {
         Command::Run(a) => cmd_run::run(a),
         Command::Join(a) => cmd_join::run(a),
         Command::SwapExpert(a) => cmd_run::swap(a),
+        Command::Chaos(a) => chaos::run(a),
         Command::Env(a) => cmd_env::run(a),
         Command::Expert(a) => cmd_expert::run(a),
         Command::TrainExperts(a) => cmd_expert::train(a),

@@ -1,5 +1,6 @@
 //! Integration tests of the `alfd` command line and of the multi-process runtime (one binary).
 
+mod chaos;
 mod cli;
 mod faults;
 mod golden;

@@ -348,7 +348,14 @@ impl Shell<'_, '_> {
             self.stats.publish += t.elapsed();
         }
         if todo.checkpoint {
-            self.checkpoint(m)?;
+            if let Err(e) = self.checkpoint(m) {
+                // A full disk, say: the previous checkpoint stays whole (written atomically),
+                // and the next one is tried at the cadence; the run goes on.
+                tracing::warn!(
+                    "checkpoint not written ({e:#}); the previous one stays, the next is tried \
+                     at the cadence"
+                );
+            }
         }
         if todo.credits {
             self.send_credits(m)?;

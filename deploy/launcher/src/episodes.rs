@@ -63,3 +63,105 @@ pub(super) fn open_episodes(run_dir: &Path, resume: bool) -> Result<(File, Vec<(
     csv.seek(std::io::SeekFrom::End(0))?;
     Ok((csv, rows))
 }
+
+/// `episodes.csv` as the launcher appends to it: rows in the order of their episodes, each
+/// whole. A row that cannot be written (a full disk) is kept in memory with those after it and
+/// written when the disk has room again (tried at every tick), so a full disk costs the run
+/// nothing unless it is still full when the run ends.
+pub(super) struct EpisodeLog {
+    file: File,
+    path: std::path::PathBuf,
+    /// Rows not written yet, oldest first, with their episode numbers.
+    pending: std::collections::VecDeque<(u64, String)>,
+    /// Whether the current streak of failures was said (once per streak).
+    warned: bool,
+}
+
+impl EpisodeLog {
+    pub(super) fn new(file: File, path: std::path::PathBuf) -> Self {
+        Self {
+            file,
+            path,
+            pending: std::collections::VecDeque::new(),
+            warned: false,
+        }
+    }
+
+    /// Appends the row of `episode` (with its newline) after every row before it.
+    pub(super) fn append(&mut self, episode: u64, row: String) {
+        self.pending.push_back((episode, row));
+        self.flush();
+    }
+
+    /// Writes what is pending, in order, as far as the disk lets it; the first failure of a
+    /// streak is logged. Whether everything is written.
+    pub(super) fn flush(&mut self) -> bool {
+        while let Some((episode, row)) = self.pending.front() {
+            if let Err(e) = alfd_harness::append_whole(&mut self.file, row.as_bytes(), false) {
+                if !self.warned {
+                    tracing::warn!(
+                        "cannot append episode {episode} to {}: {e}; the rows from it on are \
+                         kept in memory and written when there is room",
+                        self.path.display()
+                    );
+                    self.warned = true;
+                }
+                return false;
+            }
+            self.pending.pop_front();
+        }
+        if self.warned {
+            tracing::info!("{} is written up to date again", self.path.display());
+            self.warned = false;
+        }
+        true
+    }
+
+    /// [`EpisodeLog::flush`], tried every 200 ms until `deadline`; an error naming the first
+    /// row not written if the disk stays full.
+    pub(super) fn flush_by(&mut self, deadline: std::time::Instant) -> Result<()> {
+        while !self.flush() {
+            if std::time::Instant::now() >= deadline {
+                let first = self.pending.front().map_or(0, |p| p.0);
+                bail!(
+                    "cannot append episode {first} (and {} after it) to {}: the disk stayed full",
+                    self.pending.len() - 1,
+                    self.path.display()
+                );
+            }
+            std::thread::sleep(std::time::Duration::from_millis(200));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A log on a file that refuses writes (`/dev/full`) until it is swapped for a real one.
+    #[test]
+    fn rows_a_full_disk_refuses_are_kept_in_order_and_written_when_there_is_room() {
+        let full = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let mut log = EpisodeLog::new(full, "/dev/full".into());
+        log.append(0, "0,a\n".into());
+        log.append(1, "1,b\n".into());
+        assert!(!log.flush());
+        assert_eq!(log.pending.len(), 2);
+        let e = log
+            .flush_by(std::time::Instant::now())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("episode 0 (and 1 after it)"), "{e}");
+        // Room again: both rows go out, in order, and later ones after them.
+        let dir = alfd_harness::test_dir("episode-log");
+        let path = dir.path().join("episodes.csv");
+        log.file = File::create(&path).unwrap();
+        log.append(2, "2,c\n".into());
+        assert!(log.flush());
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "0,a\n1,b\n2,c\n");
+    }
+}

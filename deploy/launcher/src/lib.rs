@@ -33,7 +33,6 @@
 //!   run goes on; Ctrl-C stops it cleanly.
 
 use std::collections::VecDeque;
-use std::fs::File;
 use std::os::unix::process::CommandExt as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -61,7 +60,7 @@ mod children;
 mod episodes;
 mod remote;
 
-use episodes::{open_episodes, shares};
+use episodes::{open_episodes, shares, EpisodeLog};
 
 pub use children::describe as describe_status;
 use children::{describe, last_error, pin, proc_binary, RateMeter};
@@ -112,10 +111,21 @@ pub struct RunInfo {
     /// Launchers this run has had: 1, plus one per `alfd resume`.
     #[serde(default = "one")]
     pub launches: u32,
+    /// Restarts allowed per actor, of the expert and of the learner (`--max-restarts`), kept
+    /// by `alfd resume`.
+    #[serde(default = "default_max_restarts")]
+    pub max_restarts: u32,
 }
 
 fn one() -> u32 {
     1
+}
+
+/// `alfd run`'s default `--max-restarts`.
+pub const DEFAULT_MAX_RESTARTS: u32 = 5;
+
+fn default_max_restarts() -> u32 {
+    DEFAULT_MAX_RESTARTS
 }
 
 /// Incarnation numbers of the actors of a run's n-th launcher start at `(n - 1) ×` this `+ 1`,
@@ -211,6 +221,7 @@ pub fn launch(plan: &Plan) -> Result<RunSummary> {
         actors: plan.actors,
         schema_version: wire::SCHEMA_VERSION,
         launches: plan.launches,
+        max_restarts: plan.max_restarts,
     };
     write(
         &plan.run_dir,
@@ -254,7 +265,7 @@ struct Launcher<'a, 'w> {
     actor_bells: ActorBells<'w>,
     procs: Vec<Proc>,
     seen: Seen,
-    csv: File,
+    csv: EpisodeLog,
     recorded: u64,
     returns: VecDeque<f64>,
     all_returns: Vec<f64>,
@@ -341,7 +352,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             actor_bells: ActorBells::new(wire),
             procs: Vec::new(),
             seen: Seen::default(),
-            csv,
+            csv: EpisodeLog::new(csv, plan.run_dir.join("episodes.csv")),
             recorded: all_returns.len() as u64,
             returns: all_returns.iter().rev().take(20).rev().copied().collect(),
             all_returns,
@@ -422,6 +433,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
     fn tick(&mut self) -> Result<Wake> {
         let wake = self.waiter.wait(Duration::from_millis(100))?;
         self.drain_progress()?;
+        self.csv.flush();
         self.check_hub()?;
         if self.last_control.elapsed() >= CONTROL_PERIOD {
             self.publish_control()?;
@@ -542,15 +554,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
         };
         self.demos_used = r.demos_used;
         // A write that fails (a full disk) takes back what it wrote of the row, so the file
-        // stays whole rows for `alfd resume`.
-        let row = format!("{}\n", r.csv_row());
-        alfd_harness::append_whole(&mut self.csv, row.as_bytes(), false).what(|| {
-            format!(
-                "cannot append episode {} to {}",
-                r.episode,
-                self.plan.run_dir.join("episodes.csv").display()
-            )
-        })?;
+        // stays whole rows for `alfd resume`; the row waits in memory for room.
+        self.csv
+            .append(u64::from(r.episode), format!("{}\n", r.csv_row()));
         self.recorded += 1;
         self.returns.push_back(r.ret);
         if self.returns.len() > 20 {
@@ -930,6 +936,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
         }
         self.stop_all();
         self.drain_progress()?;
+        // Rows a full disk held back get a minute more of room.
+        self.csv
+            .flush_by(Instant::now() + Duration::from_secs(60))?;
         if !failures.is_empty() {
             bail!("{}", failures.join("; "));
         }

@@ -1,0 +1,294 @@
+//! What must hold after a chaos run, read from its run directory: the run finished; every
+//! episode is in `episodes.csv` once, in order; `demos.jsonl` is a gap-free sequence within the
+//! budget that equals what the run counted; every checkpoint on disk loads; and, when asked,
+//! the run still learned.
+
+use std::path::Path;
+
+/// One invariant, checked.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Verdict {
+    pub name: &'static str,
+    pub ok: bool,
+    /// What was found (the numbers compared, or what went wrong).
+    pub detail: String,
+}
+
+fn verdict(name: &'static str, result: Result<String, String>) -> Verdict {
+    match result {
+        Ok(detail) => Verdict {
+            name,
+            ok: true,
+            detail,
+        },
+        Err(detail) => Verdict {
+            name,
+            ok: false,
+            detail,
+        },
+    }
+}
+
+/// What the run was asked to do.
+#[derive(Debug, Clone, Copy)]
+pub struct Expected {
+    /// The run's episode limit (none: only its step limit).
+    pub episodes: Option<usize>,
+    /// The run's step limit (environment steps the learner received).
+    pub steps: Option<u64>,
+    pub budget: u32,
+    pub actors: usize,
+    /// The least mean return over the last 50 episodes (none: not checked).
+    pub min_last_50: Option<f64>,
+}
+
+/// Every invariant of the run in `dir` (its config's text is `config_toml`).
+pub fn check(dir: &Path, config_toml: &str, want: Expected) -> Vec<Verdict> {
+    let summary = read_json(&dir.join("summary.json"));
+    let demos = demo_indices(&dir.join("demos.jsonl"));
+    vec![
+        verdict("finished", finished(&summary, want)),
+        verdict(
+            "episodes",
+            episode_rows(&dir.join("episodes.csv"), &summary),
+        ),
+        verdict("demonstrations", demos_agree(&demos, &summary, want.budget)),
+        verdict(
+            "checkpoints",
+            checkpoints_load(dir, config_toml, want.actors),
+        ),
+        verdict("learned", learned(&summary, want.min_last_50)),
+    ]
+}
+
+fn read_json(path: &Path) -> Result<serde_json::Value, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Not interrupted, and at the episode limit or past the step limit (whichever came first).
+fn finished(summary: &Result<serde_json::Value, String>, want: Expected) -> Result<String, String> {
+    let s = summary.as_ref().map_err(Clone::clone)?;
+    let episodes = s["episodes"].as_u64().unwrap_or(0) as usize;
+    let steps = s["env_steps"].as_u64().unwrap_or(0);
+    let interrupted = s["interrupted"].as_bool().unwrap_or(true);
+    let at_limit = want.episodes == Some(episodes) || want.steps.is_some_and(|n| steps >= n);
+    let limits = format!(
+        "limits: {:?} episodes, {:?} steps",
+        want.episodes, want.steps
+    );
+    if at_limit && !interrupted {
+        Ok(format!(
+            "{episodes} episodes, {steps} steps, not interrupted ({limits})"
+        ))
+    } else {
+        Err(format!(
+            "summary.json: {episodes} episodes, {steps} steps, interrupted {interrupted} ({limits})"
+        ))
+    }
+}
+
+/// The episode numbers of `episodes.csv` are 0..n, each once, in order, and n is the episodes
+/// `summary.json` counts.
+fn episode_rows(
+    path: &Path,
+    summary: &Result<serde_json::Value, String>,
+) -> Result<String, String> {
+    let s = summary.as_ref().map_err(Clone::clone)?;
+    let episodes = s["episodes"].as_u64().unwrap_or(0) as usize;
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut next = 0usize;
+    for (n, line) in text.lines().enumerate().skip(1) {
+        let episode: usize = line
+            .split(',')
+            .next()
+            .and_then(|f| f.parse().ok())
+            .ok_or_else(|| format!("episodes.csv line {}: not an episode row: {line:?}", n + 1))?;
+        if episode != next {
+            return Err(format!(
+                "episodes.csv line {}: episode {episode} where {next} was due (lost or written \
+                 twice)",
+                n + 1
+            ));
+        }
+        next += 1;
+    }
+    if next == episodes {
+        Ok(format!("{next} rows, episodes 0..{next} once each"))
+    } else {
+        Err(format!(
+            "episodes.csv holds {next} episodes; summary.json counts {episodes}"
+        ))
+    }
+}
+
+/// The `index` of every line of `demos.jsonl`, in file order.
+fn demo_indices(path: &Path) -> Result<Vec<u64>, String> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(format!("{}: {e}", path.display())),
+    };
+    text.lines()
+        .enumerate()
+        .map(|(n, line)| {
+            serde_json::from_str::<serde_json::Value>(line)
+                .ok()
+                .and_then(|v| v["index"].as_u64())
+                .ok_or_else(|| format!("demos.jsonl line {}: not a demonstration", n + 1))
+        })
+        .collect()
+}
+
+/// `demos.jsonl` is 0..n without a gap or a repeat, n within the budget, and n is what
+/// `summary.json` counts.
+fn demos_agree(
+    demos: &Result<Vec<u64>, String>,
+    summary: &Result<serde_json::Value, String>,
+    budget: u32,
+) -> Result<String, String> {
+    let demos = demos.as_ref().map_err(Clone::clone)?;
+    if let Some((line, index)) = demos
+        .iter()
+        .enumerate()
+        .find(|(i, index)| **index != *i as u64)
+    {
+        return Err(format!(
+            "demos.jsonl line {}: index {index} where {line} was due",
+            line + 1
+        ));
+    }
+    let n = demos.len() as u64;
+    if n > u64::from(budget) {
+        return Err(format!("{n} demonstrations against a budget of {budget}"));
+    }
+    let s = summary.as_ref().map_err(Clone::clone)?;
+    let counted = (s["demos"].as_u64(), s["demos_used"].as_u64());
+    if counted != (Some(n), Some(n)) {
+        return Err(format!(
+            "demos.jsonl holds {n}; summary.json counts demos {:?}, demos_used {:?}",
+            counted.0, counted.1
+        ));
+    }
+    Ok(format!(
+        "{n} of {budget}, indices 0..{n}, as summary.json counts"
+    ))
+}
+
+/// `learner.ckpt` and every `actor-<id>.ckpt` on disk load.
+fn checkpoints_load(dir: &Path, config_toml: &str, actors: usize) -> Result<String, String> {
+    let mut loaded = Vec::new();
+    match alfd_learner::checkpoint::load(dir, config_toml) {
+        Ok(Some(_)) => loaded.push("learner.ckpt".to_owned()),
+        Ok(None) => {}
+        Err(e) => return Err(alfd_harness::describe(&e)),
+    }
+    for id in 0..actors as u16 {
+        match alfd_actor::checkpoint::load(dir, id, config_toml) {
+            Ok(Some(c)) => loaded.push(format!("actor-{id}.ckpt ({} states)", c.slots.len())),
+            Ok(None) => {}
+            Err(e) => return Err(alfd_harness::describe(&e)),
+        }
+    }
+    if loaded.is_empty() {
+        return Err("no checkpoint on disk".to_owned());
+    }
+    Ok(loaded.join(", "))
+}
+
+fn learned(
+    summary: &Result<serde_json::Value, String>,
+    min: Option<f64>,
+) -> Result<String, String> {
+    let Some(min) = min else {
+        return Ok("not asked".to_owned());
+    };
+    let s = summary.as_ref().map_err(Clone::clone)?;
+    let last = s["mean_return_last_50"].as_f64().unwrap_or(f64::NAN);
+    if last >= min {
+        Ok(format!("last 50 episodes' mean return {last:.1} ≥ {min}"))
+    } else {
+        Err(format!("last 50 episodes' mean return {last:.1} < {min}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn summary(episodes: u64, demos: u64, interrupted: bool) -> Result<serde_json::Value, String> {
+        Ok(serde_json::json!({
+            "episodes": episodes, "env_steps": 1000, "demos": demos, "demos_used": demos,
+            "interrupted": interrupted, "mean_return_last_50": 612.5,
+        }))
+    }
+
+    fn limits(episodes: Option<usize>, steps: Option<u64>) -> Expected {
+        Expected {
+            episodes,
+            steps,
+            budget: 0,
+            actors: 1,
+            min_last_50: None,
+        }
+    }
+
+    #[test]
+    fn a_run_that_stopped_short_or_was_interrupted_has_not_finished() {
+        let ten = limits(Some(10), None);
+        assert!(finished(&summary(10, 0, false), ten).is_ok());
+        assert!(finished(&summary(9, 0, false), ten).is_err());
+        assert!(finished(&summary(10, 0, true), ten).is_err());
+        assert!(finished(&Err("no summary.json".into()), ten).is_err());
+        // The step limit came first (1,000 steps of 1,000).
+        assert!(finished(&summary(9, 0, false), limits(Some(10), Some(1000))).is_ok());
+        assert!(finished(&summary(9, 0, false), limits(Some(10), Some(1001))).is_err());
+    }
+
+    #[test]
+    fn an_episode_lost_or_written_twice_is_named_by_its_line() {
+        let dir = alfd_harness::test_dir("chaos-check");
+        let path = dir.path().join("episodes.csv");
+        let write = |rows: &[usize]| {
+            let mut text = "episode,return\n".to_owned();
+            for r in rows {
+                text.push_str(&format!("{r},1.0\n"));
+            }
+            std::fs::write(&path, text).unwrap();
+        };
+        let three = summary(3, 0, false);
+        write(&[0, 1, 2]);
+        assert!(episode_rows(&path, &three).is_ok());
+        write(&[0, 1, 1, 2]);
+        let e = episode_rows(&path, &three).unwrap_err();
+        assert!(e.contains("line 4: episode 1 where 2 was due"), "{e}");
+        write(&[0, 2]);
+        assert!(episode_rows(&path, &three).unwrap_err().contains("line 3"));
+        write(&[0, 1]);
+        let e = episode_rows(&path, &three).unwrap_err();
+        assert!(e.contains("holds 2 episodes; summary.json counts 3"), "{e}");
+    }
+
+    #[test]
+    fn demonstrations_must_be_gap_free_within_the_budget_and_as_counted() {
+        let ok = Ok(vec![0, 1, 2]);
+        assert!(demos_agree(&ok, &summary(5, 3, false), 3).is_ok());
+        assert!(demos_agree(&ok, &summary(5, 3, false), 2)
+            .unwrap_err()
+            .contains("budget of 2"));
+        assert!(demos_agree(&ok, &summary(5, 2, false), 3)
+            .unwrap_err()
+            .contains("counts demos Some(2)"));
+        let gap = Ok(vec![0, 2]);
+        assert!(demos_agree(&gap, &summary(5, 2, false), 3)
+            .unwrap_err()
+            .contains("line 2: index 2 where 1 was due"));
+    }
+
+    #[test]
+    fn learning_is_checked_only_when_asked() {
+        assert!(learned(&summary(5, 0, false), None).is_ok());
+        assert!(learned(&summary(5, 0, false), Some(500.0)).is_ok());
+        assert!(learned(&summary(5, 0, false), Some(700.0)).is_err());
+    }
+}

@@ -1,0 +1,272 @@
+//! The chaos run's injector: which fault comes when, drawn from a seed. Pure: time is passed in,
+//! nothing is killed here (`chaos/mod.rs` carries the faults out).
+
+use std::time::Duration;
+
+use alfd_common::rng::{seeded, Rng};
+use rand::Rng as _;
+
+/// A process of the run a fault is aimed at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Target {
+    Actor(u16),
+    Learner,
+    Expert,
+}
+
+impl Target {
+    /// The binary that plays it.
+    pub fn binary(self) -> &'static str {
+        match self {
+            Target::Actor(_) => "alfd-actor",
+            Target::Learner => "alfd-learner",
+            Target::Expert => "alfd-expert",
+        }
+    }
+}
+
+/// One fault.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Fault {
+    /// SIGKILL.
+    Kill(Target),
+    /// SIGSTOP, then SIGCONT after the duration.
+    Pause(Target, #[serde(with = "millis")] Duration),
+    /// `alfd swap-expert` to this demonstrator.
+    SwapExpert(String),
+    /// SIGKILL to the launcher; `alfd resume` continues the run.
+    KillLauncher,
+    /// The run directory's file system filled up for the duration, then freed.
+    FillDisk(#[serde(with = "millis")] Duration),
+}
+
+impl Fault {
+    /// Its kind, as the report counts them.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Fault::Kill(_) => "kill",
+            Fault::Pause(..) => "pause",
+            Fault::SwapExpert(_) => "swap",
+            Fault::KillLauncher => "launcher",
+            Fault::FillDisk(_) => "disk",
+        }
+    }
+}
+
+mod millis {
+    pub fn serialize<S: serde::Serializer>(
+        d: &std::time::Duration,
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        s.serialize_u64(d.as_millis() as u64)
+    }
+}
+
+/// How often each kind of fault is drawn (relative weights; 0: never).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Mix {
+    pub kill: u32,
+    pub pause: u32,
+    pub swap: u32,
+    pub launcher: u32,
+    pub disk: u32,
+}
+
+impl Mix {
+    fn total(&self) -> u32 {
+        self.kill + self.pause + self.swap + self.launcher + self.disk
+    }
+}
+
+/// Draws the faults of a chaos run: one every `gap` on average (uniformly between half and one
+/// and a half of it), of a kind drawn by the [`Mix`], aimed at a process drawn uniformly.
+#[derive(Debug)]
+pub struct Injector {
+    rng: Rng,
+    gap: Duration,
+    actors: u16,
+    experts: Vec<String>,
+    mix: Mix,
+    next: Duration,
+}
+
+impl Injector {
+    /// Faults for a run of `actors` actors whose experts may be swapped among `experts`
+    /// (none: no swaps), the first after one gap.
+    pub fn new(seed: u64, gap: Duration, actors: u16, experts: Vec<String>, mix: Mix) -> Self {
+        let mut mix = mix;
+        if experts.is_empty() {
+            mix.swap = 0;
+        }
+        let mut injector = Self {
+            rng: seeded(seed),
+            gap,
+            actors,
+            experts,
+            mix,
+            next: Duration::ZERO,
+        };
+        injector.next = injector.draw_gap();
+        injector
+    }
+
+    fn draw_gap(&mut self) -> Duration {
+        self.gap.mul_f64(self.rng.random_range(0.5..1.5))
+    }
+
+    /// The fault due at `now` (time since the run started), if one is; the next is then drawn.
+    pub fn due(&mut self, now: Duration) -> Option<Fault> {
+        if now < self.next || self.mix.total() == 0 {
+            return None;
+        }
+        self.next = now + self.draw_gap();
+        Some(self.draw())
+    }
+
+    fn draw(&mut self) -> Fault {
+        let m = self.mix;
+        let mut pick = self.rng.random_range(0..m.total());
+        for (weight, kind) in [
+            (m.kill, 0),
+            (m.pause, 1),
+            (m.swap, 2),
+            (m.launcher, 3),
+            (m.disk, 4),
+        ] {
+            if pick >= weight {
+                pick -= weight;
+                continue;
+            }
+            return match kind {
+                0 => Fault::Kill(self.target()),
+                1 => {
+                    let target = self.target();
+                    Fault::Pause(target, self.pause_length())
+                }
+                2 => {
+                    let i = self.rng.random_range(0..self.experts.len());
+                    Fault::SwapExpert(self.experts[i].clone())
+                }
+                3 => Fault::KillLauncher,
+                _ => Fault::FillDisk(self.pause_length()),
+            };
+        }
+        unreachable!("the pick is below the total of the weights")
+    }
+
+    /// An actor, the learner or the expert, each actor as likely as the learner.
+    fn target(&mut self) -> Target {
+        match self.rng.random_range(0..u32::from(self.actors) + 2) {
+            0 => Target::Learner,
+            1 => Target::Expert,
+            a => Target::Actor((a - 2) as u16),
+        }
+    }
+
+    /// Between 0.3 and 3 seconds.
+    fn pause_length(&mut self) -> Duration {
+        Duration::from_millis(self.rng.random_range(300..3000))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const ALL: Mix = Mix {
+        kill: 4,
+        pause: 3,
+        swap: 1,
+        launcher: 1,
+        disk: 1,
+    };
+
+    fn faults(seed: u64, mix: Mix, experts: &[&str], secs: u64) -> Vec<(u64, Fault)> {
+        let experts = experts.iter().map(|e| e.to_string()).collect();
+        let mut inj = Injector::new(seed, Duration::from_secs(2), 2, experts, mix);
+        (0..secs * 10)
+            .filter_map(|t| {
+                inj.due(Duration::from_millis(t * 100))
+                    .map(|f| (t * 100, f))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn one_seed_gives_one_schedule_and_another_seed_another() {
+        let a = faults(7, ALL, &["cartpole-500"], 120);
+        assert_eq!(a, faults(7, ALL, &["cartpole-500"], 120));
+        assert_ne!(a, faults(8, ALL, &["cartpole-500"], 120));
+    }
+
+    #[test]
+    fn faults_come_between_half_and_one_and_a_half_gaps_apart() {
+        let a = faults(3, ALL, &["cartpole-500"], 600);
+        // 600 s at one every 2 s on average.
+        assert!((250..350).contains(&a.len()), "{}", a.len());
+        for w in a.windows(2) {
+            let gap = w[1].0 - w[0].0;
+            assert!((1000..=3100).contains(&gap), "{gap} ms");
+        }
+        assert!(a[0].0 >= 1000 && a[0].0 <= 3100, "{}", a[0].0);
+    }
+
+    #[test]
+    fn every_kind_and_every_process_is_drawn_in_proportion() {
+        let a = faults(11, ALL, &["cartpole-500", "cartpole-1000"], 2000);
+        let count = |k: &str| a.iter().filter(|(_, f)| f.kind() == k).count() as f64;
+        let n = a.len() as f64;
+        for (kind, share) in [
+            ("kill", 0.4),
+            ("pause", 0.3),
+            ("swap", 0.1),
+            ("launcher", 0.1),
+            ("disk", 0.1),
+        ] {
+            assert!(
+                (count(kind) / n - share).abs() < 0.05,
+                "{kind}: {} of {n}",
+                count(kind)
+            );
+        }
+        let kills: Vec<Target> = a
+            .iter()
+            .filter_map(|(_, f)| match f {
+                Fault::Kill(t) => Some(*t),
+                _ => None,
+            })
+            .collect();
+        for t in [
+            Target::Learner,
+            Target::Expert,
+            Target::Actor(0),
+            Target::Actor(1),
+        ] {
+            let share = kills.iter().filter(|k| **k == t).count() as f64 / kills.len() as f64;
+            assert!((share - 0.25).abs() < 0.07, "{t:?}: {share}");
+        }
+        assert!(!kills.contains(&Target::Actor(2)));
+        for (_, f) in &a {
+            if let Fault::Pause(_, d) | Fault::FillDisk(d) = f {
+                assert!((300..3000).contains(&(d.as_millis() as u64)), "{d:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn no_expert_to_swap_to_means_no_swaps_and_no_weights_no_faults() {
+        let a = faults(5, ALL, &[], 300);
+        assert!(!a.is_empty());
+        assert!(a.iter().all(|(_, f)| f.kind() != "swap"));
+        let none = Mix {
+            kill: 0,
+            pause: 0,
+            swap: 0,
+            launcher: 0,
+            disk: 0,
+        };
+        assert!(faults(5, none, &["x"], 300).is_empty());
+    }
+}

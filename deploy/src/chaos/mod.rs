@@ -1,0 +1,526 @@
+//! `alfd chaos`: a multi-process run (`alfd run`) under faults drawn from a seed ([`injector`]):
+//! processes killed with SIGKILL or paused with SIGSTOP/SIGCONT, the expert swapped, the
+//! launcher itself killed (then `alfd resume` continues the run), the run directory's file system
+//! filled up and freed. When the faults end the run goes on to its end, and the invariants of
+//! [`check`] are checked; everything is written to `RUN_DIR/chaos.json`.
+
+mod check;
+mod injector;
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+
+use crate::usage::usage;
+use check::{Expected, Verdict};
+use injector::{Fault, Injector, Mix, Target};
+
+/// `alfd chaos`.
+#[derive(Debug, clap::Args)]
+pub struct ChaosArgs {
+    /// The experiment config; default the recommended CartPole-1000 preset.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// The run directory (it must not hold a run). For disk faults, put it on a small file
+    /// system (a tmpfs of a few hundred MB): the filler stops at `--fill-cap-mb`.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Actor processes.
+    #[arg(long, default_value_t = 2)]
+    pub actors: usize,
+    /// Override a config value (repeatable), as `alfd run --set`.
+    #[arg(long)]
+    pub set: Vec<String>,
+    /// The seed of the faults' schedule (the run's own seed is the config's).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Seconds during which faults are injected; the run then goes on to its end without them.
+    #[arg(long, default_value_t = 120)]
+    pub duration: u64,
+    /// Mean seconds between two faults.
+    #[arg(long, default_value_t = 4.0)]
+    pub every: f64,
+    /// The kinds of fault, with their weights: `kill`, `pause`, `swap`, `launcher`, `disk`
+    /// (`KIND` or `KIND=WEIGHT`, comma-separated).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "kill=4,pause=3,swap=1,launcher=1"
+    )]
+    pub faults: Vec<String>,
+    /// The demonstrators swaps choose among; default those of the config's environment.
+    #[arg(long, value_delimiter = ',')]
+    pub experts: Vec<String>,
+    /// Checkpoint cadence of the run (`alfd run --checkpoint-every`).
+    #[arg(long, default_value_t = 2000)]
+    pub checkpoint_every: u64,
+    /// Fail unless the run's last 50 episodes' mean return reaches this.
+    #[arg(long)]
+    pub min_last_50: Option<f64>,
+    /// The most MB a disk fault writes before it gives up filling the file system.
+    #[arg(long, default_value_t = 512)]
+    pub fill_cap_mb: u64,
+    /// Seconds the run may take after the faults end before it counts as hung.
+    #[arg(long, default_value_t = 900)]
+    pub grace: u64,
+}
+
+/// A fault carried out, for the report.
+#[derive(Debug, Clone, serde::Serialize)]
+struct Event {
+    at_ms: u64,
+    fault: Fault,
+    outcome: String,
+}
+
+/// The launcher's processes and what the chaos has done to them so far.
+struct Chaos<'a> {
+    args: &'a ChaosArgs,
+    alfd: PathBuf,
+    start: Instant,
+    launcher: Child,
+    /// Processes stopped with SIGSTOP, and when each gets SIGCONT.
+    paused: Vec<(u32, Duration)>,
+    /// The filler file and when it goes.
+    filler: Option<(PathBuf, Duration)>,
+    swap: Option<Child>,
+    events: Vec<Event>,
+    run_ids: Vec<String>,
+    launches: u32,
+}
+
+/// Runs `alfd chaos`.
+pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
+    let mix = parse_mix(&args.faults)?;
+    if args.every <= 0.0 || !args.every.is_finite() {
+        return Err(usage(format!(
+            "--every must be a positive number of seconds, got {}",
+            args.every
+        )));
+    }
+    let alfd = std::env::current_exe().context("cannot locate the running alfd binary")?;
+    let launcher = spawn_run(&alfd, &args)?;
+    let mut chaos = Chaos {
+        args: &args,
+        alfd,
+        start: Instant::now(),
+        launcher,
+        paused: Vec::new(),
+        filler: None,
+        swap: None,
+        events: Vec::new(),
+        run_ids: Vec::new(),
+        launches: 1,
+    };
+    let experts = if args.experts.is_empty() {
+        experts_of(&args.out)
+    } else {
+        args.experts.clone()
+    };
+    let actors = u16::try_from(args.actors).map_err(|_| usage("--actors is too large"))?;
+    let gap = Duration::from_secs_f64(args.every);
+    let mut injector = Injector::new(args.seed, gap, actors, experts, mix);
+    let ended = chaos.drive(&mut injector);
+    chaos.settle();
+    report(&chaos, ended)
+}
+
+/// `kill=4,pause` → the weights (a kind without one weighs 1); unknown kinds are refused.
+fn parse_mix(faults: &[String]) -> anyhow::Result<Mix> {
+    let mut mix = Mix {
+        kill: 0,
+        pause: 0,
+        swap: 0,
+        launcher: 0,
+        disk: 0,
+    };
+    for f in faults.iter().filter(|f| !f.is_empty()) {
+        let (kind, weight) = f.split_once('=').unwrap_or((f, "1"));
+        let weight: u32 = weight
+            .parse()
+            .map_err(|_| usage(format!("--faults {f}: the weight must be a whole number")))?;
+        let slot = match kind {
+            "kill" => &mut mix.kill,
+            "pause" => &mut mix.pause,
+            "swap" => &mut mix.swap,
+            "launcher" => &mut mix.launcher,
+            "disk" => &mut mix.disk,
+            other => {
+                return Err(usage(format!(
+                    "--faults: unknown fault {other:?} (kill, pause, swap, launcher, disk)"
+                )))
+            }
+        };
+        *slot = weight;
+    }
+    Ok(mix)
+}
+
+/// `alfd run` for the chaos: quiet, with restarts enough for every fault.
+fn spawn_run(alfd: &Path, args: &ChaosArgs) -> anyhow::Result<Child> {
+    let mut cmd = Command::new(alfd);
+    cmd.arg("run")
+        .args(["--out", &args.out.to_string_lossy()])
+        .args(["--actors", &args.actors.to_string()])
+        .args(["--checkpoint-every", &args.checkpoint_every.to_string()])
+        .args(["--max-restarts", "100000", "--quiet"]);
+    if let Some(c) = &args.config {
+        cmd.args(["--config", &c.to_string_lossy()]);
+    }
+    for s in &args.set {
+        cmd.args(["--set", s]);
+    }
+    cmd.stdin(Stdio::null()).stdout(Stdio::null());
+    cmd.spawn().context("cannot start alfd run")
+}
+
+/// The demonstrators of the environment of the run in `dir` (once its config is written).
+fn experts_of(dir: &Path) -> Vec<String> {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let text = loop {
+        if let Ok(t) = std::fs::read_to_string(dir.join("config.toml")) {
+            break t;
+        }
+        if Instant::now() > deadline {
+            return Vec::new();
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let Ok(cfg) = alfd_common::config::ExperimentConfig::for_multi_process(&text) else {
+        return Vec::new();
+    };
+    let env = format!("{:?}", cfg.env.name).to_lowercase();
+    alfd_expert::registry::list()
+        .into_iter()
+        .filter(|e| e.env == env)
+        .map(|e| e.name)
+        .collect()
+}
+
+impl Chaos<'_> {
+    fn now(&self) -> Duration {
+        self.start.elapsed()
+    }
+
+    fn log(&mut self, fault: Fault, outcome: String) {
+        let at_ms = self.now().as_millis() as u64;
+        tracing::info!(at_ms, ?fault, %outcome, "chaos");
+        self.events.push(Event {
+            at_ms,
+            fault,
+            outcome,
+        });
+    }
+
+    /// Injects faults until `--duration`, then waits for the run's end; the run's end (`Ok`) or
+    /// why it did not come (`Err`).
+    fn drive(&mut self, injector: &mut Injector) -> Result<(), String> {
+        let faults_end = Duration::from_secs(self.args.duration);
+        let give_up = faults_end + Duration::from_secs(self.args.grace);
+        loop {
+            self.release(false);
+            self.run_id();
+            if let Some(status) = self.launcher.try_wait().map_err(|e| e.to_string())? {
+                self.release(true);
+                if self.finished() {
+                    return Ok(());
+                }
+                return Err(format!(
+                    "the launcher ended ({status}) before the run's end"
+                ));
+            }
+            let now = self.now();
+            if now >= give_up {
+                return Err(format!(
+                    "the run had not ended {} s after the faults",
+                    self.args.grace
+                ));
+            }
+            if now < faults_end {
+                if let Some(f) = injector.due(now) {
+                    self.apply(f)?;
+                }
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// Whether `summary.json` says the run is complete.
+    fn finished(&self) -> bool {
+        std::fs::read_to_string(self.args.out.join("summary.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .is_some_and(|s| s["interrupted"].as_bool() == Some(false))
+    }
+
+    /// SIGCONT to the paused processes whose pause is over (all with `all`), and the filler
+    /// removed when its time is up.
+    fn release(&mut self, all: bool) {
+        let now = self.now();
+        self.paused.retain(|&(pid, until)| {
+            let due = all || now >= until;
+            if due {
+                signal("CONT", pid);
+            }
+            !due
+        });
+        if let Some((file, until)) = &self.filler {
+            if all || now >= *until {
+                let _ = std::fs::remove_file(file);
+                self.filler = None;
+            }
+        }
+    }
+
+    /// The current run id (it changes with every launch).
+    fn run_id(&mut self) -> Option<String> {
+        let info = alfd_launcher::read_run_info(&self.args.out).ok()?;
+        if !self.run_ids.contains(&info.run_id) {
+            self.run_ids.push(info.run_id.clone());
+        }
+        Some(info.run_id)
+    }
+
+    fn pid_of(&mut self, target: Target) -> Option<u32> {
+        let run = format!("--run-id={}", self.run_id()?);
+        let mut args = vec![run];
+        if let Target::Actor(id) = target {
+            args.push(format!("--actor-id={id}"));
+        }
+        find_process(target.binary(), &args)
+    }
+
+    fn apply(&mut self, fault: Fault) -> Result<(), String> {
+        let outcome = match &fault {
+            Fault::Kill(t) => match self.pid_of(*t) {
+                Some(pid) => {
+                    signal("KILL", pid);
+                    format!("killed pid {pid}")
+                }
+                None => "no such process at that moment (restarting)".to_owned(),
+            },
+            Fault::Pause(t, d) => match self.pid_of(*t) {
+                Some(pid) => {
+                    signal("STOP", pid);
+                    self.paused.push((pid, self.now() + *d));
+                    format!("stopped pid {pid}")
+                }
+                None => "no such process at that moment (restarting)".to_owned(),
+            },
+            Fault::SwapExpert(name) => self.swap(name),
+            Fault::KillLauncher => self.kill_launcher()?,
+            Fault::FillDisk(d) => self.fill_disk(*d),
+        };
+        self.log(fault, outcome);
+        Ok(())
+    }
+
+    fn swap(&mut self, name: &str) -> String {
+        if let Some(child) = &mut self.swap {
+            if matches!(child.try_wait(), Ok(None)) {
+                return "skipped: a swap is under way".to_owned();
+            }
+        }
+        let spawned = Command::new(&self.alfd)
+            .args(["swap-expert", "--run", &self.args.out.to_string_lossy()])
+            .args(["--expert", name, "--timeout", "60"])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn();
+        match spawned {
+            Ok(child) => {
+                self.swap = Some(child);
+                format!("alfd swap-expert --expert {name} started")
+            }
+            Err(e) => format!("cannot start alfd swap-expert: {e}"),
+        }
+    }
+
+    /// SIGKILL to the launcher, then `alfd resume` (once a learner checkpoint exists to resume
+    /// from).
+    fn kill_launcher(&mut self) -> Result<String, String> {
+        if !self.args.out.join("learner.ckpt").is_file() {
+            return Ok("skipped: no learner checkpoint to resume from yet".to_owned());
+        }
+        self.release(true);
+        let pid = self.launcher.id();
+        signal("KILL", pid);
+        let _ = self.launcher.wait();
+        let resumed = Command::new(&self.alfd)
+            .args(["resume", &self.args.out.to_string_lossy(), "--quiet"])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .spawn()
+            .map_err(|e| format!("cannot start alfd resume: {e}"))?;
+        self.launcher = resumed;
+        self.launches += 1;
+        Ok(format!(
+            "killed launcher pid {pid}; alfd resume started (launch {})",
+            self.launches
+        ))
+    }
+
+    /// Fills the run directory's file system (up to `--fill-cap-mb`) until `d` from now.
+    fn fill_disk(&mut self, d: Duration) -> String {
+        if self.filler.is_some() {
+            return "skipped: the disk is full already".to_owned();
+        }
+        let file = self.args.out.join(".chaos-filler");
+        let written = fill(&file, self.args.fill_cap_mb);
+        let outcome = match written {
+            Ok((mb, true)) => format!("file system full after {mb} MB"),
+            Ok((mb, false)) => format!("wrote {mb} MB without filling the file system (cap)"),
+            Err(e) => format!("cannot write the filler: {e}"),
+        };
+        self.filler = Some((file, self.now() + d));
+        outcome
+    }
+
+    /// Nothing left paused, filled or swapping.
+    fn settle(&mut self) {
+        self.release(true);
+        if let Some(mut child) = self.swap.take() {
+            let _ = child.wait();
+        }
+    }
+}
+
+/// Writes zeros to `file` in 1 MB pieces until the file system is full or `cap_mb` are written;
+/// the MB written and whether it filled up.
+fn fill(file: &Path, cap_mb: u64) -> std::io::Result<(u64, bool)> {
+    use std::io::Write as _;
+    let mut f = std::fs::File::create(file)?;
+    let block = vec![0u8; 1 << 20];
+    for mb in 0..cap_mb {
+        match f.write_all(&block).and_then(|()| f.sync_data()) {
+            Ok(()) => {}
+            Err(e) if e.raw_os_error() == Some(28) => return Ok((mb, true)),
+            Err(e) => return Err(e),
+        }
+    }
+    Ok((cap_mb, false))
+}
+
+/// `kill -SIG pid`, its failure ignored (the process may have gone).
+fn signal(sig: &str, pid: u32) {
+    let _ = Command::new("kill")
+        .args([&format!("-{sig}"), &pid.to_string()])
+        .stderr(Stdio::null())
+        .status();
+}
+
+/// The process running `binary` with every one of `args` among its arguments.
+fn find_process(binary: &str, args: &[String]) -> Option<u32> {
+    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(cmdline) = std::fs::read(entry.path().join("cmdline")) else {
+            continue;
+        };
+        let parts: Vec<String> = cmdline
+            .split(|&b| b == 0)
+            .map(|p| String::from_utf8_lossy(p).into_owned())
+            .collect();
+        if parts.first().is_some_and(|p| p.ends_with(binary))
+            && args.iter().all(|a| parts.contains(a))
+        {
+            return Some(pid);
+        }
+    }
+    None
+}
+
+/// Checks the invariants, writes `chaos.json`, prints the verdicts; an error when one fails.
+fn report(chaos: &Chaos<'_>, ended: Result<(), String>) -> anyhow::Result<()> {
+    let dir = &chaos.args.out;
+    let config_toml = std::fs::read_to_string(dir.join("config.toml"))
+        .with_context(|| format!("cannot read {}", dir.join("config.toml").display()))?;
+    let cfg = alfd_common::config::ExperimentConfig::for_multi_process(&config_toml)?;
+    let want = Expected {
+        episodes: cfg.episode_limit().map(|n| n as usize),
+        steps: cfg.step_limit(),
+        budget: cfg.budget(),
+        actors: chaos.args.actors,
+        min_last_50: chaos.args.min_last_50,
+    };
+    let mut verdicts = vec![Verdict {
+        name: "ended",
+        ok: ended.is_ok(),
+        detail: ended
+            .err()
+            .unwrap_or_else(|| "the launcher finished the run".to_owned()),
+    }];
+    verdicts.extend(check::check(dir, &config_toml, want));
+    verdicts.push(nothing_left(&chaos.run_ids));
+    let mut counts = std::collections::BTreeMap::<&str, usize>::new();
+    for e in &chaos.events {
+        *counts.entry(e.fault.kind()).or_default() += 1;
+    }
+    let report = serde_json::json!({
+        "seed": chaos.args.seed,
+        "duration_s": chaos.args.duration,
+        "wall_clock_s": chaos.start.elapsed().as_secs_f64(),
+        "launches": chaos.launches,
+        "faults": counts,
+        "events": chaos.events,
+        "invariants": verdicts,
+    });
+    crate::output::write(
+        dir,
+        "chaos.json",
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
+    eprintln!(
+        "chaos: {} faults in {:.0} s ({counts:?}), {} launches",
+        chaos.events.len(),
+        chaos.start.elapsed().as_secs_f64(),
+        chaos.launches
+    );
+    for v in &verdicts {
+        eprintln!(
+            "  {} {:<15} {}",
+            if v.ok { "ok  " } else { "FAIL" },
+            v.name,
+            v.detail
+        );
+    }
+    let failed: Vec<&str> = verdicts.iter().filter(|v| !v.ok).map(|v| v.name).collect();
+    anyhow::ensure!(
+        failed.is_empty(),
+        "invariants broken: {}",
+        failed.join(", ")
+    );
+    Ok(())
+}
+
+/// No process of any of the run's launches is alive, and none left iceoryx2 files.
+fn nothing_left(run_ids: &[String]) -> Verdict {
+    let mut left = Vec::new();
+    for id in run_ids {
+        let alive = alfd_wire::alive_nodes(id).unwrap_or_default();
+        let files = alfd_wire::leftover_files(id);
+        if !alive.is_empty() || !files.is_empty() {
+            let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
+            left.push(format!(
+                "{id}: nodes alive {alive:?}, files {}",
+                names.join(", ")
+            ));
+        }
+    }
+    Verdict {
+        name: "nothing left",
+        ok: left.is_empty(),
+        detail: if left.is_empty() {
+            format!(
+                "{} launches' processes gone, their files removed",
+                run_ids.len()
+            )
+        } else {
+            left.join("; ")
+        },
+    }
+}

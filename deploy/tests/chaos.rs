@@ -1,0 +1,96 @@
+//! `alfd chaos`, short and seeded: a two-actor run under tens of faults of every kind (SIGKILL
+//! and SIGSTOP of actors, learner and expert, expert swaps, the launcher killed and the run
+//! resumed, and, as root, the run directory's file system filled and freed) keeps every
+//! invariant: it finishes, every episode is in `episodes.csv` once, `demos.jsonl` is gap-free
+//! within the budget and as counted, every checkpoint loads, nothing is left running.
+
+use std::path::Path;
+use std::process::Command;
+
+use crate::support::{alfd, text, timed, tmp};
+
+/// A small file system mounted on a directory for the test's life (unmounted when dropped).
+struct Tmpfs<'a>(&'a Path);
+
+impl<'a> Tmpfs<'a> {
+    /// Mounts a tmpfs of `mb` MB on `dir` if this process may (root); `None` otherwise.
+    fn mount(dir: &'a Path, mb: u32) -> Option<Self> {
+        let root = Command::new("id")
+            .arg("-u")
+            .output()
+            .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
+        let mounted = root
+            && Command::new("mount")
+                .args(["-t", "tmpfs", "-o", &format!("size={mb}m"), "tmpfs"])
+                .arg(dir)
+                .status()
+                .is_ok_and(|s| s.success());
+        mounted.then_some(Tmpfs(dir))
+    }
+}
+
+impl Drop for Tmpfs<'_> {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(self.0).status();
+    }
+}
+
+#[test]
+fn a_seeded_chaos_run_keeps_every_invariant() {
+    let _time = timed!();
+    let dir = tmp("chaos");
+    let disk = Tmpfs::mount(&dir, 96);
+    let faults = if disk.is_some() {
+        "kill=4,pause=3,swap=1,launcher=1,disk=2"
+    } else {
+        eprintln!("chaos: not root, so no tmpfs: the run goes without disk faults");
+        "kill=4,pause=3,swap=1,launcher=1"
+    };
+    let out = dir.join("run");
+    let o = alfd()
+        .args(["chaos", "--out", out.to_str().unwrap(), "--seed", "3"])
+        .args(["--duration", "60", "--every", "1.2", "--faults", faults])
+        .args(["--checkpoint-every", "300", "--grace", "300"])
+        .args([
+            "--set",
+            "episodes=500",
+            "--set",
+            "env.max_episode_steps=200",
+        ])
+        .output()
+        .unwrap();
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("chaos.json")).unwrap()).unwrap();
+    let broken: Vec<&serde_json::Value> = report["invariants"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|v| v["ok"] != true)
+        .collect();
+    assert!(broken.is_empty(), "{broken:#?}\n{}", text(&o));
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let events = report["events"].as_array().unwrap();
+    let carried_out = |kind: &str, word: &str| {
+        events
+            .iter()
+            .filter(|e| e["fault"].to_string().contains(kind))
+            .filter(|e| e["outcome"].as_str().unwrap().contains(word))
+            .count()
+    };
+    assert!(events.len() >= 15, "{} faults", events.len());
+    assert!(carried_out("kill", "killed pid") >= 3, "{events:#?}");
+    assert!(carried_out("pause", "stopped pid") >= 2, "{events:#?}");
+    assert!(
+        carried_out("kill-launcher", "alfd resume started") >= 1,
+        "{events:#?}"
+    );
+    assert!(report["launches"].as_u64().unwrap() >= 2);
+    if disk.is_some() {
+        assert!(
+            carried_out("fill-disk", "file system full") >= 1,
+            "{events:#?}"
+        );
+    }
+    // The filler is gone with the faults.
+    assert!(!out.join(".chaos-filler").exists());
+}
