@@ -46,6 +46,11 @@ pub struct Args {
     /// resume` chooses it).
     #[arg(long, value_name = "STEP")]
     pub restore_step: Option<u64>,
+    /// Steps this actor id has played before this process (its earlier incarnations' recorded
+    /// episodes): ε's clock starts there, so an actor that takes over does not explore from
+    /// ε's start again (the launcher passes it).
+    #[arg(long, value_name = "STEPS", default_value_t = 0)]
+    pub explored_steps: u64,
 }
 
 /// The name of the process's log file (without `.log`).
@@ -87,6 +92,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         actions,
         rng,
     );
+    core.continue_exploration(args.explored_steps);
     let mut variables = WireVariables::new(&session)?;
     let mut adder = WireAdder::new(&session, me, runtime.window, obs_dim, cfg.agent.heads())?;
     let mut expert = wire_expert(&session, me, &setup)?;
@@ -100,12 +106,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         .transpose()?;
     let mut start = environment_loop::Progress::default();
     if let Some(c) = &restored {
-        let bad = |e: &dyn std::fmt::Display| BadInput(format!("actor checkpoint: {e}"));
-        core.restore(&c.core).map_err(|e| bad(&e))?;
-        env.restore(&c.env).map_err(|e| bad(&e))?;
-        adder.restored(c.progress.steps);
-        expert.restore_view(c.expert.clone());
-        start = c.progress;
+        start = continue_from(c, &mut core, env.as_mut(), &mut adder, &mut expert)?;
     }
     if let Some(stop) = variables.first(&session, &mut core, runtime.handshake_timeout())? {
         // A restarted actor the run's end overtook: nothing to play, nothing lost.
@@ -290,6 +291,22 @@ impl<'a> Checkpoints<'a> {
         self.time += t.elapsed();
         self.written += 1;
     }
+}
+
+/// Puts a checkpoint's state into the actor's pieces; the progress it continues from.
+fn continue_from(
+    c: &checkpoint::ActorCheckpoint,
+    core: &mut NeuralActor,
+    env: &mut VectorEnv,
+    adder: &mut WireAdder<'_, '_>,
+    expert: &mut WireExpert<'_, '_>,
+) -> Result<environment_loop::Progress, BadInput> {
+    let bad = |e: &dyn std::fmt::Display| BadInput(format!("actor checkpoint: {e}"));
+    core.restore(&c.core).map_err(|e| bad(&e))?;
+    env.restore(&c.env).map_err(|e| bad(&e))?;
+    adder.restored(c.progress.steps);
+    expert.restore_view(c.expert.clone());
+    Ok(c.progress)
 }
 
 /// The state `RUN_DIR/actor-<id>.ckpt` holds for global step `step` (the weights come from the

@@ -13,9 +13,15 @@ use std::sync::Arc;
 #[cfg(feature = "png")]
 use anyhow::Context as _;
 
-/// Writes `bytes` to `dir/name`, replacing the file whole (a reader never sees half of it).
+/// Writes `bytes` to `dir/name`, replacing the file whole (a reader never sees half of it); a
+/// full disk is waited out for up to a minute (see `alfd_harness::write_atomically_patiently`).
 pub fn write(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
-    Ok(alfd_harness::write_atomically(&dir.join(name), bytes)?)
+    let patience = std::time::Duration::from_secs(60);
+    Ok(alfd_harness::write_atomically_patiently(
+        &dir.join(name),
+        bytes,
+        patience,
+    )?)
 }
 
 #[cfg(feature = "png")]

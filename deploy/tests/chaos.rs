@@ -43,7 +43,7 @@ fn a_seeded_chaos_run_keeps_every_invariant() {
     let faults = if disk.is_some() {
         "kill=4,pause=3,swap=1,launcher=1,disk=2"
     } else {
-        eprintln!("chaos: not root, so no tmpfs: the run goes without disk faults");
+        eprintln!("chaos: no tmpfs (not root, or mount refused): the run goes without disk faults");
         "kill=4,pause=3,swap=1,launcher=1"
     };
     let out = dir.join("run");

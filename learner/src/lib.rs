@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use alfd_common::agent::NeuralLearner;
 use alfd_common::checkpoint::Cadence;
 use alfd_common::rng::{derive_seed, seeded};
-use alfd_harness::{write_atomically, BadInput, ProcessArgs, Session, Setup};
+use alfd_harness::{write_atomically_patiently, BadInput, ProcessArgs, Session, Setup};
 use alfd_wire::{
     self as wire, process_state, progress_kind, ActorBells, Credits, Doorbell, Process, Progress,
     Role, Wake, WireError, MAX_ACTORS,
@@ -130,7 +130,13 @@ fn serve(
     let (stop_reason, end) = shell.serve(&mut m, &session)?;
     shell.stats.log(stop_reason, &m);
     let path = run_dir.join("weights.safetensors");
-    write_atomically(&path, &m.learner().network().to_safetensors_bytes())?;
+    // A disk full for a moment (being freed) does not cost the run its weights.
+    let patience = std::time::Duration::from_secs(60);
+    write_atomically_patiently(
+        &path,
+        &m.learner().network().to_safetensors_bytes(),
+        patience,
+    )?;
     info!(path = %path.display(), "final weights saved");
     if m.final_checkpoint(runtime.window) {
         // The run's learning is done and its weights are saved: a final checkpoint that cannot

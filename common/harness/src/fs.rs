@@ -2,6 +2,7 @@
 
 use std::io::Write as _;
 use std::path::Path;
+use std::time::Duration;
 
 use crate::bad_input::{Result, What as _};
 
@@ -10,6 +11,38 @@ use crate::bad_input::{Result, What as _};
 /// is returned, and a write that fails (a full disk) removes its temporary file.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomically_with_mode(path, bytes, 0o644)
+}
+
+/// [`write_atomically`], waiting out a full disk: a write refused for lack of space (ENOSPC) is
+/// tried again every 200 ms for at most `patience` (room being made), the first refusal said in
+/// the log; any other error, or a disk still full after that, is returned. For the files a run
+/// ends with (its weights, `summary.json`), which a short-lived full disk must not cost.
+pub fn write_atomically_patiently(path: &Path, bytes: &[u8], patience: Duration) -> Result<()> {
+    let deadline = std::time::Instant::now() + patience;
+    let mut said = false;
+    loop {
+        match write_atomically(path, bytes) {
+            Err(e) if disk_full(&e) && std::time::Instant::now() < deadline => {
+                if !said {
+                    tracing::warn!(
+                        "{}; trying again while the disk is full",
+                        crate::describe(&e)
+                    );
+                    said = true;
+                }
+                std::thread::sleep(Duration::from_millis(200));
+            }
+            other => return other,
+        }
+    }
+}
+
+/// Whether `e` is, anywhere in its chain, a file system out of space (ENOSPC).
+pub fn disk_full(e: &(dyn std::error::Error + 'static)) -> bool {
+    crate::chain(e).any(|e| {
+        e.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.raw_os_error() == Some(28))
+    })
 }
 
 /// [`write_atomically`] into a file only its owner can read and write (mode 0600 from its
@@ -189,5 +222,28 @@ mod tests {
         names.sort();
         assert_eq!(names, vec!["state".to_owned()]);
         assert_eq!(std::fs::read(target.join("inside")).unwrap(), b"kept");
+    }
+
+    #[test]
+    fn a_full_disk_is_told_apart_from_other_errors_anywhere_in_the_chain() {
+        let full = crate::HarnessError::Failed {
+            what: "cannot write x".into(),
+            source: Box::new(std::io::Error::from_raw_os_error(28)),
+        };
+        assert!(disk_full(&full));
+        let denied = crate::HarnessError::Failed {
+            what: "cannot write x".into(),
+            source: Box::new(std::io::Error::from_raw_os_error(13)),
+        };
+        assert!(!disk_full(&denied));
+        // Not a full disk: the error comes back as it is (no waiting for room).
+        let e = write_atomically_patiently(
+            Path::new("/proc/alfd-no-such-dir/x"),
+            b"x",
+            Duration::from_secs(30),
+        )
+        .unwrap_err();
+        assert!(!disk_full(&e), "{e}");
+        assert!(e.to_string().contains("alfd-no-such-dir"), "{e}");
     }
 }

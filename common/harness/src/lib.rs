@@ -16,7 +16,10 @@ mod startup;
 pub use bad_input::{chain, describe, exit_code, BadInput, HarnessError, Result};
 #[cfg(any(test, feature = "testing"))]
 pub use fs::test_dir;
-pub use fs::{append_whole, load_checkpoint, save_checkpoint, write_atomically, write_private};
+pub use fs::{
+    append_whole, disk_full, load_checkpoint, save_checkpoint, write_atomically,
+    write_atomically_patiently, write_private,
+};
 pub use process::{check_wire_limits, main, read_text, ProcessArgs, Setup};
 pub use runtime::{
     RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY, DEFAULT_HUMAN_QUERY_TIMEOUT_MS,

@@ -4,7 +4,6 @@
 use std::cell::RefCell;
 use std::time::Duration;
 
-use crate::bad_input::{Result, What as _};
 use alfd_common::environment_loop::Stop;
 use alfd_wire::{Control, ControlWatch, Doorbell, Waiter, Wake, Wire, WireError};
 
@@ -26,6 +25,8 @@ pub enum SessionError {
     LauncherSilent(Duration),
     #[error("the launcher (pid {0}) is gone: giving up")]
     LauncherGone(u32),
+    #[error("no handshake with the launcher")]
+    NoHandshake(#[source] WireError),
 }
 
 impl SessionError {
@@ -57,12 +58,12 @@ impl std::fmt::Debug for Session<'_> {
 impl<'w> Session<'w> {
     /// Listens on `bell` and waits up to `handshake` for the launcher's first control message
     /// (where a process of another schema version is refused).
-    pub fn join(wire: &'w Wire, bell: Doorbell, handshake: Duration) -> Result<Self> {
+    pub fn join(wire: &'w Wire, bell: Doorbell, handshake: Duration) -> Result<Self, SessionError> {
         let waiter = wire.waiter(bell)?;
         let mut control = ControlWatch::new(wire)?;
         control
             .handshake(&waiter, handshake)
-            .what(|| "no handshake with the launcher".to_owned())?;
+            .map_err(SessionError::NoHandshake)?;
         Ok(Self {
             wire,
             waiter,

@@ -20,10 +20,19 @@ pub(super) fn shares(episodes: u64, actors: usize) -> [u32; alfd_wire::MAX_ACTOR
     q
 }
 
-/// `RUN_DIR/episodes.csv` opened for this launcher, and the (return, demonstrations used) of
-/// the rows already in it: a new run creates it with its header; a resumed run appends to it,
-/// after dropping a last line cut short by a crash.
-pub(super) fn open_episodes(run_dir: &Path, resume: bool) -> Result<(File, Vec<(f64, u32)>)> {
+/// A row of `episodes.csv` as a resumed launcher needs it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Row {
+    pub ret: f64,
+    pub demos_used: u32,
+    pub length: u64,
+    pub actor: u16,
+}
+
+/// `RUN_DIR/episodes.csv` opened for this launcher, and the rows already in it: a new run
+/// creates it with its header; a resumed run appends to it, after dropping a last line cut short
+/// by a crash.
+pub(super) fn open_episodes(run_dir: &Path, resume: bool) -> Result<(File, Vec<Row>)> {
     let path = run_dir.join("episodes.csv");
     if !resume {
         let mut csv = File::create(&path).what(|| "cannot create episodes.csv".to_owned())?;
@@ -43,14 +52,22 @@ pub(super) fn open_episodes(run_dir: &Path, resume: bool) -> Result<(File, Vec<(
             continue;
         }
         let fields: Vec<&str> = line.split(',').collect();
+        let field = |i: usize| fields.get(i).copied().unwrap_or("");
         let parsed = (
-            fields.get(1).and_then(|f| f.parse::<f64>().ok()),
-            fields.get(3).and_then(|f| f.parse::<u32>().ok()),
+            field(1).parse::<f64>(),
+            field(3).parse::<u32>(),
+            field(2).parse::<u64>(),
+            field(8).parse::<u16>(),
         );
-        let (Some(ret), Some(demos)) = parsed else {
+        let (Ok(ret), Ok(demos_used), Ok(length), Ok(actor)) = parsed else {
             bail!("{} line {}: not an episode row", path.display(), n + 1);
         };
-        rows.push((ret, demos));
+        rows.push(Row {
+            ret,
+            demos_used,
+            length,
+            actor,
+        });
     }
     ensure!(whole > 0, "{} has no header", path.display());
     let csv = std::fs::OpenOptions::new()

@@ -60,7 +60,7 @@ mod children;
 mod episodes;
 mod remote;
 
-use episodes::{open_episodes, shares, EpisodeLog};
+use episodes::{open_episodes, shares, EpisodeLog, Row};
 
 pub use children::describe as describe_status;
 use children::{describe, last_error, pin, proc_binary, RateMeter};
@@ -281,6 +281,9 @@ struct Launcher<'a, 'w> {
     /// Episodes each actor id is to play (a run with an episode limit), and has recorded.
     quota: Option<[u32; alfd_wire::MAX_ACTORS]>,
     recorded_by: [u32; alfd_wire::MAX_ACTORS],
+    /// Per actor id: the steps of its recorded episodes, all incarnations and launches (ε's
+    /// clock for an incarnation that takes over).
+    explored: [u64; alfd_wire::MAX_ACTORS],
     /// Learner restarts.
     learner_restarts: u32,
     /// The expert generations: swaps and restarts.
@@ -313,8 +316,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
         let mut control_tx = wire.control_sender()?;
         control_tx.send(control)?;
         let (csv, earlier) = open_episodes(&plan.run_dir, plan.resume)?;
-        let demos_before = earlier.last().map_or(0, |r| r.1);
-        let all_returns: Vec<f64> = earlier.iter().map(|r| r.0).collect();
+        let demos_before = earlier.last().map_or(0, |r| r.demos_used);
+        let all_returns: Vec<f64> = earlier.iter().map(|r| r.ret).collect();
+        let explored = explored_steps(&earlier);
         let quota = plan
             .cfg
             .episode_limit()
@@ -362,6 +366,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             restarts: 0,
             quota,
             recorded_by: [0; alfd_wire::MAX_ACTORS],
+            explored,
             learner_restarts: 0,
             experts: ExpertLifecycle::new(plan.max_restarts),
             started: Instant::now(),
@@ -546,6 +551,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
         if let Some(n) = self.recorded_by.get_mut(actor) {
             *n = n.saturating_add(1);
         }
+        if let Some(n) = self.explored.get_mut(actor) {
+            *n = n.saturating_add(u64::from(p.episode.0.length));
+        }
         // Episodes are numbered in order of arrival; demonstrations used never go down.
         let r = EpisodeRecord {
             episode: self.recorded as u32,
@@ -571,6 +579,19 @@ impl<'a, 'w> Launcher<'a, 'w> {
     }
 
     /// Episodes actor `id` has still to play (a run with an episode limit).
+    /// The checkpointed global step actor `id`'s `incarnation` continues from, if any.
+    fn restore_step(&self, id: u16, incarnation: u64) -> Option<u64> {
+        (incarnation == self.plan.first_incarnation())
+            .then(|| {
+                self.plan
+                    .restore_actors
+                    .get(usize::from(id))
+                    .copied()
+                    .flatten()
+            })
+            .flatten()
+    }
+
     fn episodes_left(&self, id: u16) -> Option<u32> {
         let i = usize::from(id);
         self.quota.map(|q| q[i].saturating_sub(self.recorded_by[i]))
@@ -635,13 +656,14 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 ]
                 .into_iter()
                 .chain(self.episodes_left(*id).map(|n| format!("--episodes={n}")))
-                // The first actors of a resumed launch continue from their checkpoints.
-                .chain(
-                    (*incarnation == plan.first_incarnation())
-                        .then(|| plan.restore_actors.get(usize::from(*id)).copied().flatten())
-                        .flatten()
-                        .map(|step| format!("--restore-step={step}")),
-                )
+                // The first actors of a resumed launch continue from their checkpoints; any other
+                // takes over ε's clock where the id's episodes so far leave it.
+                .chain(std::iter::once(
+                    match self.restore_step(*id, *incarnation) {
+                        Some(step) => format!("--restore-step={step}"),
+                        None => format!("--explored-steps={}", self.explored[usize::from(*id)]),
+                    },
+                ))
                 .collect(),
             ),
         };
@@ -1004,4 +1026,15 @@ pub fn read_run_info(run_dir: &Path) -> Result<RunInfo> {
     let text = std::fs::read_to_string(&path)
         .what(|| format!("{} is not a run directory (no run.json)", run_dir.display()))?;
     serde_json::from_str(&text).what(|| format!("malformed {}", path.display()))
+}
+
+/// Per actor id, the steps of its episodes among `rows`.
+fn explored_steps(rows: &[Row]) -> [u64; alfd_wire::MAX_ACTORS] {
+    let mut steps = [0u64; alfd_wire::MAX_ACTORS];
+    for r in rows {
+        if let Some(n) = steps.get_mut(usize::from(r.actor)) {
+            *n = n.saturating_add(r.length);
+        }
+    }
+    steps
 }

@@ -2,10 +2,11 @@
 //! processes killed with SIGKILL or paused with SIGSTOP/SIGCONT, the expert swapped, the
 //! launcher itself killed (then `alfd resume` continues the run), the run directory's file system
 //! filled up and freed. When the faults end the run goes on to its end, and the invariants of
-//! [`check`] are checked; everything is written to `RUN_DIR/chaos.json`.
+//! [`check`] are checked; everything is written to `RUN_DIR/chaos.json` and `RUN_DIR/chaos.md`.
 
 mod check;
 mod injector;
+mod report;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -14,7 +15,6 @@ use std::time::{Duration, Instant};
 use anyhow::Context as _;
 
 use crate::usage::usage;
-use check::{Expected, Verdict};
 use injector::{Fault, Injector, Mix, Target};
 
 /// `alfd chaos`.
@@ -65,6 +65,9 @@ pub struct ChaosArgs {
     /// Seconds the run may take after the faults end before it counts as hung.
     #[arg(long, default_value_t = 900)]
     pub grace: u64,
+    /// Run nothing: re-make `RUN_DIR/chaos.md` from the `chaos.json` of an earlier chaos run.
+    #[arg(long)]
+    pub summarize: bool,
 }
 
 /// A fault carried out, for the report.
@@ -93,6 +96,9 @@ struct Chaos<'a> {
 
 /// Runs `alfd chaos`.
 pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
+    if args.summarize {
+        return report::summarize(&args.out);
+    }
     let mix = parse_mix(&args.faults)?;
     if args.every <= 0.0 || !args.every.is_finite() {
         return Err(usage(format!(
@@ -124,7 +130,7 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
     let mut injector = Injector::new(args.seed, gap, actors, experts, mix);
     let ended = chaos.drive(&mut injector);
     chaos.settle();
-    report(&chaos, ended)
+    report::report(&chaos, ended)
 }
 
 /// `kill=4,pause` → the weights (a kind without one weighs 1); unknown kinds are refused.
@@ -432,95 +438,4 @@ fn find_process(binary: &str, args: &[String]) -> Option<u32> {
         }
     }
     None
-}
-
-/// Checks the invariants, writes `chaos.json`, prints the verdicts; an error when one fails.
-fn report(chaos: &Chaos<'_>, ended: Result<(), String>) -> anyhow::Result<()> {
-    let dir = &chaos.args.out;
-    let config_toml = std::fs::read_to_string(dir.join("config.toml"))
-        .with_context(|| format!("cannot read {}", dir.join("config.toml").display()))?;
-    let cfg = alfd_common::config::ExperimentConfig::for_multi_process(&config_toml)?;
-    let want = Expected {
-        episodes: cfg.episode_limit().map(|n| n as usize),
-        steps: cfg.step_limit(),
-        budget: cfg.budget(),
-        actors: chaos.args.actors,
-        min_last_50: chaos.args.min_last_50,
-    };
-    let mut verdicts = vec![Verdict {
-        name: "ended",
-        ok: ended.is_ok(),
-        detail: ended
-            .err()
-            .unwrap_or_else(|| "the launcher finished the run".to_owned()),
-    }];
-    verdicts.extend(check::check(dir, &config_toml, want));
-    verdicts.push(nothing_left(&chaos.run_ids));
-    let mut counts = std::collections::BTreeMap::<&str, usize>::new();
-    for e in &chaos.events {
-        *counts.entry(e.fault.kind()).or_default() += 1;
-    }
-    let report = serde_json::json!({
-        "seed": chaos.args.seed,
-        "duration_s": chaos.args.duration,
-        "wall_clock_s": chaos.start.elapsed().as_secs_f64(),
-        "launches": chaos.launches,
-        "faults": counts,
-        "events": chaos.events,
-        "invariants": verdicts,
-    });
-    crate::output::write(
-        dir,
-        "chaos.json",
-        serde_json::to_string_pretty(&report)?.as_bytes(),
-    )?;
-    eprintln!(
-        "chaos: {} faults in {:.0} s ({counts:?}), {} launches",
-        chaos.events.len(),
-        chaos.start.elapsed().as_secs_f64(),
-        chaos.launches
-    );
-    for v in &verdicts {
-        eprintln!(
-            "  {} {:<15} {}",
-            if v.ok { "ok  " } else { "FAIL" },
-            v.name,
-            v.detail
-        );
-    }
-    let failed: Vec<&str> = verdicts.iter().filter(|v| !v.ok).map(|v| v.name).collect();
-    anyhow::ensure!(
-        failed.is_empty(),
-        "invariants broken: {}",
-        failed.join(", ")
-    );
-    Ok(())
-}
-
-/// No process of any of the run's launches is alive, and none left iceoryx2 files.
-fn nothing_left(run_ids: &[String]) -> Verdict {
-    let mut left = Vec::new();
-    for id in run_ids {
-        let alive = alfd_wire::alive_nodes(id).unwrap_or_default();
-        let files = alfd_wire::leftover_files(id);
-        if !alive.is_empty() || !files.is_empty() {
-            let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
-            left.push(format!(
-                "{id}: nodes alive {alive:?}, files {}",
-                names.join(", ")
-            ));
-        }
-    }
-    Verdict {
-        name: "nothing left",
-        ok: left.is_empty(),
-        detail: if left.is_empty() {
-            format!(
-                "{} launches' processes gone, their files removed",
-                run_ids.len()
-            )
-        } else {
-            left.join("; ")
-        },
-    }
 }

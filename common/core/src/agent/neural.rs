@@ -109,6 +109,12 @@ impl NeuralActor {
         self.explorer.steps()
     }
 
+    /// Puts ε's clock at `steps`: an actor that takes over from one that died goes on
+    /// exploring where its predecessor was, not from ε's start.
+    pub fn continue_exploration(&mut self, steps: u64) {
+        self.explorer.restore_steps(steps);
+    }
+
     /// Algorithm 1 line 1: sample the head to follow this episode.
     pub fn begin_episode(&mut self) {
         self.arm = self.rng.random_range(0..self.heads);
