@@ -91,6 +91,12 @@ def main(root, out):
         lines.append(f"| {kind} | {kinds[kind][0]} | {kinds[kind][1]} |")
     lines += [
         "",
+        "\"Carried out\" leaves out a fault that found no process to hit (one restarting), a swap "
+        "while another was under way and a launcher kill before the first learner checkpoint; a "
+        "swap counts when `alfd swap-expert` was started.",
+    ]
+    lines += [
+        "",
         "## Invariants",
         "",
         f"Every invariant held in {held} of {len(rows)} runs.",
