@@ -149,10 +149,11 @@ impl Hub {
             let stop = Arc::clone(&stop);
             let opts = opts.clone();
             let events_tx = events_tx.clone();
+            let held = Arc::clone(&roster);
             std::thread::Builder::new()
                 .name("hub".to_owned())
                 .spawn(move || {
-                    let r = forward(&opts, &inbox, &down, &stop, &events_tx);
+                    let r = forward(&opts, &inbox, &down, &stop, &events_tx, held);
                     if let Err(e) = &r {
                         warn!("the hub stopped: {e}");
                     }
@@ -390,12 +391,13 @@ fn forward(
     down: &zenoh::pubsub::Publisher<'static>,
     stop: &AtomicBool,
     events: &mpsc::Sender<HubEvent>,
+    roster: Arc<Mutex<Roster>>,
 ) -> Result<()> {
     let wire = Wire::connect(&opts.run_id, Process::new(Role::Bridge, 0), SCHEMA_VERSION)?;
     let mut bells = vec![Doorbell::Bridge];
     bells.extend((0..MAX_ACTORS as u16).map(Doorbell::Actor));
     let waiter = wire.waiter_on(&bells)?;
-    let mut hub = Forwarder::new(&wire, opts, down, events)?;
+    let mut hub = Forwarder::new(&wire, opts, down, events, roster)?;
     while !stop.load(Ordering::Relaxed) {
         if waiter.wait(TICK)? == Wake::Signal {
             // The launcher handles the signal; this thread goes on until told to stop.
@@ -443,6 +445,10 @@ struct Forwarder<'w, 'a> {
     params: Vec<f32>,
     bytes: Vec<u8>,
     refused: u64,
+    /// Which actor ids remote hosts hold (a frame speaking for another is refused).
+    roster: Arc<Mutex<Roster>>,
+    /// Frames refused for what they said (see [`refusal`]).
+    impostors: u64,
 }
 
 impl<'w, 'a> Forwarder<'w, 'a> {
@@ -451,8 +457,11 @@ impl<'w, 'a> Forwarder<'w, 'a> {
         opts: &'a HubOptions,
         down: &'a zenoh::pubsub::Publisher<'static>,
         events: &'a mpsc::Sender<HubEvent>,
+        roster: Arc<Mutex<Roster>>,
     ) -> Result<Self> {
         Ok(Self {
+            roster,
+            impostors: 0,
             wire,
             opts,
             down,
@@ -528,6 +537,20 @@ impl<'w, 'a> Forwarder<'w, 'a> {
 
     /// A frame from a remote host.
     fn frame(&mut self, f: Frame) -> Result<()> {
+        let refused = {
+            let roster = self.roster.lock().expect("roster");
+            refusal(&f, |id| roster.is_remote(id))
+        };
+        if let Some(why) = refused {
+            self.impostors += 1;
+            if self.impostors.is_power_of_two() {
+                warn!(
+                    refused = self.impostors,
+                    "frame from a remote host refused: {why}"
+                );
+            }
+            return Ok(());
+        }
         let sent = match f {
             Frame::Transitions(batch) => {
                 let tx = match self.transitions.entry(batch.actor) {
@@ -699,5 +722,89 @@ impl<'w, 'a> Forwarder<'w, 'a> {
             self.pending.remove(&a);
         }
         Ok(())
+    }
+}
+
+/// Why the hub refuses an up frame from a remote host, if it does: a message of another schema
+/// version than this run's, or one speaking for an actor id that no remote host holds (a local
+/// actor's, or nobody's): a remote host may act only as the actors the run gave it.
+fn refusal(f: &Frame, held: impl Fn(u16) -> bool) -> Option<String> {
+    let (service, header, actor) = match f {
+        Frame::Transitions(b) => ("transitions", b.header, Some(b.actor)),
+        Frame::Query(q) => ("query", q.header, Some(q.actor)),
+        Frame::Progress(p) => (
+            "progress",
+            p.header,
+            (p.header.role == Role::Actor as u16).then_some(u32::from(p.header.id)),
+        ),
+        _ => return None,
+    };
+    if header.schema != SCHEMA_VERSION {
+        return Some(format!(
+            "a {service} message of schema version {} (this run speaks {SCHEMA_VERSION})",
+            header.schema
+        ));
+    }
+    match actor {
+        Some(a) if !u16::try_from(a).is_ok_and(&held) => Some(format!(
+            "a {service} message for actor {a}, which no remote host holds"
+        )),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use alfd_wire::Header;
+
+    fn header(role: Role, id: u16, schema: u32) -> Header {
+        Header {
+            schema,
+            role: role as u16,
+            id,
+            seq: 1,
+        }
+    }
+
+    #[test]
+    fn a_remote_host_speaks_only_for_the_actors_it_holds_in_this_run_s_schema() {
+        // Actors 0 and 1 are this host's; a remote host holds 2 and 3.
+        let held = |id: u16| (2..4).contains(&id);
+        let batch = |actor: u32, schema: u32| {
+            let mut b = TransitionBatch::new(actor as u16, 1, 4, 2, 0).unwrap();
+            b.header = header(Role::Actor, actor as u16, schema);
+            Frame::Transitions(b)
+        };
+        assert_eq!(refusal(&batch(2, SCHEMA_VERSION), held), None);
+        let local = refusal(&batch(0, SCHEMA_VERSION), held).unwrap();
+        assert!(local.contains("transitions message for actor 0"), "{local}");
+        assert!(refusal(&batch(9, SCHEMA_VERSION), held).is_some());
+        let old = refusal(&batch(3, SCHEMA_VERSION + 1), held).unwrap();
+        assert!(old.contains("schema version"), "{old}");
+
+        let query = |actor: u32| {
+            Frame::Query(alfd_wire::QueryRequest {
+                header: header(Role::Actor, actor as u16, SCHEMA_VERSION),
+                actor,
+                ..Default::default()
+            })
+        };
+        assert_eq!(refusal(&query(3), held), None);
+        assert!(refusal(&query(1), held).is_some());
+        assert!(refusal(&query(70_000), held).is_some());
+
+        let progress = |role: Role, id: u16| {
+            Frame::Progress(alfd_wire::Progress {
+                header: header(role, id, SCHEMA_VERSION),
+                ..Default::default()
+            })
+        };
+        assert_eq!(refusal(&progress(Role::Actor, 2), held), None);
+        assert!(refusal(&progress(Role::Actor, 0), held).is_some());
+        // A remote expert's status speaks for no actor.
+        assert_eq!(refusal(&progress(Role::Expert, 0), held), None);
+        // Frames that go down are not a remote host's to send, and are dropped elsewhere.
+        assert_eq!(refusal(&Frame::Control(Default::default()), held), None);
     }
 }
