@@ -181,4 +181,34 @@ mod tests {
         assert!(log.flush());
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "0,a\n1,b\n2,c\n");
     }
+
+    #[test]
+    fn a_resumed_launcher_reads_each_row_s_actor_and_length_and_drops_a_cut_line() {
+        let dir = alfd_harness::test_dir("episode-rows");
+        let path = dir.path().join("episodes.csv");
+        let row = |ep: u32, len: u32, actor: u32| {
+            format!(
+                "{ep},{}.0,{len},3,0.1,2,{len},{},{actor},\n",
+                len,
+                (ep + 1) * 100
+            )
+        };
+        let text = format!(
+            "{CSV_HEADER}\n{}{}{}1,17",
+            row(0, 120, 1),
+            row(1, 80, 0),
+            row(2, 200, 1)
+        );
+        std::fs::write(&path, text).unwrap();
+        let (_file, rows) = open_episodes(dir.path(), true).unwrap();
+        let got: Vec<(u16, u64)> = rows.iter().map(|r| (r.actor, r.length)).collect();
+        assert_eq!(got, vec![(1, 120), (0, 80), (1, 200)]);
+        // The line cut short by a crash is gone from the file.
+        assert!(std::fs::read_to_string(&path)
+            .unwrap()
+            .ends_with(&row(2, 200, 1)));
+        // Each id's steps so far: ε's clock for an incarnation that takes over.
+        let steps = crate::explored_steps(&rows);
+        assert_eq!((steps[0], steps[1], steps[2]), (80, 320, 0));
+    }
 }
