@@ -14,9 +14,9 @@ use std::sync::Arc;
 use anyhow::Context as _;
 
 /// Writes `bytes` to `dir/name`, replacing the file whole (a reader never sees half of it); a
-/// full disk is waited out for up to a minute (see `alfd_harness::write_atomically_patiently`).
+/// full disk is waited out (`alfd_harness::DISK_FULL_PATIENCE`).
 pub fn write(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
-    let patience = std::time::Duration::from_secs(60);
+    let patience = alfd_harness::DISK_FULL_PATIENCE;
     Ok(alfd_harness::write_atomically_patiently(
         &dir.join(name),
         bytes,

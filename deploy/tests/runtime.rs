@@ -826,24 +826,4 @@ pub(crate) fn wait_output(mut run: Background, timeout: Duration) -> Output {
     }
 }
 
-/// The pid of a running `binary` whose command line holds every one of `args`.
-pub(crate) fn find_process(binary: &str, args: &[&str]) -> Option<u32> {
-    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
-        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
-            continue;
-        };
-        let Ok(cmdline) = std::fs::read(entry.path().join("cmdline")) else {
-            continue;
-        };
-        let parts: Vec<String> = cmdline
-            .split(|&b| b == 0)
-            .map(|p| String::from_utf8_lossy(p).into_owned())
-            .collect();
-        if parts.first().is_some_and(|p| p.ends_with(binary))
-            && args.iter().all(|a| parts.iter().any(|p| p == a))
-        {
-            return Some(pid);
-        }
-    }
-    None
-}
+pub(crate) use alfd_launcher::find_process;

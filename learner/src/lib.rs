@@ -131,12 +131,8 @@ fn serve(
     shell.stats.log(stop_reason, &m);
     let path = run_dir.join("weights.safetensors");
     // A disk full for a moment (being freed) does not cost the run its weights.
-    let patience = std::time::Duration::from_secs(60);
-    write_atomically_patiently(
-        &path,
-        &m.learner().network().to_safetensors_bytes(),
-        patience,
-    )?;
+    let weights = m.learner().network().to_safetensors_bytes();
+    write_atomically_patiently(&path, &weights, alfd_harness::DISK_FULL_PATIENCE)?;
     info!(path = %path.display(), "final weights saved");
     if m.final_checkpoint(runtime.window) {
         // The run's learning is done and its weights are saved: a final checkpoint that cannot

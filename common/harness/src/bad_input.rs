@@ -53,8 +53,8 @@ impl AsRef<dyn Error + 'static> for HarnessError {
 pub type Result<T, E = HarnessError> = std::result::Result<T, E>;
 
 /// `.what(|| ..)`: names what failed, keeping the error as its source (anyhow's `with_context`
-/// for the harness's typed errors).
-pub(crate) trait What<T> {
+/// for typed errors: [`HarnessError::Failed`], which the launcher's errors carry too).
+pub trait What<T> {
     fn what(self, what: impl FnOnce() -> String) -> Result<T>;
 }
 

@@ -13,6 +13,10 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomically_with_mode(path, bytes, 0o644)
 }
 
+/// How long the files a run ends with wait for room on a full disk (a disk being freed) before
+/// the run fails on them: [`write_atomically_patiently`]'s usual patience.
+pub const DISK_FULL_PATIENCE: Duration = Duration::from_secs(60);
+
 /// [`write_atomically`], waiting out a full disk: a write refused for lack of space (ENOSPC) is
 /// tried again every 200 ms for at most `patience` (room being made), the first refusal said in
 /// the log; any other error, or a disk still full after that, is returned. For the files a run

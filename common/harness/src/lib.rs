@@ -13,12 +13,12 @@ mod runtime;
 mod session;
 mod startup;
 
-pub use bad_input::{chain, describe, exit_code, BadInput, HarnessError, Result};
+pub use bad_input::{chain, describe, exit_code, BadInput, HarnessError, Result, What};
 #[cfg(any(test, feature = "testing"))]
 pub use fs::test_dir;
 pub use fs::{
     append_whole, disk_full, load_checkpoint, save_checkpoint, write_atomically,
-    write_atomically_patiently, write_private,
+    write_atomically_patiently, write_private, DISK_FULL_PATIENCE,
 };
 pub use process::{check_wire_limits, main, read_text, ProcessArgs, Setup};
 pub use runtime::{

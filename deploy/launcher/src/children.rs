@@ -92,6 +92,30 @@ impl RateMeter {
     }
 }
 
+/// The pid of a running `binary` whose command line holds every one of `args` (as whole
+/// arguments), found in `/proc`: how the chaos run and the tests find a run's processes (by
+/// `--run-id=ID`, `--actor-id=N`).
+pub fn find_process(binary: &str, args: &[&str]) -> Option<u32> {
+    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(cmdline) = std::fs::read(entry.path().join("cmdline")) else {
+            continue;
+        };
+        let parts: Vec<String> = cmdline
+            .split(|&b| b == 0)
+            .map(|p| String::from_utf8_lossy(p).into_owned())
+            .collect();
+        if parts.first().is_some_and(|p| p.ends_with(binary))
+            && args.iter().all(|a| parts.iter().any(|p| p == a))
+        {
+            return Some(pid);
+        }
+    }
+    None
+}
+
 /// The error a process printed last in its log (`alfd-expert: error: ...`), if any; only the
 /// end of the log is read.
 pub(super) fn last_error(log: &Path) -> Option<String> {

@@ -4,7 +4,9 @@ use std::fs::File;
 use std::io::Write as _;
 use std::path::Path;
 
-use crate::error::{bail, ensure, What as _};
+use alfd_harness::What as _;
+
+use crate::error::{bail, ensure};
 use crate::Result;
 
 use alfd_common::record::CSV_HEADER;

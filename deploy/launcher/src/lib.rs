@@ -32,16 +32,21 @@
 //!   ignored by the launcher (the children, in process groups of their own, never see it): the
 //!   run goes on; Ctrl-C stops it cleanly.
 
+mod children;
+mod episodes;
+mod error;
+pub mod expert_lifecycle;
+mod remote;
+
 use std::collections::VecDeque;
 use std::os::unix::process::CommandExt as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::error::{bail, ensure, What as _};
 use alfd_common::config::ExperimentConfig;
 use alfd_common::record::{mean_return_last_50, EpisodeRecord, RunSummary, RuntimeSummary};
-use alfd_harness::{RuntimeConfig, RUNTIME_FILE};
+use alfd_harness::{RuntimeConfig, What as _, RUNTIME_FILE};
 use alfd_wire::{
     self as wire, command, process_state, progress_kind, ActorBells, Bell, Control, Doorbell,
     Process, Progress, Role, Wake, Wire, WireError, CONTROL_PERIOD,
@@ -49,21 +54,13 @@ use alfd_wire::{
 use serde::{Deserialize, Serialize};
 use tracing::{debug, info, warn};
 
-use crate::expert_lifecycle::{Action, Exit, ExpertLifecycle};
-
-mod error;
-pub mod expert_lifecycle;
-
-pub use error::{LaunchError, Result};
-
-mod children;
-mod episodes;
-mod remote;
-
-use episodes::{open_episodes, shares, EpisodeLog, Row};
-
-pub use children::describe as describe_status;
 use children::{describe, last_error, pin, proc_binary, RateMeter};
+use episodes::{open_episodes, shares, EpisodeLog, Row};
+use error::{bail, ensure};
+use expert_lifecycle::{Action, Exit, ExpertLifecycle};
+
+pub use children::{describe as describe_status, find_process};
+pub use error::{LaunchError, Result};
 
 /// Everything a launch needs.
 #[derive(Debug, Clone)]
@@ -188,10 +185,10 @@ pub fn bin_dir() -> Result<PathBuf> {
     }
     let exe =
         std::env::current_exe().what(|| "cannot locate the running alfd binary".to_owned())?;
-    Ok(exe
-        .parent()
-        .what(|| "the alfd binary has no parent directory".to_owned())?
-        .to_owned())
+    match exe.parent() {
+        Some(dir) => Ok(dir.to_owned()),
+        None => bail!("the alfd binary has no parent directory"),
+    }
 }
 
 /// Runs the plan to the end (or to Ctrl-C); an error names the process that failed.
@@ -958,9 +955,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
         }
         self.stop_all();
         self.drain_progress()?;
-        // Rows a full disk held back get a minute more of room.
+        // Rows a full disk held back wait as long as the run's last files do.
         self.csv
-            .flush_by(Instant::now() + Duration::from_secs(60))?;
+            .flush_by(Instant::now() + alfd_harness::DISK_FULL_PATIENCE)?;
         if !failures.is_empty() {
             bail!("{}", failures.join("; "));
         }
@@ -1025,7 +1022,7 @@ pub fn read_run_info(run_dir: &Path) -> Result<RunInfo> {
     let path = run_dir.join("run.json");
     let text = std::fs::read_to_string(&path)
         .what(|| format!("{} is not a run directory (no run.json)", run_dir.display()))?;
-    serde_json::from_str(&text).what(|| format!("malformed {}", path.display()))
+    Ok(serde_json::from_str(&text).what(|| format!("malformed {}", path.display()))?)
 }
 
 /// Per actor id, the steps of its episodes among `rows`.

@@ -6,8 +6,8 @@
 use std::collections::HashMap;
 use std::time::Instant;
 
-use crate::error::What as _;
 use crate::Result;
+use alfd_harness::What as _;
 use tracing::{info, warn};
 
 use alfd_harness::RUNTIME_FILE;
@@ -34,7 +34,7 @@ impl Launcher<'_, '_> {
             std::fs::read_to_string(self.plan.run_dir.join(name))
                 .what(|| format!("cannot read {name} of the run"))
         };
-        alfd_bridge::Hub::start(alfd_bridge::HubOptions {
+        let hub = alfd_bridge::Hub::start(alfd_bridge::HubOptions {
             endpoint: endpoint.clone(),
             run_id: self.plan.run_id.clone(),
             local_actors: self.plan.actors,
@@ -45,7 +45,8 @@ impl Launcher<'_, '_> {
             query_timeout: self.plan.runtime.query_timeout(),
             demos_path: self.plan.run_dir.join("demos.jsonl"),
         })
-        .what(|| format!("cannot listen on {endpoint} for remote actors"))
+        .what(|| format!("cannot listen on {endpoint} for remote actors"))?;
+        Ok(hub)
     }
 
     /// Takes in joins and departures of remote hosts. A host that left (its link dropped, its

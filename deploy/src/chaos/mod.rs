@@ -76,6 +76,10 @@ struct Event {
     at_ms: u64,
     fault: Fault,
     outcome: String,
+    /// Whether the fault was carried out: not when it found no process to hit (one
+    /// restarting), a swap while another was under way, a launcher kill before the first
+    /// learner checkpoint, a filler that could not be written.
+    carried_out: bool,
 }
 
 /// The launcher's processes and what the chaos has done to them so far.
@@ -210,13 +214,14 @@ impl Chaos<'_> {
         self.start.elapsed()
     }
 
-    fn log(&mut self, fault: Fault, outcome: String) {
+    fn log(&mut self, fault: Fault, (outcome, carried_out): (String, bool)) {
         let at_ms = self.now().as_millis() as u64;
         tracing::info!(at_ms, ?fault, %outcome, "chaos");
         self.events.push(Event {
             at_ms,
             fault,
             outcome,
+            carried_out,
         });
     }
 
@@ -290,30 +295,36 @@ impl Chaos<'_> {
     }
 
     fn pid_of(&mut self, target: Target) -> Option<u32> {
-        let run = format!("--run-id={}", self.run_id()?);
-        let mut args = vec![run];
+        let mut args = vec![format!("--run-id={}", self.run_id()?)];
         if let Target::Actor(id) = target {
             args.push(format!("--actor-id={id}"));
         }
-        find_process(target.binary(), &args)
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        alfd_launcher::find_process(target.binary(), &args)
     }
 
     fn apply(&mut self, fault: Fault) -> Result<(), String> {
+        let missed = || {
+            (
+                "no such process at that moment (restarting)".to_owned(),
+                false,
+            )
+        };
         let outcome = match &fault {
             Fault::Kill(t) => match self.pid_of(*t) {
                 Some(pid) => {
                     signal("KILL", pid);
-                    format!("killed pid {pid}")
+                    (format!("killed pid {pid}"), true)
                 }
-                None => "no such process at that moment (restarting)".to_owned(),
+                None => missed(),
             },
             Fault::Pause(t, d) => match self.pid_of(*t) {
                 Some(pid) => {
                     signal("STOP", pid);
                     self.paused.push((pid, self.now() + *d));
-                    format!("stopped pid {pid}")
+                    (format!("stopped pid {pid}"), true)
                 }
-                None => "no such process at that moment (restarting)".to_owned(),
+                None => missed(),
             },
             Fault::SwapExpert(name) => self.swap(name),
             Fault::KillLauncher => self.kill_launcher()?,
@@ -323,10 +334,10 @@ impl Chaos<'_> {
         Ok(())
     }
 
-    fn swap(&mut self, name: &str) -> String {
+    fn swap(&mut self, name: &str) -> (String, bool) {
         if let Some(child) = &mut self.swap {
             if matches!(child.try_wait(), Ok(None)) {
-                return "skipped: a swap is under way".to_owned();
+                return ("skipped: a swap is under way".to_owned(), false);
             }
         }
         let spawned = Command::new(&self.alfd)
@@ -339,17 +350,18 @@ impl Chaos<'_> {
         match spawned {
             Ok(child) => {
                 self.swap = Some(child);
-                format!("alfd swap-expert --expert {name} started")
+                (format!("alfd swap-expert --expert {name} started"), true)
             }
-            Err(e) => format!("cannot start alfd swap-expert: {e}"),
+            Err(e) => (format!("cannot start alfd swap-expert: {e}"), false),
         }
     }
 
     /// SIGKILL to the launcher, then `alfd resume` (once a learner checkpoint exists to resume
     /// from).
-    fn kill_launcher(&mut self) -> Result<String, String> {
+    fn kill_launcher(&mut self) -> Result<(String, bool), String> {
         if !self.args.out.join("learner.ckpt").is_file() {
-            return Ok("skipped: no learner checkpoint to resume from yet".to_owned());
+            let skipped = "skipped: no learner checkpoint to resume from yet";
+            return Ok((skipped.to_owned(), false));
         }
         self.release(true);
         let pid = self.launcher.id();
@@ -363,23 +375,27 @@ impl Chaos<'_> {
             .map_err(|e| format!("cannot start alfd resume: {e}"))?;
         self.launcher = resumed;
         self.launches += 1;
-        Ok(format!(
+        let outcome = format!(
             "killed launcher pid {pid}; alfd resume started (launch {})",
             self.launches
-        ))
+        );
+        Ok((outcome, true))
     }
 
     /// Fills the run directory's file system (up to `--fill-cap-mb`) until `d` from now.
-    fn fill_disk(&mut self, d: Duration) -> String {
+    fn fill_disk(&mut self, d: Duration) -> (String, bool) {
         if self.filler.is_some() {
-            return "skipped: the disk is full already".to_owned();
+            return ("skipped: the disk is full already".to_owned(), false);
         }
         let file = self.args.out.join(".chaos-filler");
         let written = fill(&file, self.args.fill_cap_mb);
         let outcome = match written {
-            Ok((mb, true)) => format!("file system full after {mb} MB"),
-            Ok((mb, false)) => format!("wrote {mb} MB without filling the file system (cap)"),
-            Err(e) => format!("cannot write the filler: {e}"),
+            Ok((mb, true)) => (format!("file system full after {mb} MB"), true),
+            Ok((mb, false)) => (
+                format!("wrote {mb} MB without filling the file system (cap)"),
+                true,
+            ),
+            Err(e) => (format!("cannot write the filler: {e}"), false),
         };
         self.filler = Some((file, self.now() + d));
         outcome
@@ -403,7 +419,7 @@ fn fill(file: &Path, cap_mb: u64) -> std::io::Result<(u64, bool)> {
     for mb in 0..cap_mb {
         match f.write_all(&block).and_then(|()| f.sync_data()) {
             Ok(()) => {}
-            Err(e) if e.raw_os_error() == Some(28) => return Ok((mb, true)),
+            Err(e) if alfd_harness::disk_full(&e) => return Ok((mb, true)),
             Err(e) => return Err(e),
         }
     }
@@ -416,26 +432,4 @@ fn signal(sig: &str, pid: u32) {
         .args([&format!("-{sig}"), &pid.to_string()])
         .stderr(Stdio::null())
         .status();
-}
-
-/// The process running `binary` with every one of `args` among its arguments.
-fn find_process(binary: &str, args: &[String]) -> Option<u32> {
-    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
-        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
-            continue;
-        };
-        let Ok(cmdline) = std::fs::read(entry.path().join("cmdline")) else {
-            continue;
-        };
-        let parts: Vec<String> = cmdline
-            .split(|&b| b == 0)
-            .map(|p| String::from_utf8_lossy(p).into_owned())
-            .collect();
-        if parts.first().is_some_and(|p| p.ends_with(binary))
-            && args.iter().all(|a| parts.contains(a))
-        {
-            return Some(pid);
-        }
-    }
-    None
 }

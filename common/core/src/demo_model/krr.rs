@@ -12,7 +12,7 @@
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
-use super::{check_row, rbf, validate, DemoModelError, MAX_DEMOS};
+use super::{check_demo, rbf, validate, DemoModelError, MAX_DEMOS};
 
 /// The ridge penalty added to the kernel's diagonal.
 pub const ALPHA: f64 = 0.1;
@@ -181,14 +181,7 @@ impl KrrFactor {
     /// it (O(n²)). A state or action the factor cannot take is refused and changes nothing.
     pub fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
         let n = self.len();
-        check_row(n, state, self.state_dim)?;
-        if action >= self.num_actions {
-            return Err(DemoModelError::ActionOutOfRange {
-                row: n,
-                action,
-                num_actions: self.num_actions,
-            });
-        }
+        check_demo(n, state, action, self.state_dim, self.num_actions)?;
         if n + 1 > MAX_DEMOS {
             return Err(DemoModelError::TooManyDemos(n + 1));
         }

@@ -227,6 +227,26 @@ fn check_row(row: usize, s: &[f64], dim: usize) -> Result<(), DemoModelError> {
     Ok(())
 }
 
+/// Checks demonstration `row`: its state (`dim` finite values) and its action (below
+/// `num_actions`).
+pub(crate) fn check_demo(
+    row: usize,
+    s: &[f64],
+    action: usize,
+    dim: usize,
+    num_actions: usize,
+) -> Result<(), DemoModelError> {
+    check_row(row, s, dim)?;
+    if action >= num_actions {
+        return Err(DemoModelError::ActionOutOfRange {
+            row,
+            action,
+            num_actions,
+        });
+    }
+    Ok(())
+}
+
 /// Validates demonstrations and returns them as one row-major matrix, with the state dimension.
 pub(crate) fn validate<S: AsRef<[f64]>>(
     states: &[S],
@@ -258,14 +278,7 @@ pub(crate) fn validate<S: AsRef<[f64]>>(
     let mut flat = Vec::with_capacity(states.len() * dim);
     for (row, (s, &action)) in states.iter().zip(actions).enumerate() {
         let s = s.as_ref();
-        check_row(row, s, dim)?;
-        if action >= num_actions {
-            return Err(DemoModelError::ActionOutOfRange {
-                row,
-                action,
-                num_actions,
-            });
-        }
+        check_demo(row, s, action, dim, num_actions)?;
         flat.extend_from_slice(s);
     }
     Ok((flat, dim))
