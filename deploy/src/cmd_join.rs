@@ -30,8 +30,10 @@ const RESTART_WAIT: Duration = Duration::from_secs(5);
 #[derive(Debug, clap::Args)]
 pub struct JoinArgs {
     /// The learner's host: the endpoint its `alfd run --listen` listens on.
-    #[arg(long, value_name = "tcp/ADDR:PORT")]
+    #[arg(long, value_name = "quic/ADDR:PORT")]
     pub connect: String,
+    #[command(flatten)]
+    pub link: crate::link_flags::LinkFlags,
     /// Actor processes to start on this host (0..=16; the run gives them free actor ids).
     /// Default 1, or 0 with `--expert`.
     #[arg(long)]
@@ -148,8 +150,7 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
 
 /// The endpoint and the number of actors `args` ask for, checked.
 fn checked(args: &JoinArgs) -> anyhow::Result<(alfd_bridge::Endpoint, usize)> {
-    let endpoint = alfd_bridge::Endpoint::parse(&args.connect)
-        .map_err(|e| usage(format!("--connect: {e}")))?;
+    let endpoint = args.link.endpoint("--connect", &args.connect)?;
     let actors = args
         .actors
         .unwrap_or(if args.expert.is_some() { 0 } else { 1 });

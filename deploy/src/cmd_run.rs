@@ -27,10 +27,13 @@ pub struct RunArgs {
     /// Number of actor processes on this host (0 with --listen: all actors are remote).
     #[arg(long, default_value_t = 2)]
     pub actors: usize,
-    /// Also take actors from other hosts: listen on tcp/ADDR:PORT for `alfd join --connect`
-    /// (zenoh). Remote actors get the free actor ids above this host's.
-    #[arg(long, value_name = "tcp/ADDR:PORT")]
+    /// Also take actors from other hosts: listen on quic/ADDR:PORT (mutual TLS: --tls-ca, --tls-cert,
+    /// --tls-key) or tcp/ADDR:PORT (with --insecure) for `alfd join --connect` (zenoh). Remote
+    /// actors get the free actor ids above this host's.
+    #[arg(long, value_name = "quic/ADDR:PORT")]
     pub listen: Option<String>,
+    #[command(flatten)]
+    pub link: crate::link_flags::LinkFlags,
     /// Override a config value, e.g. `--set budget.total=20` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
@@ -100,9 +103,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let listen = args
         .listen
         .as_deref()
-        .map(alfd_bridge::Endpoint::parse)
-        .transpose()
-        .map_err(|e| usage(format!("--listen: {e}")))?;
+        .map(|text| args.link.endpoint("--listen", text))
+        .transpose()?;
     let least = usize::from(listen.is_none());
     if !(least..=MAX_ACTORS).contains(&args.actors) {
         return Err(usage(format!(

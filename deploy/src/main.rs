@@ -3,6 +3,7 @@
 
 mod chaos;
 mod checkpoint_file;
+mod cmd_certs;
 mod cmd_clean;
 mod cmd_config;
 mod cmd_demo_model;
@@ -16,6 +17,7 @@ mod cmd_q_range;
 mod cmd_resume;
 mod cmd_run;
 mod cmd_sweep;
+mod link_flags;
 mod local_remote;
 mod output;
 mod report;
@@ -46,6 +48,8 @@ enum Command {
     Run(cmd_run::RunArgs),
     /// Actors on this host for a run on another (`alfd run --listen`), over zenoh.
     Join(cmd_join::JoinArgs),
+    /// Certificates for runs across hosts: the run's CA and one per host (mutual TLS).
+    Certs(cmd_certs::CertsArgs),
     /// Replace the expert of a live run (make before break).
     SwapExpert(cmd_run::SwapArgs),
     /// A multi-process run under faults drawn from a seed (kill -9, SIGSTOP, expert swaps, the
@@ -87,6 +91,7 @@ fn main() {
         Command::Clean(a) => cmd_clean::run(a),
         Command::Run(a) => cmd_run::run(a),
         Command::Join(a) => cmd_join::run(a),
+        Command::Certs(a) => cmd_certs::run(a),
         Command::SwapExpert(a) => cmd_run::swap(a),
         Command::Chaos(a) => chaos::run(a),
         Command::Env(a) => cmd_env::run(a),

@@ -16,11 +16,15 @@ pub fn init_logging() {
         .with(
             tracing_subscriber::fmt::layer()
                 .with_writer(std::io::stderr)
-                .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr())),
+                .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+                .with_filter(tracing_subscriber::filter::filter_fn(|m| {
+                    !tls_refusals::is_zenoh_tls(m)
+                })),
         )
+        .with(tls_refusals::TlsRefusals(Default::default()))
         // zenoh warns of every failed connection attempt; its errors are enough.
         .with(alfd_harness::log_filter(
-            "warn,zenoh=error,zenoh_transport=error,zenoh_link_tcp=error",
+            "warn,zenoh=error,zenoh_transport=error,zenoh_link_tcp=error,zenoh_link_commons::quic=warn",
         ))
         .try_init();
 }
@@ -217,5 +221,89 @@ mod tests {
         // The command line overriding a bad file value is the command line's fault if still bad.
         let e = error(&bad_file, &["budget.total=-5"]);
         assert!(e.starts_with("in `--set budget.total=-5`"), "{e}");
+    }
+}
+
+/// A peer refused by the TLS handshake of a `quic/` endpoint (no certificate of the run's CA, an
+/// expired one): zenoh warns of it as of a full file table ("… Hint: increase the system open
+/// file limit."); these warnings are said again as what they are, under `alfd_bridge`, with the
+/// handshake's reason, at the 1st, 2nd, 4th, 8th, ... refusal (a peer retries 4 times a second).
+mod tls_refusals {
+    use std::sync::atomic::{AtomicU64, Ordering};
+
+    use tracing::field::{Field, Visit};
+    use tracing::{Event, Level, Metadata, Subscriber};
+    use tracing_subscriber::layer::{Context, Layer};
+
+    const HINT: &str = " Hint: increase the system open file limit.";
+
+    pub(super) fn is_zenoh_tls(m: &Metadata<'_>) -> bool {
+        m.target().starts_with("zenoh_link_commons::quic")
+    }
+
+    pub(super) struct TlsRefusals(pub(super) AtomicU64);
+
+    impl<S: Subscriber> Layer<S> for TlsRefusals {
+        fn on_event(&self, event: &Event<'_>, _: Context<'_, S>) {
+            let m = event.metadata();
+            if !is_zenoh_tls(m) || *m.level() > Level::WARN {
+                return;
+            }
+            let mut text = Message(String::new());
+            event.record(&mut text);
+            if !text.0.ends_with(HINT) {
+                tracing::warn!(target: "alfd_bridge", "QUIC: {}", text.0);
+                return;
+            }
+            let refused = self.0.fetch_add(1, Ordering::Relaxed) + 1;
+            if refused.is_power_of_two() {
+                tracing::warn!(
+                    target: "alfd_bridge",
+                    refused,
+                    "refused a peer: {}",
+                    reason(&text.0)
+                );
+            }
+        }
+    }
+
+    /// The TLS reason in a QUIC connection error (`... reason: "invalid peer certificate:
+    /// Expired" ...`), or the whole text without zenoh's hint.
+    pub(super) fn reason(text: &str) -> &str {
+        let after = ["reason: \"", "reason: b\""]
+            .iter()
+            .find_map(|k| text.split_once(k).map(|(_, rest)| rest));
+        match after.and_then(|rest| rest.split_once('"')) {
+            Some((why, _)) => why,
+            None => text.trim_end_matches(HINT),
+        }
+    }
+
+    struct Message(String);
+
+    impl Visit for Message {
+        fn record_debug(&mut self, field: &Field, value: &dyn std::fmt::Debug) {
+            if field.name() == "message" {
+                self.0 = format!("{value:?}");
+            }
+        }
+    }
+
+    #[cfg(test)]
+    mod tests {
+        #[test]
+        fn the_reason_is_taken_from_either_form_of_the_error() {
+            let a = "QUIC acceptor failed: TransportError(Error { code: Code::crypto(33), \
+                     frame: None, reason: \"invalid peer certificate: Expired\" }) at x.rs:1. \
+                     Hint: increase the system open file limit.";
+            assert_eq!(super::reason(a), "invalid peer certificate: Expired");
+            let b = "QUIC acceptor failed: ConnectionClosed(ConnectionClose { reason: \
+                     b\"peer sent no certificates\" }) Hint: increase the system open file limit.";
+            assert_eq!(super::reason(b), "peer sent no certificates");
+            assert_eq!(
+                super::reason("other Hint: increase the system open file limit."),
+                "other"
+            );
+        }
     }
 }

@@ -24,7 +24,12 @@ fn free_port() -> u16 {
 fn spawn_join(port: u16, actors: usize, dir: &Path) -> Background {
     Background(Some(
         alfd()
-            .args(["join", "--connect", &format!("tcp/127.0.0.1:{port}")])
+            .args([
+                "join",
+                "--insecure",
+                "--connect",
+                &format!("tcp/127.0.0.1:{port}"),
+            ])
             .arg(format!("--actors={actors}"))
             .arg(format!("--dir={}", dir.join("join").display()))
             .current_dir(dir)
@@ -40,7 +45,12 @@ fn spawn_join(port: u16, actors: usize, dir: &Path) -> Background {
 fn spawn_expert_join(port: u16, name: &str, dir: &Path) -> Background {
     Background(Some(
         alfd()
-            .args(["join", "--connect", &format!("tcp/127.0.0.1:{port}")])
+            .args([
+                "join",
+                "--insecure",
+                "--connect",
+                &format!("tcp/127.0.0.1:{port}"),
+            ])
             .arg(format!("--expert={name}"))
             .arg(format!("--dir={}", dir.join("join").display()))
             .current_dir(dir)
@@ -85,6 +95,7 @@ fn two_remote_actors_over_zenoh_play_a_run_to_its_end_within_the_budget() {
         0,
         &[
             &listen,
+            "--insecure",
             "episodes=150",
             "budget.total=10",
             "query.rule=first",
@@ -94,6 +105,7 @@ fn two_remote_actors_over_zenoh_play_a_run_to_its_end_within_the_budget() {
     let other = alfd()
         .args([
             "join",
+            "--insecure",
             "--connect",
             &format!("tcp/127.0.0.1:{port}"),
             "--actors=1",
@@ -162,6 +174,7 @@ fn an_expert_on_another_host_answers_every_query_and_its_demonstrations_are_writ
         0,
         &[
             &listen,
+            "--insecure",
             "episodes=120",
             "budget.total=12",
             "query.rule=first",
@@ -231,6 +244,7 @@ fn alfd_swap_expert_swaps_away_from_a_remote_expert_and_its_host_leaves() {
         1,
         &[
             &listen,
+            "--insecure",
             "episodes=100000",
             "budget.total=1000",
             "query.rule=first",
@@ -290,6 +304,7 @@ fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
         1,
         &[
             &listen,
+            "--insecure",
             "episodes=100000",
             "budget.total=20",
             "query.rule=first",
@@ -372,12 +387,23 @@ fn bad_endpoints_and_actor_counts_are_refused_with_exit_code_2() {
     let _time = timed!();
     let out = tmp("remote-bad");
     for args in [
-        vec!["join", "--connect", "127.0.0.1:7447"],
-        vec!["join", "--connect", "udp/127.0.0.1:7447"],
-        vec!["join", "--connect", "tcp/127.0.0.1:0"],
-        vec!["join", "--connect", "tcp/127.0.0.1:7447", "--actors=0"],
+        vec!["join", "--insecure", "--connect", "127.0.0.1:7447"],
+        vec!["join", "--insecure", "--connect", "udp/127.0.0.1:7447"],
+        vec!["join", "--insecure", "--connect", "tcp/127.0.0.1:0"],
+        vec![
+            "join",
+            "--insecure",
+            "--connect",
+            "tcp/127.0.0.1:7447",
+            "--actors=0",
+        ],
         vec!["run", "--actors=0"],
-        vec!["run", "--listen", "tcp/no-such-host.invalid:7447"],
+        vec![
+            "run",
+            "--insecure",
+            "--listen",
+            "tcp/no-such-host.invalid:7447",
+        ],
     ] {
         let o = alfd()
             .args(&args)
@@ -458,6 +484,7 @@ fn a_remote_expert_killed_mid_run_is_restarted_here_and_no_demonstration_is_lost
         0,
         &[
             &listen,
+            "--insecure",
             &format!("episodes={episodes}"),
             "env.max_episode_steps=200",
             "expert.model=none",
@@ -550,6 +577,7 @@ fn a_remote_python_expert_lost_with_its_host_leaves_the_run_going_without_an_exp
         1,
         &[
             &listen,
+            "--insecure",
             "episodes=100000",
             "env.max_episode_steps=200",
             "expert.model=none",
@@ -631,6 +659,7 @@ fn a_remote_actor_killed_with_sigkill_is_restarted_by_its_host_with_a_new_incarn
         0,
         &[
             &listen,
+            "--insecure",
             &format!("episodes={episodes}"),
             "env.max_episode_steps=100",
             "budget.total=20",

@@ -11,14 +11,25 @@ pub enum BridgeError {
     #[error("malformed frame from the other host: {0}")]
     Malformed(String),
     #[error(
-        "invalid endpoint `{0}`: expected tcp/HOST:PORT (for example tcp/192.168.1.10:7447 or \
-         tcp/0.0.0.0:7447)"
+        "invalid endpoint `{0}`: expected quic/HOST:PORT or tcp/HOST:PORT (for example \
+         quic/192.168.1.10:7447 or tcp/0.0.0.0:7447)"
     )]
     InvalidEndpoint(String),
+    /// Certificates: a file missing or of the wrong kind, or a security setting that does not
+    /// fit the endpoint.
+    #[error("{0}")]
+    Tls(String),
     #[error("zenoh: {0}")]
     Zenoh(String),
-    #[error("no run answered at {endpoint} within {waited_ms} ms (is `alfd run --listen {endpoint}` running?)")]
-    NoRun { endpoint: String, waited_ms: u64 },
+    #[error(
+        "no run answered at {endpoint} within {waited_ms} ms ({why}; is `alfd run --listen \
+         {endpoint}` running, and are this host's certificates of its CA?)"
+    )]
+    NoRun {
+        endpoint: String,
+        waited_ms: u64,
+        why: String,
+    },
     #[error("the run refused to be joined: {0}")]
     Refused(String),
     #[error("{0}")]
@@ -32,7 +43,10 @@ impl BridgeError {
     pub fn is_bad_input(&self) -> bool {
         matches!(
             self,
-            Self::SchemaMismatch { .. } | Self::InvalidEndpoint(_) | Self::Refused(_)
+            Self::SchemaMismatch { .. }
+                | Self::InvalidEndpoint(_)
+                | Self::Refused(_)
+                | Self::Tls(_)
         )
     }
 }

@@ -1,8 +1,8 @@
 //! Runs across hosts: a bridge between a run's iceoryx2 services and zenoh.
 //!
 //! iceoryx2 is shared memory, so every process of a run sits on one host. To put actors on
-//! other hosts, the learner's host runs a [`Hub`] (`alfd run --listen tcp/ADDR:PORT`) and each
-//! other host a [`Mirror`] (`alfd join --connect tcp/ADDR:PORT --actors N`): a local copy of the
+//! other hosts, the learner's host runs a [`Hub`] (`alfd run --listen quic/ADDR:PORT`) and each
+//! other host a [`Mirror`] (`alfd join --connect quic/ADDR:PORT --actors N`): a local copy of the
 //! run's services under a run id of its own, in which the actor processes run unchanged. The
 //! two bridges carry every message whole over zenoh ([`Frame`]: the wire's own message with its
 //! header, sender, sequence number and schema version, behind the frame's schema version).
@@ -21,7 +21,9 @@
 //! its answers come up with their demonstrations, which the hub writes to the run's
 //! `demos.jsonl` before any actor sees them.
 //!
-//! One run id is one key prefix, so two runs never see each other's messages.
+//! One run id is one key prefix, so two runs never see each other's messages. Peers prove who
+//! they are with certificates of the run's CA (mutual TLS, see [`TlsFiles`]); plain TCP only
+//! when the user says so ([`Security::Insecure`]).
 
 mod demos;
 mod desk;
@@ -34,6 +36,7 @@ mod inbox;
 mod link;
 mod mirror;
 mod roster;
+mod tls;
 mod worker;
 
 use std::time::Duration;
@@ -45,6 +48,7 @@ pub use frame::{decode, encode, ExpertOrder, Frame};
 pub use hub::{Hub, HubEvent, HubOptions};
 pub use mirror::{join, Mirror, Remote};
 pub use roster::{JoinReply, JoinRequest, Joined, Left, RestartReply, RestartRequest, Roster};
+pub use tls::{make_ca, make_host, valid_for, CaMade, Security, TlsFiles};
 
 /// The longest a bridge sleeps between two looks at what this host published (the learner's
 /// weights and credits ring nobody); rings wake it sooner.

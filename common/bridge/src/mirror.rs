@@ -46,6 +46,42 @@ impl std::fmt::Debug for Remote {
     }
 }
 
+/// Why a connection failed, in a line: the TLS handshake's reason when there is one.
+fn connect_failure(error: &str) -> String {
+    match error
+        .split_once("reason: ")
+        .map(|(_, rest)| rest.trim_start_matches('b'))
+    {
+        Some(rest) => rest
+            .trim_start_matches('"')
+            .split('"')
+            .next()
+            .unwrap_or(rest)
+            .to_owned(),
+        // zenoh's own text names where in zenoh it failed: left out.
+        None => error
+            .split(" at /")
+            .next()
+            .unwrap_or(error)
+            .trim()
+            .trim_end_matches('!')
+            .to_owned(),
+    }
+}
+
+#[cfg(test)]
+#[test]
+fn a_connection_failure_is_said_in_a_line() {
+    assert_eq!(
+        connect_failure("Unable to connect to any of [Single(quic/h:1)]!  at /x/y.rs:447."),
+        "Unable to connect to any of [Single(quic/h:1)]"
+    );
+    assert_eq!(
+        connect_failure("x { reason: b\"invalid peer certificate: Expired\" } at /z"),
+        "invalid peer certificate: Expired"
+    );
+}
+
 /// Connects to `endpoint` and asks the run listening there for `actors` actor ids, speaking
 /// schema version `schema` (normally [`SCHEMA_VERSION`]; a run of another version refuses).
 pub fn join(
@@ -54,9 +90,10 @@ pub fn join(
     wait: Duration,
     schema: u32,
 ) -> Result<Remote> {
-    let no_run = || BridgeError::NoRun {
+    let no_run = |why: String| BridgeError::NoRun {
         endpoint: endpoint.to_string(),
         waited_ms: wait.as_millis() as u64,
+        why,
     };
     let started = Instant::now();
     // The run may not listen yet (its hub starts once its learner is up): try again until the
@@ -66,7 +103,7 @@ pub fn join(
             Ok(s) => break s,
             Err(e) if started.elapsed() >= wait => {
                 debug!("cannot connect to {endpoint}: {e}");
-                return Err(no_run());
+                return Err(no_run(connect_failure(&e.to_string())));
             }
             Err(_) => std::thread::sleep(Duration::from_millis(250)),
         }
@@ -88,7 +125,7 @@ pub fn join(
         }
         match got.len() {
             0 if started.elapsed() < wait => std::thread::sleep(Duration::from_millis(200)),
-            0 => return Err(no_run()),
+            0 => return Err(no_run("connected, but no run answered".to_owned())),
             1 => break got.remove(0),
             n => {
                 return Err(BridgeError::Refused(format!(

@@ -183,7 +183,10 @@ fn bridges(
     let port = std::net::TcpListener::bind("127.0.0.1:0")?
         .local_addr()?
         .port();
-    let endpoint = alfd_bridge::Endpoint::parse(&format!("tcp/127.0.0.1:{port}"))?;
+    let endpoint = alfd_bridge::Endpoint::parse(
+        &format!("tcp/127.0.0.1:{port}"),
+        alfd_bridge::Security::Insecure,
+    )?;
     let hub = alfd_bridge::Hub::start(alfd_bridge::HubOptions {
         endpoint: endpoint.clone(),
         run_id: run_id.to_owned(),
