@@ -709,3 +709,139 @@ fn a_remote_actor_killed_with_sigkill_is_restarted_by_its_host_with_a_new_incarn
         );
     }
 }
+
+/// A free UDP port on 127.0.0.1 (for a quic/ endpoint).
+fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// `alfd certs DIR --host …` (the CLI), checked.
+fn certs(dir: &Path, hosts: &[&str]) {
+    let mut c = alfd();
+    c.arg("certs").arg(dir);
+    for h in hosts {
+        c.args(["--host", h]);
+    }
+    let o = c.output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+}
+
+/// The --tls-* flags for host `name`'s files in `dir`, with the CA of `ca_dir`.
+fn tls_flags(ca_dir: &Path, dir: &Path, name: &str) -> Vec<String> {
+    vec![
+        format!("--tls-ca={}", ca_dir.join("ca.pem").display()),
+        format!("--tls-cert={}", dir.join(format!("{name}.pem")).display()),
+        format!("--tls-key={}", dir.join(format!("{name}.key")).display()),
+    ]
+}
+
+#[test]
+fn tls_a_run_across_hosts_takes_hosts_of_its_ca_and_refuses_strangers() {
+    let _time = timed!();
+    let (out, remote, ca, other) = (
+        tmp("tls-run"),
+        tmp("tls-host"),
+        tmp("tls-ca"),
+        tmp("tls-other-ca"),
+    );
+    certs(&ca, &["127.0.0.1", "remote"]);
+    certs(&other, &["stranger"]);
+    let port = free_udp_port();
+    let endpoint = format!("quic/127.0.0.1:{port}");
+    let mut sets = vec![format!("--listen={endpoint}")];
+    sets.extend(tls_flags(&ca, &ca, "127.0.0.1"));
+    sets.extend(["episodes=60", "budget.total=10", "query.rule=first"].map(String::from));
+    let sets: Vec<&str> = sets.iter().map(String::as_str).collect();
+    let run = spawn_run(&out, 0, &sets);
+    // Strangers first: a host showing another CA's certificate, and one without TLS.
+    let stranger = alfd()
+        .args(["join", "--connect", &endpoint, "--wait-s=3"])
+        .args(tls_flags(&ca, &other, "stranger"))
+        .arg(format!("--dir={}", remote.join("stranger").display()))
+        .output()
+        .unwrap();
+    let plain = alfd()
+        .args(["join", "--insecure", "--wait-s=2"])
+        .arg(format!("--connect=tcp/127.0.0.1:{port}"))
+        .arg(format!("--dir={}", remote.join("plain").display()))
+        .output()
+        .unwrap();
+    for (who, o) in [
+        ("another CA's host", &stranger),
+        ("a plain TCP host", &plain),
+    ] {
+        assert_eq!(o.status.code(), Some(1), "{who}: {}", text(o));
+        assert!(text(o).contains("no run answered"), "{who}: {}", text(o));
+    }
+    // The run's own host plays it to the end, unaffected.
+    let join = Background(Some(
+        alfd()
+            .args(["join", "--connect", &endpoint, "--actors=2"])
+            .args(tls_flags(&ca, &ca, "remote"))
+            .arg(format!("--dir={}", remote.join("join").display()))
+            .current_dir(&remote)
+            .env("HOME", &remote)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
+    let o = finish(run, 120);
+    assert!(o.status.success(), "{}", text(&o));
+    let j = finish(join, 60);
+    assert!(j.status.success(), "{}", text(&j));
+    let s = summary(&out);
+    assert_eq!(s["episodes"], 60);
+    assert_eq!(rows(&out).len(), 60);
+    assert_eq!(s["demos"], 10);
+    // The run said whom it refused, and why.
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("refused a peer: invalid peer certificate"),
+        "{err}"
+    );
+}
+
+#[test]
+fn plain_tcp_without_insecure_and_tls_over_tcp_are_refused_with_exit_code_2() {
+    let _time = timed!();
+    let out = tmp("tls-plain");
+    for (args, says) in [
+        (vec!["run", "--listen", "tcp/127.0.0.1:7447"], "--insecure"),
+        (
+            vec!["join", "--connect", "tcp/127.0.0.1:7447"],
+            "--insecure",
+        ),
+        (
+            vec!["run", "--listen", "tls/127.0.0.1:7447"],
+            "quic/127.0.0.1:7447",
+        ),
+        (vec!["run", "--listen", "quic/127.0.0.1:7447"], "--tls-ca"),
+        (
+            vec![
+                "join",
+                "--connect",
+                "quic/127.0.0.1:7447",
+                "--tls-ca=/nonexistent/ca.pem",
+            ],
+            "all three",
+        ),
+    ] {
+        let o = alfd()
+            .args(&args)
+            .arg(format!(
+                "--{}={}",
+                if args[0] == "run" { "out" } else { "dir" },
+                out.join("x").display()
+            ))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));
+        assert!(text(&o).contains(says), "{args:?}: {}", text(&o));
+        assert!(!out.join("x").exists(), "{args:?} made its directory");
+    }
+}
