@@ -5,8 +5,8 @@
 //!
 //! zenoh's TLS-over-TCP link (`tls/`) is not offered: in zenoh 1.10 its reader and writer share
 //! one TLS stream without a common lock, and on 127.0.0.1 a run's first connection failed with
-//! "handshake not complete" within a second in 3 of 3 tries, dropping the remote host. Its QUIC
-//! link takes the same certificates and keys.
+//! "handshake not complete" within a second, dropping the remote host. Its QUIC link takes the
+//! same certificates and keys.
 
 use std::fmt;
 use std::net::ToSocketAddrs as _;
