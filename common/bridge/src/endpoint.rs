@@ -145,6 +145,9 @@ fn serde_json_string(text: &str) -> String {
     out
 }
 
+/// The largest message a bridge takes from a peer.
+pub const MAX_MESSAGE_BYTES: usize = 64 << 20;
+
 fn base_config(mode: &str) -> Result<zenoh::Config> {
     let mut cfg = zenoh::Config::default();
     for (key, value) in [
@@ -154,6 +157,12 @@ fn base_config(mode: &str) -> Result<zenoh::Config> {
         ("connect/endpoints", "[]".to_owned()),
         // No admin space, no timestamps: nothing the run does not use.
         ("adminspace/enabled", "false".to_owned()),
+        // A message larger than any the run sends (its weights, `demos.jsonl` whole) is
+        // dropped by zenoh before it is put together: a peer cannot make this host hold a GiB.
+        (
+            "transport/link/rx/max_message_size",
+            MAX_MESSAGE_BYTES.to_string(),
+        ),
     ] {
         cfg.insert_json5(key, &value).map_err(zenoh_error)?;
     }
@@ -199,6 +208,10 @@ mod tests {
         let c = e.connect_config().unwrap();
         assert!(c.get_json("connect/endpoints").unwrap().contains("7447"));
         assert!(c.get_json("mode").unwrap().contains("client"));
+        for cfg in [l, c] {
+            let max = cfg.get_json("transport/link/rx/max_message_size").unwrap();
+            assert_eq!(max, MAX_MESSAGE_BYTES.to_string());
+        }
     }
 
     #[test]

@@ -728,7 +728,7 @@ impl<'w, 'a> Forwarder<'w, 'a> {
 /// Why the hub refuses an up frame from a remote host, if it does: a message of another schema
 /// version than this run's, or one speaking for an actor id that no remote host holds (a local
 /// actor's, or nobody's): a remote host may act only as the actors the run gave it.
-fn refusal(f: &Frame, held: impl Fn(u16) -> bool) -> Option<String> {
+pub(crate) fn refusal(f: &Frame, held: impl Fn(u16) -> bool) -> Option<String> {
     let (service, header, actor) = match f {
         Frame::Transitions(b) => ("transitions", b.header, Some(b.actor)),
         Frame::Query(q) => ("query", q.header, Some(q.actor)),

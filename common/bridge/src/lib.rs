@@ -31,6 +31,8 @@ mod endpoint;
 mod error;
 mod expert_host;
 mod frame;
+#[cfg(test)]
+mod fuzz;
 mod hub;
 mod inbox;
 mod link;
