@@ -5,7 +5,8 @@
 //! Written here rather than taken from a crate so that every number comes from the core's own
 //! arithmetic: the RBF kernel through `crate::math::exp`, the same bits on every CPU (a
 //! crate calling the platform's `exp` would not give them). No shrinking and no kernel cache: the
-//! demonstrations are a few hundred at most and the kernel matrix is computed once.
+//! whole kernel matrix is given (the SVM computes every pair of demonstrations once and takes
+//! each fold's matrix from it), and the columns the gradient update needs are read as rows.
 //!
 //! The problem, with `y_i = ±1`, `Q_ij = y_i y_j K(x_i, x_j)`:
 //! minimise `½ αᵀQα − Σ α_i` subject to `0 ≤ α_i ≤ C` and `Σ y_i α_i = 0`.
@@ -32,6 +33,7 @@ pub fn solve(k: &[f64], positive: &[bool], c: f64, eps: f64, max_iter: usize) ->
     let problem = Problem {
         k,
         n,
+        diag: (0..n).map(|t| k[t * n + t]).collect(),
         y: positive
             .iter()
             .map(|&p| if p { 1.0 } else { -1.0 })
@@ -67,6 +69,8 @@ pub fn solve(k: &[f64], positive: &[bool], c: f64, eps: f64, max_iter: usize) ->
 struct Problem<'k> {
     k: &'k [f64],
     n: usize,
+    /// `K_tt`, kept apart: read at every candidate of every working pair.
+    diag: Vec<f64>,
     y: Vec<f64>,
     c: f64,
 }
@@ -76,9 +80,14 @@ impl Problem<'_> {
         self.k[i * self.n + j]
     }
 
+    /// Row `i` of the kernel matrix (its column too: the matrix is symmetric).
+    fn row(&self, i: usize) -> &[f64] {
+        &self.k[i * self.n..(i + 1) * self.n]
+    }
+
     /// The curvature of the objective along the pair (i, j), floored at TAU.
     fn curvature(&self, i: usize, j: usize) -> f64 {
-        let a = self.kij(i, i) + self.kij(j, j) - 2.0 * self.kij(i, j);
+        let a = self.diag[i] + self.diag[j] - 2.0 * self.kij(i, j);
         if a > 0.0 {
             a
         } else {
@@ -194,11 +203,14 @@ impl Problem<'_> {
         }
     }
 
-    /// G += Q[:, i] Δα_i + Q[:, j] Δα_j.
+    /// G += Q[:, i] Δα_i + Q[:, j] Δα_j (columns i and j read as rows: the matrix is
+    /// symmetric).
     fn move_gradient(&self, grad: &mut [f64], (i, di): (usize, f64), (j, dj): (usize, f64)) {
         let y = &self.y;
-        for (t, g) in grad.iter_mut().enumerate() {
-            *g += y[t] * (y[i] * self.kij(t, i) * di + y[j] * self.kij(t, j) * dj);
+        let (yi, yj) = (y[i], y[j]);
+        let (ki, kj) = (self.row(i), self.row(j));
+        for (((g, &yt), &kti), &ktj) in grad.iter_mut().zip(y).zip(ki).zip(kj) {
+            *g += yt * (yi * kti * di + yj * ktj * dj);
         }
     }
 

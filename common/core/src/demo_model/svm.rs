@@ -162,22 +162,76 @@ struct Svc {
     rho: f64,
 }
 
+/// The RBF kernel of every pair of demonstrations, computed once for the final SVM and every
+/// fold's (each pair once: `rbf` is symmetric to the bit), `n × n` row-major.
+struct Gram {
+    n: usize,
+    k: Vec<f64>,
+}
+
+impl Gram {
+    fn new(flat: &[f64], state_dim: usize) -> Gram {
+        let n = flat.len() / state_dim;
+        let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
+        let mut k = vec![0.0; n * n];
+        for i in 0..n {
+            for j in i..n {
+                let v = rbf(row(i), row(j));
+                k[i * n + j] = v;
+                k[j * n + i] = v;
+            }
+        }
+        Gram { n, k }
+    }
+
+    fn at(&self, i: usize, j: usize) -> f64 {
+        self.k[i * self.n + j]
+    }
+
+    /// The kernel matrix of the rows `idx`, in their order.
+    fn sub(&self, idx: &[usize]) -> Vec<f64> {
+        let mut out = Vec::with_capacity(idx.len() * idx.len());
+        for &i in idx {
+            let row = &self.k[i * self.n..(i + 1) * self.n];
+            out.extend(idx.iter().map(|&j| row[j]));
+        }
+        out
+    }
+}
+
+/// An SVM fitted on some of the demonstrations, with the rows its support vectors are.
+struct FoldFit {
+    svc: Svc,
+    support_rows: Vec<usize>,
+}
+
+impl FoldFit {
+    /// The decision value at demonstration `i`, from the Gram matrix: the same sum, in the same
+    /// order, as [`Svc::decision_value`] of its state.
+    fn decision_at(&self, gram: &Gram, i: usize) -> f64 {
+        let sum: f64 = self
+            .support_rows
+            .iter()
+            .zip(&self.svc.coef)
+            .map(|(&j, c)| c * gram.at(i, j))
+            .sum();
+        sum - self.svc.rho
+    }
+}
+
 impl Svc {
     /// Solves the C-SVC dual on the rows `idx` of `flat` (row-major, `state_dim` wide) with the
-    /// core's SMO ([`super::smo`]). Both labels must be present among `idx`.
+    /// core's SMO ([`super::smo`]), their kernel taken from `gram`. Both labels must be present
+    /// among `idx`.
     fn fit(
+        gram: &Gram,
         flat: &[f64],
         state_dim: usize,
         idx: &[usize],
         positive: &[bool],
-    ) -> Result<Svc, DemoModelError> {
+    ) -> Result<FoldFit, DemoModelError> {
         let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
-        let mut k = Vec::with_capacity(idx.len() * idx.len());
-        for &i in idx {
-            for &j in idx {
-                k.push(rbf(row(i), row(j)));
-            }
-        }
+        let k = gram.sub(idx);
         let labels: Vec<bool> = idx.iter().map(|&i| positive[i]).collect();
         let dual = smo::solve(&k, &labels, C, SOLVER_EPS, SOLVER_MAX_ITER);
         if !dual.rho.is_finite() || dual.coef.iter().any(|c| !c.is_finite()) {
@@ -189,18 +243,21 @@ impl Svc {
         tracing::trace!(iterations = dual.iterations, rho = dual.rho, "SMO solved");
 
         let mut support = Vec::new();
+        let mut support_rows = Vec::new();
         let mut coef = Vec::new();
         for (&i, &c) in idx.iter().zip(&dual.coef) {
             if c != 0.0 {
                 support.extend_from_slice(row(i));
+                support_rows.push(i);
                 coef.push(c);
             }
         }
-        Ok(Svc {
+        let svc = Svc {
             support,
             coef,
             rho: dual.rho,
-        })
+        };
+        Ok(FoldFit { svc, support_rows })
     }
 
     fn decision_value(&self, s: &[f64]) -> f64 {
@@ -264,18 +321,19 @@ impl KernelSvm {
         }
 
         let all: Vec<usize> = (0..num_demos).collect();
-        let svc = Svc::fit(&flat, state_dim, &all, &positive)?;
-        let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
+        let gram = Gram::new(&flat, state_dim);
+        let fitted = Svc::fit(&gram, &flat, state_dim, &all, &positive)?;
         let decision = if n_pos.min(n_neg) >= 2 {
-            cross_validated_decision_values(&flat, state_dim, &positive)?
+            cross_validated_decision_values(&gram, &flat, state_dim, &positive)?
         } else {
             tracing::debug!(
                 n_pos,
                 n_neg,
                 "SVM: an action demonstrated once, Platt fitted in-sample"
             );
-            all.iter().map(|&i| svc.decision_value(row(i))).collect()
+            all.iter().map(|&i| fitted.decision_at(&gram, i)).collect()
         };
+        let svc = fitted.svc;
         let platt = Platt::fit(&decision, &positive);
         tracing::debug!(
             num_demos,
@@ -378,6 +436,7 @@ pub fn stratified_folds(positive: &[bool]) -> Vec<usize> {
 
 /// Out-of-fold decision values: for each fold, an SVM fitted on the other folds evaluates it.
 fn cross_validated_decision_values(
+    gram: &Gram,
     flat: &[f64],
     state_dim: usize,
     positive: &[bool],
@@ -390,9 +449,9 @@ fn cross_validated_decision_values(
             continue;
         }
         let train: Vec<usize> = (0..positive.len()).filter(|&i| fold[i] != k).collect();
-        let svc = Svc::fit(flat, state_dim, &train, positive)?;
+        let fitted = Svc::fit(gram, flat, state_dim, &train, positive)?;
         for i in held_out {
-            decision[i] = svc.decision_value(&flat[i * state_dim..(i + 1) * state_dim]);
+            decision[i] = fitted.decision_at(gram, i);
         }
     }
     Ok(decision)
@@ -447,6 +506,39 @@ mod tests {
             assert!((1..=2).contains(&pos), "fold {k}: {pos} positives");
             assert_eq!(neg, 3, "fold {k}");
         }
+    }
+
+    #[test]
+    fn the_gram_matrix_gives_the_decision_values_of_the_states_to_the_bit() {
+        let mut rng = rng::seeded(5);
+        let states: Vec<Vec<f64>> = (0..60)
+            .map(|_| {
+                (0..4)
+                    .map(|_| rand::Rng::random_range(&mut rng, -2.0..2.0))
+                    .collect()
+            })
+            .collect();
+        let positive: Vec<bool> = states.iter().map(|s| s[0] + 0.5 * s[1] > 0.0).collect();
+        let flat: Vec<f64> = states.concat();
+        let gram = Gram::new(&flat, 4);
+        for i in 0..60 {
+            for j in 0..60 {
+                assert_eq!(
+                    gram.at(i, j).to_bits(),
+                    rbf(&states[i], &states[j]).to_bits()
+                );
+            }
+        }
+        let train: Vec<usize> = (0..60).filter(|i| i % 3 != 0).collect();
+        let fitted = Svc::fit(&gram, &flat, 4, &train, &positive).unwrap();
+        for (i, s) in states.iter().enumerate() {
+            let from_state = fitted.svc.decision_value(s);
+            assert_eq!(fitted.decision_at(&gram, i).to_bits(), from_state.to_bits());
+        }
+        assert_eq!(
+            gram.sub(&[2, 0])[..],
+            [gram.at(2, 2), gram.at(2, 0), gram.at(0, 2), gram.at(0, 0)]
+        );
     }
 
     #[test]
