@@ -19,12 +19,14 @@ fn valid_frames() -> Vec<Vec<u8>> {
     // As the wire's port stamps it when an actor sends the batch.
     batch.header.schema = SCHEMA_VERSION;
     let query = QueryRequest::new(1, 7, 55, &[0.1, -0.2, 0.3, 0.4]).unwrap();
-    let mut progress = Progress::default();
-    progress.header = Header {
-        schema: SCHEMA_VERSION,
-        role: Role::Actor as u16,
-        id: 1,
-        seq: 9,
+    let progress = Progress {
+        header: Header {
+            schema: SCHEMA_VERSION,
+            role: Role::Actor as u16,
+            id: 1,
+            seq: 9,
+        },
+        ..Progress::default()
     };
     let frames = [
         Frame::Transitions(batch),
