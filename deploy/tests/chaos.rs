@@ -94,3 +94,43 @@ fn a_seeded_chaos_run_keeps_every_invariant() {
     // The filler is gone with the faults.
     assert!(!out.join(".chaos-filler").exists());
 }
+
+#[test]
+fn a_seeded_chaos_run_with_python_adapters_keeps_every_invariant() {
+    let _time = timed!();
+    let dir = tmp("chaos-gym");
+    let out = dir.join("run");
+    let o = alfd()
+        .args(["chaos", "--out", out.to_str().unwrap(), "--seed", "4"])
+        .args(["--duration", "40", "--every", "1.2"])
+        .args(["--faults", "kill=4,pause=3,launcher=1"])
+        .args(["--checkpoint-every", "300", "--grace", "300"])
+        .args([
+            "--set",
+            "episodes=300",
+            "--set",
+            "env.max_episode_steps=200",
+        ])
+        .args(["--set", "env.name=gymnasium", "--set", "env.id=CartPole-v1"])
+        .args(["--set", "expert.name=python:alfd_examples:cartpole_balance"])
+        .output()
+        .unwrap();
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("chaos.json")).unwrap()).unwrap();
+    let broken: Vec<&serde_json::Value> = report["invariants"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|v| v["ok"] != true)
+        .collect();
+    assert!(broken.is_empty(), "{broken:#?}\n{}", text(&o));
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let events = report["events"].as_array().unwrap();
+    let adapters_hit = events
+        .iter()
+        .filter(|e| e["fault"].to_string().contains("adapter"))
+        .filter(|e| e["carried_out"] == true)
+        .count();
+    assert!(events.len() >= 10, "{} faults", events.len());
+    assert!(adapters_hit >= 1, "no adapter was hit: {events:#?}");
+}

@@ -13,15 +13,18 @@ pub enum Target {
     Actor(u16),
     Learner,
     Expert,
+    /// The Python environment adapter of an actor (a Gymnasium environment's run).
+    Adapter(u16),
 }
 
 impl Target {
-    /// The binary that plays it.
+    /// The binary that plays it (`""`: the adapter's Python interpreter, whatever its name).
     pub fn binary(self) -> &'static str {
         match self {
             Target::Actor(_) => "alfd-actor",
             Target::Learner => "alfd-learner",
             Target::Expert => "alfd-expert",
+            Target::Adapter(_) => "",
         }
     }
 }
@@ -89,6 +92,7 @@ pub struct Injector {
     actors: u16,
     experts: Vec<String>,
     mix: Mix,
+    adapters: bool,
     next: Duration,
 }
 
@@ -106,10 +110,18 @@ impl Injector {
             actors,
             experts,
             mix,
+            adapters: false,
             next: Duration::ZERO,
         };
         injector.next = injector.draw_gap();
         injector
+    }
+
+    /// Aims kills and pauses at the actors' environment adapters too, each as likely as an
+    /// actor (without them the schedule of a seed is as before).
+    pub fn with_adapters(mut self, adapters: bool) -> Self {
+        self.adapters = adapters;
+        self
     }
 
     fn draw_gap(&mut self) -> Duration {
@@ -156,12 +168,16 @@ impl Injector {
         unreachable!("the pick is below the total of the weights")
     }
 
-    /// An actor, the learner or the expert, each actor as likely as the learner.
+    /// An actor, the learner, the expert or (with adapters) an actor's adapter, each as likely
+    /// as the learner.
     fn target(&mut self) -> Target {
-        match self.rng.random_range(0..u32::from(self.actors) + 2) {
+        let actors = u32::from(self.actors);
+        let adapters = if self.adapters { actors } else { 0 };
+        match self.rng.random_range(0..actors + adapters + 2) {
             0 => Target::Learner,
             1 => Target::Expert,
-            a => Target::Actor((a - 2) as u16),
+            a if a < actors + 2 => Target::Actor((a - 2) as u16),
+            a => Target::Adapter((a - 2 - actors) as u16),
         }
     }
 
@@ -192,6 +208,42 @@ mod tests {
                     .map(|f| (t * 100, f))
             })
             .collect()
+    }
+
+    #[test]
+    fn adapters_are_aimed_at_only_when_asked_and_a_seed_without_them_is_unchanged() {
+        let draw = |adapters: bool| {
+            let mut inj =
+                Injector::new(5, Duration::from_secs(1), 2, vec![], ALL).with_adapters(adapters);
+            (0..400)
+                .filter_map(|t| inj.due(Duration::from_millis(t * 100)))
+                .collect::<Vec<_>>()
+        };
+        let aimed = |faults: &[Fault]| {
+            faults
+                .iter()
+                .filter(|f| {
+                    matches!(
+                        f,
+                        Fault::Kill(Target::Adapter(_)) | Fault::Pause(Target::Adapter(_), _)
+                    )
+                })
+                .count()
+        };
+        let without = draw(false);
+        assert_eq!(aimed(&without), 0);
+        assert_eq!(
+            without,
+            faults(5, ALL, &[], 40)
+                .into_iter()
+                .map(|(_, f)| f)
+                .collect::<Vec<_>>()
+        );
+        let with = draw(true);
+        assert!(aimed(&with) > 0, "{with:?}");
+        assert!(with
+            .iter()
+            .all(|f| !matches!(f, Fault::Kill(Target::Adapter(a)) if *a > 1)));
     }
 
     #[test]

@@ -131,7 +131,8 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
     };
     let actors = u16::try_from(args.actors).map_err(|_| usage("--actors is too large"))?;
     let gap = Duration::from_secs_f64(args.every);
-    let mut injector = Injector::new(args.seed, gap, actors, experts, mix);
+    let adapters = runs_adapters(&args.out);
+    let mut injector = Injector::new(args.seed, gap, actors, experts, mix).with_adapters(adapters);
     let ended = chaos.drive(&mut injector);
     chaos.settle();
     report::report(&chaos, ended)
@@ -187,18 +188,13 @@ fn spawn_run(alfd: &Path, args: &ChaosArgs) -> anyhow::Result<Child> {
 }
 
 /// The demonstrators of the environment of the run in `dir` (once its config is written).
+/// Whether the run's environment is served by Python adapters (a Gymnasium environment).
+fn runs_adapters(dir: &Path) -> bool {
+    run_config(dir).is_some_and(|cfg| cfg.env.name.is_remote())
+}
+
 fn experts_of(dir: &Path) -> Vec<String> {
-    let deadline = Instant::now() + Duration::from_secs(30);
-    let text = loop {
-        if let Ok(t) = std::fs::read_to_string(dir.join("config.toml")) {
-            break t;
-        }
-        if Instant::now() > deadline {
-            return Vec::new();
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    let Ok(cfg) = alfd_common::config::ExperimentConfig::for_multi_process(&text) else {
+    let Some(cfg) = run_config(dir) else {
         return Vec::new();
     };
     let env = format!("{:?}", cfg.env.name).to_lowercase();
@@ -207,6 +203,21 @@ fn experts_of(dir: &Path) -> Vec<String> {
         .filter(|e| e.env == env)
         .map(|e| e.name)
         .collect()
+}
+
+/// The run's `config.toml` once the launcher has written it (waited for up to 30 s).
+fn run_config(dir: &Path) -> Option<alfd_common::config::ExperimentConfig> {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let text = loop {
+        if let Ok(t) = std::fs::read_to_string(dir.join("config.toml")) {
+            break t;
+        }
+        if Instant::now() > deadline {
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    alfd_common::config::ExperimentConfig::for_multi_process(&text).ok()
 }
 
 impl Chaos<'_> {
@@ -296,8 +307,10 @@ impl Chaos<'_> {
 
     fn pid_of(&mut self, target: Target) -> Option<u32> {
         let mut args = vec![format!("--run-id={}", self.run_id()?)];
-        if let Target::Actor(id) = target {
-            args.push(format!("--actor-id={id}"));
+        match target {
+            Target::Actor(id) => args.push(format!("--actor-id={id}")),
+            Target::Adapter(id) => args.push(format!("--name=env-{id}")),
+            _ => {}
         }
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         alfd_launcher::find_process(target.binary(), &args)

@@ -1,0 +1,228 @@
+"""The main job near the machine's limit: where the learner's time goes in `alfd run` (a perf
+profile of the learner process by part, beside the idle time it logs), its share of one core's
+FMA peak, `alfd run` against `alfd local` in learner updates per second, 1, 2, 4 and 8 actors,
+and the replay buffer's memory per million transitions. Writes results.json and summary.md
+(see whole-run.sh)."""
+
+import argparse
+import datetime
+import json
+import os
+import re
+import statistics
+import subprocess
+import tempfile
+import time
+
+PRESET = "deploy/configs/recommended/cartpole.toml"
+
+# The learner's code by part, as perf names its symbols (first match wins).
+PARTS = [
+    ("replay sampling", r"replay::|sample_with_demos|sample_into"),
+    ("train step: networks and Adam", r"alfd_common::nn::|gemm|adam|td_loss|train_step"),
+    ("the wire (iceoryx2)", r"iceoryx2|alfd_wire|iox2"),
+    ("n-step returns, shaping, credits", r"n_step|shaping|credit_book|alfd_learner"),
+    ("maths library (exp, ln)", r"libm::"),
+    ("operating system", r"^\[k\]"),
+]
+
+
+def sh(cmd, **kw):
+    return subprocess.run(cmd, check=True, capture_output=True, text=True, **kw)
+
+
+def run_json(cmd):
+    t = time.monotonic()
+    out = sh(cmd).stdout
+    return json.loads(out.strip().splitlines()[-1]), time.monotonic() - t
+
+
+def learner_log_fields(run_dir):
+    """The numbers of the learner's "learner stopping" line."""
+    with open(os.path.join(run_dir, "learner.log")) as f:
+        line = [l for l in f if "learner stopping" in l][-1]
+    return {k: float(v) for k, v in re.findall(r"(\w+)=([0-9.]+)", line)}
+
+
+def profile(alfd, tmp):
+    """One `alfd run` of the preset under `perf record`; the learner's samples by part."""
+    run_dir = os.path.join(tmp, "profiled")
+    data = os.path.join(tmp, "perf.data")
+    summary, wall = run_json(
+        ["perf", "record", "-q", "-F", "499", "-o", data, "--",
+         alfd, "run", "--config", PRESET, "--quiet", "--json", "--out", run_dir]
+    )
+    report = sh(["perf", "report", "-i", data, "--comm", "alfd-learner", "--no-children",
+                 "--sort", "sym", "--stdio", "-q"]).stdout
+    shares = {name: 0.0 for name, _ in PARTS}
+    shares["other"] = 0.0
+    for line in report.splitlines():
+        m = re.match(r"\s*([0-9.]+)%\s+(\[.\])\s+(.*)", line)
+        if not m:
+            continue
+        pct, kind, sym = float(m.group(1)), m.group(2), m.group(3).strip()
+        text = f"{kind} {sym}" if kind == "[k]" else sym
+        for name, pattern in PARTS:
+            if re.search(pattern, text if name == "operating system" else sym):
+                shares[name] += pct
+                break
+        else:
+            shares["other"] += pct
+    log = learner_log_fields(run_dir)
+    return {"summary": summary, "wall_s": wall, "learner_log": log, "cpu_shares_pct": shares,
+            "weights": weight_shapes(os.path.join(run_dir, "weights.safetensors"))}
+
+
+def weight_shapes(path):
+    with open(path, "rb") as f:
+        n = int.from_bytes(f.read(8), "little")
+        header = json.loads(f.read(n))
+    return {k: v["shape"] for k, v in header.items() if k != "__metadata__"}
+
+
+def flops_per_update(shapes, batch):
+    """Multiply-adds of one update: online forward on states and on next states (double DQN),
+    the target forward on next states, and the backward pass (twice the forward), times 2."""
+    macs = sum(s[0] * s[1] for s in shapes.values() if len(s) == 2)
+    return 2 * batch * macs * (3 + 2)
+
+
+def core_peak_flops():
+    """One core's f32 FMA peak from /proc/cpuinfo: MHz x 2 FMA units x lanes x 2."""
+    mhz, flags = None, ""
+    with open("/proc/cpuinfo") as f:
+        for line in f:
+            if line.startswith("cpu MHz") and mhz is None:
+                mhz = float(line.split(":")[1])
+            if line.startswith("flags") and not flags:
+                flags = line
+    lanes = 16 if " avx512f" in flags else 8 if " avx2" in flags and " fma" in flags else 4
+    return mhz * 1e6 * 2 * lanes * 2, mhz, lanes
+
+
+def actors_sweep(alfd, tmp, counts, repeats):
+    out = {}
+    for n in counts:
+        rows = []
+        for r in range(repeats):
+            s, wall = run_json([alfd, "run", "--config", PRESET, "--actors", str(n), "--quiet",
+                                "--json", "--out", os.path.join(tmp, f"actors-{n}-{r}")])
+            rows.append({"updates_per_s": s["updates_per_s"],
+                         "env_steps_per_s": s["env_steps_per_s"],
+                         "last_50": s["mean_return_last_50"], "wall_s": wall})
+        out[n] = rows
+    return out
+
+
+def local_run(alfd, tmp, repeats):
+    rows = []
+    for r in range(repeats):
+        d = os.path.join(tmp, f"local-{r}")
+        t = time.monotonic()
+        sh([alfd, "local", "--config", PRESET, "--quiet", "--out", d])
+        wall = time.monotonic() - t
+        with open(os.path.join(d, "summary.json")) as f:
+            s = json.load(f)
+        steps = s.get("env_steps") or s.get("total_steps")
+        rows.append({"updates": s.get("updates"), "env_steps": steps, "wall_s": wall,
+                     "updates_per_s": (s.get("updates") or 0) / wall})
+    return rows
+
+
+def replay_bytes(example):
+    return json.loads(sh([example]).stdout)
+
+
+def med(xs):
+    return statistics.median(xs)
+
+
+def write(results, out):
+    with open(os.path.join(out, "results.json"), "w") as f:
+        json.dump(results, f, indent=1)
+    p = results["profile"]
+    log, shares = p["learner_log"], p["cpu_shares_pct"]
+    wall = p["summary"]["wall_clock_s"]
+    idle = log.get("idle_running_s", 0.0)
+    busy = max(wall - idle, 0.0)
+    peak, mhz, lanes = results["peak"]
+    fl = results["flops_per_update"]
+    achieved = p["summary"]["updates_per_s"] * fl
+    L = ["# The main job near the machine's limit", "",
+         "Written by `bash deploy/bench/whole-run.sh`; every number is in `results.json`.", "",
+         "## Machine", "", f"{results['machine']}; {results['date']}; load average "
+         f"{results['load_before']:.2f} before. Runs one at a time, the recommended CartPole-1000 "
+         "preset (50,000 environment steps), release build.", "",
+         "## Where the learner's time goes", "",
+         f"`alfd run` (2 actors) under `perf record -F 499`: {p['summary']['updates_per_s']:.0f} "
+         f"updates/s over {wall:.1f} s. The learner waited {idle:.1f} s of it for transitions "
+         f"(its own count, `idle_running_s`); its CPU samples, split by part of the code, share "
+         "the rest:", "",
+         "| part | share of the learner's CPU samples | seconds (of the time not waiting) |",
+         "|---|---:|---:|"]
+    for name, pct in sorted(shares.items(), key=lambda kv: -kv[1]):
+        L.append(f"| {name} | {pct:.1f}% | {busy * pct / 100:.1f} s |")
+    L.append(f"| waiting for transitions | | {idle:.1f} s |")
+    L += ["", f"One update is {fl / 1e6:.2f} MFLOP (forward on states and next states, the target "
+          "network's forward, backward twice the forward; from the shapes in "
+          "`weights.safetensors`, batch "
+          f"{results['batch']}); at {p['summary']['updates_per_s']:.0f} updates/s that is "
+          f"{achieved / 1e9:.2f} GFLOP/s, {100 * achieved / peak:.1f}% of one core's f32 FMA "
+          f"peak ({peak / 1e9:.0f} GFLOP/s: {mhz:.0f} MHz x 2 FMA units x {lanes} lanes x 2).", "",
+          "## Multi-process against single-process", "",
+          "| runtime | updates/s (median) | runs |", "|---|---:|---:|"]
+    run2 = results["actors"]["2"] if "2" in results["actors"] else results["actors"][2]
+    L.append(f"| `alfd run` (2 actors) | {med([r['updates_per_s'] for r in run2]):.0f} | {len(run2)} |")
+    loc = results["local"]
+    L.append(f"| `alfd local` (one process) | {med([r['updates_per_s'] for r in loc]):.0f} | {len(loc)} |")
+    L += ["", "## Actors", "", "On the 2-core machine; medians over the runs.", "",
+          "| actors | updates/s | environment steps/s | last-50 mean return | wall-clock |",
+          "|---:|---:|---:|---:|---:|"]
+    for n, rows in results["actors"].items():
+        L.append(f"| {n} | {med([r['updates_per_s'] for r in rows]):.0f} | "
+                 f"{med([r['env_steps_per_s'] for r in rows]):.0f} | "
+                 f"{med([r['last_50'] for r in rows]):.1f} | {med([r['wall_s'] for r in rows]):.1f} s |")
+    rb = results["replay"]
+    L += ["", "## Replay memory", "",
+          f"A replay buffer of {rb['transitions']:,} CartPole transitions (4 observations, "
+          f"{rb['heads']} heads) adds {rb['rss_bytes'] / 2**20:.1f} MiB of resident memory "
+          f"({rb['rss_bytes'] / rb['transitions']:.0f} bytes per transition; the layout holds "
+          f"{rb['layout_bytes_per_transition']} bytes each): "
+          f"`common/core/examples/replay_memory.rs`.", ""]
+    with open(os.path.join(out, "summary.md"), "w") as f:
+        f.write("\n".join(L))
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("--alfd", required=True)
+    p.add_argument("--replay-example", required=True)
+    p.add_argument("--out", required=True)
+    p.add_argument("--repeats", type=int, default=2)
+    a = p.parse_args()
+    os.makedirs(a.out, exist_ok=True)
+    load = os.getloadavg()[0]
+    with open("/proc/cpuinfo") as f:
+        cpu = next((l.split(":", 1)[1].strip() for l in f if l.startswith("model name")), "?")
+    mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
+    with tempfile.TemporaryDirectory(prefix="alfd-whole-run-") as tmp:
+        print("whole_run.py: profiling one run", flush=True)
+        prof = profile(a.alfd, tmp)
+        print("whole_run.py: 1, 2, 4, 8 actors", flush=True)
+        actors = actors_sweep(a.alfd, tmp, [1, 2, 4, 8], a.repeats)
+        print("whole_run.py: alfd local", flush=True)
+        local = local_run(a.alfd, tmp, a.repeats)
+    batch = 128
+    results = {
+        "machine": f"{cpu}, {os.cpu_count()} cores, {mem:.0f} GiB",
+        "date": datetime.date.today().isoformat(), "load_before": load,
+        "profile": prof, "actors": {str(k): v for k, v in actors.items()}, "local": local,
+        "batch": batch, "flops_per_update": flops_per_update(prof["weights"], batch),
+        "peak": core_peak_flops(), "replay": replay_bytes(a.replay_example),
+    }
+    write(results, a.out)
+    print(f"whole_run.py: wrote {a.out}/summary.md and results.json", flush=True)
+
+
+if __name__ == "__main__":
+    main()
