@@ -8,6 +8,7 @@
 # on an idle machine.
 #
 #   bash deploy/bench/whole-run.sh [REPEATS]      # each configuration REPEATS times (default 2)
+#   bash deploy/bench/whole-run.sh 2 --summary-only   # rewrite summary.md from results.json
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 if ! command -v perf >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
@@ -17,5 +18,7 @@ command -v perf >/dev/null || { echo "whole-run.sh: perf is needed (Debian: linu
 cargo build --release --quiet --workspace
 cargo build --release --quiet -p alfd-common --example replay_memory
 bin="${CARGO_TARGET_DIR:-target}/release"
-exec python3 deploy/bench/whole_run.py --alfd "$bin/alfd" \
-    --replay-example "$bin/examples/replay_memory" --out results/whole-run --repeats "${1:-2}"
+gcc -O2 -o "$bin/alfd-bench-clock" deploy/bench/clock.c
+exec python3 deploy/bench/whole_run.py --alfd "$bin/alfd" --clock "$bin/alfd-bench-clock" \
+    --replay-example "$bin/examples/replay_memory" --out results/whole-run --repeats "${1:-2}" \
+    "${@:2}"

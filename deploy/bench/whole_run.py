@@ -5,6 +5,7 @@ and the replay buffer's memory per million transitions. Writes results.json and 
 (see whole-run.sh)."""
 
 import argparse
+import csv
 import datetime
 import json
 import os
@@ -87,16 +88,14 @@ def flops_per_update(shapes, batch):
     return 2 * batch * macs * (3 + 2)
 
 
-def core_peak_flops():
-    """One core's f32 FMA peak from /proc/cpuinfo: MHz x 2 FMA units x lanes x 2."""
-    mhz, flags = None, ""
+def core_peak_flops(clock_bin):
+    """One core's f32 FMA peak at the width the network's products use (8 lanes of AVX2 with
+    FMA, else 4 of SSE): measured MHz (the median of 3 runs of clock.c) x 2 FMA units x lanes x
+    2."""
+    mhz = statistics.median(float(sh([clock_bin]).stdout) for _ in range(3))
     with open("/proc/cpuinfo") as f:
-        for line in f:
-            if line.startswith("cpu MHz") and mhz is None:
-                mhz = float(line.split(":")[1])
-            if line.startswith("flags") and not flags:
-                flags = line
-    lanes = 16 if " avx512f" in flags else 8 if " avx2" in flags and " fma" in flags else 4
+        flags = next((l for l in f if l.startswith("flags")), "")
+    lanes = 8 if " avx2" in flags and " fma" in flags else 4
     return mhz * 1e6 * 2 * lanes * 2, mhz, lanes
 
 
@@ -123,9 +122,10 @@ def local_run(alfd, tmp, repeats):
         wall = time.monotonic() - t
         with open(os.path.join(d, "summary.json")) as f:
             s = json.load(f)
-        steps = s.get("env_steps") or s.get("total_steps")
-        rows.append({"updates": s.get("updates"), "env_steps": steps, "wall_s": wall,
-                     "updates_per_s": (s.get("updates") or 0) / wall})
+        with open(os.path.join(d, "episodes.csv")) as f:
+            steps = sum(int(r["length"]) for r in csv.DictReader(f))
+        rows.append({"env_steps": steps, "wall_s": wall, "run_wall_s": s["wall_clock_s"],
+                     "env_steps_per_s": steps / s["wall_clock_s"]})
     return rows
 
 
@@ -141,7 +141,10 @@ def write(results, out):
     with open(os.path.join(out, "results.json"), "w") as f:
         json.dump(results, f, indent=1)
     p = results["profile"]
-    log, shares = p["learner_log"], p["cpu_shares_pct"]
+    log, raw = p["learner_log"], p["cpu_shares_pct"]
+    # perf's percentages are of every process's samples: made shares of the learner's own.
+    total = sum(raw.values()) or 1.0
+    shares = {k: 100.0 * v / total for k, v in raw.items()}
     wall = p["summary"]["wall_clock_s"]
     idle = log.get("idle_running_s", 0.0)
     busy = max(wall - idle, 0.0)
@@ -168,13 +171,24 @@ def write(results, out):
           "`weights.safetensors`, batch "
           f"{results['batch']}); at {p['summary']['updates_per_s']:.0f} updates/s that is "
           f"{achieved / 1e9:.2f} GFLOP/s, {100 * achieved / peak:.1f}% of one core's f32 FMA "
-          f"peak ({peak / 1e9:.0f} GFLOP/s: {mhz:.0f} MHz x 2 FMA units x {lanes} lanes x 2).", "",
+          f"peak at the width the network's products use ({peak / 1e9:.0f} GFLOP/s: "
+          f"{mhz:.0f} MHz x 2 FMA units x {lanes} lanes x 2; the clock measured under load by "
+          f"`deploy/bench/clock.c`, a chain of dependent additions, as the VM's /proc/cpuinfo "
+          f"gives only its nominal clock). An estimate: the count includes the first layer's "
+          f"input gradient, which the backward pass skips.", "",
           "## Multi-process against single-process", "",
-          "| runtime | updates/s (median) | runs |", "|---|---:|---:|"]
-    run2 = results["actors"]["2"] if "2" in results["actors"] else results["actors"][2]
-    L.append(f"| `alfd run` (2 actors) | {med([r['updates_per_s'] for r in run2]):.0f} | {len(run2)} |")
+          "Environment steps per second of the training loop (the run's own wall-clock in "
+          "`summary.json`). Both make the preset's updates per environment step, so the ratio "
+          "of steps/s is the ratio of updates/s; `alfd local` does not count its updates, "
+          "`alfd run`'s learner does.", "",
+          "| runtime | environment steps/s (median) | updates/s (median) | runs |",
+          "|---|---:|---:|---:|"]
+    run2 = results["actors"]["2"]
+    L.append(f"| `alfd run` (2 actors) | {med([r['env_steps_per_s'] for r in run2]):.0f} | "
+             f"{med([r['updates_per_s'] for r in run2]):.0f} | {len(run2)} |")
     loc = results["local"]
-    L.append(f"| `alfd local` (one process) | {med([r['updates_per_s'] for r in loc]):.0f} | {len(loc)} |")
+    L.append(f"| `alfd local` (one process) | {med([r['env_steps_per_s'] for r in loc]):.0f} | "
+             f"not counted | {len(loc)} |")
     L += ["", "## Actors", "", "On the 2-core machine; medians over the runs.", "",
           "| actors | updates/s | environment steps/s | last-50 mean return | wall-clock |",
           "|---:|---:|---:|---:|---:|"]
@@ -198,8 +212,17 @@ def main():
     p.add_argument("--alfd", required=True)
     p.add_argument("--replay-example", required=True)
     p.add_argument("--out", required=True)
+    p.add_argument("--clock", required=True)
     p.add_argument("--repeats", type=int, default=2)
+    p.add_argument("--summary-only", action="store_true",
+                   help="re-measure the clock and rewrite summary.md from results.json")
     a = p.parse_args()
+    if a.summary_only:
+        with open(os.path.join(a.out, "results.json")) as f:
+            results = json.load(f)
+        results["peak"] = core_peak_flops(a.clock)
+        write(results, a.out)
+        return
     os.makedirs(a.out, exist_ok=True)
     load = os.getloadavg()[0]
     with open("/proc/cpuinfo") as f:
@@ -218,7 +241,7 @@ def main():
         "date": datetime.date.today().isoformat(), "load_before": load,
         "profile": prof, "actors": {str(k): v for k, v in actors.items()}, "local": local,
         "batch": batch, "flops_per_update": flops_per_update(prof["weights"], batch),
-        "peak": core_peak_flops(), "replay": replay_bytes(a.replay_example),
+        "peak": core_peak_flops(a.clock), "replay": replay_bytes(a.replay_example),
     }
     write(results, a.out)
     print(f"whole_run.py: wrote {a.out}/summary.md and results.json", flush=True)
