@@ -103,6 +103,7 @@ fn a_seeded_chaos_run_with_python_adapters_keeps_every_invariant() {
     let o = alfd()
         .args(["chaos", "--out", out.to_str().unwrap(), "--seed", "4"])
         .args(["--duration", "40", "--every", "1.2"])
+        // A Gymnasium run cannot be resumed (`alfd chaos` drops launcher kills on its own).
         .args(["--faults", "kill=4,pause=3,launcher=1"])
         .args(["--checkpoint-every", "300", "--grace", "300"])
         .args([

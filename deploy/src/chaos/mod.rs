@@ -132,6 +132,12 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
     let actors = u16::try_from(args.actors).map_err(|_| usage("--actors is too large"))?;
     let gap = Duration::from_secs_f64(args.every);
     let adapters = runs_adapters(&args.out);
+    let mut mix = mix;
+    if adapters && mix.launcher > 0 {
+        // A Gymnasium environment's state lives in its adapter: such a run cannot be resumed.
+        eprintln!("chaos: a Gymnasium run cannot be resumed: no launcher kills");
+        mix.launcher = 0;
+    }
     let mut injector = Injector::new(args.seed, gap, actors, experts, mix).with_adapters(adapters);
     let ended = chaos.drive(&mut injector);
     chaos.settle();
