@@ -212,38 +212,34 @@ mod tests {
 
     #[test]
     fn adapters_are_aimed_at_only_when_asked_and_a_seed_without_them_is_unchanged() {
-        let draw = |adapters: bool| {
-            let mut inj =
-                Injector::new(5, Duration::from_secs(1), 2, vec![], ALL).with_adapters(adapters);
+        let schedule = |inj: Injector| {
+            let mut inj = inj;
             (0..400)
                 .filter_map(|t| inj.due(Duration::from_millis(t * 100)))
                 .collect::<Vec<_>>()
         };
-        let aimed = |faults: &[Fault]| {
+        let new = || Injector::new(5, Duration::from_secs(1), 2, vec![], ALL);
+        let at_adapters = |faults: &[Fault]| {
             faults
                 .iter()
-                .filter(|f| {
-                    matches!(
-                        f,
-                        Fault::Kill(Target::Adapter(_)) | Fault::Pause(Target::Adapter(_), _)
-                    )
+                .filter_map(|f| match f {
+                    Fault::Kill(Target::Adapter(a)) | Fault::Pause(Target::Adapter(a), _) => {
+                        Some(*a)
+                    }
+                    _ => None,
                 })
-                .count()
-        };
-        let without = draw(false);
-        assert_eq!(aimed(&without), 0);
-        assert_eq!(
-            without,
-            faults(5, ALL, &[], 40)
-                .into_iter()
-                .map(|(_, f)| f)
                 .collect::<Vec<_>>()
+        };
+        let without = schedule(new().with_adapters(false));
+        assert_eq!(without, schedule(new()));
+        assert!(at_adapters(&without).is_empty());
+        let with = schedule(new().with_adapters(true));
+        let hit = at_adapters(&with);
+        assert!(!hit.is_empty(), "{with:?}");
+        assert!(
+            hit.iter().all(|&a| a < 2),
+            "only the 2 actors' adapters: {hit:?}"
         );
-        let with = draw(true);
-        assert!(aimed(&with) > 0, "{with:?}");
-        assert!(with
-            .iter()
-            .all(|f| !matches!(f, Fault::Kill(Target::Adapter(a)) if *a > 1)));
     }
 
     #[test]
