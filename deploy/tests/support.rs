@@ -38,6 +38,25 @@ pub(crate) fn bin_dir() -> &'static Path {
         // is compiled twice.
         cmd.args(["build", "--workspace", "--bins"])
             .current_dir(repo());
+        // Without the variables cargo sets for this test binary: a build script that watches
+        // one (ring's watches CARGO_MANIFEST_DIR) would otherwise see it change and rebuild its
+        // crate and everything above it, here and again at the next `deploy/test.sh`.
+        for (key, _) in std::env::vars_os() {
+            let key = key.to_string_lossy();
+            let set_for_tests = key.starts_with("CARGO_PKG_")
+                || key.starts_with("CARGO_BIN_EXE_")
+                || [
+                    "CARGO_MANIFEST_DIR",
+                    "CARGO_MANIFEST_PATH",
+                    "CARGO_CRATE_NAME",
+                    "CARGO_PRIMARY_PACKAGE",
+                    "CARGO_TARGET_TMPDIR",
+                ]
+                .contains(&key.as_ref());
+            if set_for_tests {
+                cmd.env_remove(key.as_ref());
+            }
+        }
         if dir.ends_with("release") {
             cmd.arg("--release");
         }
