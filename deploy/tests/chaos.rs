@@ -35,6 +35,22 @@ impl Drop for Tmpfs<'_> {
     }
 }
 
+/// The chaos run's report, once every invariant held and it exited 0 (else the test fails with
+/// the broken ones and the run's output).
+fn held(out: &Path, o: &std::process::Output) -> serde_json::Value {
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("chaos.json")).unwrap()).unwrap();
+    let broken: Vec<&serde_json::Value> = report["invariants"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|v| v["ok"] != true)
+        .collect();
+    assert!(broken.is_empty(), "{broken:#?}\n{}", text(o));
+    assert_eq!(o.status.code(), Some(0), "{}", text(o));
+    report
+}
+
 #[test]
 fn a_seeded_chaos_run_keeps_every_invariant() {
     let _time = timed!();
@@ -59,16 +75,7 @@ fn a_seeded_chaos_run_keeps_every_invariant() {
         ])
         .output()
         .unwrap();
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("chaos.json")).unwrap()).unwrap();
-    let broken: Vec<&serde_json::Value> = report["invariants"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|v| v["ok"] != true)
-        .collect();
-    assert!(broken.is_empty(), "{broken:#?}\n{}", text(&o));
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let report = held(&out, &o);
     let events = report["events"].as_array().unwrap();
     let carried_out = |kind: &str, word: &str| {
         events
@@ -116,16 +123,7 @@ fn a_seeded_chaos_run_with_python_adapters_keeps_every_invariant() {
         .args(["--set", "expert.name=python:alfd_examples:cartpole_balance"])
         .output()
         .unwrap();
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("chaos.json")).unwrap()).unwrap();
-    let broken: Vec<&serde_json::Value> = report["invariants"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|v| v["ok"] != true)
-        .collect();
-    assert!(broken.is_empty(), "{broken:#?}\n{}", text(&o));
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let report = held(&out, &o);
     let events = report["events"].as_array().unwrap();
     let adapters_hit = events
         .iter()

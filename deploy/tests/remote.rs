@@ -382,6 +382,21 @@ fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
     );
 }
 
+/// `alfd ARGS` with its run or host directory under `out`, which must end with exit code 2.
+fn refused_with_2(args: &[&str], out: &Path) -> Output {
+    let o = alfd()
+        .args(args)
+        .arg(format!(
+            "--{}={}",
+            if args[0] == "run" { "out" } else { "dir" },
+            out.join("x").display()
+        ))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));
+    o
+}
+
 #[test]
 fn bad_endpoints_and_actor_counts_are_refused_with_exit_code_2() {
     let _time = timed!();
@@ -405,16 +420,7 @@ fn bad_endpoints_and_actor_counts_are_refused_with_exit_code_2() {
             "tcp/no-such-host.invalid:7447",
         ],
     ] {
-        let o = alfd()
-            .args(&args)
-            .arg(format!(
-                "--{}={}",
-                if args[0] == "run" { "out" } else { "dir" },
-                out.join("x").display()
-            ))
-            .output()
-            .unwrap();
-        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));
+        let o = refused_with_2(&args, &out);
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(
             err.contains("--connect") || err.contains("--listen") || err.contains("--actors"),
@@ -831,16 +837,7 @@ fn plain_tcp_without_insecure_and_tls_over_tcp_are_refused_with_exit_code_2() {
             "all three",
         ),
     ] {
-        let o = alfd()
-            .args(&args)
-            .arg(format!(
-                "--{}={}",
-                if args[0] == "run" { "out" } else { "dir" },
-                out.join("x").display()
-            ))
-            .output()
-            .unwrap();
-        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));
+        let o = refused_with_2(&args, &out);
         assert!(text(&o).contains(says), "{args:?}: {}", text(&o));
         assert!(!out.join("x").exists(), "{args:?} made its directory");
     }

@@ -4,7 +4,7 @@
 //! scouting, so nothing is multicast and a session talks only to the endpoint it was given).
 //!
 //! zenoh's TLS-over-TCP link (`tls/`) is not offered: in zenoh 1.10 its reader and writer share
-//! one TLS stream without a common lock, and on 127.0.0.1 a run's first connection failed with
+//! one TLS stream without a common lock, and on 127.0.0.1 a run's first connection fails with
 //! "handshake not complete" within a second, dropping the remote host. Its QUIC link takes the
 //! same certificates and keys.
 
