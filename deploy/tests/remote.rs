@@ -842,3 +842,23 @@ fn plain_tcp_without_insecure_and_tls_over_tcp_are_refused_with_exit_code_2() {
         assert!(!out.join("x").exists(), "{args:?} made its directory");
     }
 }
+
+#[test]
+fn tls_alfd_certs_refuses_bad_names_and_days_with_exit_code_2_and_keeps_what_it_made() {
+    let _time = timed!();
+    let dir = tmp("tls-certs-bad");
+    certs(&dir, &["h1"]);
+    let ca = std::fs::read(dir.join("ca.pem")).unwrap();
+    for (args, says) in [
+        (vec!["--days", "0"], "--days"),
+        (vec!["--host", "a b"], "a b"),
+        (vec!["--host", "h1"], "h1.key"),
+    ] {
+        let o = alfd().arg("certs").arg(&dir).args(&args).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o));
+        assert!(text(&o).contains(says), "{args:?}: {}", text(&o));
+    }
+    // The CA and the host's files made first are as they were.
+    assert_eq!(std::fs::read(dir.join("ca.pem")).unwrap(), ca);
+    assert!(dir.join("h1.pem").is_file() && dir.join("h1.key").is_file());
+}
