@@ -9,10 +9,8 @@ ratio leans in scikit-learn's favour by our process start.
 """
 
 import argparse
-import datetime
 import json
 import os
-import platform
 import random
 import resource
 import statistics
@@ -25,6 +23,8 @@ import sklearn
 from sklearn.kernel_ridge import KernelRidge
 from sklearn.svm import SVC
 
+import host
+
 ALFD = "target/release/alfd"
 TRAIN_STEPS = "target/release/examples/train_steps"
 KRR_GROW = "target/release/examples/krr_grow"
@@ -35,21 +35,7 @@ QUERIES = 100
 
 
 def machine():
-    model = "unknown"
-    with open("/proc/cpuinfo") as f:
-        for line in f:
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    return {
-        "cpu": model,
-        "cores": os.cpu_count(),
-        "memory_gib": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30),
-        "python": platform.python_version(),
-        "scikit_learn": sklearn.__version__,
-        "numpy": np.__version__,
-        "date": datetime.date.today().isoformat(),
-    }
+    return host.machine() | {"scikit_learn": sklearn.__version__, "numpy": np.__version__}
 
 
 def cpu_seconds(cmd):

@@ -3,7 +3,7 @@
 # other: `bash .ci/run` (the test command as CI runs it: build, the Python pieces, every test)
 # and `bash deploy/run.sh` (the main job: build and train), each in a clone of its own with an
 # empty target directory (crates already downloaded stay in ~/.cargo). Written to
-# results/fresh-clone/summary.md for README.md (`alfd docs` copies it). About 15 minutes on the
+# results/fresh-clone/summary.md for README.md (`alfd docs` copies it). About 18 minutes on the
 # 2-core machine; run it on an idle machine. A `../shared` beside this repository is linked
 # beside the clones, as CI has it.
 #

@@ -4,12 +4,12 @@ samples.csv and summary.md (see long-run.sh)."""
 
 import argparse
 import csv
-import datetime
 import json
 import os
-import platform
 import subprocess
 import time
+
+import host
 
 PERIOD_S = 2.0
 
@@ -64,17 +64,6 @@ def files(run_dir):
     return out
 
 
-def machine():
-    cpu = "unknown CPU"
-    with open("/proc/cpuinfo") as f:
-        for line in f:
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
-    return f"{cpu}, {os.cpu_count()} cores, {mem:.0f} GiB, {platform.system()}"
-
-
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("--alfd", required=True)
@@ -119,6 +108,7 @@ def at_fraction(series, frac, wall):
 
 
 def write_summary(a, rows, end_files, summary, wall):
+    m = host.machine()
     by = {}
     for r in rows:
         if r["kind"] == "rss_kib":
@@ -130,7 +120,7 @@ def write_summary(a, rows, end_files, summary, wall):
         "",
         "## Run",
         "",
-        f"{machine()}; {datetime.date.today().isoformat()}. `alfd run --set steps={a.steps}` "
+        f"{host.described(m)}, Linux; {m['date']}. `alfd run --set steps={a.steps}` "
         f"(the recommended CartPole-1000 preset, 2 actors, replay capacity 50,000), "
         f"{summary.get('episodes')} episodes, {summary.get('env_steps')} environment steps, "
         f"{wall:.0f} s wall-clock; resident memory and file sizes sampled every {PERIOD_S:.0f} s.",

@@ -6,7 +6,6 @@ and the replay buffer's memory per million transitions. Writes results.json and 
 
 import argparse
 import csv
-import datetime
 import json
 import os
 import re
@@ -14,6 +13,8 @@ import statistics
 import subprocess
 import tempfile
 import time
+
+import host
 
 PRESET = "deploy/configs/recommended/cartpole.toml"
 
@@ -225,9 +226,7 @@ def main():
         return
     os.makedirs(a.out, exist_ok=True)
     load = os.getloadavg()[0]
-    with open("/proc/cpuinfo") as f:
-        cpu = next((l.split(":", 1)[1].strip() for l in f if l.startswith("model name")), "?")
-    mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
+    m = host.machine()
     with tempfile.TemporaryDirectory(prefix="alfd-whole-run-") as tmp:
         print("whole_run.py: profiling one run", flush=True)
         prof = profile(a.alfd, tmp)
@@ -237,8 +236,7 @@ def main():
         local = local_run(a.alfd, tmp, a.repeats)
     batch = 128
     results = {
-        "machine": f"{cpu}, {os.cpu_count()} cores, {mem:.0f} GiB",
-        "date": datetime.date.today().isoformat(), "load_before": load,
+        "machine": host.described(m), "date": m["date"], "load_before": load,
         "profile": prof, "actors": {str(k): v for k, v in actors.items()}, "local": local,
         "batch": batch, "flops_per_update": flops_per_update(prof["weights"], batch),
         "peak": core_peak_flops(a.clock), "replay": replay_bytes(a.replay_example),

@@ -37,25 +37,22 @@ impl LinkFlags {
     }
 
     fn security(&self, text: &str) -> Result<Security, String> {
-        let files = [&self.tls_ca, &self.tls_cert, &self.tls_key];
-        let given = files.iter().filter(|f| f.is_some()).count();
-        match (self.insecure, given) {
-            (true, 0) => Ok(Security::Insecure),
-            (true, _) => Err("--insecure and --tls-* together: choose one".to_owned()),
-            (false, 3) => {
-                let [ca, cert, key] = files.map(|f| f.as_deref().unwrap_or_else(|| "".as_ref()));
-                TlsFiles::checked(ca, cert, key)
-                    .map(Security::Tls)
-                    .map_err(|e| e.to_string())
-            }
-            (false, 0) if text.starts_with("tcp/") => Err(format!(
-                "{text} is plain TCP: anyone who reaches the port could join the run. Use \
-                 quic/{} with --tls-ca, --tls-cert and --tls-key (`alfd certs DIR --host NAME` \
-                 makes them), or add --insecure on a network you trust",
-                &text[4..]
-            )),
-            (false, 0) => Ok(Security::Insecure),
-            (false, _) => Err("give all three of --tls-ca, --tls-cert and --tls-key".to_owned()),
+        match (self.insecure, &self.tls_ca, &self.tls_cert, &self.tls_key) {
+            (false, Some(ca), Some(cert), Some(key)) => TlsFiles::checked(ca, cert, key)
+                .map(Security::Tls)
+                .map_err(|e| e.to_string()),
+            (true, None, None, None) => Ok(Security::Insecure),
+            (true, ..) => Err("--insecure and --tls-* together: choose one".to_owned()),
+            (false, None, None, None) => match text.strip_prefix("tcp/") {
+                Some(rest) => Err(format!(
+                    "{text} is plain TCP: anyone who reaches the port could join the run. Use \
+                     quic/{rest} with --tls-ca, --tls-cert and --tls-key (`alfd certs DIR \
+                     --host NAME` makes them), or add --insecure on a network you trust"
+                )),
+                // quic/ without files, or not an endpoint: the endpoint's own check says so.
+                None => Ok(Security::Insecure),
+            },
+            (false, ..) => Err("give all three of --tls-ca, --tls-cert and --tls-key".to_owned()),
         }
     }
 }

@@ -267,16 +267,9 @@ mod tls_refusals {
         }
     }
 
-    /// The TLS reason in a QUIC connection error (`... reason: "invalid peer certificate:
-    /// Expired" ...`), or the whole text without zenoh's hint.
+    /// The TLS reason in a QUIC connection error, or the whole text without zenoh's hint.
     pub(super) fn reason(text: &str) -> &str {
-        let after = ["reason: \"", "reason: b\""]
-            .iter()
-            .find_map(|k| text.split_once(k).map(|(_, rest)| rest));
-        match after.and_then(|rest| rest.split_once('"')) {
-            Some((why, _)) => why,
-            None => text.trim_end_matches(HINT),
-        }
+        alfd_bridge::tls_reason(text).unwrap_or_else(|| text.trim_end_matches(HINT))
     }
 
     struct Message(String);

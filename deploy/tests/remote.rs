@@ -20,17 +20,14 @@ fn free_port() -> u16 {
         .port()
 }
 
-/// `alfd join` with `actors` actors, as another host: its own working directory and home.
-fn spawn_join(port: u16, actors: usize, dir: &Path) -> Background {
+/// `alfd join` as another host (its own working directory and home) with `link` (`--connect`
+/// and how it proves who it is) and `role` (`--actors=N` or `--expert=NAME`).
+fn spawn_host(link: &[String], role: &str, dir: &Path) -> Background {
     Background(Some(
         alfd()
-            .args([
-                "join",
-                "--insecure",
-                "--connect",
-                &format!("tcp/127.0.0.1:{port}"),
-            ])
-            .arg(format!("--actors={actors}"))
+            .arg("join")
+            .args(link)
+            .arg(role)
             .arg(format!("--dir={}", dir.join("join").display()))
             .current_dir(dir)
             .env("HOME", dir)
@@ -41,25 +38,22 @@ fn spawn_join(port: u16, actors: usize, dir: &Path) -> Background {
     ))
 }
 
+/// The link of a host joining the run on `port` of 127.0.0.1 over plain TCP.
+fn insecure(port: u16) -> Vec<String> {
+    vec![
+        "--insecure".to_owned(),
+        format!("--connect=tcp/127.0.0.1:{port}"),
+    ]
+}
+
+/// `alfd join` with `actors` actors, as another host.
+fn spawn_join(port: u16, actors: usize, dir: &Path) -> Background {
+    spawn_host(&insecure(port), &format!("--actors={actors}"), dir)
+}
+
 /// `alfd join` serving the run's expert `name` (no actors), as another host.
 fn spawn_expert_join(port: u16, name: &str, dir: &Path) -> Background {
-    Background(Some(
-        alfd()
-            .args([
-                "join",
-                "--insecure",
-                "--connect",
-                &format!("tcp/127.0.0.1:{port}"),
-            ])
-            .arg(format!("--expert={name}"))
-            .arg(format!("--dir={}", dir.join("join").display()))
-            .current_dir(dir)
-            .env("HOME", dir)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("alfd join runs"),
-    ))
+    spawn_host(&insecure(port), &format!("--expert={name}"), dir)
 }
 
 /// Waits (at most `secs`) for a background process to end, and returns its output.
@@ -103,13 +97,9 @@ fn two_remote_actors_over_zenoh_play_a_run_to_its_end_within_the_budget() {
     );
     // A host built from other sources is refused by name, with exit code 2, and joins nothing.
     let other = alfd()
-        .args([
-            "join",
-            "--insecure",
-            "--connect",
-            &format!("tcp/127.0.0.1:{port}"),
-            "--actors=1",
-        ])
+        .arg("join")
+        .args(insecure(port))
+        .arg("--actors=1")
         .arg(format!("--dir={}", remote.join("other").display()))
         .env("ALFD_SCHEMA_VERSION_OVERRIDE", "999")
         .output()
@@ -771,8 +761,8 @@ fn tls_a_run_across_hosts_takes_hosts_of_its_ca_and_refuses_strangers() {
         .output()
         .unwrap();
     let plain = alfd()
-        .args(["join", "--insecure", "--wait-s=2"])
-        .arg(format!("--connect=tcp/127.0.0.1:{port}"))
+        .args(["join", "--wait-s=2"])
+        .args(insecure(port))
         .arg(format!("--dir={}", remote.join("plain").display()))
         .output()
         .unwrap();
@@ -784,18 +774,9 @@ fn tls_a_run_across_hosts_takes_hosts_of_its_ca_and_refuses_strangers() {
         assert!(text(o).contains("no run answered"), "{who}: {}", text(o));
     }
     // The run's own host plays it to the end, unaffected.
-    let join = Background(Some(
-        alfd()
-            .args(["join", "--connect", &endpoint, "--actors=2"])
-            .args(tls_flags(&ca, &ca, "remote"))
-            .arg(format!("--dir={}", remote.join("join").display()))
-            .current_dir(&remote)
-            .env("HOME", &remote)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap(),
-    ));
+    let mut link = vec![format!("--connect={endpoint}")];
+    link.extend(tls_flags(&ca, &ca, "remote"));
+    let join = spawn_host(&link, "--actors=2", &remote);
     let o = finish(run, 120);
     assert!(o.status.success(), "{}", text(&o));
     let j = finish(join, 60);

@@ -50,7 +50,7 @@ pub use frame::{decode, encode, ExpertOrder, Frame};
 pub use hub::{Hub, HubEvent, HubOptions};
 pub use mirror::{join, Mirror, Remote};
 pub use roster::{JoinReply, JoinRequest, Joined, Left, RestartReply, RestartRequest, Roster};
-pub use tls::{make_ca, make_host, valid_for, CaMade, Security, TlsFiles};
+pub use tls::{make_ca, make_host, tls_reason, valid_for, CaMade, Security, TlsFiles};
 
 /// The longest a bridge sleeps between two looks at what this host published (the learner's
 /// weights and credits ring nobody); rings wake it sooner.

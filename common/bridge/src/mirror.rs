@@ -48,25 +48,12 @@ impl std::fmt::Debug for Remote {
 
 /// Why a connection failed, in a line: the TLS handshake's reason when there is one.
 fn connect_failure(error: &str) -> String {
-    match error
-        .split_once("reason: ")
-        .map(|(_, rest)| rest.trim_start_matches('b'))
-    {
-        Some(rest) => rest
-            .trim_start_matches('"')
-            .split('"')
-            .next()
-            .unwrap_or(rest)
-            .to_owned(),
+    let said = crate::tls::tls_reason(error).unwrap_or_else(|| {
         // zenoh's own text names where in zenoh it failed: left out.
-        None => error
-            .split(" at /")
-            .next()
-            .unwrap_or(error)
-            .trim()
-            .trim_end_matches('!')
-            .to_owned(),
-    }
+        let text = error.split(" at /").next().unwrap_or(error);
+        text.trim().trim_end_matches('!')
+    });
+    said.to_owned()
 }
 
 #[cfg(test)]

@@ -63,6 +63,14 @@ impl TlsFiles {
     }
 }
 
+/// The TLS handshake's reason in a zenoh QUIC error's text (`... reason: "invalid peer
+/// certificate: Expired" ...` or `reason: b"peer sent no certificates"`), when it holds one.
+pub fn tls_reason(text: &str) -> Option<&str> {
+    let (_, rest) = text.split_once("reason: ")?;
+    let rest = rest.strip_prefix('b').unwrap_or(rest).strip_prefix('"')?;
+    rest.split_once('"').map(|(why, _)| why)
+}
+
 fn check_pem(path: &Path, flag: &str, label: &str) -> Result<()> {
     let bad = |why: String| BridgeError::Tls(format!("{flag} {}: {why}", path.display()));
     let text = fs::read_to_string(path).map_err(|e| bad(format!("cannot read it: {e}")))?;
@@ -102,9 +110,7 @@ pub fn make_ca(dir: &Path, days: u32) -> Result<CaMade> {
         .push(DnType::CommonName, "alfd run CA");
     params.is_ca = IsCa::Ca(BasicConstraints::Constrained(0));
     params.key_usages = vec![KeyUsagePurpose::KeyCertSign, KeyUsagePurpose::CrlSign];
-    let now = OffsetDateTime::now_utc();
-    params.not_before = now - Duration::hours(1);
-    params.not_after = now + Duration::days(i64::from(days));
+    (params.not_before, params.not_after) = valid_for(days);
     let key_pair = KeyPair::generate().map_err(rcgen_error)?;
     let ca = params.self_signed(&key_pair).map_err(rcgen_error)?;
     write_private(&key, &key_pair.serialize_pem())?;

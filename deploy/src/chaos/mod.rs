@@ -103,7 +103,7 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
     if args.summarize {
         return report::summarize(&args.out);
     }
-    let mix = parse_mix(&args.faults)?;
+    let mut mix = parse_mix(&args.faults)?;
     if args.every <= 0.0 || !args.every.is_finite() {
         return Err(usage(format!(
             "--every must be a positive number of seconds, got {}",
@@ -124,15 +124,16 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
         run_ids: Vec::new(),
         launches: 1,
     };
+    let cfg = run_config(&args.out);
     let experts = if args.experts.is_empty() {
-        experts_of(&args.out)
+        experts_of(cfg.as_ref())
     } else {
         args.experts.clone()
     };
     let actors = u16::try_from(args.actors).map_err(|_| usage("--actors is too large"))?;
     let gap = Duration::from_secs_f64(args.every);
-    let adapters = runs_adapters(&args.out);
-    let mut mix = mix;
+    // A Gymnasium environment is served by Python adapters, which are targets too.
+    let adapters = cfg.is_some_and(|c| c.env.name.is_remote());
     if adapters && mix.launcher > 0 {
         // A Gymnasium environment's state lives in its adapter: such a run cannot be resumed.
         eprintln!("chaos: a Gymnasium run cannot be resumed: no launcher kills");
@@ -193,14 +194,9 @@ fn spawn_run(alfd: &Path, args: &ChaosArgs) -> anyhow::Result<Child> {
     cmd.spawn().context("cannot start alfd run")
 }
 
-/// The demonstrators of the environment of the run in `dir` (once its config is written).
-/// Whether the run's environment is served by Python adapters (a Gymnasium environment).
-fn runs_adapters(dir: &Path) -> bool {
-    run_config(dir).is_some_and(|cfg| cfg.env.name.is_remote())
-}
-
-fn experts_of(dir: &Path) -> Vec<String> {
-    let Some(cfg) = run_config(dir) else {
+/// The demonstrators of the run's environment (none when its config could not be read).
+fn experts_of(cfg: Option<&alfd_common::config::ExperimentConfig>) -> Vec<String> {
+    let Some(cfg) = cfg else {
         return Vec::new();
     };
     let env = format!("{:?}", cfg.env.name).to_lowercase();
