@@ -97,7 +97,14 @@ mod tests {
 
     fn state(step: u64) -> ActorCheckpoint {
         let cfg = ExperimentConfig::from_toml(CONFIG).unwrap();
-        let core = NeuralActor::new(&cfg.agent, &cfg.query, cfg.shaping.kind, 4, 2, seeded(1));
+        let core = NeuralActor::new(
+            &cfg.agent,
+            &cfg.rule_spec(),
+            cfg.shaping.kind,
+            4,
+            2,
+            seeded(1),
+        );
         let mut env = CartPole::new(1000);
         env.reset(Some(step));
         ActorCheckpoint {

@@ -86,7 +86,7 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
     let rng = seeded(derive_seed(cfg.seed, &actor_stream));
     let mut core = NeuralActor::new(
         &cfg.agent,
-        &cfg.query,
+        &cfg.rule_spec(),
         cfg.shaping.kind,
         obs_dim,
         actions,

@@ -80,7 +80,7 @@ mod tests {
         .unwrap();
         let agent = alfd_common::agent::TabularAgent::new(
             &cfg.agent,
-            &cfg.query,
+            &cfg.rule_spec(),
             env.num_states(),
             4,
             alfd_common::rng::seeded(0),

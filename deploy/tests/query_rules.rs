@@ -59,7 +59,17 @@ fn every_rule_runs_in_alfd_local_within_the_budget_and_random_replays_js_s_steps
         } else {
             "seed=0"
         };
-        let o = local(&out, &[&rule, &sched, "query.probability=0.05", seed]);
+        // js-spread: B = 12 over H = 3,000 steps, the k-th (from 0) at step 250·k or later.
+        let o = local(
+            &out,
+            &[
+                &rule,
+                &sched,
+                "query.probability=0.05",
+                "query.horizon=3000",
+                seed,
+            ],
+        );
         assert!(o.status.success(), "{}: {}", kind.name(), text(&o));
         let steps = demo_steps(&out);
         assert!(
@@ -74,6 +84,15 @@ fn every_rule_runs_in_alfd_local_within_the_budget_and_random_replays_js_s_steps
             // The whole budget on the first steps.
             RuleKind::First => assert_eq!(steps, (0..12).collect::<Vec<u64>>()),
             RuleKind::Random => assert_eq!(steps, asked),
+            RuleKind::JsSpread => {
+                assert!(!steps.is_empty(), "js-spread asked nothing");
+                for (k, &t) in steps.iter().enumerate() {
+                    assert!(
+                        t >= 250 * k as u64,
+                        "demonstration {k} at step {t}: {steps:?}"
+                    );
+                }
+            }
             // 600+ steps: every rule that asks at all spends some of its budget.
             _ => assert!(!steps.is_empty(), "{} asked nothing", kind.name()),
         }
@@ -103,7 +122,7 @@ fn a_random_rule_without_a_readable_schedule_is_refused_with_exit_code_2() {
 #[test]
 fn alfd_run_accepts_the_rules_that_read_the_actor_s_own_signals() {
     let _time = timed!();
-    for rule in ["js-burst", "novelty", "q-std", "uniform"] {
+    for rule in ["js-burst", "novelty", "q-std", "uniform", "js-spread"] {
         let out = tmp(&format!("run-{rule}"));
         let o = crate::runtime::run(
             &out,
@@ -113,6 +132,7 @@ fn alfd_run_accepts_the_rules_that_read_the_actor_s_own_signals() {
                 "budget.total=15",
                 &format!("query.rule={rule}"),
                 "query.probability=0.05",
+                "query.horizon=4000",
             ],
         );
         assert!(o.status.success(), "{rule}: {}", text(&o));

@@ -105,7 +105,7 @@ fn bench_act_step(c: &mut Criterion) {
         .expect("valid config");
         let mut actor = alfd_common::agent::NeuralActor::new(
             &cfg.agent,
-            &cfg.query,
+            &cfg.rule_spec(),
             cfg.shaping.kind,
             OBS,
             ACTIONS,
@@ -115,7 +115,11 @@ fn bench_act_step(c: &mut Criterion) {
         actor.begin_episode();
         b.iter(|| {
             i = (i + 1) % states.len();
-            black_box(actor.decide(black_box(&states[i]), i as u64, true))
+            black_box(actor.decide(
+                black_box(&states[i]),
+                i as u64,
+                alfd_common::query::BudgetView::FRESH,
+            ))
         })
     });
     c.bench_function("query_rule_observe_lq1000", |b| {

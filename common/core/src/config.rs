@@ -604,6 +604,11 @@ impl ExperimentConfig {
         self.budget.total as u32
     }
 
+    /// The query rule's spec: `[query]` with the run's budget and length.
+    pub fn rule_spec(&self) -> crate::query::RuleSpec {
+        self.query.spec(u64::from(self.budget()), self.steps)
+    }
+
     /// Whether the reward is shaped (a demonstration model is chosen).
     pub fn shaping_enabled(&self) -> bool {
         self.expert.model != DemoModelChoice::None
@@ -719,6 +724,7 @@ model = "krr"
                 &[
                     format!("query.rule={}", kind.name()),
                     "query.schedule=run/{seed}/demos.jsonl".into(),
+                    "query.horizon=500".into(),
                 ],
             )
             .unwrap();
@@ -731,6 +737,18 @@ model = "krr"
         assert!(err(&["query.burst=0"]).contains("query.burst"));
         assert!(err(&["query.gap=0"]).contains("query.gap"));
         assert!(err(&["query.rule=sometimes"]).contains("sometimes"));
+        // js-spread spreads B over `steps`, or `query.horizon` in a run limited by episodes.
+        assert!(err(&["query.rule=js-spread"]).contains("query.horizon"));
+        let spread = |sets: &[&str]| {
+            let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+            ExperimentConfig::from_toml_with_overrides(BASE, &sets)
+                .unwrap()
+                .rule_spec()
+        };
+        let s = spread(&["query.rule=js-spread", "steps=6000", "budget.total=30"]);
+        assert_eq!((s.kind, s.total, s.horizon), (RuleKind::JsSpread, 30, 6000));
+        let s = spread(&["query.rule=js-spread", "steps=6000", "query.horizon=900"]);
+        assert_eq!(s.horizon, 900);
     }
 
     #[test]

@@ -44,11 +44,16 @@ pub enum RuleKind {
     /// The paper's rule, but at most one query in any `query.gap` consecutive steps: the heads'
     /// disagreement picks the states, the gap spreads the budget over the run as `uniform` does.
     JsPaced,
+    /// The paper's rule, with the budget spread over the run: with `n` demonstrations used it
+    /// asks at global step `t` only if `n·H ≤ B·t` (`H` = `query.horizon`, the run's `steps` by
+    /// default), so the `(n+1)`-th is allowed from step `n·H/B`. The disagreement picks the
+    /// states, the budget and the horizon set the pace; an allowance not spent carries over.
+    JsSpread,
 }
 
 impl RuleKind {
     /// Every rule, in the order the documents list them.
-    pub const ALL: [RuleKind; 9] = [
+    pub const ALL: [RuleKind; 10] = [
         RuleKind::Never,
         RuleKind::First,
         RuleKind::Js,
@@ -58,6 +63,7 @@ impl RuleKind {
         RuleKind::Novelty,
         RuleKind::JsBurst,
         RuleKind::JsPaced,
+        RuleKind::JsSpread,
     ];
 
     /// The name in configs (`query.rule`).
@@ -72,6 +78,7 @@ impl RuleKind {
             RuleKind::Novelty => "novelty",
             RuleKind::JsBurst => "js-burst",
             RuleKind::JsPaced => "js-paced",
+            RuleKind::JsSpread => "js-spread",
         }
     }
 }
@@ -89,6 +96,25 @@ pub struct Signals {
     pub q_std: f64,
     /// `1 − max_i k(s, x_i)` over the demonstrations held; `None` when none is held.
     pub novelty: Option<f64>,
+    /// Demonstrations used in the run so far, as far as the acting agent knows.
+    pub used: u64,
+}
+
+/// Budget B as the acting agent sees it at a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct BudgetView {
+    /// Whether any demonstration is left.
+    pub left: bool,
+    /// Demonstrations used in the run so far.
+    pub used: u64,
+}
+
+impl BudgetView {
+    /// Budget left, none used yet.
+    pub const FRESH: BudgetView = BudgetView {
+        left: true,
+        used: 0,
+    };
 }
 
 /// A query rule: whether to ask the expert at a state, given its [`Signals`]. Called once per
@@ -108,6 +134,10 @@ pub struct RuleSpec {
     pub gap: u64,
     /// The global steps to ask at (rule `random`), in any order.
     pub schedule: Vec<u64>,
+    /// B, the run's budget (rule `js-spread`).
+    pub total: u64,
+    /// H, the steps over which rule `js-spread` spreads B (≥ 1).
+    pub horizon: u64,
 }
 
 /// Never asks.
@@ -261,6 +291,30 @@ impl QueryRule for Paced {
     }
 }
 
+/// The paper's rule, asking only while `used·horizon ≤ total·step`: B spread evenly over H steps,
+/// the first demonstration allowed from the start, the `(n+1)`-th from step `n·H/B`. The
+/// divergence is pushed to the queue on every step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Spread {
+    pub gate: PercentileGate,
+    pub total: u64,
+    pub horizon: u64,
+}
+
+impl Spread {
+    /// Whether one more demonstration is allowed at `step` with `used` spent: `used·H ≤ B·step`.
+    pub fn allows(&self, used: u64, step: u64) -> bool {
+        u128::from(used) * u128::from(self.horizon) <= u128::from(self.total) * u128::from(step)
+    }
+}
+
+impl QueryRule for Spread {
+    fn ask(&mut self, s: &Signals) -> bool {
+        let fired = self.gate.observe(s.js);
+        fired && self.allows(s.used, s.step)
+    }
+}
+
 /// Every rule, with its state (what a checkpoint keeps).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Rule {
@@ -271,6 +325,7 @@ pub enum Rule {
     Uniform(Uniform),
     Burst(Burst),
     Paced(Paced),
+    Spread(Spread),
 }
 
 impl Rule {
@@ -307,6 +362,11 @@ impl Rule {
                 gap: spec.gap,
                 last: None,
             }),
+            RuleKind::JsSpread => Rule::Spread(Spread {
+                gate: gate(),
+                total: spec.total,
+                horizon: spec.horizon,
+            }),
         }
     }
 
@@ -320,18 +380,19 @@ impl Rule {
     /// `novelty` only when the budget is left and the rule reads them (the act step's hot path).
     pub fn decide_at(
         &mut self,
-        budget_left: bool,
+        budget: BudgetView,
         step: u64,
         js: f64,
         q_std: impl FnOnce() -> f64,
         novelty: impl FnOnce() -> Option<f64>,
     ) -> bool {
-        if !budget_left {
+        if !budget.left {
             return false;
         }
         let signals = Signals {
             step,
             js,
+            used: budget.used,
             q_std: if self.reads(Signal::QStd) {
                 q_std()
             } else {
@@ -363,6 +424,7 @@ impl QueryRule for Rule {
             Rule::Uniform(r) => r.ask(s),
             Rule::Burst(r) => r.ask(s),
             Rule::Paced(r) => r.ask(s),
+            Rule::Spread(r) => r.ask(s),
         }
     }
 }
@@ -575,6 +637,8 @@ mod tests {
             burst: 3,
             gap: 2,
             schedule: vec![9, 3, 5],
+            total: 4,
+            horizon: 20,
         }
     }
 
@@ -608,19 +672,19 @@ mod tests {
                         js: u,
                         q_std: noise,
                         novelty: Some(noise),
-                        step: 0,
+                        ..Signals::default()
                     },
                     RuleKind::QStd => Signals {
                         js: noise,
                         q_std: u,
                         novelty: Some(noise),
-                        step: 0,
+                        ..Signals::default()
                     },
                     _ => Signals {
                         js: noise,
                         q_std: noise,
                         novelty: Some(u),
-                        step: 0,
+                        ..Signals::default()
                     },
                 };
                 assert_eq!(rule.decide(&s, true), want, "{kind:?} step {i}");
@@ -633,17 +697,49 @@ mod tests {
         let rng = crate::rng::seeded(0);
         let mut js = Rule::new(&spec(RuleKind::Js), &rng);
         let never_called = || -> f64 { panic!("q_std computed for the js rule") };
-        assert!(!js.decide_at(true, 0, 1.0, never_called, || panic!("novelty computed")));
-        assert!(js.decide_at(true, 1, 2.0, never_called, || panic!("novelty computed")));
+        assert!(
+            !js.decide_at(BudgetView::FRESH, 0, 1.0, never_called, || panic!(
+                "novelty computed"
+            ))
+        );
+        assert!(
+            js.decide_at(BudgetView::FRESH, 1, 2.0, never_called, || panic!(
+                "novelty computed"
+            ))
+        );
         let mut q = Rule::new(&spec(RuleKind::QStd), &rng);
-        assert!(!q.decide_at(true, 0, 9.0, || 1.0, || panic!("novelty computed")));
-        assert!(q.decide_at(true, 1, 0.0, || 2.0, || panic!("novelty computed")));
-        assert!(!q.decide_at(false, 2, 0.0, || panic!("computed without budget"), || None));
+        assert!(!q.decide_at(
+            BudgetView::FRESH,
+            0,
+            9.0,
+            || 1.0,
+            || panic!("novelty computed")
+        ));
+        assert!(q.decide_at(
+            BudgetView::FRESH,
+            1,
+            0.0,
+            || 2.0,
+            || panic!("novelty computed")
+        ));
+        assert!(!q.decide_at(
+            BudgetView::default(),
+            2,
+            0.0,
+            || panic!("computed without budget"),
+            || None
+        ));
         let mut n = Rule::new(&spec(RuleKind::Novelty), &rng);
         assert!(
-            n.decide_at(true, 0, 0.0, never_called, || None),
+            n.decide_at(BudgetView::FRESH, 0, 0.0, never_called, || None),
             "nothing held: ask"
         );
+        // The budget's use reaches the rule: js-spread (B = 4, H = 20) with 1 used at step 1.
+        let mut spread = Rule::new(&spec(RuleKind::JsSpread), &rng);
+        let used = |used| BudgetView { left: true, used };
+        assert!(!spread.decide_at(used(0), 0, 1.0, never_called, || None));
+        assert!(!spread.decide_at(used(1), 1, 2.0, never_called, || None));
+        assert!(spread.decide_at(used(0), 2, 3.0, never_called, || None));
         assert!(n.reads(Signal::Novelty) && !n.reads(Signal::QStd) && !js.reads(Signal::Novelty));
     }
 
@@ -743,6 +839,43 @@ mod tests {
     }
 
     #[test]
+    fn spread_asks_when_the_gate_fires_within_the_allowance() {
+        // B = 4 over H = 20 steps: one more demonstration is allowed while used·20 ≤ 4t, that
+        // is used ≤ t/5: the first from step 0, the second from 5, the third from 10, ...
+        let mut rule = Rule::new(&spec(RuleKind::JsSpread), &crate::rng::seeded(0));
+        let s = |step, js, used| Signals {
+            step,
+            js,
+            used,
+            ..Signals::default()
+        };
+        // Gate alone at steps 0..7: [no (empty), yes, no, yes, no, no, yes]. Step 1: 0 ≤ 1/5:
+        // asked. Step 3: 1 used, 1 > 3/5: not asked. Step 6: 1 ≤ 6/5: asked.
+        let used = [0, 0, 1, 1, 1, 1, 1];
+        let asked: Vec<bool> = [1.0, 2.0, 1.5, 1.6, 1.55, 0.0, 5.0]
+            .into_iter()
+            .zip(used)
+            .enumerate()
+            .map(|(t, (u, n))| rule.decide(&s(t as u64, u, n), true))
+            .collect();
+        assert_eq!(asked, vec![false, true, false, false, false, false, true]);
+        // An allowance not spent carries over: from step 15 on, up to 3 used allow one more;
+        // with 2 used a firing gate asks twice in a row, and not a third time with 4 used.
+        assert!(rule.decide(&s(15, 9.0, 2), true));
+        assert!(rule.decide(&s(16, 9.5, 3), true));
+        assert!(!rule.decide(&s(17, 9.9, 4), true));
+        let Rule::Spread(spread) = rule else {
+            panic!("js-spread builds a Spread")
+        };
+        // The edges: 1·20 ≤ 4·5 but not ≤ 4·4; 2·20 ≤ 4·10 but not ≤ 4·9.
+        assert!(spread.allows(1, 5) && !spread.allows(1, 4));
+        assert!(spread.allows(2, 10) && !spread.allows(2, 9));
+        // No overflow near u64::MAX: (MAX/5)·20 ≤ 4·MAX, (MAX/4 + 1)·20 > 4·MAX.
+        assert!(spread.allows(u64::MAX / 5, u64::MAX));
+        assert!(!spread.allows(u64::MAX / 4 + 1, u64::MAX));
+    }
+
+    #[test]
     fn q_spread_is_the_heads_standard_deviation_at_the_greedy_action_of_their_mean() {
         // Heads [1, 4] and [3, 2]: mean [2, 3], greedy action 1, values 4 and 2: std 1.
         assert_eq!(q_spread(&[1.0, 4.0, 3.0, 2.0], 2), 1.0);
@@ -783,6 +916,7 @@ mod tests {
                 js: (t as f64 * 0.7).sin(),
                 q_std: (t as f64 * 1.3).cos(),
                 novelty: Some((t as f64 * 0.4).sin().abs()),
+                used: t / 4,
             };
             for t in 0..20 {
                 rule.decide(&s(t), true);

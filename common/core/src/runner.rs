@@ -191,7 +191,7 @@ pub fn run_tabular_checkpointed(
 ) -> Result<TabularRun, StateMismatch> {
     let mut agent = TabularAgent::new(
         &cfg.agent,
-        &cfg.query,
+        &cfg.rule_spec(),
         env.num_states(),
         env.num_actions(),
         seeded(derive_seed(cfg.seed, "agent")),
@@ -320,7 +320,7 @@ pub fn run_neural_on(
     );
     let mut core = NeuralActor::new(
         &cfg.agent,
-        &cfg.query,
+        &cfg.rule_spec(),
         cfg.shaping.kind,
         obs_dim,
         actions,

@@ -5,7 +5,8 @@ Every rule at every budget on one task's recommended preset, the only change bei
 B. `random` replays the query steps of the `js` run of the same budget and the sweep's next seed
 (`{out}` is the sweep's output directory, `{other_seed}` its next seed): the same number of
 queries at the same times, at states unrelated to the heads' disagreement. `js-paced` keeps at
-least 100 / (100 - p_r) steps between queries, uniform's mean spacing. (Replaying the js run
+least 100 / (100 - p_r) steps between queries, uniform's mean spacing; `js-spread` allows the
+(n+1)-th demonstration from step n·H/B (H the run's steps), B spread evenly over the run. (Replaying the js run
 of the same seed reproduces that run: every state up to the first query is the same, so the same
 states are asked about.) `uniform` asks with probability
 (100 - p_r) / 100, the rate the percentile gate of the disagreement rules aims at. The burst
@@ -16,9 +17,13 @@ Run: python3 deploy/experiments/study/make.py  (rewrites the files next to this 
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-RULES = ["first", "js", "random", "uniform", "q-std", "novelty", "js-burst", "js-paced"]
+RULES = ["first", "js", "random", "uniform", "q-std", "novelty", "js-burst", "js-paced", "js-spread"]
 BUDGETS = [10, 25, 50, 100, 200]
 BURST = 30
+# CliffWalk's runs are limited by episodes: js-spread spreads B over 100,000 steps, about what
+# 3,000 episodes take without demonstrations (101,686 to 284,699 steps, median 114,072, on
+# tuning seeds 1000-1004).
+CLIFFWALK_HORIZON = 100_000
 
 TASKS = {
     # name: (title, preset, x, thresholds, last, p_r, eval threshold)
@@ -48,6 +53,8 @@ def methods(task, budgets, rules, burst=BURST):
             s.append(f"query.burst={burst if rule == 'js-burst' else 10}")
             if rule == "js-paced":
                 s.append(f"query.gap={round(100 / (100 - p_r))}")
+            if rule == "js-spread" and task == "cliffwalk":
+                s.append(f"query.horizon={CLIFFWALK_HORIZON}")
             out.append((f"{rule}-b{b}", f"{rule}, B = {b}", s))
     return preset, out
 

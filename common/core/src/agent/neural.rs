@@ -9,11 +9,11 @@ use serde::{Deserialize, Serialize};
 use crate::agent::{Decision, Explorer};
 use crate::checkpoint::StateMismatch;
 use crate::config::LossKind;
-use crate::config::{AgentConfig, LrSchedule, QueryConfig};
+use crate::config::{AgentConfig, LrSchedule};
 use crate::demo_model::DemoModel;
 use crate::nn::{Adam, AdamConfig, AdamState, Mlp, NnError, TdConfig, TdLoss, TrainScratch};
 use crate::policy::{js_divergence, softmax_into};
-use crate::query::{novelty, q_spread, Rule, Signal};
+use crate::query::{novelty, q_spread, BudgetView, Rule, RuleSpec, Signal};
 use crate::replay::{Batch, ReplayBuffer, Transition};
 use crate::rng::{Rng, RngState};
 use crate::shaping::{shaped_reward, ShapingKind};
@@ -47,7 +47,7 @@ impl NeuralActor {
     /// given with [`NeuralActor::set_weights`] (a fresh initialisation until then).
     pub fn new(
         agent: &AgentConfig,
-        query: &QueryConfig,
+        rule: &RuleSpec,
         shaping_kind: ShapingKind,
         obs_dim: usize,
         actions: usize,
@@ -62,7 +62,7 @@ impl NeuralActor {
             explorer: Explorer::new(agent, actions),
             temperature: agent.temperature,
             bootstrap_probability: agent.bootstrap_probability,
-            rule: Rule::new(&query.spec(), &rng),
+            rule: Rule::new(rule, &rng),
             demo_states: Vec::new(),
             rng,
             arm: 0,
@@ -123,7 +123,7 @@ impl NeuralActor {
     /// Algorithm 1 lines 3-16 at state `obs`, the run's global step `step`: the divergence, the
     /// query rule's decision, and the agent's own action (greedy on the episode's head, or
     /// ε-greedy / softmax as configured).
-    pub fn decide(&mut self, obs: &[f32], step: u64, budget_left: bool) -> Decision {
+    pub fn decide(&mut self, obs: &[f32], step: u64, budget: BudgetView) -> Decision {
         self.net.forward_one(obs, &mut self.q32);
         for (q, &v) in self.q.iter_mut().zip(&self.q32) {
             *q = f64::from(v);
@@ -135,7 +135,7 @@ impl NeuralActor {
         };
         let (q, heads, held) = (&self.q, self.heads, &self.demo_states);
         let query = self.rule.decide_at(
-            budget_left,
+            budget,
             step,
             js,
             || q_spread(q, heads),

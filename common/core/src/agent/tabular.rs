@@ -8,12 +8,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::agent::{Decision, Explorer};
 use crate::checkpoint::StateMismatch;
-use crate::config::{AgentConfig, AgentKind, QueryConfig};
+use crate::config::{AgentConfig, AgentKind};
 use crate::env::Step;
 use crate::math;
 use crate::policy::argmax;
 use crate::qfunction::{QFunction, TabularQ};
-use crate::query::{q_spread, Rule, Signal};
+use crate::query::{q_spread, BudgetView, Rule, RuleSpec, Signal};
 use crate::rng::{Rng, RngState};
 
 /// A tabular agent over `states` states and `actions` actions.
@@ -98,13 +98,13 @@ impl TabularAgent {
 
     pub fn new(
         cfg: &AgentConfig,
-        query: &QueryConfig,
+        rule: &RuleSpec,
         states: usize,
         actions: usize,
         rng: Rng,
     ) -> Self {
         let heads = cfg.heads();
-        let rule = Rule::new(&query.spec(), &rng);
+        let rule = Rule::new(rule, &rng);
         Self {
             kind: cfg.kind,
             explorer: Explorer::new(cfg, actions),
@@ -152,13 +152,13 @@ impl TabularAgent {
 
     /// Algorithm 1 lines 3-16 at `s`, the run's global step `step`: the divergence, the agent's
     /// own action, and the query rule's decision.
-    pub fn decide(&mut self, s: usize, step: u64, budget_left: bool) -> Decision {
+    pub fn decide(&mut self, s: usize, step: u64, budget: BudgetView) -> Decision {
         let js = self.js_divergence(s);
         let action = self.act(s);
         let (q, held) = (&self.q, &self.demo_states);
         let heads = q.heads();
         let query = self.rule.decide_at(
-            budget_left,
+            budget,
             step,
             js,
             || {
@@ -264,7 +264,7 @@ impl TabularAgent {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::ExperimentConfig;
+    use crate::config::{ExperimentConfig, QueryConfig};
 
     fn cfg(kind: &str, extra: &str) -> AgentConfig {
         let text = format!("seed = 0\nepisodes = 1\n[env]\nname = \"cliffwalk\"\n[agent]\nkind = \"{kind}\"\n{extra}");
@@ -275,14 +275,14 @@ mod tests {
     fn qlearning_and_sarsa_targets_differ_as_they_should() {
         let mut ql = TabularAgent::new(
             &cfg("qlearning", "learning_rate = 1.0\ngamma = 0.5"),
-            &QueryConfig::default(),
+            &QueryConfig::default().spec(0, 0),
             2,
             2,
             crate::rng::seeded(0),
         );
         let mut sa = TabularAgent::new(
             &cfg("sarsa", "learning_rate = 1.0\ngamma = 0.5"),
-            &QueryConfig::default(),
+            &QueryConfig::default().spec(0, 0),
             2,
             2,
             crate::rng::seeded(0),
@@ -314,7 +314,7 @@ mod tests {
     fn masked_updates_train_each_head_about_half_the_time() {
         let mut agent = TabularAgent::new(
             &cfg("bootstrapped-q", "heads = 4\nlearning_rate = 1.0"),
-            &QueryConfig::default(),
+            &QueryConfig::default().spec(0, 0),
             1000,
             2,
             crate::rng::seeded(1),
@@ -340,7 +340,7 @@ mod tests {
     fn softmax_exploration_follows_the_policy() {
         let mut agent = TabularAgent::new(
             &cfg("qlearning", "temperature = 1.0"),
-            &QueryConfig::default(),
+            &QueryConfig::default().spec(0, 0),
             1,
             2,
             crate::rng::seeded(2),

@@ -30,12 +30,19 @@ pub struct QueryConfig {
     /// Rule `js-paced`: the fewest steps between two queries (≥ 1).
     #[serde(default = "default_gap")]
     pub gap: u64,
+    /// Rule `js-spread`: the steps H over which budget B is spread (0: the run's `steps`; needed
+    /// when the run is limited by `episodes` only).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub horizon: u64,
     /// Rule `random`: the global steps read from `schedule` by
     /// [`ExperimentConfig::load_schedule`] (not part of the TOML).
     #[serde(skip)]
     pub schedule_steps: Vec<u64>,
 }
 
+fn is_zero(v: &u64) -> bool {
+    *v == 0
+}
 fn default_query_rule() -> RuleKind {
     RuleKind::Never
 }
@@ -65,6 +72,7 @@ impl Default for QueryConfig {
             probability: default_probability(),
             burst: default_burst(),
             gap: default_gap(),
+            horizon: 0,
             schedule_steps: Vec::new(),
         }
     }
@@ -78,8 +86,18 @@ impl QueryConfig {
             .map(|p| p.replace("{seed}", &seed.to_string()))
     }
 
-    /// The rule's spec (with the loaded schedule of rule `random`).
-    pub fn spec(&self) -> crate::query::RuleSpec {
+    /// The steps rule `js-spread` spreads the budget over in a run of `steps` steps.
+    pub fn horizon_for(&self, steps: u64) -> u64 {
+        if self.horizon > 0 {
+            self.horizon
+        } else {
+            steps
+        }
+    }
+
+    /// The rule's spec (with the loaded schedule of rule `random`) for a run with budget `total`
+    /// and `steps` steps.
+    pub fn spec(&self, total: u64, steps: u64) -> crate::query::RuleSpec {
         crate::query::RuleSpec {
             kind: self.rule,
             queue_len: self.queue_len,
@@ -88,6 +106,8 @@ impl QueryConfig {
             burst: self.burst,
             gap: self.gap,
             schedule: self.schedule_steps.clone(),
+            total,
+            horizon: self.horizon_for(steps),
         }
     }
 }

@@ -341,6 +341,13 @@ impl ExperimentConfig {
         if q.gap == 0 {
             return Err(invalid("query.gap", "must be at least 1"));
         }
+        if q.rule == RuleKind::JsSpread && q.horizon_for(self.steps) == 0 {
+            return Err(invalid(
+                "query.horizon",
+                "rule `js-spread` spreads B over the run's steps: set `steps`, or `query.horizon` \
+                 for a run limited by `episodes`",
+            ));
+        }
         if q.rule == RuleKind::Random && q.schedule.is_none() {
             return Err(invalid(
                 "query.schedule",

@@ -24,6 +24,7 @@ use crate::agent::{Decision, NeuralActor, TabularAgent};
 use crate::demo_model::DemoModel;
 use crate::env::{Env, EnvError, Step};
 use crate::n_step::NStep;
+use crate::query::BudgetView;
 use crate::record::EpisodeRecord;
 use crate::replay::Transition;
 use crate::shaping::{potential_bonus, ShapingKind};
@@ -75,6 +76,13 @@ pub trait ExpertClient<O: ?Sized> {
     }
     /// Whether budget B has demonstrations left, as far as this actor knows.
     fn budget_left(&self) -> bool;
+    /// Budget B as this actor knows it: whether any is left, how much is used.
+    fn budget(&self) -> BudgetView {
+        BudgetView {
+            left: self.budget_left(),
+            used: u64::from(self.demos_used()),
+        }
+    }
     /// Asks for a demonstration at `obs`, the run's global step `step`: `Some(action)` if the
     /// expert gave one (and spent one unit of budget on it), `None` if it did not (budget
     /// exhausted, no expert, no answer in time): the agent then acts on its own.
@@ -103,7 +111,7 @@ pub trait Actor<O> {
     /// Algorithm 1 lines 3-16 but the asking: the divergence of the heads at `obs` (the run's
     /// global step `step`), whether the query rule fires (only while budget is left), and the
     /// agent's own action.
-    fn select(&mut self, obs: &O, step: u64, budget_left: bool) -> Decision;
+    fn select(&mut self, obs: &O, step: u64, budget: BudgetView) -> Decision;
     /// Algorithm 1 lines 17-20: learn from (or hand on) the step taken with `action` from `obs`,
     /// with the reward shaped when `shaping` is given. Returns whether the reward was shaped.
     fn observe(
@@ -234,8 +242,8 @@ impl<A: Adder, V: VariableSource> Actor<Vec<f32>> for GenericActor<A, V> {
         self.core.begin_episode();
     }
 
-    fn select(&mut self, obs: &Vec<f32>, step: u64, budget_left: bool) -> Decision {
-        self.core.decide(obs, step, budget_left)
+    fn select(&mut self, obs: &Vec<f32>, step: u64, budget: BudgetView) -> Decision {
+        self.core.decide(obs, step, budget)
     }
 
     fn observe(
@@ -279,8 +287,8 @@ impl Actor<usize> for TabularAgent {
         TabularAgent::begin_episode(self);
     }
 
-    fn select(&mut self, obs: &usize, step: u64, budget_left: bool) -> Decision {
-        self.decide(*obs, step, budget_left)
+    fn select(&mut self, obs: &usize, step: u64, budget: BudgetView) -> Decision {
+        self.decide(*obs, step, budget)
     }
 
     fn observe(
@@ -458,7 +466,7 @@ where
         expert.update()?;
         let global_step = actor.global_step(*steps);
         // Lines 3-16: the divergence, the query rule, the action.
-        let decision = actor.select(&obs, global_step, expert.budget_left());
+        let decision = actor.select(&obs, global_step, expert.budget());
         js_sum += decision.js;
         let (action, demo) = match decision.query {
             true => match expert.ask(&obs, global_step)? {
@@ -532,7 +540,7 @@ mod tests {
         let cfg = ExperimentConfig::from_toml(&text).unwrap();
         NeuralActor::new(
             &cfg.agent,
-            &cfg.query,
+            &cfg.rule_spec(),
             cfg.shaping.kind,
             4,
             2,
