@@ -364,6 +364,7 @@ def main():
     parser.add_argument("--envs-bench", required=True, help="the Criterion binary of envs.rs")
     parser.add_argument("--alfd", required=True, help="the alfd binary")
     parser.add_argument("--quick", action="store_true", help="a short smoke run: one round")
+    parser.add_argument("--out", help="a directory to write summary.md and results.json to")
     parser.add_argument("--rounds", type=int, help="rounds of ours-then-theirs (default 5)")
     parser.add_argument("--dqn-steps", type=int,
                         help="environment steps of the end-to-end runs (default 3064: 64 to fill "
@@ -409,25 +410,37 @@ def main():
     load_after = load_average()
     minutes = (time.time() - started) / 60
 
-    print()
-    print("| quantity | ours | PyTorch / Gymnasium | ratio (ours faster) |")
-    print("|---|---|---|---|")
+    lines = ["# Side by side with PyTorch and Gymnasium", "",
+             "Written by `bash deploy/bench/peers.sh`; every number is in `results.json`.", "",
+             "## Ratios", "",
+             "| quantity | ours | PyTorch / Gymnasium | ratio (ours faster) |",
+             "|---|---|---|---|"]
     for label, kind, *_ in rows:
         mine, theirs = results[label]
         ratio = statistics.median(theirs) / statistics.median(mine)
         if kind == "rate":
             ratio = 1.0 / ratio
-        print(f"| {label} | {scaled(mine, kind)} | {scaled(theirs, kind)} | {ratio:,.1f}× |")
-    print()
-    print(f"Medians over {rounds} interleaved round(s), range in parentheses; "
-          f"{minutes:.1f} min of measuring.")
-    print(f"Machine: {model}, {cpus} CPU(s); load average {load_before} before, "
-          f"{load_after} after.")
-    print(f"Date: {datetime.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}.")
-    print(f"Versions: {rustc_version()}; Python {platform.python_version()}, torch "
-          f"{torch.__version__} ({torch.get_num_threads()} thread), gymnasium "
-          f"{gymnasium.__version__}, numpy {np.__version__}.")
-
+        lines.append(f"| {label} | {scaled(mine, kind)} | {scaled(theirs, kind)} | "
+                     f"{ratio:,.1f}× |")
+    versions = (f"{rustc_version()}; Python {platform.python_version()}, torch "
+                f"{torch.__version__} ({torch.get_num_threads()} thread), gymnasium "
+                f"{gymnasium.__version__}, numpy {np.__version__}")
+    date = datetime.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')
+    lines += ["", f"Medians over {rounds} interleaved round(s), range in parentheses; "
+              f"{minutes:.1f} min of measuring. Machine: {model}, {cpus} CPU(s); load average "
+              f"{load_before} before, {load_after} after. {date}. Versions: {versions}.", ""]
+    print("\n".join(lines))
+    if args.out:
+        os.makedirs(args.out, exist_ok=True)
+        with open(os.path.join(args.out, "summary.md"), "w") as f:
+            f.write("\n".join(lines))
+        with open(os.path.join(args.out, "results.json"), "w") as f:
+            json.dump({"rounds": rounds, "date": date, "machine": f"{model}, {cpus} CPU(s)",
+                       "load_before": load_before, "load_after": load_after,
+                       "versions": versions,
+                       "rows": {label: {"kind": kind, "ours": results[label][0],
+                                        "theirs": results[label][1]}
+                                for label, kind, *_ in rows}}, f, indent=1)
 
 if __name__ == "__main__":
     main()

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Side-by-side speed of alfd and PyTorch / Gymnasium: the train step, the act
-# step, environment steps/s and an end-to-end DQN, measured interleaved; prints one table.
+# step, environment steps/s and an end-to-end DQN, measured interleaved; prints one table and
+# writes it to results/peers/summary.md (with results.json) unless --quick.
 #
 #   bash deploy/bench/peers.sh            # 5 rounds, about 5 minutes after the first install
 #   bash deploy/bench/peers.sh --quick    # one short round, a smoke run
@@ -39,5 +40,8 @@ core="$(bench_exe core)"
 envs="$(bench_exe envs)"
 [[ -n "$core" && -n "$envs" ]] || { echo "peers.sh: bench binaries not found" >&2; exit 1; }
 
+# A full run writes results/peers/ (summary.md, results.json) for BENCHMARKS.md; --quick does not.
+out=(--out results/peers)
+for a in "$@"; do [[ "$a" == --quick ]] && out=(); done
 exec "$venv/bin/python" deploy/bench/peers.py --alfd target/release/alfd \
-    --core-bench "$core" --envs-bench "$envs" "$@"
+    --core-bench "$core" --envs-bench "$envs" "${out[@]}" "$@"

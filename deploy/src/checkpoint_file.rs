@@ -148,8 +148,8 @@ mod tests {
 
     /// The size and write time of the checkpoint of a CartPole run whose 10,000-transition
     /// replay buffer is full (the run's own state, the records and demonstrations so far).
-    /// Prints; asserts no time. `cargo test --release -p alfd-deploy --bin alfd -- --ignored
-    /// --nocapture checkpoint_size`.
+    /// Prints one `BENCH {json}` line (`deploy/bench/runtime.sh` reads it); asserts no time.
+    /// `cargo test --release -p alfd-deploy --bin alfd -- --ignored --nocapture checkpoint_size`.
     #[test]
     #[ignore = "a measurement, run by hand"]
     fn checkpoint_size_and_write_time_of_a_full_cartpole_buffer() {
@@ -192,35 +192,34 @@ mod tests {
         let config_toml = cfg.to_toml();
         let tmp = crate::run_dir::test_dir("ckpt");
         let d = tmp.path();
-        let mut encode_s = Vec::new();
-        let mut write_s = Vec::new();
+        // Each write: encode (postcard, header, checksum) and the atomic write; then ten reads.
+        let mut write_ms = Vec::new();
         let mut size = 0;
         for _ in 0..10 {
             let t = Instant::now();
             let bytes = to_bytes(&file, &config_toml);
-            encode_s.push(t.elapsed().as_secs_f64());
             size = bytes.len();
-            let t = Instant::now();
             alfd_harness::write_atomically(&path(d), &bytes).unwrap();
-            write_s.push(t.elapsed().as_secs_f64());
+            write_ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
-        let t = Instant::now();
-        let back = load(d, &config_toml).unwrap();
-        let load_s = t.elapsed().as_secs_f64();
-        assert_eq!(back.state.progress(), file.state.progress());
-        let median = |v: &mut Vec<f64>| {
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2] * 1e3
-        };
+        let mut read_ms = Vec::new();
+        for _ in 0..10 {
+            let t = Instant::now();
+            let back = load(d, &config_toml).unwrap();
+            read_ms.push(t.elapsed().as_secs_f64() * 1e3);
+            assert_eq!(back.state.progress(), file.state.progress());
+        }
+        write_ms.sort_by(f64::total_cmp);
+        read_ms.sort_by(f64::total_cmp);
+        // One line for deploy/bench/runtime.py.
         println!(
-            "checkpoint of a full 10,000-transition CartPole buffer (episode {}, {} demos): \
-             {size} bytes; encode {:.2} ms, write (temp file + fsync + rename + dir fsync) \
-             {:.2} ms (medians of 10); read + check + decode {:.2} ms",
-            file.state.progress().episodes,
-            file.state.demos().len(),
-            median(&mut encode_s),
-            median(&mut write_s),
-            load_s * 1e3
+            "BENCH {}",
+            serde_json::json!({
+                "bench": "checkpoint_bin", "bytes": size,
+                "episode": file.state.progress().episodes, "demos": file.state.demos().len(),
+                "write_ms_median": write_ms[5], "write_ms_min": write_ms[0],
+                "write_ms_max": write_ms[9], "read_ms_median": read_ms[5],
+            })
         );
     }
 }

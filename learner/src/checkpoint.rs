@@ -132,8 +132,9 @@ mod tests {
         assert_eq!(std::fs::read(path(d)).unwrap(), flipped);
     }
 
-    /// BENCHMARKS.md, "Checkpoints": the size and write time of `learner.ckpt` with a full
-    /// 10,000-transition CartPole buffer (the recommended preset's learner). Run with
+    /// The size and write time of `learner.ckpt` with a full 10,000-transition CartPole buffer
+    /// (the recommended preset's learner), as one `BENCH {json}` line that
+    /// `deploy/bench/runtime.sh` reads. Run with
     /// `cargo test --release -p alfd-learner -- --ignored --nocapture learner_checkpoint_cost`.
     #[test]
     #[ignore = "a measurement, not a test"]
@@ -182,10 +183,14 @@ mod tests {
         }
         times.sort_by(f64::total_cmp);
         loads.sort_by(f64::total_cmp);
-        eprintln!(
-            "learner.ckpt: {size} bytes; snapshot + encode + write (fsync, rename, fsync dir): \
-             median {:.2} ms (min {:.2}, max {:.2}); read + check + decode: median {:.2} ms",
-            times[5], times[0], times[9], loads[5]
+        // One line for deploy/bench/runtime.py.
+        println!(
+            "BENCH {}",
+            serde_json::json!({
+                "bench": "learner_ckpt", "bytes": size,
+                "write_ms_median": times[5], "write_ms_min": times[0], "write_ms_max": times[9],
+                "read_ms_median": loads[5],
+            })
         );
     }
 

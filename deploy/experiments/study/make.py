@@ -6,7 +6,8 @@ B. `random` replays the query steps of the `js` run of the same budget and the s
 (`{out}` is the sweep's output directory, `{other_seed}` its next seed): the same number of
 queries at the same times, at states unrelated to the heads' disagreement. `js-paced` keeps at
 least 100 / (100 - p_r) steps between queries, uniform's mean spacing; `js-spread` allows the
-(n+1)-th demonstration from step n·H/B (H the run's steps), B spread evenly over the run. (Replaying the js run
+(n+1)-th demonstration from step n·H/B (H the run's steps), B spread evenly over the run, and
+`random-spread` is its matched control (js-spread's query steps of the next seed). (Replaying the js run
 of the same seed reproduces that run: every state up to the first query is the same, so the same
 states are asked about.) `uniform` asks with probability
 (100 - p_r) / 100, the rate the percentile gate of the disagreement rules aims at. The burst
@@ -17,7 +18,8 @@ Run: python3 deploy/experiments/study/make.py  (rewrites the files next to this 
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-RULES = ["first", "js", "random", "uniform", "q-std", "novelty", "js-burst", "js-paced", "js-spread"]
+RULES = ["first", "js", "random", "uniform", "q-std", "novelty", "js-burst", "js-paced", "js-spread",
+         "random-spread"]
 BUDGETS = [10, 25, 50, 100, 200]
 BURST = 30
 # CliffWalk's runs are limited by episodes: js-spread spreads B over 100,000 steps, about what
@@ -46,6 +48,10 @@ def methods(task, budgets, rules, burst=BURST):
             s = [f"query.rule={rule}", f"budget.total={b}"]
             if rule == "random":
                 s.append(f"query.schedule={{out}}/runs/js-b{b}/{{other_seed}}/demos.jsonl")
+            if rule == "random-spread":
+                # js-spread's matched control: its query steps, at unrelated states.
+                s[0] = "query.rule=random"
+                s.append(f"query.schedule={{out}}/runs/js-spread-b{b}/{{other_seed}}/demos.jsonl")
             if rule == "uniform":
                 s.append(f"query.probability={(100 - p_r) / 100}")
             # Every method names its burst length: js-burst's, and the default 10 for the rules

@@ -8,7 +8,8 @@
 //! learner side behind a hub, the two bridges (`alfd_bridge`) in this process, joined over
 //! zenoh TCP on 127.0.0.1.
 //!
-//! Prints one JSON object; `BENCHMARKS.md` records the numbers with the machine.
+//! Prints one JSON object; `deploy/bench/runtime.sh` writes the numbers, with the machine, for
+//! `BENCHMARKS.md`.
 
 use std::process::{Child, Command};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};

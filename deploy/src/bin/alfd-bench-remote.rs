@@ -1,7 +1,7 @@
 //! `alfd-bench-remote`: speed of a Gymnasium environment served by the Python adapter (steps per
 //! second through `RemoteEnv`, episodes reset as they end), and the round trip of an external
 //! expert (`python:alfd_examples:cartpole_balance`). Prints one JSON object per measurement;
-//! `deploy/bench/remote.sh` runs it beside Gymnasium stepping in-process
+//! `deploy/bench/runtime.sh` runs it beside Gymnasium stepping in-process
 //! (`deploy/python/bench_inprocess.py`) and `BENCHMARKS.md` records the numbers.
 //!
 //!     alfd-bench-remote [ENV_ID] [STEPS] [QUERIES]   # default CartPole-v1 20000 5000

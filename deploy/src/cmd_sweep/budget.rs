@@ -14,13 +14,30 @@ use super::stats::{self};
 use super::summary::{Episodes, Run};
 
 /// The row of a method in the tables against B: its query rule, and its prior scale when the
-/// heads have randomized prior functions (`js + prior 30`).
+/// heads have randomized prior functions (`js + prior 30`). A `random` control that replays the
+/// steps of another rule than `js` in the same sweep (`{out}/runs/METHOD/SEED/demos.jsonl`, the
+/// method named `RULE-bB`) is named after it: `random (js-spread's steps)`.
 pub fn row_name(cfg: &alfd_common::config::ExperimentConfig) -> String {
     let rule = cfg.query.rule.name();
+    if cfg.query.rule == alfd_common::query::RuleKind::Random {
+        if let Some(other) = cfg.query.schedule.as_deref().and_then(replayed_rule) {
+            if other != "js" {
+                return format!("random ({other}'s steps)");
+            }
+        }
+    }
     match cfg.agent.prior_scale {
         s if s > 0.0 => format!("{rule} + prior {s}"),
         _ => rule.to_owned(),
     }
+}
+
+/// The rule of the method whose runs a schedule path replays: `js-spread` in
+/// `…/runs/js-spread-b25/{other_seed}/demos.jsonl`.
+fn replayed_rule(schedule: &str) -> Option<&str> {
+    let method = schedule.split("/runs/").nth(1)?.split('/').next()?;
+    let (rule, budget) = method.rsplit_once("-b")?;
+    budget.chars().all(|c| c.is_ascii_digit()).then_some(rule)
 }
 
 /// The demonstrations used by the end of the first episode after which greedy evaluation reached
@@ -266,6 +283,33 @@ mod tests {
         assert_eq!(demos_to_threshold(&e, -100.0), f64::INFINITY);
         // 20 demonstrations over 1000 steps.
         assert_eq!(expert_share(&e), 0.02);
+    }
+
+    #[test]
+    fn a_random_control_is_named_after_the_rule_whose_steps_it_replays() {
+        let cfg = |rule: &str, schedule: &str| {
+            alfd_common::config::ExperimentConfig::from_toml_with_overrides(
+                "seed = 0\nsteps = 100\n[env]\nname = \"cartpole\"\n[agent]\nkind = \"bdqn\"\n",
+                &[
+                    format!("query.rule={rule}"),
+                    format!("query.schedule={schedule}"),
+                ],
+            )
+            .unwrap()
+        };
+        let out = "/tmp/sweep/runs";
+        for (schedule, want) in [
+            (format!("{out}/js-b10/{{other_seed}}/demos.jsonl"), "random"),
+            (
+                format!("{out}/js-spread-b200/{{other_seed}}/demos.jsonl"),
+                "random (js-spread's steps)",
+            ),
+            ("recorded/demos.jsonl".to_owned(), "random"),
+            (format!("{out}/js-bx/1/demos.jsonl"), "random"),
+        ] {
+            assert_eq!(row_name(&cfg("random", &schedule)), want, "{schedule}");
+        }
+        assert_eq!(row_name(&cfg("js-spread", "x")), "js-spread");
     }
 
     #[test]
