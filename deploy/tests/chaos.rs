@@ -5,35 +5,8 @@
 //! within the budget and as counted, every checkpoint loads, nothing is left running.
 
 use std::path::Path;
-use std::process::Command;
 
-use crate::support::{alfd, text, timed, tmp};
-
-/// A small file system mounted on a directory for the test's life (unmounted when dropped).
-struct Tmpfs<'a>(&'a Path);
-
-impl<'a> Tmpfs<'a> {
-    /// Mounts a tmpfs of `mb` MB on `dir` if this process may (root); `None` otherwise.
-    fn mount(dir: &'a Path, mb: u32) -> Option<Self> {
-        let root = Command::new("id")
-            .arg("-u")
-            .output()
-            .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
-        let mounted = root
-            && Command::new("mount")
-                .args(["-t", "tmpfs", "-o", &format!("size={mb}m"), "tmpfs"])
-                .arg(dir)
-                .status()
-                .is_ok_and(|s| s.success());
-        mounted.then_some(Tmpfs(dir))
-    }
-}
-
-impl Drop for Tmpfs<'_> {
-    fn drop(&mut self) {
-        let _ = Command::new("umount").arg(self.0).status();
-    }
-}
+use crate::support::{alfd, text, timed, tmp, Tmpfs};
 
 /// The chaos run's report, once every invariant held and it exited 0 (else the test fails with
 /// the broken ones and the run's output).

@@ -191,3 +191,29 @@ impl Drop for TestTime {
         }
     }
 }
+
+/// A small file system mounted on a directory for the test's life (unmounted when dropped).
+pub(crate) struct Tmpfs<'a>(&'a Path);
+
+impl<'a> Tmpfs<'a> {
+    /// Mounts a tmpfs of `mb` MB on `dir` if this process may (root); `None` otherwise.
+    pub(crate) fn mount(dir: &'a Path, mb: u32) -> Option<Self> {
+        let root = std::process::Command::new("id")
+            .arg("-u")
+            .output()
+            .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
+        let mounted = root
+            && std::process::Command::new("mount")
+                .args(["-t", "tmpfs", "-o", &format!("size={mb}m"), "tmpfs"])
+                .arg(dir)
+                .status()
+                .is_ok_and(|s| s.success());
+        mounted.then_some(Tmpfs(dir))
+    }
+}
+
+impl Drop for Tmpfs<'_> {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount").arg(self.0).status();
+    }
+}

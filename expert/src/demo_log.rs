@@ -26,6 +26,13 @@ pub enum DemoLogError {
 
 /// Reads every demonstration of `path` (none if the file does not exist). Each line must be a
 /// [`DemoRecord`] whose `index` is its 0-based line number, and the file must end with a newline.
+impl DemoLogError {
+    /// Whether a write was refused for want of space (ENOSPC).
+    pub fn is_disk_full(&self) -> bool {
+        matches!(self, DemoLogError::Write { io, .. } if io.raw_os_error() == Some(28))
+    }
+}
+
 pub fn read(path: &Path) -> Result<Vec<DemoRecord>, DemoLogError> {
     let text = match std::fs::read_to_string(path) {
         Ok(t) => t,
@@ -159,6 +166,12 @@ mod tests {
             matches!(&e, DemoLogError::Write { io, .. } if io.raw_os_error() == Some(28)),
             "{e:?}"
         );
+        assert!(e.is_disk_full());
+        let other = DemoLogError::Write {
+            path: "x".into(),
+            io: std::io::Error::from_raw_os_error(5),
+        };
+        assert!(!other.is_disk_full(), "EIO is not a full disk");
     }
 
     fn record(index: u32) -> DemoRecord {

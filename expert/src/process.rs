@@ -111,6 +111,8 @@ pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
         actions,
         query_timeout: runtime.query_timeout(),
         clock: Instant::now(),
+        disk_full_until: None,
+        refused: 0,
     };
     let start = machine.start(shell.now());
     shell.apply(&mut machine, start)?;
@@ -242,7 +244,15 @@ struct Shell<'w> {
     actions: usize,
     query_timeout: Duration,
     clock: Instant,
+    /// Until when no query is asked (a full disk refused the last demonstration).
+    disk_full_until: Option<Duration>,
+    /// Demonstrations a full disk refused since the last one recorded.
+    refused: u32,
 }
+
+/// How long the expert leaves queries unanswered after a full disk refused a demonstration, before
+/// it tries to record one again.
+const DISK_FULL_PAUSE: Duration = Duration::from_secs(1);
 
 impl<'w> Shell<'w> {
     fn now(&self) -> Duration {
@@ -341,7 +351,29 @@ impl<'w> Shell<'w> {
                         .log
                         .as_mut()
                         .context("a demonstration with no log open")?;
-                    log.append(&record)?;
+                    if let Err(e) = log.append(&record) {
+                        if !e.is_disk_full() {
+                            return Err(e.into());
+                        }
+                        // Not on disk, so not given: the query goes unanswered (the actor acts
+                        // on its own), and the budget and the model go back to what
+                        // demos.jsonl holds, as a restarted expert's would.
+                        tracing::warn!(
+                            "{e}: demonstration {} not kept; no query is answered for {:?}",
+                            record.index,
+                            DISK_FULL_PAUSE
+                        );
+                        self.disk_full_until = Some(self.now() + DISK_FULL_PAUSE);
+                        self.refused += 1;
+                        return self.apply(m, vec![Action::LoadDemos]);
+                    }
+                    if self.refused > 0 {
+                        info!(
+                            refused = self.refused,
+                            "demonstrations are recorded again after a full disk"
+                        );
+                        self.refused = 0;
+                    }
                     debug!(
                         index = record.index,
                         action = record.action,
@@ -363,6 +395,13 @@ impl<'w> Shell<'w> {
                     state,
                     step,
                 } => {
+                    if self.disk_full_until.is_some_and(|t| self.now() < t) {
+                        debug!(
+                            actor,
+                            "the disk was full a moment ago; query left unanswered"
+                        );
+                        continue;
+                    }
                     let Some(action) = self.ask(actor, &state)? else {
                         continue;
                     };

@@ -126,7 +126,8 @@ PRIOR_SCALES = [3, 10, 30]
 def screen_rules():
     for task, b in PRESET_BUDGET.items():
         title = TASKS[task][0]
-        preset, ms = methods(task, [b], ["first", "js", "uniform", "js-burst", "js-paced"])
+        preset, ms = methods(task, [b], ["first", "js", "uniform", "js-burst", "js-paced",
+                                         "js-spread"])
         for scale in PRIOR_SCALES:
             ms.append((f"js-prior{scale}-b{b}", f"js, prior {scale}, B = {b}",
                        ["query.rule=js", f"budget.total={b}", f"agent.prior_scale={scale}"]))
