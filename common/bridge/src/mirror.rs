@@ -320,6 +320,34 @@ fn forward(
     Ok(())
 }
 
+/// What the mirror does with a frame from the learner's host.
+#[derive(Debug, PartialEq)]
+enum Down {
+    /// Published to this host's actors under the sender's header; `wake`: ring every actor here
+    /// afterwards (credits and control may unblock one that waits); `heard`: the learner's host
+    /// is alive (its control messages are its heartbeat).
+    Publish {
+        frame: Frame,
+        wake: bool,
+        heard: bool,
+    },
+    /// The answer to a query held for one of this host's actors.
+    Answer(alfd_wire::QueryResponse),
+    /// A frame that only goes up, or to a remote expert: dropped (its service named).
+    Drop(&'static str),
+}
+
+fn route_down(f: Frame) -> Down {
+    let publish = |frame, wake, heard| Down::Publish { frame, wake, heard };
+    match f {
+        Frame::Credits(_) => publish(f, true, false),
+        Frame::Control(_) => publish(f, true, true),
+        Frame::Weights(..) | Frame::DemoModel(..) => publish(f, false, false),
+        Frame::Answer(r) => Down::Answer(r),
+        other => Down::Drop(other.service()),
+    }
+}
+
 /// The mirror's side of this host's services: what comes down goes to the actors here.
 struct Here<'w, 'a> {
     wire: &'w Wire,
@@ -336,26 +364,19 @@ struct Here<'w, 'a> {
 }
 
 impl Here<'_, '_> {
-    /// A frame from the learner's host, into this host's services.
+    /// A frame from the learner's host, into this host's services ([`route_down`] decides).
     fn down(&mut self, b: &[u8]) -> Result<()> {
         let Some(f) = link::take_in(b, &mut self.refused, "the learner's host") else {
             return Ok(());
         };
-        let done = match f {
-            Frame::Credits(c) => self.credits.forward(c).map(|_| true),
-            Frame::Control(c) => {
-                self.heard.beat();
-                self.control.forward(c).map(|_| true)
+        let (frame, wake) = match route_down(f) {
+            Down::Publish { frame, wake, heard } => {
+                if heard {
+                    self.heard.beat();
+                }
+                (frame, wake)
             }
-            Frame::Weights(h, params) => {
-                let tx = match &mut self.weights {
-                    Some(tx) => tx,
-                    None => self.weights.insert(self.wire.weights_sender(params.len())?),
-                };
-                tx.forward(h, &params).map(|_| false)
-            }
-            Frame::DemoModel(h, bytes) => self.model.forward(h, &bytes).map(|_| false),
-            Frame::Answer(r) => {
+            Down::Answer(r) => {
                 if let Ok(q) = self.held.take(&r) {
                     q.answer(r)?;
                     if let Ok(id) = u16::try_from(r.actor) {
@@ -364,13 +385,25 @@ impl Here<'_, '_> {
                 }
                 return Ok(());
             }
-            other => {
-                debug!(service = other.service(), "an up frame came down; dropped");
+            Down::Drop(service) => {
+                debug!(service, "an up frame came down; dropped");
                 return Ok(());
             }
         };
-        // Credits and control wake the actors that may wait for them.
-        if link::forwarded(done)? == Some(true) {
+        let published = match frame {
+            Frame::Credits(c) => self.credits.forward(c).map(|_| ()),
+            Frame::Control(c) => self.control.forward(c).map(|_| ()),
+            Frame::Weights(h, params) => {
+                let tx = match &mut self.weights {
+                    Some(tx) => tx,
+                    None => self.weights.insert(self.wire.weights_sender(params.len())?),
+                };
+                tx.forward(h, &params).map(|_| ())
+            }
+            Frame::DemoModel(h, bytes) => self.model.forward(h, &bytes).map(|_| ()),
+            _ => unreachable!("route_down publishes only these"),
+        };
+        if link::forwarded(published)?.is_some() && wake {
             for &id in self.ids {
                 self.bells.ring(id)?;
             }
@@ -388,4 +421,44 @@ impl Here<'_, '_> {
         }
         Ok(())
     }
+}
+
+#[cfg(test)]
+#[test]
+fn down_frames_reach_the_actors_and_wake_them_only_when_they_may_be_waiting() {
+    use alfd_wire::{
+        Control, Credits, DemoModelHeader, QueryRequest, QueryResponse, WeightsHeader,
+    };
+    let publish = |f: Frame| match route_down(f) {
+        Down::Publish { wake, heard, .. } => Some((wake, heard)),
+        _ => None,
+    };
+    // Credits and control may unblock a waiting actor; control is also the heartbeat.
+    assert_eq!(
+        publish(Frame::Credits(Credits::default())),
+        Some((true, false))
+    );
+    assert_eq!(
+        publish(Frame::Control(Control::default())),
+        Some((true, true))
+    );
+    // Weights and the demonstration model are taken at the actors' next step: no ring.
+    let weights = Frame::Weights(WeightsHeader::default(), vec![0.5; 3]);
+    assert_eq!(publish(weights), Some((false, false)));
+    let model = Frame::DemoModel(DemoModelHeader::default(), vec![1, 2]);
+    assert_eq!(publish(model), Some((false, false)));
+    let r = QueryResponse {
+        actor: 3,
+        ..QueryResponse::default()
+    };
+    assert_eq!(route_down(Frame::Answer(r)), Down::Answer(r));
+    // What only goes up is dropped, named.
+    let up = Frame::Query(QueryRequest::default());
+    assert_eq!(route_down(up), Down::Drop("query"));
+    let exited = Frame::ExpertExited {
+        generation: 1,
+        how: "exited".into(),
+        code: Some(0),
+    };
+    assert!(matches!(route_down(exited), Down::Drop(_)));
 }
