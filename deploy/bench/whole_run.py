@@ -125,8 +125,11 @@ def local_run(alfd, tmp, repeats):
             s = json.load(f)
         with open(os.path.join(d, "episodes.csv")) as f:
             steps = sum(int(r["length"]) for r in csv.DictReader(f))
-        rows.append({"env_steps": steps, "wall_s": wall, "run_wall_s": s["wall_clock_s"],
-                     "env_steps_per_s": steps / s["wall_clock_s"]})
+        row = {"env_steps": steps, "wall_s": wall, "run_wall_s": s["wall_clock_s"],
+               "env_steps_per_s": steps / s["wall_clock_s"]}
+        if "updates" in s:
+            row["updates_per_s"] = s["updates"] / s["wall_clock_s"]
+        rows.append(row)
     return rows
 
 
@@ -180,16 +183,20 @@ def write(results, out):
           "## Multi-process against single-process", "",
           "Environment steps per second of the training loop (the run's own wall-clock in "
           "`summary.json`). Both make the preset's updates per environment step, so the ratio "
-          "of steps/s is the ratio of updates/s; `alfd local` does not count its updates, "
-          "`alfd run`'s learner does.", "",
+          "of steps/s is the ratio of updates/s" + (
+              "; `alfd local` does not count its updates, `alfd run`'s learner does."
+              if any("updates_per_s" not in r for r in results["local"])
+              else " (both count them: `updates` in `summary.json`)."), "",
           "| runtime | environment steps/s (median) | updates/s (median) | runs |",
           "|---|---:|---:|---:|"]
     run2 = results["actors"]["2"]
     L.append(f"| `alfd run` (2 actors) | {med([r['env_steps_per_s'] for r in run2]):.0f} | "
              f"{med([r['updates_per_s'] for r in run2]):.0f} | {len(run2)} |")
     loc = results["local"]
+    loc_updates = [r["updates_per_s"] for r in loc if "updates_per_s" in r]
     L.append(f"| `alfd local` (one process) | {med([r['env_steps_per_s'] for r in loc]):.0f} | "
-             f"not counted | {len(loc)} |")
+             f"{f'{med(loc_updates):.0f}' if len(loc_updates) == len(loc) else 'not counted'} | "
+             f"{len(loc)} |")
     L += ["", "## Actors", "", "On the 2-core machine; medians over the runs.", "",
           "| actors | updates/s | environment steps/s | last-50 mean return | wall-clock |",
           "|---:|---:|---:|---:|---:|"]

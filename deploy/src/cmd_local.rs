@@ -262,6 +262,9 @@ struct Produced {
     greedy: Option<f64>,
     /// The optimal value at the start state (tabular runs).
     optimal: Option<f64>,
+    /// Environment steps taken, and the learner's updates (neural runs).
+    env_steps: u64,
+    updates: Option<u64>,
 }
 
 /// What a run's callbacks share: the progress bar, the checkpoints, and why the run stopped
@@ -345,6 +348,8 @@ fn run_tabular(
     let table = serde_json::json!({ "actions": run.greedy_policy });
     write(watch.out, "policy.json", table.to_string().as_bytes())?;
     Ok(Some(Produced {
+        env_steps: run.records.last().map_or(0, |r| r.total_steps),
+        updates: None,
         records: run.records,
         demos: run.demos,
         greedy: Some(greedy[s0]),
@@ -416,6 +421,8 @@ fn neural_outputs(out: &Path, run: NeuralRun) -> anyhow::Result<Produced> {
         demos: run.expert.demos().to_vec(),
         greedy: None,
         optimal: None,
+        env_steps: run.env_steps,
+        updates: Some(run.updates),
     })
 }
 
@@ -427,12 +434,16 @@ fn write_outputs(out: &Path, produced: Produced, wall: f64) -> anyhow::Result<Ru
         demos,
         greedy,
         optimal,
+        env_steps,
+        updates,
     } = produced;
     write(out, "episodes.csv", episodes_csv(&records).as_bytes())?;
     write(out, "demos.jsonl", &demos_jsonl(&demos)?)?;
     let summary = RunSummary {
         greedy_value_at_start: greedy,
         optimal_value_at_start: optimal,
+        env_steps: Some(env_steps),
+        updates,
         ..RunSummary::of(&records, wall)
     };
     write(

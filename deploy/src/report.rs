@@ -320,11 +320,12 @@ impl RunReport<'_> {
             line("shaping", text);
         }
         if let Some(r) = &s.runtime {
+            let rate = |v: Option<f64>| thousands(v.unwrap_or(0.0).round() as u64);
             let mut text = format!(
                 "run id {}; {} environment steps/s, {} updates/s",
                 r.run_id,
-                thousands(r.env_steps_per_s.round() as u64),
-                thousands(r.updates_per_s.round() as u64)
+                rate(s.env_steps_per_s),
+                rate(s.updates_per_s)
             );
             let events = [
                 (r.actor_restarts, "actor restarts"),

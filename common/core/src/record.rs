@@ -182,6 +182,18 @@ pub struct RunSummary {
     pub greedy_value_at_start: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub optimal_value_at_start: Option<f64>,
+    /// Environment steps taken (every actor's; the episode a step limit cut short included).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub env_steps: Option<u64>,
+    /// The learner's updates (neural agents).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub updates: Option<u64>,
+    /// Their rates: over the time the actors ran in a multi-process run, over the training
+    /// loop's wall-clock in a single-process one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub env_steps_per_s: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub updates_per_s: Option<f64>,
     /// A multi-process run's own numbers.
     #[serde(default, flatten, skip_serializing_if = "Option::is_none")]
     pub runtime: Option<RuntimeSummary>,
@@ -194,11 +206,6 @@ pub struct RuntimeSummary {
     /// Lines of `demos.jsonl`: every demonstration the expert gave, including those asked in
     /// episodes still running when the run stopped.
     pub demos: usize,
-    pub env_steps: u64,
-    pub updates: u64,
-    /// Rates over the time the actors ran (from their start to the end of the run).
-    pub env_steps_per_s: f64,
-    pub updates_per_s: f64,
     pub actor_restarts: u32,
     pub expert_swaps: u32,
     /// Times the expert was restarted after its process died.
@@ -222,6 +229,10 @@ impl RunSummary {
             wall_clock_s,
             greedy_value_at_start: None,
             optimal_value_at_start: None,
+            env_steps: None,
+            updates: None,
+            env_steps_per_s: None,
+            updates_per_s: None,
             runtime: None,
         }
     }
@@ -349,13 +360,11 @@ mod tests {
             "{json}"
         );
         assert_eq!(serde_json::from_str::<RunSummary>(&json).unwrap(), s);
+        s.env_steps = Some(40);
+        s.updates_per_s = Some(39.0);
         s.runtime = Some(RuntimeSummary {
             run_id: "r1".into(),
             demos: 3,
-            env_steps: 40,
-            updates: 39,
-            env_steps_per_s: 1.0,
-            updates_per_s: 1.0,
             actor_restarts: 0,
             expert_swaps: 1,
             expert_restarts: 2,
@@ -367,6 +376,10 @@ mod tests {
         assert_eq!(
             (v["demos"].as_u64(), v["expert_swaps"].as_u64()),
             (Some(3), Some(1))
+        );
+        assert_eq!(
+            (v["env_steps"].as_u64(), v.get("updates")),
+            (Some(40), None)
         );
         assert_eq!(serde_json::from_str::<RunSummary>(&json).unwrap(), s);
     }

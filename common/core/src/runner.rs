@@ -38,6 +38,10 @@ pub struct NeuralRun {
     pub records: Vec<EpisodeRecord>,
     pub network: Mlp,
     pub expert: ExpertCore,
+    /// Environment steps taken, the episode cut short by a step limit included.
+    pub env_steps: u64,
+    /// The learner's updates.
+    pub updates: u64,
 }
 
 /// The whole learning state of a neural single-process run between two episodes, from which
@@ -348,7 +352,7 @@ pub fn run_neural_on(
     );
     let eval_seed = derive_seed(cfg.seed, "eval");
     let limit = cfg.episode_limit();
-    environment_loop::run_from(
+    let end = environment_loop::run_from(
         env.as_mut(),
         &mut actor,
         &mut expert,
@@ -380,9 +384,12 @@ pub fn run_neural_on(
         },
     )?;
     drop(actor);
+    let learner = handle.into_inner();
     Ok(NeuralRun {
         records,
-        network: handle.into_inner().network().clone(),
+        network: learner.network().clone(),
         expert: expert.core,
+        env_steps: end.progress.steps,
+        updates: learner.updates(),
     })
 }
