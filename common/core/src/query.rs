@@ -136,7 +136,7 @@ pub struct RuleSpec {
     pub schedule: Vec<u64>,
     /// B, the run's budget (rule `js-spread`).
     pub total: u64,
-    /// H, the steps over which rule `js-spread` spreads B (≥ 1).
+    /// H, the steps over which rule `js-spread` spreads B (the config requires ≥ 1 for it).
     pub horizon: u64,
 }
 
