@@ -130,7 +130,8 @@ def screen_rules():
                                          "js-spread"])
         for scale in PRIOR_SCALES:
             ms.append((f"js-prior{scale}-b{b}", f"js, prior {scale}, B = {b}",
-                       ["query.rule=js", f"budget.total={b}", f"agent.prior_scale={scale}"]))
+                       ["query.rule=js", f"budget.total={b}", f"agent.prior_scale={scale}",
+                        "query.burst=10"]))
         write(HERE / f"screen-rules-{task}.toml", f"Rule screen at B = {b}: {title}", task, 10,
               preset, [m for m in ms if m[0] != "never"],
               "The presets' query rule, screened on tuning seeds 1000-1009.")
