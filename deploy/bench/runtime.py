@@ -140,11 +140,11 @@ def write(r, out):
           "times; medians (min-max).", "",
           "| file | state | size | write | read + check + decode |", "|---|---|---:|---:|---:|",
           f"| `checkpoint.bin` (`alfd local`) | a `cartpole-bdqn-krr` run stopped when its "
-          f"10,000-transition buffer is full | {run['bytes']:,} B | {run['write_ms_median']:.2f} "
+          f"{run['transitions']:,}-transition buffer is full | {run['bytes']:,} B | {run['write_ms_median']:.2f} "
           f"ms ({run['write_ms_min']:.2f}-{run['write_ms_max']:.2f}) | "
           f"{run['read_ms_median']:.2f} ms |",
           f"| `learner.ckpt` (`alfd run`) | the recommended CartPole preset's learner with a full "
-          f"10,000-transition buffer | {lrn['bytes']:,} B | {lrn['write_ms_median']:.2f} ms "
+          f"{lrn['transitions']:,}-transition buffer | {lrn['bytes']:,} B | {lrn['write_ms_median']:.2f} ms "
           f"({lrn['write_ms_min']:.2f}-{lrn['write_ms_max']:.2f}) | "
           f"{lrn['read_ms_median']:.2f} ms |", "",
           "A write is: snapshot, encode (postcard, header, FNV-1a checksum), a temporary file, "
@@ -174,13 +174,13 @@ def main():
     r = {"machine": host.described(m), "date": m["date"], "load_before": load,
          "rounds": a.rounds, "scale": a.scale, "python_steps": a.python_steps,
          "shm": [], "zenoh": [], "python": []}
+    print("runtime.py: checkpoints", flush=True)
+    r["checkpoints"] = checkpoint_costs()
     for i in range(a.rounds):
         print(f"runtime.py: round {i + 1}/{a.rounds}", flush=True)
         r["shm"].append(ipc(a.bin, a.scale, zenoh=False))
         r["zenoh"].append(ipc(a.bin, a.scale, zenoh=True))
         r["python"].append(python_steps(a.bin, a.python, a.python_steps))
-    print("runtime.py: checkpoints", flush=True)
-    r["checkpoints"] = checkpoint_costs()
     write(r, a.out)
 
 

@@ -215,7 +215,7 @@ mod tests {
         println!(
             "BENCH {}",
             serde_json::json!({
-                "bench": "checkpoint_bin", "bytes": size,
+                "bench": "checkpoint_bin", "bytes": size, "transitions": 10_000,
                 "episode": file.state.progress().episodes, "demos": file.state.demos().len(),
                 "write_ms_median": write_ms[5], "write_ms_min": write_ms[0],
                 "write_ms_max": write_ms[9], "read_ms_median": read_ms[5],

@@ -132,8 +132,8 @@ mod tests {
         assert_eq!(std::fs::read(path(d)).unwrap(), flipped);
     }
 
-    /// The size and write time of `learner.ckpt` with a full 10,000-transition CartPole buffer
-    /// (the recommended preset's learner), as one `BENCH {json}` line that
+    /// The size and write time of `learner.ckpt` with a full replay buffer of the recommended
+    /// CartPole preset's learner, as one `BENCH {json}` line that
     /// `deploy/bench/runtime.sh` reads. Run with
     /// `cargo test --release -p alfd-learner -- --ignored --nocapture learner_checkpoint_cost`.
     #[test]
@@ -153,7 +153,9 @@ mod tests {
                 action: (i % 2) as u32,
                 reward: 1.0,
                 terminated: i % 200 == 199,
-                mask: vec![1.0, 0.0],
+                mask: (0..cfg.agent.heads())
+                    .map(|k| ((i + k) % 2) as f32)
+                    .collect(),
                 demo: i < 100,
                 horizon: 1,
             });
@@ -187,7 +189,7 @@ mod tests {
         println!(
             "BENCH {}",
             serde_json::json!({
-                "bench": "learner_ckpt", "bytes": size,
+                "bench": "learner_ckpt", "bytes": size, "transitions": cfg.agent.replay_capacity,
                 "write_ms_median": times[5], "write_ms_min": times[0], "write_ms_max": times[9],
                 "read_ms_median": loads[5],
             })
