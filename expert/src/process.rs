@@ -347,38 +347,12 @@ impl<'w> Shell<'w> {
                     self.log = None;
                 }
                 Action::Record(record) => {
-                    let log = self
-                        .log
-                        .as_mut()
-                        .context("a demonstration with no log open")?;
-                    if let Err(e) = log.append(&record) {
-                        if !e.is_disk_full() {
-                            return Err(e.into());
-                        }
+                    if !self.record(&record)? {
                         // Not on disk, so not given: the query goes unanswered (the actor acts
                         // on its own), and the budget and the model go back to what
                         // demos.jsonl holds, as a restarted expert's would.
-                        tracing::warn!(
-                            "{e}: demonstration {} not kept; no query is answered for {:?}",
-                            record.index,
-                            DISK_FULL_PAUSE
-                        );
-                        self.disk_full_until = Some(self.now() + DISK_FULL_PAUSE);
-                        self.refused += 1;
                         return self.apply(m, vec![Action::LoadDemos]);
                     }
-                    if self.refused > 0 {
-                        info!(
-                            refused = self.refused,
-                            "demonstrations are recorded again after a full disk"
-                        );
-                        self.refused = 0;
-                    }
-                    debug!(
-                        index = record.index,
-                        action = record.action,
-                        "demonstration"
-                    );
                 }
                 Action::PublishModel => publish_model(&mut self.model_tx, m)?,
                 Action::Reply {
@@ -422,6 +396,41 @@ impl<'w> Shell<'w> {
 
     /// The demonstrator's action for `state`, or `None` when an external one failed (the actor
     /// acts on its own after its timeout; no budget is spent).
+    /// Appends a demonstration to `demos.jsonl`; `false` when a full disk refused it (then no
+    /// query is asked for [`DISK_FULL_PAUSE`]).
+    fn record(&mut self, record: &alfd_common::agent::DemoRecord) -> anyhow::Result<bool> {
+        let log = self
+            .log
+            .as_mut()
+            .context("a demonstration with no log open")?;
+        if let Err(e) = log.append(record) {
+            if !e.is_disk_full() {
+                return Err(e.into());
+            }
+            tracing::warn!(
+                "{e}: demonstration {} not kept; no query is answered for {:?}",
+                record.index,
+                DISK_FULL_PAUSE
+            );
+            self.disk_full_until = Some(self.now() + DISK_FULL_PAUSE);
+            self.refused += 1;
+            return Ok(false);
+        }
+        if self.refused > 0 {
+            info!(
+                refused = self.refused,
+                "demonstrations are recorded again after a full disk"
+            );
+            self.refused = 0;
+        }
+        debug!(
+            index = record.index,
+            action = record.action,
+            "demonstration"
+        );
+        Ok(true)
+    }
+
     fn ask(&mut self, actor: u32, state: &[f32]) -> anyhow::Result<Option<usize>> {
         match &mut self.source {
             Source::BuiltIn(d) => Ok(Some(d.act(state))),

@@ -320,8 +320,10 @@ fn forward(
     Ok(())
 }
 
-/// What the mirror does with a frame from the learner's host.
+/// What the mirror does with a frame from the learner's host (a value of one call, never
+/// stored: the size of its frame does not matter).
 #[derive(Debug, PartialEq)]
+#[allow(clippy::large_enum_variant)]
 enum Down {
     /// Published to this host's actors under the sender's header; `wake`: ring every actor here
     /// afterwards (credits and control may unblock one that waits); `heard`: the learner's host
