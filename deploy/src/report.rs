@@ -511,7 +511,7 @@ pub(crate) struct SweepReport {
     /// The files written in `out` (the plot's: one or two), beside `summary.md` and the curves.
     pub files: Vec<String>,
     /// `alfd sweep` prints this line on stdout when it is not a terminal and `--json` is not
-    /// given (as it always did).
+    /// given.
     #[serde(skip)]
     pub line: String,
 }

@@ -342,7 +342,7 @@ fn a_lockstep_run_stopped_and_resumed_is_the_uninterrupted_run_to_the_byte() {
 
 /// A full disk refuses a demonstration: the expert does not exit (no restart), leaves queries
 /// unanswered for a moment, rolls its budget and model back to what `demos.jsonl` holds, and
-/// answers again once there is room; the run finishes with `demos.jsonl` gap-free and as counted.
+/// answers again once there is room; `demos.jsonl` stays gap-free and as counted.
 #[test]
 fn a_full_disk_pauses_the_expert_without_a_restart() {
     let _time = timed!();
@@ -357,15 +357,16 @@ fn a_full_disk_pauses_the_expert_without_a_restart() {
         return;
     };
     let out = dir.join("run");
+    // Long enough to go on well after the disk is freed; stopped with Ctrl-C at the end.
     let mut child = spawn_run(
         &out,
         2,
         &[
-            "episodes=400",
+            "episodes=1000000",
             "env.max_episode_steps=200",
             "query.rule=uniform",
             "query.probability=0.02",
-            "budget.total=400",
+            "budget.total=10000",
             "--checkpoint-every=1000000",
         ],
     );
@@ -375,7 +376,8 @@ fn a_full_disk_pauses_the_expert_without_a_restart() {
             .unwrap_or(0)
     };
     wait_until(&mut child, "3 demonstrations", || demos(&out) >= 3);
-    // Fill the file system to the last byte.
+    // Fill the file system to the last byte, hold it full for 2 s (dozens of queries at this
+    // rate), then free it.
     let filler = dir.join("filler");
     let mut f = std::fs::File::create(&filler).unwrap();
     let block = vec![0u8; 1 << 16];
@@ -383,21 +385,21 @@ fn a_full_disk_pauses_the_expert_without_a_restart() {
     for small in [4096, 512, 64, 1] {
         while std::io::Write::write_all(&mut f, &block[..small]).is_ok() {}
     }
-    // The expert's warning cannot be written to its log while the disk is full: the disk is
-    // held full for 3 s (dozens of queries at this rate), and the line the expert writes when it
-    // records again shows that it refused some meanwhile.
-    std::thread::sleep(Duration::from_secs(3));
+    std::thread::sleep(Duration::from_secs(2));
     drop(f);
     std::fs::remove_file(&filler).unwrap();
-    let (o, s) = finished(child, &out, 400);
+    // The line the expert writes when it records again shows that it refused some meanwhile
+    // (its warnings may not have found room in its log while the disk was full).
+    let log = out.join("expert-1.log");
+    wait_until(&mut child, "the expert recording again", || {
+        std::fs::read_to_string(&log)
+            .is_ok_and(|t| t.contains("demonstrations are recorded again after a full disk"))
+    });
+    let o = interrupt(child);
+    assert_eq!(o.status.code(), Some(130), "Ctrl-C's exit code: {}", text(&o));
+    let s = summary(&out);
     assert_eq!(s["expert_restarts"].as_u64(), Some(0), "{}", text(&o));
-    let records = check_run_dir(&out, 400);
+    let records = check_run_dir(&out, 10_000);
     let indices: Vec<u32> = records.iter().map(|d| d.index).collect();
     assert_eq!(indices, (0..records.len() as u32).collect::<Vec<_>>());
-    let log = std::fs::read_to_string(out.join("expert-1.log")).unwrap();
-    assert!(
-        log.contains("demonstrations are recorded again after a full disk"),
-        "{log}"
-    );
-    check_rows_and_demos(&out, 400);
 }

@@ -125,7 +125,7 @@ fn tls_peers_without_a_certificate_of_the_runs_ca_are_refused_and_the_listener_g
         let refused = got.as_ref().is_err_and(|e| e.contains("Unable to connect"));
         assert!(refused, "{what}: {got:?}");
     }
-    // The listener serves its run's hosts as before.
+    // The listener goes on serving its run's hosts.
     assert_eq!(ping(client(good)), Ok("pong".to_owned()));
     // And said why it refused each (the handshake's reasons, as rustls names them).
     let said = String::from_utf8_lossy(&warnings.lock().unwrap()).into_owned();

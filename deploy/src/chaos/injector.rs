@@ -118,7 +118,7 @@ impl Injector {
     }
 
     /// Aims kills and pauses at the actors' environment adapters too, each as likely as an
-    /// actor (without them the schedule of a seed is as before).
+    /// actor (with `false`, a seed gives the schedule of a run without adapters).
     pub fn with_adapters(mut self, adapters: bool) -> Self {
         self.adapters = adapters;
         self

@@ -79,7 +79,7 @@ pub struct SweepArgs {
     #[arg(long)]
     pub quiet: bool,
     /// Print only a machine-readable line: the sweep's numbers and files as JSON on stdout.
-    /// (Without it, a stdout that is not a terminal gets the one-line summary as before.)
+    /// (Without it, a stdout that is not a terminal gets the one-line summary.)
     #[arg(long)]
     pub json: bool,
     /// Run only shard I of N (1-based) of a training sweep: the runs whose index k in the fixed
