@@ -396,7 +396,12 @@ fn a_full_disk_pauses_the_expert_without_a_restart() {
             .is_ok_and(|t| t.contains("demonstrations are recorded again after a full disk"))
     });
     let o = interrupt(child);
-    assert_eq!(o.status.code(), Some(130), "Ctrl-C's exit code: {}", text(&o));
+    assert_eq!(
+        o.status.code(),
+        Some(130),
+        "Ctrl-C's exit code: {}",
+        text(&o)
+    );
     let s = summary(&out);
     assert_eq!(s["expert_restarts"].as_u64(), Some(0), "{}", text(&o));
     let records = check_run_dir(&out, 10_000);
