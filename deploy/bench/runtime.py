@@ -147,8 +147,9 @@ def write(r, out):
           f"{lrn['transitions']:,}-transition buffer | {lrn['bytes']:,} B | {lrn['write_ms_median']:.2f} ms "
           f"({lrn['write_ms_min']:.2f}-{lrn['write_ms_max']:.2f}) | "
           f"{lrn['read_ms_median']:.2f} ms |", "",
-          "A write is: snapshot, encode (postcard, header, FNV-1a checksum), a temporary file, "
-          "fsync, rename, fsync of the directory.", ""]
+          "A write is: encode (postcard, header, FNV-1a checksum), a temporary file, fsync, "
+          "rename, fsync of the directory; `learner.ckpt`'s also takes the learner's snapshot "
+          "first, `checkpoint.bin`'s starts from one.", ""]
     with open(os.path.join(out, "summary.md"), "w") as f:
         f.write("\n".join(L))
 

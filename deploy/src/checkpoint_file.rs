@@ -215,7 +215,8 @@ mod tests {
         println!(
             "BENCH {}",
             serde_json::json!({
-                "bench": "checkpoint_bin", "bytes": size, "transitions": 10_000,
+                "bench": "checkpoint_bin", "bytes": size,
+                "transitions": cfg.agent.replay_capacity,
                 "episode": file.state.progress().episodes, "demos": file.state.demos().len(),
                 "write_ms_median": write_ms[5], "write_ms_min": write_ms[0],
                 "write_ms_max": write_ms[9], "read_ms_median": read_ms[5],

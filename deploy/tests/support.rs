@@ -217,3 +217,9 @@ impl Drop for Tmpfs<'_> {
         let _ = std::process::Command::new("umount").arg(self.0).status();
     }
 }
+
+/// Whether the tests run under CI (`CI` set, and not to `false` or `0`): a test that cannot run
+/// there fails instead of skipping.
+pub(crate) fn under_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0")
+}

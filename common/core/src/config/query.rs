@@ -32,7 +32,7 @@ pub struct QueryConfig {
     pub gap: u64,
     /// Rule `js-spread`: the steps H over which budget B is spread (0: the run's `steps`; needed
     /// when the run is limited by `episodes` only).
-    #[serde(default, skip_serializing_if = "is_zero")]
+    #[serde(default, skip_serializing_if = "super::is_zero_u64")]
     pub horizon: u64,
     /// Rule `random`: the global steps read from `schedule` by
     /// [`ExperimentConfig::load_schedule`] (not part of the TOML).
@@ -40,9 +40,6 @@ pub struct QueryConfig {
     pub schedule_steps: Vec<u64>,
 }
 
-fn is_zero(v: &u64) -> bool {
-    *v == 0
-}
 fn default_query_rule() -> RuleKind {
     RuleKind::Never
 }
