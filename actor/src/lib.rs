@@ -69,7 +69,7 @@ pub fn seed_streams(actor_id: u16, incarnation: u64) -> (String, String) {
 }
 
 /// Runs the actor until the launcher says stop or a termination signal arrives.
-pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
+pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let me = identity(args)?;
     let setup = args.process.load()?;
     let (cfg, runtime) = (&setup.config, &setup.runtime);
@@ -189,13 +189,14 @@ fn log_end(
 }
 
 /// This actor's id and incarnation, checked.
-fn identity(args: &Args) -> anyhow::Result<Identity> {
-    anyhow::ensure!(
-        (args.actor_id as usize) < MAX_ACTORS,
-        "--actor-id must be below {MAX_ACTORS}, got {}",
-        args.actor_id
-    );
-    anyhow::ensure!(args.incarnation >= 1, "--incarnation must be at least 1");
+fn identity(args: &Args) -> alfd_harness::Result<Identity> {
+    if args.actor_id as usize >= MAX_ACTORS {
+        let id = args.actor_id;
+        return Err(BadInput(format!("--actor-id must be below {MAX_ACTORS}, got {id}")).into());
+    }
+    if args.incarnation < 1 {
+        return Err(BadInput("--incarnation must be at least 1".into()).into());
+    }
     Ok(Identity {
         id: args.actor_id,
         incarnation: args.incarnation,
@@ -207,7 +208,7 @@ fn wire_expert<'s, 'w>(
     session: &'s Session<'w>,
     me: Identity,
     setup: &alfd_harness::Setup,
-) -> anyhow::Result<WireExpert<'s, 'w>> {
+) -> alfd_harness::Result<WireExpert<'s, 'w>> {
     let (cfg, runtime) = (&setup.config, &setup.runtime);
     let schedule = cfg.shaping_enabled().then(|| cfg.shaping.schedule());
     Ok(
@@ -316,7 +317,7 @@ fn restore(
     id: u16,
     step: u64,
     config_toml: &str,
-) -> anyhow::Result<checkpoint::ActorCheckpoint> {
+) -> alfd_harness::Result<checkpoint::ActorCheckpoint> {
     let path = checkpoint::path(run_dir, id);
     let file = checkpoint::load(run_dir, id, config_toml)?.ok_or_else(|| {
         BadInput(format!(
@@ -340,7 +341,7 @@ fn restore(
 }
 
 /// Waits until the launcher says stop or a termination signal arrives; the reason.
-fn wait_for_stop(session: &Session<'_>) -> anyhow::Result<&'static str> {
+fn wait_for_stop(session: &Session<'_>) -> alfd_harness::Result<&'static str> {
     loop {
         if let Some(stop) = session.should_stop()? {
             return Ok(stop.0);

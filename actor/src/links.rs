@@ -12,7 +12,7 @@ use alfd_common::demo_model::DemoModel;
 use alfd_common::environment_loop::{Adder, ExpertClient, LoopError, Result, Stop, VariableSource};
 use alfd_common::replay::Transition;
 use alfd_common::shaping::ShapingSchedule;
-use alfd_harness::Session;
+use alfd_harness::{Session, What as _};
 use alfd_wire::{
     Bell, Credits, DemoModelReceiver, QueryClient, QueryRequest, Receiver, Sender, TransitionBatch,
     WeightsReceiver,
@@ -48,7 +48,7 @@ impl<'s, 'w> WireAdder<'s, 'w> {
         window: u64,
         obs_dim: usize,
         heads: usize,
-    ) -> anyhow::Result<Self> {
+    ) -> alfd_harness::Result<Self> {
         let wire = session.wire();
         Ok(Self {
             session,
@@ -195,7 +195,7 @@ pub struct WireVariables<'w> {
 }
 
 impl<'w> WireVariables<'w> {
-    pub fn new(session: &Session<'w>) -> anyhow::Result<Self> {
+    pub fn new(session: &Session<'w>) -> alfd_harness::Result<Self> {
         Ok(Self {
             rx: session.wire().weights_receiver()?,
             params: Vec::new(),
@@ -210,20 +210,22 @@ impl<'w> WireVariables<'w> {
         session: &Session<'_>,
         actor: &mut NeuralActor,
         timeout: Duration,
-    ) -> anyhow::Result<Option<Stop>> {
+    ) -> alfd_harness::Result<Option<Stop>> {
         let start = Instant::now();
         loop {
             if let Some(h) = self.rx.latest_into(&mut self.params)? {
-                actor.set_weights(&self.params, h.version)?;
+                actor
+                    .set_weights(&self.params, h.version)
+                    .what(|| "the learner's first weights".into())?;
                 return Ok(None);
             }
             if let Some(stop) = session.should_stop()? {
                 return Ok(Some(stop));
             }
-            anyhow::ensure!(
-                start.elapsed() < timeout,
-                "no weights from the learner within {timeout:?}"
-            );
+            if start.elapsed() >= timeout {
+                let why = format!("no weights from the learner within {timeout:?}");
+                return Err(alfd_harness::HarnessError::Run(why));
+            }
             if let Some(stop) = session.wait(Duration::from_millis(50))? {
                 return Ok(Some(stop));
             }
@@ -284,7 +286,7 @@ impl<'s, 'w> WireExpert<'s, 'w> {
         budget: u32,
         schedule: Option<ShapingSchedule>,
         timeout: Duration,
-    ) -> anyhow::Result<Self> {
+    ) -> alfd_harness::Result<Self> {
         let wire = session.wire();
         Ok(Self {
             session,

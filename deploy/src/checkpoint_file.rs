@@ -106,7 +106,7 @@ mod tests {
 
     #[test]
     fn a_saved_checkpoint_loads_back() {
-        let tmp = crate::run_dir::test_dir("ckpt");
+        let tmp = alfd_harness::test_dir("ckpt");
         let d = tmp.path();
         save(d, &state(), "seed = 0\n").unwrap();
         let back = load(d, "seed = 0\n").unwrap();
@@ -116,7 +116,7 @@ mod tests {
 
     #[test]
     fn a_bad_checkpoint_is_refused_with_its_reason_and_left_as_it_is() {
-        let tmp = crate::run_dir::test_dir("ckpt");
+        let tmp = alfd_harness::test_dir("ckpt");
         let d = tmp.path();
         let good = to_bytes(&state(), "seed = 0\n");
         let mut flipped = good.clone();
@@ -190,7 +190,7 @@ mod tests {
             state: RunState::Neural(Box::new(state)),
         };
         let config_toml = cfg.to_toml();
-        let tmp = crate::run_dir::test_dir("ckpt");
+        let tmp = alfd_harness::test_dir("ckpt");
         let d = tmp.path();
         // Each write: encode (postcard, header, checksum) and the atomic write; then ten reads.
         let mut write_ms = Vec::new();

@@ -582,7 +582,7 @@ mod tests {
 
     #[test]
     fn show_reads_a_map_file_and_refuses_bad_ones() {
-        let tmp = crate::run_dir::test_dir("cmd-env");
+        let tmp = alfd_harness::test_dir("cmd-env");
         let dir = tmp.path();
         let good = dir.join("good.txt");
         std::fs::write(&good, "S.G\n").expect("write");

@@ -12,8 +12,8 @@ use alfd_common::runner::{run_neural, run_tabular};
 use alfd_expert::registry::{self, ExpertEntry};
 use anyhow::Context as _;
 
-use crate::output::write;
 use crate::usage::usage;
+use alfd_lab::output::write;
 
 #[derive(Debug, clap::Args)]
 pub struct ExpertArgs {
@@ -342,5 +342,6 @@ fn update_manifest(dir: &Path, entries: Vec<ExpertEntry>) -> anyhow::Result<()> 
         dir,
         "manifest.json",
         (serde_json::to_string_pretty(&all)? + "\n").as_bytes(),
-    )
+    )?;
+    Ok(())
 }

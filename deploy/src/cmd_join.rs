@@ -190,8 +190,8 @@ fn write_join_files(
     expert_host_id: &str,
 ) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    crate::output::write(dir, "config.toml", joined.config_toml.as_bytes())?;
-    crate::output::write(
+    alfd_lab::output::write(dir, "config.toml", joined.config_toml.as_bytes())?;
+    alfd_lab::output::write(
         dir,
         alfd_harness::RUNTIME_FILE,
         joined.runtime_toml.as_bytes(),
@@ -204,11 +204,12 @@ fn write_join_files(
         "connect": endpoint.to_string(),
         "actors": joined.actors,
     });
-    crate::output::write(
+    alfd_lab::output::write(
         dir,
         "join.json",
         serde_json::to_string_pretty(&record)?.as_bytes(),
-    )
+    )?;
+    Ok(())
 }
 
 /// This host's part of a run: its bridges and where its processes go.

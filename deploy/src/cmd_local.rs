@@ -20,10 +20,11 @@ use alfd_common::runner::{
 use anyhow::Context as _;
 
 use crate::checkpoint_file::{self, CheckpointFile};
-use crate::output::write;
-use crate::report::{self, Output};
+use crate::setup;
 use crate::usage::usage;
-use crate::{run_dir, setup};
+use alfd_harness::run_dir;
+use alfd_lab::output::write;
+use alfd_lab::report::{self, Output};
 
 #[derive(Debug, clap::Args)]
 pub struct LocalArgs {
@@ -86,7 +87,7 @@ pub(crate) fn finish(
     output: Output,
 ) -> anyhow::Result<()> {
     match summary {
-        Some(summary) => report::finish_run(cfg, dir, &summary, output),
+        Some(summary) => Ok(report::finish_run(cfg, dir, &summary, output)?),
         None => {
             eprintln!("stopped as asked (--stop-after-episodes); continue with `alfd resume`");
             Ok(())

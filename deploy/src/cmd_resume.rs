@@ -16,9 +16,10 @@ use std::path::PathBuf;
 
 use crate::checkpoint_file;
 use crate::cmd_local::{finish, run_pieces, Pieces, Resumable};
-use crate::report::Output;
+use crate::setup;
 use crate::usage::usage;
-use crate::{run_dir, setup};
+use alfd_harness::run_dir;
+use alfd_lab::report::Output;
 
 #[derive(Debug, clap::Args)]
 pub struct ResumeArgs {

@@ -7,9 +7,10 @@ use std::time::{Duration, Instant};
 use alfd_harness::RuntimeConfig;
 use alfd_wire::MAX_ACTORS;
 
-use crate::report::{self, Output};
+use crate::setup;
 use crate::usage::usage;
-use crate::{run_dir, setup};
+use alfd_harness::run_dir;
+use alfd_lab::report::{self, Output};
 use alfd_launcher::{
     self as launcher, Plan, SwapRequest, SwapResponse, SWAP_REQUEST, SWAP_RESPONSE,
 };
@@ -218,7 +219,7 @@ fn runtime_config(
 pub fn finish(plan: &Plan, output: Output) -> anyhow::Result<()> {
     let run_dir = &plan.run_dir;
     let summary = launcher::launch(plan)?;
-    crate::output::write(
+    alfd_lab::output::write(
         run_dir,
         "summary.json",
         serde_json::to_string_pretty(&summary)?.as_bytes(),
@@ -267,7 +268,7 @@ pub fn swap(args: SwapArgs) -> anyhow::Result<()> {
         id: id.clone(),
         expert: args.expert.clone(),
     };
-    crate::output::write(
+    alfd_lab::output::write(
         &args.run,
         SWAP_REQUEST,
         serde_json::to_string(&request)?.as_bytes(),

@@ -19,9 +19,6 @@ mod cmd_run;
 mod cmd_sweep;
 mod link_flags;
 mod local_remote;
-mod output;
-mod report;
-mod run_dir;
 mod setup;
 mod usage;
 
@@ -105,7 +102,7 @@ fn main() {
         Command::Config(a) => cmd_config::run(a),
     };
     if let Err(err) = result {
-        eprintln!("error: {err:#}");
+        eprintln!("error: {}", alfd_harness::describe(err.as_ref()));
         std::process::exit(usage::exit_code(&err));
     }
 }

@@ -17,11 +17,11 @@ use std::time::{Duration, Instant};
 use alfd_common::agent::{Demonstrator, ExpertCore};
 use alfd_harness::python::Adapter;
 use alfd_harness::{BadInput, ProcessArgs, Session};
+use alfd_harness::{HarnessError, What as _};
 use alfd_wire::{
     name_to_bytes, progress_kind, ActorBells, DemoModelHeader, Doorbell, IncomingQuery, Process,
     Progress, QueryServer, RemoteDemonstrator, Role, WireError,
 };
-use anyhow::Context as _;
 use tracing::{debug, info};
 
 use crate::demo_log::{self, DemoLog};
@@ -63,7 +63,7 @@ type Machine<'w> = ExpertMachine<IncomingQuery<'w>>;
 
 /// Runs the expert until the launcher says stop, a newer expert replaces it, or a termination
 /// signal arrives.
-pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
+pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let setup = args.process.load()?;
     let (cfg, runtime) = (&setup.config, &setup.runtime);
     let (obs_dim, actions) = setup.env_dims()?;
@@ -171,7 +171,7 @@ fn source(
     me: Process,
     schema: u32,
     actions: usize,
-) -> anyhow::Result<Source> {
+) -> alfd_harness::Result<Source> {
     if name == HUMAN {
         return Ok(Source::Person);
     }
@@ -200,7 +200,7 @@ fn start_page(
     env: &str,
     actions: usize,
     core: &ExpertCore,
-) -> anyhow::Result<HumanPage> {
+) -> alfd_harness::Result<HumanPage> {
     let page = HumanPage::start(
         port,
         PageState {
@@ -260,7 +260,7 @@ impl<'w> Shell<'w> {
     }
 
     /// Every query waiting on the wire, as events.
-    fn poll_queries(&mut self, m: &mut Machine<'w>) -> anyhow::Result<()> {
+    fn poll_queries(&mut self, m: &mut Machine<'w>) -> alfd_harness::Result<()> {
         loop {
             let query = match self.server.receive() {
                 Ok(Some(q)) => q,
@@ -287,7 +287,7 @@ impl<'w> Shell<'w> {
     }
 
     /// The queries whose actors stopped waiting, the person's decisions, and the page's state.
-    fn poll_page(&mut self, m: &mut Machine<'w>) -> anyhow::Result<()> {
+    fn poll_page(&mut self, m: &mut Machine<'w>) -> alfd_harness::Result<()> {
         let Some(decisions) = self.page.as_ref().map(HumanPage::decisions) else {
             return Ok(());
         };
@@ -323,7 +323,7 @@ impl<'w> Shell<'w> {
         &mut self,
         m: &mut Machine<'w>,
         actions: Vec<Action<IncomingQuery<'w>>>,
-    ) -> anyhow::Result<Option<&'static str>> {
+    ) -> alfd_harness::Result<Option<&'static str>> {
         for action in actions {
             match action {
                 Action::Exit(reason) => return Ok(Some(reason)),
@@ -334,8 +334,10 @@ impl<'w> Shell<'w> {
                     let n = records.len();
                     let next = m
                         .activate(records)
-                        .context("cannot refit the demonstration model on demos.jsonl")?;
-                    self.log = Some(DemoLog::open(&self.demos_path)?);
+                        .what(|| "cannot refit the demonstration model on demos.jsonl".into())?;
+                    let log =
+                        DemoLog::open(&self.demos_path).what(|| "the demonstration log".into())?;
+                    self.log = Some(log);
                     let left = m.core().budget().remaining();
                     info!(demos = n, budget_left = left, "active: answering queries");
                     if let Some(reason) = self.apply(m, next)? {
@@ -398,14 +400,13 @@ impl<'w> Shell<'w> {
     /// acts on its own after its timeout; no budget is spent).
     /// Appends a demonstration to `demos.jsonl`; `false` when a full disk refused it (then no
     /// query is asked for [`DISK_FULL_PAUSE`]).
-    fn record(&mut self, record: &alfd_common::agent::DemoRecord) -> anyhow::Result<bool> {
-        let log = self
-            .log
-            .as_mut()
-            .context("a demonstration with no log open")?;
+    fn record(&mut self, record: &alfd_common::agent::DemoRecord) -> alfd_harness::Result<bool> {
+        let Some(log) = self.log.as_mut() else {
+            return Err(HarnessError::Run("a demonstration with no log open".into()));
+        };
         if let Err(e) = log.append(record) {
             if !e.is_disk_full() {
-                return Err(e.into());
+                return Err(e).what(|| "the demonstration log".into());
             }
             tracing::warn!(
                 "{e}: demonstration {} not kept; no query is answered for {:?}",
@@ -431,7 +432,7 @@ impl<'w> Shell<'w> {
         Ok(true)
     }
 
-    fn ask(&mut self, actor: u32, state: &[f32]) -> anyhow::Result<Option<usize>> {
+    fn ask(&mut self, actor: u32, state: &[f32]) -> alfd_harness::Result<Option<usize>> {
         match &mut self.source {
             Source::BuiltIn(d) => Ok(Some(d.act(state))),
             Source::External { adapter, remote } => match remote.act(state, self.query_timeout) {
@@ -439,7 +440,8 @@ impl<'w> Shell<'w> {
                 Err(e) => {
                     tracing::error!(actor, "external expert: {e}; query dropped");
                     if let Some(why) = adapter.gone() {
-                        anyhow::bail!("the external expert stopped: {why}");
+                        let why = format!("the external expert stopped: {why}");
+                        return Err(HarnessError::Run(why));
                     }
                     Ok(None)
                 }
@@ -448,7 +450,7 @@ impl<'w> Shell<'w> {
         }
     }
 
-    fn status(&mut self, state: u32, core: &ExpertCore) -> anyhow::Result<()> {
+    fn status(&mut self, state: u32, core: &ExpertCore) -> alfd_harness::Result<()> {
         self.progress.send(Progress {
             kind: progress_kind::STATUS,
             state,
@@ -463,7 +465,7 @@ impl<'w> Shell<'w> {
 
 /// Rings the doorbell of the actor that asked (an id beyond `u16` has none: it is not truncated
 /// onto another actor's).
-fn ring_actor(actors: &mut ActorBells<'_>, actor: u32) -> anyhow::Result<()> {
+fn ring_actor(actors: &mut ActorBells<'_>, actor: u32) -> alfd_harness::Result<()> {
     if let Ok(id) = u16::try_from(actor) {
         actors.ring(id)?;
     }
@@ -472,11 +474,14 @@ fn ring_actor(actors: &mut ActorBells<'_>, actor: u32) -> anyhow::Result<()> {
 
 /// Publishes the current demonstration model (empty bytes when there is none yet), with the
 /// budget and the step of the last demonstration.
-fn publish_model(tx: &mut alfd_wire::DemoModelSender<'_>, m: &Machine<'_>) -> anyhow::Result<()> {
+fn publish_model(
+    tx: &mut alfd_wire::DemoModelSender<'_>,
+    m: &Machine<'_>,
+) -> alfd_harness::Result<()> {
     let core = m.core();
     let bytes = match core.model() {
         Some(model) => {
-            postcard::to_stdvec(model).context("cannot serialise the demonstration model")?
+            postcard::to_stdvec(model).what(|| "cannot serialise the demonstration model".into())?
         }
         None => Vec::new(),
     };

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use alfd_common::agent::NeuralLearner;
 use alfd_common::checkpoint::Cadence;
 use alfd_common::rng::{derive_seed, seeded};
-use alfd_harness::{write_atomically_patiently, BadInput, ProcessArgs, Session, Setup};
+use alfd_harness::{write_atomically_patiently, BadInput, ProcessArgs, Session, Setup, What as _};
 use alfd_wire::{
     self as wire, process_state, progress_kind, ActorBells, Credits, Doorbell, Process, Progress,
     Role, Wake, WireError, MAX_ACTORS,
@@ -54,7 +54,7 @@ enum End {
 /// Runs the learner until the launcher says stop or a termination signal arrives (or the launcher
 /// is gone); checkpoints its whole state to `RUN_DIR/learner.ckpt` every `checkpoint_every`
 /// updates and at the end, and saves the final weights to `RUN_DIR/weights.safetensors`.
-pub fn run(args: &Args, schema: u32) -> anyhow::Result<()> {
+pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let setup = args.process.load()?;
     let run_dir = &args.process.run_dir;
     let config_toml = checkpoint::config_text(run_dir)?;
@@ -101,7 +101,7 @@ fn serve(
     config_toml: &str,
     restored: Option<LearnerCheckpoint>,
     wire: &wire::Wire,
-) -> anyhow::Result<End> {
+) -> alfd_harness::Result<End> {
     let runtime = &setup.runtime;
     let run_dir = &args.process.run_dir;
     let session = Session::join(wire, Doorbell::Learner, runtime.handshake_timeout())?;
@@ -176,7 +176,7 @@ fn machine(
     setup: &Setup,
     restored: Option<&LearnerCheckpoint>,
     run_dir: &std::path::Path,
-) -> anyhow::Result<LearnerMachine<NeuralLearner>> {
+) -> alfd_harness::Result<LearnerMachine<NeuralLearner>> {
     let (cfg, runtime) = (&setup.config, &setup.runtime);
     let (obs_dim, num_actions) = setup.env_dims()?;
     let mut learner = NeuralLearner::new(
@@ -269,7 +269,7 @@ impl Shell<'_, '_> {
         &mut self,
         m: &mut Machine,
         session: &Session<'_>,
-    ) -> anyhow::Result<(&'static str, End)> {
+    ) -> alfd_harness::Result<(&'static str, End)> {
         let mut since_check = 0u32;
         loop {
             self.receive(m)?;
@@ -310,7 +310,7 @@ impl Shell<'_, '_> {
     }
 
     /// Takes in whatever arrived.
-    fn receive(&mut self, m: &mut Machine) -> anyhow::Result<()> {
+    fn receive(&mut self, m: &mut Machine) -> alfd_harness::Result<()> {
         loop {
             match self.rx.receive() {
                 Ok(Some(batch)) => m.accept(&batch),
@@ -323,7 +323,7 @@ impl Shell<'_, '_> {
         }
     }
 
-    fn idle(&mut self, m: &Machine, session: &Session<'_>) -> anyhow::Result<Wake> {
+    fn idle(&mut self, m: &Machine, session: &Session<'_>) -> alfd_harness::Result<Wake> {
         let since = Instant::now();
         self.stats.idle_waits += 1;
         let wake = session.wait_for(Duration::from_millis(100))?;
@@ -343,7 +343,7 @@ impl Shell<'_, '_> {
         Ok(wake)
     }
 
-    fn carry_out(&mut self, m: &mut Machine, todo: Todo) -> anyhow::Result<()> {
+    fn carry_out(&mut self, m: &mut Machine, todo: Todo) -> alfd_harness::Result<()> {
         if todo.publish {
             let t = Instant::now();
             self.publish(m)?;
@@ -365,9 +365,12 @@ impl Shell<'_, '_> {
         Ok(())
     }
 
-    fn publish(&mut self, m: &Machine) -> anyhow::Result<()> {
+    fn publish(&mut self, m: &Machine) -> alfd_harness::Result<()> {
         let learner = m.learner();
-        learner.network().copy_params_into(&mut self.params)?;
+        learner
+            .network()
+            .copy_params_into(&mut self.params)
+            .what(|| "the weights to publish".into())?;
         let v = learner.updates();
         self.weights_tx
             .publish(v, v, m.book().env_steps(), &self.params)?;
@@ -375,7 +378,7 @@ impl Shell<'_, '_> {
     }
 
     /// Publishes the grants, and wakes the actors that wait for them.
-    fn send_credits(&mut self, m: &mut Machine) -> anyhow::Result<()> {
+    fn send_credits(&mut self, m: &mut Machine) -> alfd_harness::Result<()> {
         let (credits, wake) = m.grant();
         self.credits_tx.send(credits)?;
         for id in wake {
@@ -384,7 +387,7 @@ impl Shell<'_, '_> {
         Ok(())
     }
 
-    fn checkpoint(&mut self, m: &Machine) -> anyhow::Result<()> {
+    fn checkpoint(&mut self, m: &Machine) -> alfd_harness::Result<()> {
         let t = Instant::now();
         let ckpt = LearnerCheckpoint {
             learner: m.learner().snapshot(),
@@ -404,7 +407,7 @@ impl Shell<'_, '_> {
         Ok(())
     }
 
-    fn status(&mut self, m: &mut Machine, state: u32) -> anyhow::Result<()> {
+    fn status(&mut self, m: &mut Machine, state: u32) -> alfd_harness::Result<()> {
         self.progress.send(Progress {
             kind: progress_kind::STATUS,
             state,

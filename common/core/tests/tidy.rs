@@ -608,6 +608,18 @@ fn the_dependency_graph_keeps_its_shape() {
         "{:?}",
         inside("alfd-launcher")
     );
+    // The lab (sweeps, statistics, plots, reports) trains through a trait the CLI passes in: it
+    // needs no process, wire or launcher.
+    assert!(
+        inside("alfd-lab").is_subset(&BTreeSet::from([
+            "alfd-common",
+            "alfd-harness",
+            "alfd-wire",
+            "alfd-expert"
+        ])),
+        "{:?}",
+        inside("alfd-lab")
+    );
     for m in &g.members {
         assert!(
             !g.direct(g.name(m)).contains("alfd-deploy"),
@@ -623,9 +635,17 @@ fn the_dependency_graph_keeps_its_shape() {
         "alfd-harness",
         "alfd-bridge",
         "alfd-launcher",
+        "alfd-lab",
     ] {
         assert!(!g.normal(lib).contains("anyhow"), "{lib} depends on anyhow");
         assert!(g.normal(lib).contains("thiserror"), "{lib}");
+    }
+    // The process crates report the harness's typed error (their binaries print it).
+    for process in ["alfd-actor", "alfd-learner", "alfd-expert"] {
+        assert!(
+            !g.normal(process).contains("anyhow"),
+            "{process} depends on anyhow"
+        );
     }
 }
 

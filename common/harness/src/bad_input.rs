@@ -34,6 +34,12 @@ pub enum HarnessError {
     /// A child process (the Python adapter) failed; its own words.
     #[error("{0}")]
     Child(String),
+    /// A process cannot go on, for the reason the message gives (no weights from the learner in
+    /// time, an external expert that stopped).
+    #[error("{0}")]
+    Run(String),
+    #[error(transparent)]
+    Loop(#[from] alfd_common::environment_loop::LoopError),
 }
 
 impl HarnessError {
@@ -93,10 +99,15 @@ pub fn chain<'e>(
     std::iter::successors(Some(err), |&e| e.source())
 }
 
-/// An error with its sources, as `outer: inner: innermost` (anyhow's `{:#}`).
+/// An error with its sources, as `outer: inner: innermost` (anyhow's `{:#}`), a message said
+/// once where a wrapper repeats its source's (an enum variant that shows the error it holds).
 pub fn describe(err: &(dyn Error + 'static)) -> String {
-    chain(err)
-        .map(|e| e.to_string())
-        .collect::<Vec<_>>()
-        .join(": ")
+    let mut parts: Vec<String> = Vec::new();
+    for e in chain(err) {
+        let text = e.to_string();
+        if parts.last() != Some(&text) {
+            parts.push(text);
+        }
+    }
+    parts.join(": ")
 }

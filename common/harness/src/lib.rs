@@ -3,12 +3,14 @@
 //! (`process`), the runtime settings every process reads from `runtime.toml` (`runtime`),
 //! joining the run and the one `should_stop` (`session`), the Python adapters of Gymnasium
 //! environments and external experts (`python`), start-up (logging, the schema-version
-//! hook: `startup`), and durable file writes (`fs`).
+//! hook: `startup`), durable file writes (`fs`), and a run directory's ownership (`run_dir`:
+//! one run per directory, held by a `flock`).
 
 mod bad_input;
 mod fs;
 mod process;
 pub mod python;
+pub mod run_dir;
 mod runtime;
 mod session;
 mod startup;

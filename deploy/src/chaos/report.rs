@@ -50,12 +50,12 @@ pub(super) fn report(chaos: &Chaos<'_>, ended: Result<(), String>) -> anyhow::Re
         "events": chaos.events,
         "invariants": verdicts,
     });
-    crate::output::write(
+    alfd_lab::output::write(
         dir,
         "chaos.json",
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;
-    crate::output::write(
+    alfd_lab::output::write(
         dir,
         "chaos.md",
         markdown(&report, &summary_of(dir)).as_bytes(),
@@ -91,7 +91,7 @@ pub(super) fn summarize(dir: &Path) -> anyhow::Result<()> {
         .map_err(|e| crate::usage::usage(format!("cannot read {}: {e}", path.display())))?;
     let report: Value = serde_json::from_str(&text)
         .map_err(|e| crate::usage::usage(format!("{}: {e}", path.display())))?;
-    crate::output::write(
+    alfd_lab::output::write(
         dir,
         "chaos.md",
         markdown(&report, &summary_of(dir)).as_bytes(),

@@ -21,16 +21,16 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use crate::error::Context as _;
 use alfd_common::checkpoint::fnv1a64;
 use alfd_common::config::ExperimentConfig;
-use anyhow::Context as _;
 use serde::{Deserialize, Serialize};
 
 use super::experiment::Experiment;
 use super::{is_complete, run_dir};
+use crate::error::usage;
 use crate::output::write;
 use crate::report::Output;
-use crate::usage::usage;
 
 /// The most shards a sweep is split into.
 pub const MAX_SHARDS: u64 = 10_000;
@@ -47,7 +47,7 @@ pub struct Shard {
 
 impl Shard {
     /// Parses `--shard I/N`: bad input (exit code 2) naming the flag unless 1 ≤ I ≤ N ≤ 10,000.
-    pub fn parse(s: &str) -> anyhow::Result<Self> {
+    pub fn parse(s: &str) -> crate::Result<Self> {
         let bad = |why: &str| usage(format!("--shard {s}: {why}"));
         let (i, n) = s
             .split_once('/')
@@ -137,7 +137,7 @@ fn hex(h: u64) -> String {
 /// The experiment's fingerprint and each method's config hash. Covers everything that makes the
 /// runs and the outputs (settings, seeds, episodes, methods and their resolved configs), not
 /// where the files are.
-pub fn fingerprint(exp: &Experiment) -> anyhow::Result<(String, Vec<MethodHash>)> {
+pub fn fingerprint(exp: &Experiment) -> crate::Result<(String, Vec<MethodHash>)> {
     let mut text = String::new();
     let _ = writeln!(
         text,
@@ -191,7 +191,7 @@ pub fn runs_of(exp: &Experiment, shard: Shard) -> Vec<RunId> {
         .collect()
 }
 
-fn shard_file(exp: &Experiment, shard: Shard, complete: bool) -> anyhow::Result<ShardFile> {
+fn shard_file(exp: &Experiment, shard: Shard, complete: bool) -> crate::Result<ShardFile> {
     let (experiment_hash, methods) = fingerprint(exp)?;
     Ok(ShardFile {
         experiment: exp.name.clone(),
@@ -208,7 +208,7 @@ fn shard_file(exp: &Experiment, shard: Shard, complete: bool) -> anyhow::Result<
 
 /// Reads `DIR/shard.json`: `Ok(None)` when there is none; bad input naming the file when it
 /// cannot be read or parsed.
-fn read_shard_file(dir: &Path) -> anyhow::Result<Option<ShardFile>> {
+fn read_shard_file(dir: &Path) -> crate::Result<Option<ShardFile>> {
     let path = dir.join(SHARD_FILE);
     let text = match std::fs::read_to_string(&path) {
         Ok(t) => t,
@@ -222,7 +222,7 @@ fn read_shard_file(dir: &Path) -> anyhow::Result<Option<ShardFile>> {
 
 /// Before a shard runs: `OUT/shard.json` is written (not complete yet), after checking that `OUT`
 /// is not the directory of another shard or another experiment's.
-pub fn begin(exp: &Experiment, shard: Shard, out: &Path) -> anyhow::Result<()> {
+pub fn begin(exp: &Experiment, shard: Shard, out: &Path) -> crate::Result<()> {
     let file = shard_file(exp, shard, false)?;
     if let Some(old) = read_shard_file(out)? {
         if old.experiment_hash != file.experiment_hash
@@ -254,7 +254,7 @@ pub fn finish(
     run_now: usize,
     resumed: u64,
     wall: f64,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let file = shard_file(exp, shard, true)?;
     write(out, SHARD_FILE, &serde_json::to_vec_pretty(&file)?)?;
     let line = format!(
@@ -295,7 +295,7 @@ pub fn finish(
 
 /// `--collect`: checks the shard directories (see the module's doc) and copies their runs into
 /// `OUT/runs/`. Anything wrong with a shard is bad input naming its directory.
-pub fn collect(exp: &Experiment, dirs: &[PathBuf], out: &Path) -> anyhow::Result<()> {
+pub fn collect(exp: &Experiment, dirs: &[PathBuf], out: &Path) -> crate::Result<()> {
     let (n, seen) = check_shards(exp, dirs)?;
     let copies = checked_copies(exp, n, &seen, out)?;
     std::fs::create_dir_all(out)
@@ -304,7 +304,7 @@ pub fn collect(exp: &Experiment, dirs: &[PathBuf], out: &Path) -> anyhow::Result
         if is_complete(&dst, &cfg)? {
             continue; // Collected before, or `OUT` is this shard's directory.
         }
-        let _lock = crate::run_dir::lock(&dst)?;
+        let _lock = alfd_harness::run_dir::lock(&dst)?;
         copy_run(&src, &dst)?;
     }
     Ok(())
@@ -315,7 +315,7 @@ pub fn collect(exp: &Experiment, dirs: &[PathBuf], out: &Path) -> anyhow::Result
 fn check_shards<'d>(
     exp: &Experiment,
     dirs: &'d [PathBuf],
-) -> anyhow::Result<(u64, BTreeMap<u64, &'d Path>)> {
+) -> crate::Result<(u64, BTreeMap<u64, &'d Path>)> {
     let (hash, _) = fingerprint(exp)?;
     let mut count = None;
     let mut seen: BTreeMap<u64, &Path> = BTreeMap::new();
@@ -369,7 +369,7 @@ fn read_shard(
     hash: &str,
     dir: &Path,
     count: &mut Option<u64>,
-) -> anyhow::Result<(ShardFile, Shard)> {
+) -> crate::Result<(ShardFile, Shard)> {
     if !dir.is_dir() {
         return Err(usage(format!(
             "--collect {}: no such directory",
@@ -403,8 +403,13 @@ fn read_shard(
             file.shards
         )));
     }
-    let shard = Shard::parse(&format!("{}/{}", file.shard, file.shards))
-        .map_err(|e| usage(format!("--collect {}: {e:#}", dir.display())))?;
+    let shard = Shard::parse(&format!("{}/{}", file.shard, file.shards)).map_err(|e| {
+        usage(format!(
+            "--collect {}: {}",
+            dir.display(),
+            alfd_harness::describe(&e)
+        ))
+    })?;
     Ok((file, shard))
 }
 
@@ -416,7 +421,7 @@ fn checked_copies(
     n: u64,
     seen: &BTreeMap<u64, &Path>,
     out: &Path,
-) -> anyhow::Result<Vec<(PathBuf, PathBuf, ExperimentConfig)>> {
+) -> crate::Result<Vec<(PathBuf, PathBuf, ExperimentConfig)>> {
     let mut copies = Vec::new();
     for (&i, dir) in seen {
         for run in runs_of(exp, Shard { index: i, count: n }) {
@@ -427,7 +432,9 @@ fn checked_copies(
                 .expect("a method of the experiment");
             let src = run_dir(dir, &run.method, run.seed);
             let cfg = m.config(run.seed, exp.episodes)?;
-            if !is_complete(&src, &cfg).map_err(|e| usage(format!("--collect: {e:#}")))? {
+            if !is_complete(&src, &cfg)
+                .map_err(|e| usage(format!("--collect: {}", alfd_harness::describe(&e))))?
+            {
                 return Err(usage(format!(
                     "--collect {}: run {} seed {} is not complete ({} has no summary.json)",
                     dir.display(),
@@ -444,14 +451,14 @@ fn checked_copies(
 
 /// Copies a complete run's files from `src` into `dst` (created), `summary.json` last so that the
 /// copy is complete only once every file is in; the locks are not copied.
-fn copy_run(src: &Path, dst: &Path) -> anyhow::Result<()> {
+fn copy_run(src: &Path, dst: &Path) -> crate::Result<()> {
     copy_tree(src, dst, true)?;
     std::fs::copy(src.join("summary.json"), dst.join("summary.json"))
         .with_context(|| format!("cannot copy {}", src.join("summary.json").display()))?;
     Ok(())
 }
 
-fn copy_tree(src: &Path, dst: &Path, top: bool) -> anyhow::Result<()> {
+fn copy_tree(src: &Path, dst: &Path, top: bool) -> crate::Result<()> {
     std::fs::create_dir_all(dst).with_context(|| format!("cannot create {}", dst.display()))?;
     let entries =
         std::fs::read_dir(src).with_context(|| format!("cannot read {}", src.display()))?;
@@ -459,8 +466,8 @@ fn copy_tree(src: &Path, dst: &Path, top: bool) -> anyhow::Result<()> {
         let entry = entry.with_context(|| format!("cannot read {}", src.display()))?;
         let name = entry.file_name();
         let skip = [
-            crate::run_dir::LOCK_FILE,
-            crate::run_dir::SWAP_LOCK_FILE,
+            alfd_harness::run_dir::LOCK_FILE,
+            alfd_harness::run_dir::SWAP_LOCK_FILE,
             "summary.json",
         ];
         if top && skip.iter().any(|s| name == *s) {
@@ -488,7 +495,7 @@ mod tests {
             "0/2", "3/2", "1/0", "1", "a/2", "1/b", "1/10001", "-1/2", "",
         ] {
             let e = Shard::parse(bad).unwrap_err();
-            assert!(crate::usage::is_usage_error(&e), "{bad}");
+            assert!(alfd_harness::exit_code(&e) == 2, "{bad}");
             assert!(format!("{e}").contains("--shard"), "{bad}: {e}");
         }
     }

@@ -39,15 +39,15 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
+use crate::error::Context as _;
 use alfd_common::config::{ExperimentConfig, RuleKind};
 use alfd_common::record::ReturnStats;
-use anyhow::Context as _;
 
-use crate::cmd_demo_model_policy::{self, PolicyRun};
-use crate::cmd_local;
+use crate::error::usage;
 use crate::output::{png_from_svg, write};
+use crate::policy::{self, PolicyRun};
 use crate::report::{Output, SweepReport};
-use crate::usage::usage;
+use crate::{LabError, Trainer};
 use alfd_common::record::RunSummary;
 use experiment::{Experiment, ExperimentKind, Method, MethodSpec};
 
@@ -104,13 +104,14 @@ enum Mode {
 /// The most runs a sweep runs at a time.
 const MAX_JOBS: usize = 256;
 
-pub fn run(args: SweepArgs) -> anyhow::Result<()> {
+/// Runs the sweep `args` name, its training runs by `trainer`.
+pub fn run(args: SweepArgs, trainer: &dyn Trainer) -> crate::Result<()> {
     let mode = match &args.shard {
         Some(s) => Mode::Shard(shard::Shard::parse(s)?),
         None if !args.collect.is_empty() => Mode::Collect,
         None => Mode::Whole,
     };
-    let mut exp = Experiment::load(&args.config, args.seeds, args.episodes)?;
+    let mut exp = Experiment::load(&args.config, args.seeds, args.episodes, trainer)?;
     if let Some(first) = args.first_seed {
         exp = exp.with_first_seed(first)?;
     }
@@ -171,6 +172,7 @@ pub fn run(args: SweepArgs) -> anyhow::Result<()> {
     };
     let ctx = Ctx {
         exp: &exp,
+        trainer,
         out: &args.out,
         jobs,
         mode,
@@ -187,6 +189,7 @@ pub fn run(args: SweepArgs) -> anyhow::Result<()> {
 
 struct Ctx<'a> {
     exp: &'a Experiment,
+    trainer: &'a dyn Trainer,
     out: &'a Path,
     jobs: usize,
     mode: Mode,
@@ -204,7 +207,7 @@ struct Job<'a> {
     cfg: ExperimentConfig,
 }
 
-fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
+fn run_training(ctx: &Ctx) -> crate::Result<()> {
     let exp = ctx.exp;
     let Planned {
         pending,
@@ -212,7 +215,7 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
         total,
     } = plan_training(ctx)?;
     if ctx.mode == Mode::Collect && !pending.is_empty() {
-        anyhow::bail!(
+        crate::error::bail!(
             "--collect: {} runs are still missing in {} after copying the shards'",
             pending.len(),
             ctx.out.display()
@@ -223,9 +226,9 @@ fn run_training(ctx: &Ctx) -> anyhow::Result<()> {
     let (replays, first): (Vec<Job>, Vec<Job>) = pending
         .into_iter()
         .partition(|j| j.cfg.query.rule == RuleKind::Random);
-    run_jobs(&first, ctx.jobs, total, resumed, ctx.progress)?;
+    run_jobs(ctx.trainer, &first, ctx.jobs, total, resumed, ctx.progress)?;
     let done = resumed + first.len() as u64;
-    run_jobs(&replays, ctx.jobs, total, done, ctx.progress)?;
+    run_jobs(ctx.trainer, &replays, ctx.jobs, total, done, ctx.progress)?;
     let pending_len = first.len() + replays.len();
     if let Mode::Shard(s) = ctx.mode {
         let wall = ctx.start.elapsed().as_secs_f64();
@@ -269,7 +272,7 @@ struct Planned<'a> {
 }
 
 /// Every run's config first, seed-major so that an interrupted sweep has whole seeds done.
-fn plan_training<'a>(ctx: &Ctx<'a>) -> anyhow::Result<Planned<'a>> {
+fn plan_training<'a>(ctx: &Ctx<'a>) -> crate::Result<Planned<'a>> {
     let exp = ctx.exp;
     let mut planned = Planned {
         pending: Vec::new(),
@@ -302,7 +305,7 @@ fn plan_training<'a>(ctx: &Ctx<'a>) -> anyhow::Result<Planned<'a>> {
 }
 
 /// The config of `method`'s run with `seed` in this sweep.
-fn job_config(ctx: &Ctx, method: &Method, seed: u64) -> anyhow::Result<ExperimentConfig> {
+fn job_config(ctx: &Ctx, method: &Method, seed: u64) -> crate::Result<ExperimentConfig> {
     let exp = ctx.exp;
     let mut cfg = method.config(seed, exp.episodes)?;
     // A matched control's schedule names another method's runs of this sweep: `{out}` is the
@@ -326,7 +329,7 @@ struct Analysed<'a> {
 }
 
 /// Reads back every method's runs and analyses them.
-fn analyse_training<'a>(ctx: &Ctx<'a>) -> anyhow::Result<Analysed<'a>> {
+fn analyse_training<'a>(ctx: &Ctx<'a>) -> crate::Result<Analysed<'a>> {
     let exp = ctx.exp;
     let mut analysed = Analysed {
         results: Vec::with_capacity(exp.methods.len()),
@@ -368,7 +371,7 @@ fn training_markdown(
     resumed: u64,
     wall: f64,
     plotted: &[String],
-) -> anyhow::Result<String> {
+) -> crate::Result<String> {
     let exp = ctx.exp;
     let mut md = summary::training_summary(ctx, &analysed.results, run_now, resumed, wall, plotted);
     if exp.learner_episodes_only {
@@ -417,7 +420,7 @@ fn run_dir(out: &Path, method: &str, seed: u64) -> PathBuf {
 }
 
 /// Whether `dir` holds a complete run of `cfg`. A complete run of another config is an error.
-fn is_complete(dir: &Path, cfg: &ExperimentConfig) -> anyhow::Result<bool> {
+fn is_complete(dir: &Path, cfg: &ExperimentConfig) -> crate::Result<bool> {
     if !dir.join("summary.json").is_file() {
         return Ok(false);
     }
@@ -434,12 +437,13 @@ fn is_complete(dir: &Path, cfg: &ExperimentConfig) -> anyhow::Result<bool> {
 
 /// Runs the jobs on `jobs` threads, showing progress over `total` runs of which `done` are done.
 fn run_jobs(
+    trainer: &dyn Trainer,
     pending: &[Job],
     jobs: usize,
     total: u64,
     done: u64,
     progress: bool,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let bar = if progress {
         indicatif::ProgressBar::new(total)
     } else {
@@ -456,20 +460,14 @@ fn run_jobs(
     bar.reset_eta();
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
-    let failure: Mutex<Option<anyhow::Error>> = Mutex::new(None);
+    let failure: Mutex<Option<LabError>> = Mutex::new(None);
     std::thread::scope(|scope| {
         for _ in 0..jobs.min(pending.len()) {
             scope.spawn(|| {
                 while !stop.load(Ordering::Relaxed) {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(job) = pending.get(i) else { break };
-                    // The sweep's own run directory, re-run in place if unfinished; locked so
-                    // that two sweeps of one --out never run the same job at once.
-                    let run = crate::run_dir::lock(&job.dir).and_then(|_lock| {
-                        let mut cfg = job.cfg.clone();
-                        cfg.load_schedule(alfd_harness::read_text)?;
-                        cmd_local::run_config(&cfg, &job.dir, false)
-                    });
+                    let run = train_job(trainer, job);
                     match run {
                         Ok(summary) => {
                             tracing::debug!(method = %job.method.name, seed = job.seed, wall = summary.wall_clock_s, "run done");
@@ -481,12 +479,15 @@ fn run_jobs(
                         }
                         Err(e) => {
                             stop.store(true, Ordering::Relaxed);
-                            let e = e.context(format!(
-                                "run of method `{}` with seed {} ({})",
-                                job.method.name,
-                                job.seed,
-                                job.dir.display()
-                            ));
+                            let e = LabError::Failed {
+                                what: format!(
+                                    "run of method `{}` with seed {} ({})",
+                                    job.method.name,
+                                    job.seed,
+                                    job.dir.display()
+                                ),
+                                source: e,
+                            };
                             failure
                                 .lock()
                                 .unwrap_or_else(std::sync::PoisonError::into_inner)
@@ -507,14 +508,23 @@ fn run_jobs(
     }
 }
 
+/// Trains one job in the sweep's own run directory, re-run in place if unfinished; locked so
+/// that two sweeps of one --out never run the same job at once.
+fn train_job(trainer: &dyn Trainer, job: &Job) -> Result<RunSummary, crate::BoxError> {
+    let _lock = alfd_harness::run_dir::lock(&job.dir)?;
+    let mut cfg = job.cfg.clone();
+    cfg.load_schedule(alfd_harness::read_text)?;
+    trainer.train(&cfg, &job.dir)
+}
+
 /// `f` over `items` on `jobs` threads, results in the order of `items`; the first error wins.
 fn parallel_map<T: Sync, R: Send>(
     items: &[T],
     jobs: usize,
-    f: impl Fn(&T) -> anyhow::Result<R> + Sync,
-) -> anyhow::Result<Vec<R>> {
+    f: impl Fn(&T) -> crate::Result<R> + Sync,
+) -> crate::Result<Vec<R>> {
     let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<anyhow::Result<R>>>> =
+    let results: Mutex<Vec<Option<crate::Result<R>>>> =
         Mutex::new(items.iter().map(|_| None).collect());
     std::thread::scope(|scope| {
         for _ in 0..jobs.min(items.len()) {
@@ -541,7 +551,7 @@ fn read_runs(
     out: &Path,
     method: &Method,
     seeds: std::ops::Range<u64>,
-) -> anyhow::Result<Vec<summary::Run>> {
+) -> crate::Result<Vec<summary::Run>> {
     seeds
         .map(|seed| {
             let dir = run_dir(out, &method.name, seed);
@@ -568,7 +578,7 @@ fn read_runs(
 
 /// The query-rule view of the sweep ([`budget`]): its Markdown, its plots against B and
 /// `by-budget.csv`.
-fn budget_section(ctx: &Ctx, table: &budget::Table) -> anyhow::Result<String> {
+fn budget_section(ctx: &Ctx, table: &budget::Table) -> crate::Result<String> {
     let exp = ctx.exp;
     let score_desc = if table
         .values()
@@ -664,7 +674,7 @@ fn write_curves(
     csv: &str,
     stem: &str,
     what: &str,
-) -> anyhow::Result<Vec<String>> {
+) -> crate::Result<Vec<String>> {
     write(
         ctx.out,
         csv,
@@ -677,13 +687,13 @@ fn write_curves(
 /// The learning curves of greedy evaluation from each method's `runs` (in the order of the
 /// experiment's methods): `eval-curves.csv`, `EXPERIMENT-eval.svg` (and `.png`) and their section
 /// of `summary.md`.
-fn eval_curves(ctx: &Ctx, all_runs: &[Vec<summary::Run>]) -> anyhow::Result<String> {
+fn eval_curves(ctx: &Ctx, all_runs: &[Vec<summary::Run>]) -> crate::Result<String> {
     let exp = ctx.exp;
     let mut results = Vec::with_capacity(exp.methods.len());
     for (method, runs) in exp.methods.iter().zip(all_runs) {
         let runs = with_episodes(runs, summary::Episodes::greedy_evaluations);
         if runs.iter().any(|r| r.episodes.returns.is_empty()) {
-            anyhow::bail!(
+            crate::error::bail!(
                 "`eval_curves`: a run of method `{}` records no greedy evaluation (set \
                  `evaluation.every` in its config)",
                 method.name
@@ -703,7 +713,7 @@ fn eval_curves(ctx: &Ctx, all_runs: &[Vec<summary::Run>]) -> anyhow::Result<Stri
 }
 
 /// Writes `EXPERIMENT.svg` and, when a font is found, `EXPERIMENT.png`; returns the files written.
-fn write_plot(ctx: &Ctx, series: &[plot::Series], x_desc: &str) -> anyhow::Result<Vec<String>> {
+fn write_plot(ctx: &Ctx, series: &[plot::Series], x_desc: &str) -> crate::Result<Vec<String>> {
     write_plot_as(ctx, series, x_desc, &ctx.exp.name, "return")
 }
 
@@ -714,7 +724,7 @@ fn write_plot_as(
     x_desc: &str,
     stem: &str,
     what: &str,
-) -> anyhow::Result<Vec<String>> {
+) -> crate::Result<Vec<String>> {
     let exp = ctx.exp;
     let seeds = summary::count(exp.seeds, "seed");
     let (title, y_desc, band) = match exp.kind {
@@ -766,7 +776,7 @@ fn write_plot_as(
     Ok(files)
 }
 
-fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
+fn run_policy(ctx: &Ctx) -> crate::Result<()> {
     let exp = ctx.exp;
     let total = exp.seeds * exp.methods.len() as u64;
     let results = play_policies(ctx, total)?;
@@ -789,7 +799,7 @@ fn run_policy(ctx: &Ctx) -> anyhow::Result<()> {
 type PolicyResults<'a> = Vec<(&'a Method, Vec<PolicyRun>)>;
 
 /// Plays every seed of every method, showing progress over the `total` runs.
-fn play_policies<'a>(ctx: &Ctx<'a>, total: u64) -> anyhow::Result<PolicyResults<'a>> {
+fn play_policies<'a>(ctx: &Ctx<'a>, total: u64) -> crate::Result<PolicyResults<'a>> {
     let exp = ctx.exp;
     let bar = if ctx.progress {
         indicatif::ProgressBar::new(total)
@@ -806,11 +816,11 @@ fn play_policies<'a>(ctx: &Ctx<'a>, total: u64) -> anyhow::Result<PolicyResults<
             ..
         } = &method.spec
         else {
-            anyhow::bail!("method `{}` is not a demo-model-policy method", method.name);
+            crate::error::bail!("method `{}` is not a demo-model-policy method", method.name);
         };
         let seeds: Vec<u64> = exp.seed_range().collect();
         let runs = parallel_map(&seeds, ctx.jobs, |&seed| {
-            let run = cmd_demo_model_policy::play(expert, *demos, *model, seed, source);
+            let run = policy::play(expert, *demos, *model, seed, source);
             bar.inc(1);
             run
         })?;

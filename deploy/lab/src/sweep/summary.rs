@@ -10,7 +10,7 @@
 
 use std::fmt::Write as _;
 
-use anyhow::Context as _;
+use crate::error::Context as _;
 
 use super::experiment::{Experiment, Method, XAxis};
 use super::stats::bootstrap::{CrossingCi, Estimate, Interval, Resamples};
@@ -135,8 +135,8 @@ pub fn analyse<'a>(
     method: &'a Method,
     runs: &[Run],
     exp: &Experiment,
-) -> anyhow::Result<MethodResult<'a>> {
-    anyhow::ensure!(!runs.is_empty(), "method `{}` has no runs", method.name);
+) -> crate::Result<MethodResult<'a>> {
+    crate::error::ensure!(!runs.is_empty(), "method `{}` has no runs", method.name);
     let returns: Vec<Vec<f64>> = runs.iter().map(|r| r.episodes.returns.clone()).collect();
     let longest = returns.iter().map(Vec::len).max().unwrap_or(0);
     let tail = stats::runs_tail_mean(&returns, exp.last as usize);
@@ -236,7 +236,7 @@ fn final_eval(runs: &[Run]) -> Option<EvalResult> {
 
 /// Reads `episodes.csv` by column name: `return` and `demos_used` are required; `total_steps` and
 /// `eval_return` are read when present (an empty `eval_return` is NaN).
-pub fn parse_episodes(text: &str) -> anyhow::Result<Episodes> {
+pub fn parse_episodes(text: &str) -> crate::Result<Episodes> {
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name);
@@ -252,7 +252,7 @@ pub fn parse_episodes(text: &str) -> anyhow::Result<Episodes> {
     let mut eval_return = eval_col.map(|_| Vec::new());
     for (i, line) in lines.enumerate().filter(|(_, l)| !l.is_empty()) {
         let fields: Vec<&str> = line.split(',').collect();
-        let field = |c: usize| -> anyhow::Result<f64> {
+        let field = |c: usize| -> crate::Result<f64> {
             fields
                 .get(c)
                 .and_then(|v| v.trim().parse().ok())
@@ -272,7 +272,7 @@ pub fn parse_episodes(text: &str) -> anyhow::Result<Episodes> {
             v.push(if empty { f64::NAN } else { field(c)? });
         }
     }
-    anyhow::ensure!(!returns.is_empty(), "no episodes");
+    crate::error::ensure!(!returns.is_empty(), "no episodes");
     Ok(Episodes {
         returns,
         demos_used,

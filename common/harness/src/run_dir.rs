@@ -9,9 +9,12 @@ use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{Read as _, Seek as _, SeekFrom, Write as _};
 use std::path::{Path, PathBuf};
 
-use anyhow::Context as _;
+use crate::{BadInput, Result, What as _};
 
-use crate::usage::usage;
+/// Bad input: the user's to fix (exit code 2).
+fn usage(msg: String) -> crate::HarnessError {
+    BadInput(msg).into()
+}
 
 /// The files that make a directory a run's: any one of them and the directory is taken.
 pub const RUN_FILES: [&str; 5] = [
@@ -43,10 +46,10 @@ pub fn run_files(dir: &Path) -> Vec<&'static str> {
 
 /// Claims `dir` for a new run, whose `--out` it is: refused (bad input, exit code 2) if it holds a
 /// run already or another process holds its lock. Nothing in a refused directory is touched.
-pub fn claim_new(dir: &Path) -> anyhow::Result<DirLock> {
+pub fn claim_new(dir: &Path) -> Result<DirLock> {
     refuse_a_run(dir)?;
     std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create run directory {}", dir.display()))?;
+        .what(|| format!("cannot create run directory {}", dir.display()))?;
     let lock = lock(dir)?;
     // A run may have written its files between the first look and the lock.
     refuse_a_run(dir)?;
@@ -56,9 +59,9 @@ pub fn claim_new(dir: &Path) -> anyhow::Result<DirLock> {
 /// Locks `dir` (created if missing) for one run: refused if another process holds the lock.
 /// `alfd sweep` takes this lock (without [`claim_new`]'s check) to re-run an unfinished run of its
 /// own in place.
-pub fn lock(dir: &Path) -> anyhow::Result<DirLock> {
+pub fn lock(dir: &Path) -> Result<DirLock> {
     std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create run directory {}", dir.display()))?;
+        .what(|| format!("cannot create run directory {}", dir.display()))?;
     try_lock(&dir.join(LOCK_FILE))?.map_err(|holder| {
         usage(format!(
             "{} is in use by another run{holder} (it holds {}): wait for that run to end, or \
@@ -71,7 +74,7 @@ pub fn lock(dir: &Path) -> anyhow::Result<DirLock> {
 
 /// Takes the swap lock of the run in `dir`: refused at once if another `alfd swap-expert` of that
 /// run is in progress.
-pub fn lock_swaps(dir: &Path) -> anyhow::Result<DirLock> {
+pub fn lock_swaps(dir: &Path) -> Result<DirLock> {
     try_lock(&dir.join(SWAP_LOCK_FILE))?.map_err(|holder| {
         usage(format!(
             "another `alfd swap-expert`{holder} is in progress for the run in {}: swaps are made \
@@ -81,7 +84,7 @@ pub fn lock_swaps(dir: &Path) -> anyhow::Result<DirLock> {
     })
 }
 
-fn refuse_a_run(dir: &Path) -> anyhow::Result<()> {
+fn refuse_a_run(dir: &Path) -> Result<()> {
     let found = run_files(dir);
     if found.is_empty() {
         return Ok(());
@@ -107,14 +110,14 @@ fn free_sibling(dir: &Path) -> PathBuf {
 
 /// Locks `path` (created if missing) and writes our pid in it. `Ok(Err(holder))` when another
 /// process holds it; `holder` says which (" (pid N)"), if it could be read.
-fn try_lock(path: &Path) -> anyhow::Result<Result<DirLock, String>> {
+fn try_lock(path: &Path) -> Result<Result<DirLock, String>> {
     let mut file = OpenOptions::new()
         .create(true)
         .truncate(false)
         .read(true)
         .write(true)
         .open(path)
-        .with_context(|| format!("cannot open {}", path.display()))?;
+        .what(|| format!("cannot open {}", path.display()))?;
     match file.try_lock() {
         Ok(()) => {}
         Err(TryLockError::WouldBlock) => {
@@ -127,25 +130,25 @@ fn try_lock(path: &Path) -> anyhow::Result<Result<DirLock, String>> {
             return Ok(Err(holder));
         }
         Err(TryLockError::Error(e)) => {
-            return Err(e).with_context(|| format!("cannot lock {}", path.display()))
+            return Err(e).what(|| format!("cannot lock {}", path.display()))
         }
     }
     // Who holds it, for the message of whoever is refused; the lock itself is the flock.
     file.set_len(0)
         .and_then(|()| file.seek(SeekFrom::Start(0)))
         .and_then(|_| writeln!(file, "{}", std::process::id()))
-        .with_context(|| format!("cannot write {}", path.display()))?;
+        .what(|| format!("cannot write {}", path.display()))?;
     Ok(Ok(DirLock { _file: file }))
 }
 
 #[cfg(test)]
-#[cfg(test)]
-pub(crate) use alfd_harness::test_dir;
-
-#[cfg(test)]
 mod tests {
     use super::*;
-    use crate::usage::is_usage_error;
+    use crate::test_dir;
+
+    fn is_usage_error(e: &crate::HarnessError) -> bool {
+        e.is_bad_input()
+    }
 
     #[test]
     fn a_directory_holding_a_run_is_refused_untouched() {
@@ -160,8 +163,8 @@ mod tests {
             std::fs::create_dir_all(&other).unwrap();
             std::fs::write(other.join(f), "x").unwrap();
             let e = claim_new(&other).unwrap_err();
-            assert!(is_usage_error(&e), "{e:#}");
-            let msg = format!("{e:#}");
+            assert!(is_usage_error(&e), "{}", crate::describe(&e));
+            let msg = crate::describe(&e);
             assert!(
                 msg.contains(&other.display().to_string())
                     && msg.contains(f)
@@ -185,7 +188,7 @@ mod tests {
         // A second run (another open file description: as another process would be) is refused.
         let e = claim_new(&d).unwrap_err();
         assert!(is_usage_error(&e));
-        let msg = format!("{e:#}");
+        let msg = crate::describe(&e);
         assert!(
             msg.contains("in use by another run")
                 && msg.contains(&format!("(pid {})", std::process::id())),
@@ -198,8 +201,9 @@ mod tests {
         let swap = lock_swaps(&d).unwrap();
         let e = lock_swaps(&d).unwrap_err();
         assert!(
-            format!("{e:#}").contains("another `alfd swap-expert`"),
-            "{e:#}"
+            crate::describe(&e).contains("another `alfd swap-expert`"),
+            "{}",
+            crate::describe(&e)
         );
         drop(swap);
         assert!(lock_swaps(&d).is_ok());

@@ -14,10 +14,10 @@ use std::fmt::Write as _;
 use std::io::IsTerminal as _;
 use std::path::Path;
 
+use crate::error::Context as _;
 use alfd_common::config::{EnvName, ExperimentConfig, RuleKind};
 use alfd_common::record::{parse_episodes_csv, EpisodeRecord, RunSummary};
 use alfd_expert::registry::{self, ExpertEntry};
-use anyhow::Context as _;
 
 /// What a command prints at its end (`--json`, `--quiet`).
 #[derive(Debug, Clone, Copy)]
@@ -78,17 +78,20 @@ pub fn finish_run(
     dir: &Path,
     summary: &RunSummary,
     output: Output,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let records = match read_records(dir) {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("warning: {e:#}; no learning curve");
+            eprintln!("warning: {}; no learning curve", alfd_harness::describe(&e));
             Vec::new()
         }
     };
     if !records.is_empty() {
         if let Err(e) = curve::write(dir, cfg, &expert_reference(cfg), &records) {
-            eprintln!("warning: the learning curve was not drawn: {e:#}");
+            eprintln!(
+                "warning: the learning curve was not drawn: {}",
+                alfd_harness::describe(&e)
+            );
         }
     }
     if output.machine_line() {
@@ -101,7 +104,7 @@ pub fn finish_run(
             summary,
             records: &records,
             files: files_in(dir),
-            q_values: crate::cmd_q_range::summary_text(dir, cfg),
+            q_values: crate::q_values::summary_text(dir, cfg),
         };
         eprint!("{}", report.text(Style::stderr()));
     }
@@ -109,7 +112,7 @@ pub fn finish_run(
 }
 
 /// The rows of `dir/episodes.csv`.
-fn read_records(dir: &Path) -> anyhow::Result<Vec<EpisodeRecord>> {
+fn read_records(dir: &Path) -> crate::Result<Vec<EpisodeRecord>> {
     let path = dir.join("episodes.csv");
     let text = std::fs::read_to_string(&path)
         .with_context(|| format!("cannot read {}", path.display()))?;
@@ -263,7 +266,7 @@ pub(crate) struct RunReport<'a> {
     /// The files in `dir` to list.
     pub files: Vec<String>,
     /// The learned network's Q-values against the true values' range
-    /// ([`crate::cmd_q_range::summary_text`]), for neural runs.
+    /// ([`crate::q_values::summary_text`]), for neural runs.
     pub q_values: Option<String>,
 }
 
@@ -519,7 +522,7 @@ pub(crate) struct SweepReport {
 impl SweepReport {
     /// Prints the sweep's end as `output` says: the JSON line (`--json`), else the one line on
     /// a stdout that is not a terminal; the summary on stderr.
-    pub fn print(&self, output: Output) -> anyhow::Result<()> {
+    pub fn print(&self, output: Output) -> crate::Result<()> {
         if output.json {
             println!("{}", serde_json::to_string(self)?);
         } else if output.machine_line() {

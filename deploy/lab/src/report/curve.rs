@@ -7,9 +7,9 @@
 
 use std::path::Path;
 
+use crate::error::Context as _;
 use alfd_common::config::ExperimentConfig;
 use alfd_common::record::EpisodeRecord;
-use anyhow::Context as _;
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -45,7 +45,7 @@ pub(crate) fn write(
     cfg: &ExperimentConfig,
     expert: &ExpertReference,
     records: &[EpisodeRecord],
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let mut records = records.to_vec();
     records.sort_by_key(|r| r.episode);
     let name = dir
@@ -79,13 +79,13 @@ pub(crate) fn write(
 }
 
 /// The picture as an SVG document.
-pub(crate) fn svg(curve: &Curve) -> anyhow::Result<String> {
+pub(crate) fn svg(curve: &Curve) -> crate::Result<String> {
     let mut out = String::new();
     {
         let root = SVGBackend::with_string(&mut out, (WIDTH, HEIGHT)).into_drawing_area();
         draw(&root, curve)?;
         root.present()
-            .map_err(|e| anyhow::anyhow!("drawing the learning curve: {e}"))?;
+            .map_err(|e| crate::error::msg!("drawing the learning curve: {e}"))?;
     }
     Ok(out)
 }
@@ -144,9 +144,10 @@ fn panel<'a, DB: DrawingBackend>(
     x_max: f64,
     y: (f64, f64),
     y_desc: &str,
-) -> anyhow::Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>> {
-    let err =
-        |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("drawing the learning curve: {e}");
+) -> crate::Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>> {
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| {
+        crate::error::msg!("drawing the learning curve: {e}")
+    };
     let mut chart = ChartBuilder::on(area)
         .margin(12)
         .x_label_area_size(36)
@@ -171,7 +172,7 @@ fn panel<'a, DB: DrawingBackend>(
 /// A panel's legend, upper left.
 fn legend<'a, DB: DrawingBackend + 'a>(
     chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperLeft)
@@ -179,10 +180,10 @@ fn legend<'a, DB: DrawingBackend + 'a>(
         .background_style(WHITE.mix(0.85))
         .border_style(RGBColor(160, 160, 160))
         .draw()
-        .map_err(|e| anyhow::anyhow!("drawing the learning curve: {e}"))
+        .map_err(|e| crate::error::msg!("drawing the learning curve: {e}"))
 }
 
-fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Curve) -> anyhow::Result<()> {
+fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Curve) -> crate::Result<()> {
     root.fill(&WHITE).map_err(drawing_error)?;
     let root = root
         .titled(&c.title, ("sans-serif", 22))
@@ -198,8 +199,10 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &Curve) -> anyhow:
 type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// The error of a drawing step of the picture.
-fn drawing_error<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> anyhow::Error {
-    anyhow::anyhow!("drawing the learning curve: {e}")
+fn drawing_error<E: std::error::Error + Send + Sync>(
+    e: DrawingAreaErrorKind<E>,
+) -> crate::LabError {
+    crate::error::msg!("drawing the learning curve: {e}")
 }
 
 /// The x of an episode's record.
@@ -213,7 +216,7 @@ fn draw_returns<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     c: &Curve,
     x_max: f64,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let returns: Vec<f64> = c.records.iter().map(|r| r.ret).collect();
     let evals: Vec<(f64, f64)> = c
         .records
@@ -276,7 +279,7 @@ fn draw_shaping<'a, DB: DrawingBackend + 'a>(
     records: &[EpisodeRecord],
     x_max: f64,
     (lo, hi): (f64, f64),
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let windows = shaping_windows(records);
     if !windows.is_empty() {
         chart
@@ -303,7 +306,7 @@ fn draw_demos<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     c: &Curve,
     x_max: f64,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let most = c.records.iter().map(|r| r.demos_used).max().unwrap_or(0);
     // Room above the budget's line for the legend.
     let y_max = (f64::from(most.max(c.budget)) * 1.5).max(1.0);

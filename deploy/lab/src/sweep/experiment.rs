@@ -29,14 +29,14 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
+use crate::error::Context as _;
 use alfd_common::config::ExperimentConfig;
 use alfd_common::demo_model::DemoModelKind;
-use anyhow::Context as _;
 use serde::Deserialize;
 
-use crate::cmd_demo_model_policy::{queries_config, DemoSource};
-use crate::setup;
-use crate::usage::usage;
+use crate::error::usage;
+use crate::policy::{queries_config, DemoSource};
+use crate::Trainer;
 
 /// What an experiment does with its methods.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
@@ -218,14 +218,14 @@ pub enum MethodSpec {
 impl Method {
     /// The config of this method's run with `seed`: the base config, then the method's `set`,
     /// then the episodes override, then the seed.
-    pub fn config(&self, seed: u64, episodes: Option<u32>) -> anyhow::Result<ExperimentConfig> {
+    pub fn config(&self, seed: u64, episodes: Option<u32>) -> crate::Result<ExperimentConfig> {
         let MethodSpec::Training {
             config_path,
             config_text,
             set,
         } = &self.spec
         else {
-            anyhow::bail!("method `{}` is not a training method", self.name);
+            crate::error::bail!("method `{}` is not a training method", self.name);
         };
         let mut overrides = set.clone();
         if let Some(e) = episodes {
@@ -252,7 +252,7 @@ impl Experiment {
     }
 
     /// Starts the sweep's seeds at `first` (`--first-seed`); refused when the last would not fit.
-    pub fn with_first_seed(mut self, first: u64) -> anyhow::Result<Self> {
+    pub fn with_first_seed(mut self, first: u64) -> crate::Result<Self> {
         if first.checked_add(self.seeds).is_none() {
             return Err(usage(format!(
                 "--first-seed {first} with {} seeds: the last seed would pass {}",
@@ -267,14 +267,19 @@ impl Experiment {
     /// Reads and validates an experiment file; `seeds` and `episodes` override the file's.
     /// Every method's config is loaded and checked, and its expert looked up, so that a bad entry
     /// is refused before anything runs.
-    pub fn load(path: &Path, seeds: Option<u64>, episodes: Option<u32>) -> anyhow::Result<Self> {
+    pub fn load(
+        path: &Path,
+        seeds: Option<u64>,
+        episodes: Option<u32>,
+        trainer: &dyn Trainer,
+    ) -> crate::Result<Self> {
         let (name, file) = read_file(path)?;
         let Checked {
             seeds,
             episodes,
             y_range,
         } = check(&file, path, seeds, episodes)?;
-        let methods = load_methods(&file, path, episodes)?;
+        let methods = load_methods(&file, path, episodes, trainer)?;
         Ok(Self {
             name,
             title: file.title,
@@ -299,7 +304,7 @@ impl Experiment {
 }
 
 /// The experiment file at `path` as parsed, with the experiment's name (the file stem).
-fn read_file(path: &Path) -> anyhow::Result<(String, ExperimentFile)> {
+fn read_file(path: &Path) -> crate::Result<(String, ExperimentFile)> {
     let text = std::fs::read_to_string(path).map_err(|e| {
         usage(format!(
             "cannot read experiment file {}: {e}",
@@ -328,7 +333,7 @@ fn read_file(path: &Path) -> anyhow::Result<(String, ExperimentFile)> {
 }
 
 /// A usage error about the experiment file at `path`.
-fn invalid(path: &Path, msg: String) -> anyhow::Error {
+fn invalid(path: &Path, msg: String) -> crate::LabError {
     usage(format!("experiment file {}: {msg}", path.display()))
 }
 
@@ -346,7 +351,7 @@ fn check(
     path: &Path,
     seeds: Option<u64>,
     episodes: Option<u32>,
-) -> anyhow::Result<Checked> {
+) -> crate::Result<Checked> {
     let bad = |msg: String| invalid(path, msg);
     let seeds = seeds.unwrap_or(file.seeds);
     if seeds == 0 {
@@ -399,7 +404,8 @@ fn load_methods(
     file: &ExperimentFile,
     path: &Path,
     episodes: Option<u32>,
-) -> anyhow::Result<Vec<Method>> {
+    trainer: &dyn Trainer,
+) -> crate::Result<Vec<Method>> {
     let bad = |msg: String| invalid(path, msg);
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut names = BTreeSet::new();
@@ -418,7 +424,13 @@ fn load_methods(
             ExperimentKind::Training => training_spec(m, dir),
             ExperimentKind::DemoModelPolicy => policy_spec(m, dir),
         }
-        .map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?;
+        .map_err(|e| {
+            bad(format!(
+                "method `{}`: {}",
+                m.name,
+                alfd_harness::describe(&e)
+            ))
+        })?;
         let method = Method {
             name: m.name.clone(),
             label: m.label.clone().unwrap_or_else(|| m.name.clone()),
@@ -427,23 +439,25 @@ fn load_methods(
         if file.kind == ExperimentKind::Training {
             let cfg = method
                 .config(0, episodes)
-                .map_err(|e| bad(format!("{e:#}")))?;
-            setup::check_demonstrator(&cfg)
-                .map_err(|e| bad(format!("method `{}`: {e:#}", m.name)))?;
+                .map_err(|e| bad(alfd_harness::describe(&e)))?;
+            trainer.check(&cfg).map_err(|e| {
+                let why = alfd_harness::describe(e.as_ref());
+                bad(format!("method `{}`: {why}", m.name))
+            })?;
         }
         methods.push(method);
     }
     Ok(methods)
 }
 
-fn training_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {
+fn training_spec(m: &MethodFile, dir: &Path) -> crate::Result<MethodSpec> {
     if m.expert.is_some() || m.demos.is_some() || m.model.is_some() {
-        anyhow::bail!("`expert`, `demos` and `model` belong to demo-model-policy experiments; a training method takes `config` and `set`");
+        crate::error::bail!("`expert`, `demos` and `model` belong to demo-model-policy experiments; a training method takes `config` and `set`");
     }
     let config = m
         .config
         .as_deref()
-        .ok_or_else(|| anyhow::anyhow!("`config` is missing"))?;
+        .ok_or_else(|| crate::error::msg!("`config` is missing"))?;
     let config_path = dir.join(config);
     let config_text = std::fs::read_to_string(&config_path)
         .with_context(|| format!("cannot read config {}", config_path.display()))?;
@@ -452,7 +466,7 @@ fn training_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {
         .iter()
         .find(|s| s.split('=').next().map(str::trim) == Some("seed"))
     {
-        anyhow::bail!("`set` entry `{s}`: the sweep sets the seed of each run");
+        crate::error::bail!("`set` entry `{s}`: the sweep sets the seed of each run");
     }
     Ok(MethodSpec::Training {
         config_path,
@@ -461,18 +475,18 @@ fn training_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {
     })
 }
 
-fn policy_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {
+fn policy_spec(m: &MethodFile, dir: &Path) -> crate::Result<MethodSpec> {
     let expert = m
         .expert
         .clone()
-        .ok_or_else(|| anyhow::anyhow!("`expert` is missing"))?;
+        .ok_or_else(|| crate::error::msg!("`expert` is missing"))?;
     alfd_expert::registry::cartpole(&expert)?;
     let demos = m.demos.unwrap_or(100);
     if demos == 0 {
-        anyhow::bail!("`demos` must be at least 1");
+        crate::error::bail!("`demos` must be at least 1");
     }
     if demos > alfd_common::demo_model::MAX_DEMOS {
-        anyhow::bail!(
+        crate::error::bail!(
             "`demos` = {demos}: a demonstration model is fitted on at most {} demonstrations",
             alfd_common::demo_model::MAX_DEMOS
         );
@@ -487,7 +501,7 @@ fn policy_spec(m: &MethodFile, dir: &Path) -> anyhow::Result<MethodSpec> {
         Some(c) => format!("the queries of `{c}`"),
     };
     let source = match &m.config {
-        None if !m.set.is_empty() => anyhow::bail!("`set` needs a `config`"),
+        None if !m.set.is_empty() => crate::error::bail!("`set` needs a `config`"),
         None => DemoSource::ExpertTrajectory,
         Some(config) => {
             let path = dir.join(config);
@@ -526,16 +540,16 @@ mod fuzz {
     /// A scratch tree `experiments/` beside a link to the shipped `configs/`, so that a mutated
     /// experiment file still finds the configs it names; removed when the guard is dropped.
     fn scratch() -> (tempfile::TempDir, PathBuf) {
-        let root = crate::run_dir::test_dir("fuzz-experiment");
+        let root = alfd_harness::test_dir("fuzz-experiment");
         let experiments = root.path().join("experiments");
         std::fs::create_dir_all(&experiments).unwrap();
-        let configs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("configs");
+        let configs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../configs");
         std::os::unix::fs::symlink(configs, root.path().join("configs")).unwrap();
         (root, experiments)
     }
 
     fn shipped() -> Vec<String> {
-        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("experiments");
+        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../experiments");
         let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
             .unwrap()
             .map(|e| e.unwrap().path())
@@ -579,8 +593,8 @@ mod fuzz {
             for (name, t) in [("mutated", text.into_iter().collect::<String>()), ("arbitrary", arbitrary)] {
                 let path = dir.join(format!("{name}.toml"));
                 std::fs::write(&path, &t).unwrap();
-                if let Err(e) = Experiment::load(&path, seeds, None) {
-                    let message = format!("{e:#}");
+                if let Err(e) = Experiment::load(&path, seeds, None, &crate::testing::AnyDemonstrator) {
+                    let message = alfd_harness::describe(&e);
                     prop_assert!(!message.is_empty());
                 }
             }

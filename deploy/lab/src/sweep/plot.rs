@@ -56,7 +56,7 @@ const PALETTE: [RGBColor; 10] = [
 const MARKED_POINTS: usize = 12;
 
 /// The plot as an SVG document.
-pub fn svg(plot: &Plot) -> anyhow::Result<String> {
+pub fn svg(plot: &Plot) -> crate::Result<String> {
     let mut out = String::new();
     {
         let root = SVGBackend::with_string(&mut out, (WIDTH, HEIGHT)).into_drawing_area();
@@ -66,7 +66,7 @@ pub fn svg(plot: &Plot) -> anyhow::Result<String> {
         } else {
             draw(&root, plot, lo..hi, lo, hi)?;
         }
-        root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
+        root.present().map_err(|e| crate::error::msg!("{e}"))?;
     }
     Ok(out)
 }
@@ -106,7 +106,7 @@ fn draw<DB, Y>(
     y_spec: Y,
     y_lo: f64,
     y_hi: f64,
-) -> anyhow::Result<()>
+) -> crate::Result<()>
 where
     DB: DrawingBackend,
     Y: AsRangedCoord<Value = f64>,
@@ -151,8 +151,10 @@ where
 type Chart<'a, DB, Y> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, Y>>;
 
 /// The error of a drawing step of the plot.
-fn drawing_error<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> anyhow::Error {
-    anyhow::anyhow!("drawing the plot: {e}")
+fn drawing_error<E: std::error::Error + Send + Sync>(
+    e: DrawingAreaErrorKind<E>,
+) -> crate::LabError {
+    crate::error::msg!("drawing the plot: {e}")
 }
 
 /// The band of `s` in `color`, its edges brought into the y range by `clamp`.
@@ -161,7 +163,7 @@ fn draw_band<'a, DB, Y>(
     s: &Series,
     color: RGBColor,
     clamp: impl Fn(f64) -> f64,
-) -> anyhow::Result<()>
+) -> crate::Result<()>
 where
     DB: DrawingBackend + 'a,
     Y: Ranged<ValueType = f64>,
@@ -197,7 +199,7 @@ fn draw_line<'a, DB, Y>(
     s: &Series,
     color: RGBColor,
     clamp: impl Fn(f64) -> f64,
-) -> anyhow::Result<()>
+) -> crate::Result<()>
 where
     DB: DrawingBackend + 'a,
     Y: Ranged<ValueType = f64>,
@@ -228,7 +230,7 @@ where
 }
 
 /// The legend: the lines' entries, then the bands' description when the plot has one.
-fn draw_legend<'a, DB, Y>(chart: &mut Chart<'a, DB, Y>, plot: &Plot) -> anyhow::Result<()>
+fn draw_legend<'a, DB, Y>(chart: &mut Chart<'a, DB, Y>, plot: &Plot) -> crate::Result<()>
 where
     DB: DrawingBackend + 'a,
     Y: Ranged<ValueType = f64>,

@@ -11,11 +11,11 @@ use std::path::Path;
 use std::sync::Arc;
 
 #[cfg(feature = "png")]
-use anyhow::Context as _;
+use crate::error::Context as _;
 
 /// Writes `bytes` to `dir/name`, replacing the file whole (a reader never sees half of it); a
 /// full disk is waited out (`alfd_harness::DISK_FULL_PATIENCE`).
-pub fn write(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
+pub fn write(dir: &Path, name: &str, bytes: &[u8]) -> crate::Result<()> {
     let patience = alfd_harness::DISK_FULL_PATIENCE;
     Ok(alfd_harness::write_atomically_patiently(
         &dir.join(name),
@@ -37,7 +37,7 @@ const PREFERRED_FAMILIES: [&str; 6] = [
 /// Without the `png` feature (a build with `--no-default-features`, which leaves out resvg and
 /// its font stack, about 14% of a clean build): no PNG, a warning, the SVG as always.
 #[cfg(not(feature = "png"))]
-pub fn png_from_svg(_svg: &str) -> anyhow::Result<Option<Vec<u8>>> {
+pub fn png_from_svg(_svg: &str) -> crate::Result<Option<Vec<u8>>> {
     eprintln!(
         "warning: this alfd was built without the `png` feature: the plot is written as SVG only"
     );
@@ -49,7 +49,7 @@ pub fn png_from_svg(_svg: &str) -> anyhow::Result<Option<Vec<u8>>> {
 ///
 /// Fonts: `ALFD_FONT` unset: the system's; set to a file: that font; set but empty: none (SVG only).
 #[cfg(feature = "png")]
-pub fn png_from_svg(svg: &str) -> anyhow::Result<Option<Vec<u8>>> {
+pub fn png_from_svg(svg: &str) -> crate::Result<Option<Vec<u8>>> {
     let mut db = resvg::usvg::fontdb::Database::new();
     match std::env::var_os("ALFD_FONT") {
         None => db.load_system_fonts(),
