@@ -205,6 +205,61 @@ fn in_written_order(answers: &mut [QueryResponse]) {
     answers.sort_by_key(|r| (r.outcome == outcome::ANSWERED, r.demo_index));
 }
 
+/// What the expert host's services held at one look: the expert's status reports, its answers,
+/// its newest model, and the exits of its processes that the host saw.
+struct Look {
+    reports: Vec<alfd_wire::Progress>,
+    answers: Vec<QueryResponse>,
+    model: Option<(alfd_wire::DemoModelHeader, Vec<u8>)>,
+    exits: Vec<Frame>,
+}
+
+/// The frames that go up for one look, in the order the expert did things, given the
+/// generations the run gave this host (`mine`, which loses an exited one) and the expert's
+/// `demos.jsonl` (`demos`): the model first, if it is one of this host's generations (the actor
+/// shapes the step it asked about with it, as on one host); then the answers in the order their
+/// demonstrations were written, each with its line (one whose line is not in the file is
+/// dropped: the learner's host could not write it); then the status reports, so that an
+/// `exiting` never overtakes an answer sent before it; the exits at the very end.
+fn plan_up(mine: &mut HashSet<u16>, look: Look, demos: &str) -> Vec<Frame> {
+    let Look {
+        reports,
+        mut answers,
+        model,
+        exits,
+    } = look;
+    let mut up = Vec::new();
+    if let Some((h, bytes)) = model {
+        if u16::try_from(h.expert).is_ok_and(|g| mine.contains(&g)) {
+            up.push(Frame::DemoModel(h, bytes));
+        }
+    }
+    in_written_order(&mut answers);
+    for r in answers {
+        let demo = if r.outcome == outcome::ANSWERED {
+            let Some(line) = demos.lines().nth(r.demo_index as usize) else {
+                warn!(
+                    index = r.demo_index,
+                    "an answer without its demonstration; dropped"
+                );
+                continue;
+            };
+            Some(line.to_owned())
+        } else {
+            None
+        };
+        up.push(Frame::ExpertAnswer(r, demo));
+    }
+    up.extend(reports.into_iter().map(Frame::Progress));
+    for f in exits {
+        if let Frame::ExpertExited { generation, .. } = &f {
+            mine.remove(generation);
+        }
+        up.push(f);
+    }
+    up
+}
+
 /// The bridge's thread: blocks on its own doorbell (zenoh delivered something), the
 /// launcher's (the expert reports) and the actors' (the expert answered).
 fn forward(
@@ -329,10 +384,7 @@ impl HostForwarder<'_, '_> {
         Ok(())
     }
 
-    /// Up, in the order the expert did things: its status reports are taken first and sent
-    /// last, so an `exiting` never overtakes an answer sent before it; the model before the
-    /// answers (the actor shapes the step it asked about with it, as on one host); the expert's
-    /// exits at the very end.
+    /// Up: what the expert did since the last look, in the order [`plan_up`] gives.
     fn up(&mut self, exits: Vec<Frame>) -> Result<()> {
         let mut reports = Vec::new();
         drain(
@@ -342,41 +394,24 @@ impl HostForwarder<'_, '_> {
                 Ok(())
             },
         )?;
-        let mut answers = self.answers();
-        in_written_order(&mut answers);
-        if let Some(h) = self.model.latest_into(&mut self.bytes)? {
-            if self.mine.contains(&(h.expert as u16)) {
-                self.put(&Frame::DemoModel(h, self.bytes.clone()))?;
-            }
-        }
+        let answers = self.answers();
+        let model = self
+            .model
+            .latest_into(&mut self.bytes)?
+            .map(|h| (h, self.bytes.clone()));
         // The expert's demonstrations, read once for all the answers that carry one.
-        let text = if answers.iter().any(|r| r.outcome == outcome::ANSWERED) {
+        let demos = if answers.iter().any(|r| r.outcome == outcome::ANSWERED) {
             crate::demos::read(&self.me.demos)?
         } else {
             String::new()
         };
-        for r in answers {
-            let demo = if r.outcome == outcome::ANSWERED {
-                let Some(line) = text.lines().nth(r.demo_index as usize) else {
-                    warn!(
-                        index = r.demo_index,
-                        "an answer without its demonstration; dropped"
-                    );
-                    continue;
-                };
-                Some(line.to_owned())
-            } else {
-                None
-            };
-            self.put(&Frame::ExpertAnswer(r, demo))?;
-        }
-        for p in reports {
-            self.put(&Frame::Progress(p))?;
-        }
-        for f in exits {
-            if let Frame::ExpertExited { generation, .. } = &f {
-                self.mine.remove(generation);
-            }
+        let look = Look {
+            reports,
+            answers,
+            model,
+            exits,
+        };
+        for f in plan_up(&mut self.mine, look, &demos) {
             self.put(&f)?;
         }
         Ok(())
@@ -476,5 +511,69 @@ mod route_tests {
                 (outcome::ANSWERED, 7)
             ]
         );
+    }
+
+    #[test]
+    fn what_goes_up_keeps_the_experts_order_and_drops_what_the_learner_could_not_write() {
+        let answer = |outcome, demo_index| QueryResponse {
+            outcome,
+            demo_index,
+            ..QueryResponse::default()
+        };
+        let header = |expert| alfd_wire::DemoModelHeader {
+            expert,
+            ..alfd_wire::DemoModelHeader::default()
+        };
+        let exit = |generation| Frame::ExpertExited {
+            generation,
+            how: "exited".into(),
+            code: Some(0),
+        };
+        let status = alfd_wire::Progress::default();
+        let mut mine = HashSet::from([2u16]);
+        let look = Look {
+            reports: vec![status],
+            // Demonstration 2 is not in the file (an answer that raced its line): dropped.
+            answers: vec![
+                answer(outcome::ANSWERED, 2),
+                answer(outcome::ANSWERED, 1),
+                answer(outcome::DECLINED, 0),
+                answer(outcome::ANSWERED, 0),
+            ],
+            model: Some((header(2), vec![7])),
+            exits: vec![exit(2)],
+        };
+        let up = plan_up(&mut mine, look, "d0\nd1\n");
+        let kinds: Vec<String> = up
+            .iter()
+            .map(|f| match f {
+                Frame::DemoModel(h, _) => format!("model {}", h.expert),
+                Frame::ExpertAnswer(r, d) => format!("answer {} {d:?}", r.outcome),
+                Frame::Progress(_) => "status".into(),
+                Frame::ExpertExited { generation, .. } => format!("exit {generation}"),
+                _ => "other".into(),
+            })
+            .collect();
+        let answered = outcome::ANSWERED;
+        assert_eq!(
+            kinds,
+            vec![
+                "model 2".to_owned(),
+                format!("answer {} None", outcome::DECLINED),
+                format!("answer {answered} Some(\"d0\")"),
+                format!("answer {answered} Some(\"d1\")"),
+                "status".into(),
+                "exit 2".into(),
+            ]
+        );
+        // The exited generation is no longer this host's: its model does not go up.
+        assert!(mine.is_empty());
+        let look = Look {
+            reports: vec![],
+            answers: vec![],
+            model: Some((header(2), vec![7])),
+            exits: vec![],
+        };
+        assert!(plan_up(&mut mine, look, "").is_empty());
     }
 }
