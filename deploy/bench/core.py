@@ -29,8 +29,10 @@ ALFD = "target/release/alfd"
 TRAIN_STEPS = "target/release/examples/train_steps"
 KRR_GROW = "target/release/examples/krr_grow"
 GROWN = 10
-SIZES = [500, 1000, 2000, 3000]
+SIZES = [500, 1000, 2000, 3000, 10000]
 SVM_SIZES = [500, 1000, 3000]
+# KRR grown by one from B: B + GROWN demonstrations at most (the exact model's limit, 10,000).
+GROW_SIZES = [500, 1000, 2000, 3000, 9990]
 QUERIES = 100
 
 
@@ -119,7 +121,8 @@ def main():
     steps = {64: 20000, 128: 10000}
     krr = {n: {"ours": [], "sklearn": [], "max_diff": 0.0} for n in SIZES}
     svm = {n: {"ours": [], "sklearn": []} for n in SVM_SIZES}
-    grow = {n: {"grow": [], "fit": [], "same_bits": True} for n in SIZES}
+    grow = {n: {"grow": [], "push": [], "model": [], "fit": [], "same_bits": True}
+            for n in GROW_SIZES}
     for r in range(args.rounds):
         print(f"core.py: round {r + 1} of {args.rounds}", flush=True)
         for hidden in train:
@@ -136,11 +139,13 @@ def main():
                 krr[n][who].append(t)
             diff = float(np.max(np.abs(np.array(raw_ours) - raw_sk)))
             krr[n]["max_diff"] = max(krr[n]["max_diff"], diff)
-        for n in SIZES:
+        for n in GROW_SIZES:
             out = json.loads(subprocess.run(
                 [KRR_GROW, str(n), str(GROWN)], check=True, capture_output=True, text=True
             ).stdout)
             grow[n]["grow"].append(out["grow_s"])
+            grow[n]["push"].append(out["push_s"])
+            grow[n]["model"].append(out["model_s"])
             grow[n]["fit"].append(out["fit_s"])
             grow[n]["same_bits"] = grow[n]["same_bits"] and out["same_bits"]
         for n in SVM_SIZES:
@@ -212,20 +217,22 @@ def main():
         "## One more demonstration",
         "",
         f"KRR's cost of a demonstration arriving at B: the factor grown by one row and the model "
-        f"solved from it (`KrrFactor::push` + `model`, the mean over {GROWN} arrivals from B on), "
+        f"solved from it (`KrrFactor::push` + `model`, the mean over {GROWN} arrivals from B on; "
+        "\"new row\" and \"solve\" are the two parts), "
         f"against a fit anew on B + {GROWN} (`KrrFactor::fit` + `model`); in-process times of the "
         "example `common/core/examples/krr_grow.rs`. \"same bits\": the grown model equals the "
         "fitted one bit for bit. scikit-learn's `KernelRidge` has no update: it refits (its fit "
         "column above).",
         "",
-        "| demonstrations | grown by one | fitted anew | fitted / grown | same bits |",
-        "|---:|---:|---:|---:|:---:|",
+        "| demonstrations | grown by one | new row | solve | fitted anew | fitted / grown | same bits |",
+        "|---:|---:|---:|---:|---:|---:|:---:|",
     ]
-    for n in SIZES:
+    for n in GROW_SIZES:
         g = grow[n]
         ratio = statistics.median(g["fit"]) / statistics.median(g["grow"])
         lines.append(
-            f"| {n:,} | {span(g['grow'], ms)} | {span(g['fit'], ms)} | {ratio:.0f} | "
+            f"| {n:,} | {span(g['grow'], ms)} | {span(g['push'], ms)} | {span(g['model'], ms)} | "
+            f"{span(g['fit'], ms)} | {ratio:.0f} | "
             f"{'yes' if g['same_bits'] else 'no'} |"
         )
     with open(os.path.join(args.out, "summary.md"), "w") as f:

@@ -2,7 +2,7 @@
 //! demonstration for KRR at B demonstrations, grown (`KrrFactor::push` and the solve for the
 //! model) against fitted anew (`KrrFactor::fit` and the solve), on CartPole-like states (two
 //! actions). Prints one JSON line: the seconds per grown demonstration (the mean over R of them,
-//! from B on) and the seconds of one fit on B + R, and whether the two models agree bit for bit.
+//! from B on; `push_s` the new row of the factor, `model_s` the solve for the model) and the seconds of one fit on B + R, and whether the two models agree bit for bit.
 
 use alfd_common::demo_model::krr::KrrFactor;
 use alfd_common::rng::seeded;
@@ -26,13 +26,18 @@ fn main() {
     let actions: Vec<usize> = states.iter().map(|s| usize::from(s[2] > 0.0)).collect();
 
     let mut grown = KrrFactor::fit(&states[..b], &actions[..b], 2).expect("a factor");
-    let t = std::time::Instant::now();
+    let (mut push_s, mut model_s) = (0.0, 0.0);
     let mut model = None;
     for i in b..b + r {
+        let t = std::time::Instant::now();
         grown.push(&states[i], actions[i]).expect("a new row");
+        push_s += t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
         model = Some(grown.model());
+        model_s += t.elapsed().as_secs_f64();
     }
-    let grow_s = t.elapsed().as_secs_f64() / r as f64;
+    let (push_s, model_s) = (push_s / r as f64, model_s / r as f64);
+    let grow_s = push_s + model_s;
 
     let t = std::time::Instant::now();
     let fitted = KrrFactor::fit(&states, &actions, 2)
@@ -41,6 +46,6 @@ fn main() {
     let fit_s = t.elapsed().as_secs_f64();
     let same = model.as_ref() == Some(&fitted);
     println!(
-        r#"{{"demos": {b}, "grown": {r}, "grow_s": {grow_s:.6}, "fit_s": {fit_s:.6}, "same_bits": {same}}}"#
+        r#"{{"demos": {b}, "grown": {r}, "grow_s": {grow_s:.6}, "push_s": {push_s:.6}, "model_s": {model_s:.6}, "fit_s": {fit_s:.6}, "same_bits": {same}}}"#
     );
 }

@@ -110,6 +110,9 @@ pub struct KrrFactor {
     actions: Vec<usize>,
     /// L row by row: row i holds its `i + 1` values up to the diagonal.
     l: Vec<f64>,
+    /// `L⁻¹ Y`, row-major `n × actions`, Y the one-hot actions: the forward half of the solve
+    /// for the model, grown with L (a new row of it is O(n) per action).
+    w: Vec<f64>,
 }
 
 impl KrrFactor {
@@ -153,13 +156,34 @@ impl KrrFactor {
             num_actions,
             "factored the kernel matrix"
         );
-        Ok(KrrFactor {
+        let mut f = KrrFactor {
             state_dim,
             num_actions,
             states: flat,
-            actions: actions.to_vec(),
+            actions: Vec::with_capacity(n),
             l,
-        })
+            w: Vec::with_capacity(n * num_actions),
+        };
+        for &a in actions {
+            f.forward_row(a);
+            f.actions.push(a);
+        }
+        Ok(f)
+    }
+
+    /// Appends row `n` of `w = L⁻¹ Y` for the demonstration of `action` whose row of L is the
+    /// last: `w_n = (y_n − Σ_j l_nj w_j) / l_nn`, the products subtracted in order of j.
+    fn forward_row(&mut self, action: usize) {
+        let (n, m) = (self.w.len() / self.num_actions, self.num_actions);
+        let start = n * (n + 1) / 2;
+        let row = &self.l[start..start + n + 1];
+        for a in 0..m {
+            let mut v = if a == action { 1.0 } else { 0.0 };
+            for (l, w) in row[..n].iter().zip(self.w.iter().skip(a).step_by(m)) {
+                v -= l * w;
+            }
+            self.w.push(v / row[n]);
+        }
     }
 
     /// Demonstrations factored.
@@ -186,8 +210,14 @@ impl KrrFactor {
             return Err(DemoModelError::TooManyDemos(n + 1));
         }
         let mut z = Vec::with_capacity(n + 1);
-        for (j, x) in self.states.chunks_exact(self.state_dim).enumerate() {
+        let mut j = 0;
+        while j + 4 <= n {
+            self.forward_four(state, j, &mut z);
+            j += 4;
+        }
+        for j in j..n {
             let lj = self.row(j);
+            let x = &self.states[j * self.state_dim..(j + 1) * self.state_dim];
             let mut s = rbf(state, x);
             for (l, zp) in lj[..j].iter().zip(&z) {
                 s -= l * zp;
@@ -203,21 +233,49 @@ impl KrrFactor {
         }
         z.push(d.sqrt());
         self.l.extend_from_slice(&z);
+        self.forward_row(action);
         self.states.extend_from_slice(state);
         self.actions.push(action);
         Ok(())
     }
 
+    /// Rows `j..j + 4` of the forward substitution for a new row of L (`z` holds its first `j`
+    /// values): four chains of subtractions at once, so that one does not wait on the last, each
+    /// taking its products in order of the column, as one row alone would.
+    fn forward_four(&self, state: &[f64], j: usize, z: &mut Vec<f64>) {
+        let d = self.state_dim;
+        let rows: [&[f64]; 4] = std::array::from_fn(|t| self.row(j + t));
+        let mut acc: [f64; 4] =
+            std::array::from_fn(|t| rbf(state, &self.states[(j + t) * d..(j + t + 1) * d]));
+        let [r0, r1, r2, r3] = rows.map(|r| &r[..j]);
+        for ((((&zk, l0), l1), l2), l3) in z[..j].iter().zip(r0).zip(r1).zip(r2).zip(r3) {
+            acc[0] -= l0 * zk;
+            acc[1] -= l1 * zk;
+            acc[2] -= l2 * zk;
+            acc[3] -= l3 * zk;
+        }
+        for t in 0..4 {
+            for u in 0..t {
+                acc[t] -= rows[t][j + u] * z[j + u];
+            }
+            z.push(acc[t] / rows[t][j + t]);
+        }
+    }
+
     /// The regression on the demonstrations factored: `L Lᵀ C = Y` solved for the dual
     /// coefficients, O(n²) per action: by nalgebra below [`BLOCKED_FROM`] demonstrations (the
-    /// numbers every smaller run keeps), from there on the rows where they are kept.
+    /// numbers every smaller run keeps), from there on by back substitution from the kept
+    /// `L⁻¹ Y` ([`KrrFactor::back_solve`]).
     pub fn model(&self) -> KernelRidge {
         let (n, m) = (self.len(), self.num_actions);
+        if n >= BLOCKED_FROM {
+            return self.with_coef(self.back_solve());
+        }
         let mut coef = vec![0.0; n * m];
         for (i, &a) in self.actions.iter().enumerate() {
             coef[i * m + a] = 1.0;
         }
-        if n < BLOCKED_FROM {
+        {
             let mut l = DMatrix::<f64>::zeros(n, n);
             for i in 0..n {
                 for (j, v) in self.row(i).iter().enumerate() {
@@ -232,10 +290,8 @@ impl KrrFactor {
                     coef[i * m + a] = y[(i, a)];
                 }
             }
-        } else {
-            self.solve_rows(&mut coef);
+            self.with_coef(coef)
         }
-        self.with_coef(coef)
     }
 
     fn with_coef(&self, dual_coef: Vec<f64>) -> KernelRidge {
@@ -247,33 +303,35 @@ impl KrrFactor {
         }
     }
 
-    /// `L Lᵀ X = Y` in place for `x`, row-major `n × actions` (Y in, X out), reading L a row at a
-    /// time where it is stored (no `n × n` matrix is made): forward substitution row by row,
-    /// back substitution from the last row up.
-    fn solve_rows(&self, x: &mut [f64]) {
+    /// `Lᵀ X = W` for the dual coefficients X (row-major `n × actions`), W = L⁻¹ Y being kept
+    /// ([`KrrFactor::forward_row`]): back substitution from the last row up, each action's
+    /// column apart so that a row of L updates it in one pass over contiguous values. Every
+    /// coefficient takes the same products in the same order as a row-major back substitution.
+    fn back_solve(&self) -> Vec<f64> {
         let (n, m) = (self.len(), self.num_actions);
-        for i in 0..n {
-            let row = self.row(i);
-            let (done, rest) = x.split_at_mut(i * m);
-            let xi = &mut rest[..m];
-            for (j, l) in row[..i].iter().enumerate() {
-                for (v, xj) in xi.iter_mut().zip(&done[j * m..(j + 1) * m]) {
-                    *v -= l * xj;
-                }
+        let mut cols = vec![0.0; n * m];
+        for (i, w) in self.w.chunks_exact(m).enumerate() {
+            for (a, v) in w.iter().enumerate() {
+                cols[a * n + i] = *v;
             }
-            xi.iter_mut().for_each(|v| *v /= row[i]);
         }
         for i in (0..n).rev() {
             let row = self.row(i);
-            let (before, rest) = x.split_at_mut(i * m);
-            let xi = &mut rest[..m];
-            xi.iter_mut().for_each(|v| *v /= row[i]);
-            for (j, l) in row[..i].iter().enumerate() {
-                for (v, xv) in before[j * m..(j + 1) * m].iter_mut().zip(xi.iter()) {
-                    *v -= l * xv;
+            for col in cols.chunks_exact_mut(n) {
+                let xi = col[i] / row[i];
+                col[i] = xi;
+                for (v, l) in col[..i].iter_mut().zip(&row[..i]) {
+                    *v -= l * xi;
                 }
             }
         }
+        let mut x = vec![0.0; n * m];
+        for (a, col) in cols.chunks_exact(n).enumerate() {
+            for (i, v) in col.iter().enumerate() {
+                x[i * m + a] = *v;
+            }
+        }
+        x
     }
 }
 
