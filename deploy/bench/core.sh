@@ -19,5 +19,5 @@ source deploy/bench/venv.sh
 bench_venv core.sh "$venv" "$requirements" 'import sklearn, numpy, scipy'
 echo "core.sh: building alfd and the train-step example (release)" >&2
 cargo build --release --quiet -p alfd-deploy --bin alfd
-cargo build --release --quiet -p alfd-common --example train_steps --example krr_grow
+cargo build --release --quiet -p alfd-common --example train_steps --example krr_grow --example nystrom_agreement
 exec "$venv/bin/python" deploy/bench/core.py --out results/bench "$@"

@@ -8,6 +8,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use alfd_common::demo_model::nystrom::MAX_APPROX_DEMOS;
 use alfd_common::demo_model::{DemoModel, DemoModelError, DemoModelKind, MAX_ACTIONS, MAX_DEMOS};
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
@@ -21,6 +22,8 @@ pub enum KindArg {
     Krr,
     /// Kernel SVM (C = 10, RBF gamma 0.1) with Platt scaling; two actions only.
     Svm,
+    /// KRR on the first 512 demonstrations as Nyström landmarks: up to 1,000,000 demonstrations.
+    Nystrom,
 }
 
 impl From<KindArg> for DemoModelKind {
@@ -28,6 +31,7 @@ impl From<KindArg> for DemoModelKind {
         match k {
             KindArg::Krr => DemoModelKind::Krr,
             KindArg::Svm => DemoModelKind::Svm,
+            KindArg::Nystrom => DemoModelKind::Nystrom,
         }
     }
 }
@@ -132,16 +136,24 @@ fn parse_lines<T: for<'de> Deserialize<'de>>(
     Ok(out)
 }
 
-/// Parses a demos file's text (`file` names it in errors): at most [`MAX_DEMOS`] demonstrations.
-pub fn parse_demos(text: &str, file: &str) -> Result<Demos, BadInput> {
+/// Parses a demos file's text (`file` names it in errors) for a model of `kind`: at most
+/// [`MAX_DEMOS`] demonstrations ([`MAX_APPROX_DEMOS`] for the Nyström model).
+pub fn parse_demos(text: &str, file: &str, kind: DemoModelKind) -> Result<Demos, BadInput> {
     let items = parse_lines::<DemoLine>(text, file, None, |d| &d.state)?;
     if items.is_empty() {
         return Err(BadInput(format!("{file}: no demonstrations")));
     }
-    if items.len() > MAX_DEMOS {
+    if kind == DemoModelKind::Nystrom && items.len() > MAX_APPROX_DEMOS {
+        return Err(BadInput(format!(
+            "{file}: {} demonstrations, but the nystrom model is fitted on at most \
+             {MAX_APPROX_DEMOS}",
+            items.len()
+        )));
+    }
+    if kind != DemoModelKind::Nystrom && items.len() > MAX_DEMOS {
         return Err(BadInput(format!(
             "{file}: {} demonstrations, but a demonstration model is fitted on at most {MAX_DEMOS} \
-             (its kernel matrix holds n × n numbers)",
+             (its kernel matrix holds n × n numbers; `--kind nystrom` takes more)",
             items.len()
         )));
     }
@@ -209,7 +221,8 @@ fn read(path: &Path, what: &str) -> Result<String, BadInput> {
 pub fn run(args: DemoModelArgs) -> anyhow::Result<()> {
     let demos_name = args.demos.display().to_string();
     let query_name = args.query.display().to_string();
-    let demos = parse_demos(&read(&args.demos, "demos")?, &demos_name)?;
+    let kind = DemoModelKind::from(args.kind);
+    let demos = parse_demos(&read(&args.demos, "demos")?, &demos_name, kind)?;
     let num_actions = num_actions(&demos, args.actions, &demos_name)?;
     let dim = demos.states[0].len();
     let queries = parse_queries(&read(&args.query, "query")?, &query_name, dim)?;
@@ -221,13 +234,13 @@ pub fn run(args: DemoModelArgs) -> anyhow::Result<()> {
         "fitting the demonstration model"
     );
 
-    let kind = DemoModelKind::from(args.kind);
     let model = match DemoModel::fit(kind, &demos.states, &demos.actions, num_actions) {
         Ok(m) => m,
         Err(
             e @ (DemoModelError::Unsupported(_)
             | DemoModelError::TooManyActions(_)
-            | DemoModelError::TooManyDemos(_)),
+            | DemoModelError::TooManyDemos(_)
+            | DemoModelError::TooManyApproxDemos(_)),
         ) => return Err(BadInput(format!("{kind} on {demos_name}: {e}")).into()),
         Err(e) => return Err(e).with_context(|| format!("fitting {kind} on {demos_name}")),
     };
@@ -254,7 +267,7 @@ mod tests {
     fn demos_parse_and_skip_blank_lines() {
         let text =
             "{\"state\":[0.5,1],\"action\":1}\n\n{\"state\":[2,3],\"action\":0,\"reward\":1}\n";
-        let d = parse_demos(text, "d.jsonl").unwrap();
+        let d = parse_demos(text, "d.jsonl", DemoModelKind::Krr).unwrap();
         assert_eq!(d.states, vec![vec![0.5, 1.0], vec![2.0, 3.0]]);
         assert_eq!(d.actions, vec![1, 0]);
         assert_eq!(d.lines, vec![1, 3]);
@@ -264,15 +277,15 @@ mod tests {
     #[test]
     fn malformed_lines_are_named() {
         let text = "{\"state\":[0,1],\"action\":1}\n{\"state\":[0,1],\"action\":-1}\n";
-        let e = parse_demos(text, "d.jsonl").unwrap_err();
+        let e = parse_demos(text, "d.jsonl", DemoModelKind::Krr).unwrap_err();
         assert!(e.0.starts_with("d.jsonl:2: malformed line"), "{e}");
 
         let text = "{\"state\":[0,1],\"action\":1}\n\n{\"state\":[0,1]\n";
-        let e = parse_demos(text, "d.jsonl").unwrap_err();
+        let e = parse_demos(text, "d.jsonl", DemoModelKind::Krr).unwrap_err();
         assert!(e.0.starts_with("d.jsonl:3: malformed line"), "{e}");
 
         let text = "{\"state\":[0,1],\"action\":1}\n{\"action\":0}\n";
-        let e = parse_demos(text, "d.jsonl").unwrap_err();
+        let e = parse_demos(text, "d.jsonl", DemoModelKind::Krr).unwrap_err();
         assert!(
             e.0.starts_with("d.jsonl:2:") && e.0.contains("state"),
             "{e}"
@@ -282,7 +295,7 @@ mod tests {
     #[test]
     fn inconsistent_dimensions_are_named() {
         let text = "{\"state\":[0,1],\"action\":1}\n{\"state\":[0,1,2],\"action\":0}\n";
-        let e = parse_demos(text, "d.jsonl").unwrap_err();
+        let e = parse_demos(text, "d.jsonl", DemoModelKind::Krr).unwrap_err();
         assert_eq!(
             e.0,
             "d.jsonl:2: the state has 3 components, expected 2 (as line 1)"
@@ -301,25 +314,28 @@ mod tests {
     #[test]
     fn empty_demos_and_bad_action_counts_are_refused() {
         assert_eq!(
-            parse_demos("\n\n", "d.jsonl").unwrap_err().0,
+            parse_demos("\n\n", "d.jsonl", DemoModelKind::Krr)
+                .unwrap_err()
+                .0,
             "d.jsonl: no demonstrations"
         );
         let d = parse_demos(
             "{\"state\":[0],\"action\":0}\n{\"state\":[1],\"action\":3}\n",
             "d",
+            DemoModelKind::Krr,
         )
         .unwrap();
         assert_eq!(num_actions(&d, None, "d").unwrap(), 4);
         assert_eq!(num_actions(&d, Some(5), "d").unwrap(), 5);
         let e = num_actions(&d, Some(3), "d").unwrap_err();
         assert!(e.0.starts_with("d:2: action 3"), "{e}");
-        let d = parse_demos("{\"state\":[0],\"action\":0}\n", "d").unwrap();
+        let d = parse_demos("{\"state\":[0],\"action\":0}\n", "d", DemoModelKind::Krr).unwrap();
         assert_eq!(num_actions(&d, None, "d").unwrap(), 2);
     }
 
     #[test]
     fn sizes_beyond_the_limits_are_refused_naming_the_argument_or_line() {
-        let d = parse_demos("{\"state\":[0],\"action\":1}\n", "d").unwrap();
+        let d = parse_demos("{\"state\":[0],\"action\":1}\n", "d", DemoModelKind::Krr).unwrap();
         assert_eq!(
             num_actions(&d, Some(100_000_000_000), "d").unwrap_err().0,
             "--actions 100000000000: a demonstration model handles at most 1024 actions"
@@ -332,6 +348,7 @@ mod tests {
         let d = parse_demos(
             "{\"state\":[0],\"action\":0}\n{\"state\":[1],\"action\":100000000000}\n",
             "d",
+            DemoModelKind::Krr,
         )
         .unwrap();
         assert_eq!(
@@ -340,8 +357,15 @@ mod tests {
         );
         let many = "{\"state\":[0],\"action\":0}\n".repeat(MAX_DEMOS + 1);
         assert_eq!(
-            parse_demos(&many, "d").unwrap_err().0,
-            "d: 10001 demonstrations, but a demonstration model is fitted on at most 10000 (its kernel matrix holds n × n numbers)"
+            parse_demos(&many, "d", DemoModelKind::Svm).unwrap_err().0,
+            "d: 10001 demonstrations, but a demonstration model is fitted on at most 10000 (its kernel matrix holds n × n numbers; `--kind nystrom` takes more)"
+        );
+        assert_eq!(
+            parse_demos(&many, "d", DemoModelKind::Nystrom)
+                .unwrap()
+                .actions
+                .len(),
+            MAX_DEMOS + 1
         );
     }
 

@@ -690,6 +690,27 @@ fn demo_model_refuses_an_absurd_number_of_actions_or_demonstrations() {
         &args,
         &format!("{d}: 10001 demonstrations, but a demonstration model is fitted on at most 10000"),
     );
+    // The Nyström model takes them (20,000 demonstrations of two states with their actions): at
+    // the demonstrated states, each action's probability.
+    let half = "{\"state\":[0,1],\"action\":1}\n{\"state\":[1,0],\"action\":0}\n";
+    std::fs::write(&demos, half.repeat(10_000)).unwrap();
+    std::fs::write(&query, "{\"state\":[0,1]}\n{\"state\":[1,0]}\n").unwrap();
+    let o = alfd(&[
+        "demo-model",
+        "--kind",
+        "nystrom",
+        "--demos",
+        d,
+        "--query",
+        q,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let p1 = |i: usize| lines[i]["probs"][1].as_f64().unwrap();
+    assert!(lines.len() == 2 && p1(0) > 0.9 && p1(1) < 0.1, "{lines:?}");
     assert_usage_error(
         &["demo-model-policy", "--demos", "100000", "--runs", "1"],
         "--demos 100000: a demonstration model is fitted on at most 10000 demonstrations",

@@ -451,6 +451,9 @@ pub enum DemoModelChoice {
     Krr,
     /// Kernel SVM (C = 10, RBF γ = 0.1) with Platt scaling.
     Svm,
+    /// KRR on the first 512 demonstrations as Nyström landmarks (α = 0.1, RBF γ = 0.1): for
+    /// budgets beyond the exact models' 10,000, up to 1,000,000.
+    Nystrom,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]

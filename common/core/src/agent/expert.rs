@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::checkpoint::StateMismatch;
 use crate::config::DemoModelChoice;
 use crate::demo_model::krr::KrrFactor;
+use crate::demo_model::nystrom::NystromFactor;
 use crate::demo_model::{DemoModel, DemoModelError, DemoModelKind};
 use crate::nn::Mlp;
 use crate::policy::argmax;
@@ -120,6 +121,8 @@ pub struct ExpertCore {
     model: Option<DemoModel>,
     /// With KRR: the kernel matrix's factor over `demos`, grown by a row per demonstration.
     krr: Option<KrrFactor>,
+    /// With the Nyström model: its sums over `demos`, grown by each demonstration.
+    nystrom: Option<NystromFactor>,
     model_version: u64,
     schedule: ShapingSchedule,
 }
@@ -138,6 +141,7 @@ impl ExpertCore {
             num_actions,
             model: None,
             krr: None,
+            nystrom: None,
             model_version: 0,
             schedule,
         }
@@ -159,6 +163,7 @@ impl ExpertCore {
         self.budget = Budget::with_used(self.budget.total(), records.len() as u32);
         self.demos = records;
         self.krr = None;
+        self.nystrom = None;
         self.refit()
     }
 
@@ -231,14 +236,17 @@ impl ExpertCore {
             DemoModelChoice::None => return Ok(()),
             DemoModelChoice::Krr => DemoModelKind::Krr,
             DemoModelChoice::Svm => DemoModelKind::Svm,
+            DemoModelChoice::Nystrom => DemoModelKind::Nystrom,
         };
         if self.demos.is_empty() {
             self.model = None;
             self.krr = None;
+            self.nystrom = None;
             return Ok(());
         }
         self.model = Some(match kind {
             DemoModelKind::Krr => DemoModel::Krr(self.grow_krr()?.model()),
+            DemoModelKind::Nystrom => DemoModel::Nystrom(self.grow_nystrom()?.model()?),
             DemoModelKind::Svm => {
                 let states: Vec<Vec<f64>> = self.demos.iter().map(|d| d.state.clone()).collect();
                 let actions: Vec<usize> = self.demos.iter().map(|d| d.action).collect();
@@ -265,6 +273,23 @@ impl ExpertCore {
             }
         }
         Ok(self.krr.as_ref().expect("factored above"))
+    }
+
+    /// The Nyström sums over every demonstration: those held, grown by the newest
+    /// demonstration, or summed anew when they do not hold all the others (the same bits).
+    fn grow_nystrom(&mut self) -> Result<&NystromFactor, DemoModelError> {
+        let n = self.demos.len();
+        match (&mut self.nystrom, self.demos.last()) {
+            (Some(f), Some(d)) if f.len() + 1 == n => f.push(&d.state, d.action)?,
+            (Some(f), _) if f.len() == n => {}
+            _ => {
+                self.nystrom = None;
+                let states: Vec<&[f64]> = self.demos.iter().map(|d| d.state.as_slice()).collect();
+                let actions: Vec<usize> = self.demos.iter().map(|d| d.action).collect();
+                self.nystrom = Some(NystromFactor::fit(&states, &actions, self.num_actions)?);
+            }
+        }
+        Ok(self.nystrom.as_ref().expect("summed above"))
     }
 
     pub fn budget(&self) -> Budget {
@@ -297,5 +322,39 @@ impl ExpertCore {
             self.last_demo_step(),
             self.model.as_ref(),
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The model after each demonstration, grown, against the model of the same demonstrations
+    /// restored at once (as a restarted expert fits it).
+    fn grown_and_restored(choice: DemoModelChoice, n: usize) -> (DemoModel, DemoModel) {
+        let schedule = crate::config::ShapingConfig::default().schedule();
+        let mut core = ExpertCore::new(n as u32, choice, 2, schedule.clone());
+        for i in 0..n {
+            let x = i as f64;
+            let state = [(x * 0.37).sin() * 3.0, (x * 0.11).cos() * 3.0];
+            core.record(&state, usize::from(state[0] > 0.0), i as u64, "e")
+                .expect("budget left");
+        }
+        let mut restored = ExpertCore::new(n as u32, choice, 2, schedule);
+        restored.restore(core.demos().to_vec()).unwrap();
+        (
+            core.model().cloned().unwrap(),
+            restored.model().cloned().unwrap(),
+        )
+    }
+
+    #[test]
+    fn the_kernel_models_grown_a_demonstration_at_a_time_are_those_fitted_on_restore() {
+        for choice in [DemoModelChoice::Krr, DemoModelChoice::Nystrom] {
+            let n = crate::demo_model::nystrom::LANDMARKS + 20;
+            let (grown, restored) = grown_and_restored(choice, n);
+            assert_eq!(grown, restored, "{choice:?}");
+            assert_eq!(grown.num_demos(), n);
+        }
     }
 }

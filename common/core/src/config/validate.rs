@@ -1,7 +1,8 @@
 //! [`ExperimentConfig::validate`]: every value of a config checked, the error naming the field;
 //! sizes (buffers, layers, queues) have upper limits so that no config asks for absurd memory.
 
-use super::{invalid, AgentKind, EnvName, ExperimentConfig, Result, RuleKind};
+use super::{invalid, AgentKind, DemoModelChoice, EnvName, ExperimentConfig, Result, RuleKind};
+use crate::demo_model::nystrom::MAX_APPROX_DEMOS;
 use crate::demo_model::MAX_DEMOS;
 
 /// The largest `agent.replay_capacity`: a million transitions take about 100 MB.
@@ -382,12 +383,17 @@ impl ExperimentConfig {
                 format!("must be >= 0, got {}", s.stop_multiple),
             ));
         }
-        if self.shaping_enabled() && self.budget.total > MAX_DEMOS as i64 {
+        let max_demos = match self.expert.model {
+            DemoModelChoice::Nystrom => MAX_APPROX_DEMOS,
+            _ => MAX_DEMOS,
+        };
+        if self.shaping_enabled() && self.budget.total > max_demos as i64 {
             return Err(invalid(
                 "budget.total",
                 format!(
                     "is {}, but the demonstration model (`expert.model`) is refitted on every \
-                     demonstration and takes at most {MAX_DEMOS}",
+                     demonstration and takes at most {max_demos} (`nystrom` takes up to \
+                     {MAX_APPROX_DEMOS})",
                     self.budget.total
                 ),
             ));
@@ -501,9 +507,27 @@ mod tests {
             e.starts_with(&format!(
                 "invalid config: `budget.total` is {}, but the demonstration model",
                 max + 1
-            )) && e.ends_with(&format!("takes at most {max}")),
+            )) && e.contains(&format!("takes at most {max} (`nystrom`")),
             "{e}"
         );
+        // The Nyström model takes budgets a hundred times larger, and no more.
+        let approx = MAX_APPROX_DEMOS as i64;
+        assert!(check(
+            NEURAL,
+            &[
+                "expert.model=\"nystrom\"",
+                &format!("budget.total={approx}")
+            ]
+        )
+        .is_ok());
+        let e = error(
+            NEURAL,
+            &[
+                "expert.model=\"nystrom\"",
+                &format!("budget.total={}", approx + 1),
+            ],
+        );
+        assert!(e.contains(&format!("takes at most {approx} ")), "{e}");
         // Without a model, demonstrations are only stored: the budget is not limited by it.
         assert!(check(NEURAL, &["budget.total=1000000"]).is_ok());
     }

@@ -12,10 +12,12 @@
 
 mod cholesky;
 pub mod krr;
+pub mod nystrom;
 pub mod smo;
 pub mod svm;
 
 pub use krr::KernelRidge;
+pub use nystrom::NystromRidge;
 pub use svm::{KernelSvm, Platt};
 
 use serde::{Deserialize, Serialize};
@@ -39,6 +41,9 @@ pub enum DemoModelKind {
     Krr,
     /// Kernel SVM (C = 10, RBF gamma 0.1) with Platt-scaled probabilities; two actions only.
     Svm,
+    /// KRR on the first 512 demonstrations as Nyström landmarks, for up to 1,000,000
+    /// demonstrations (`nystrom.rs`).
+    Nystrom,
 }
 
 impl DemoModelKind {
@@ -47,6 +52,7 @@ impl DemoModelKind {
         match self {
             DemoModelKind::Krr => "krr",
             DemoModelKind::Svm => "svm",
+            DemoModelKind::Nystrom => "nystrom",
         }
     }
 }
@@ -64,6 +70,7 @@ impl std::str::FromStr for DemoModelKind {
         match s.to_ascii_lowercase().as_str() {
             "krr" => Ok(DemoModelKind::Krr),
             "svm" => Ok(DemoModelKind::Svm),
+            "nystrom" => Ok(DemoModelKind::Nystrom),
             _ => Err(DemoModelError::UnknownKind(s.to_string())),
         }
     }
@@ -104,11 +111,13 @@ pub enum DemoModelError {
     TooManyActions(usize),
     #[error("{0} demonstrations: a demonstration model is fitted on at most {MAX_DEMOS} (its kernel matrix holds n × n numbers)")]
     TooManyDemos(usize),
+    #[error("{0} demonstrations: the Nyström model is fitted on at most {max}", max = nystrom::MAX_APPROX_DEMOS)]
+    TooManyApproxDemos(usize),
     #[error("unsupported: {0}")]
     Unsupported(String),
     #[error("the SVM solver failed: {0}")]
     Solver(String),
-    #[error("unknown demonstration model kind {0:?} (expected \"krr\" or \"svm\")")]
+    #[error("unknown demonstration model kind {0:?} (expected \"krr\", \"svm\" or \"nystrom\")")]
     UnknownKind(String),
 }
 
@@ -117,6 +126,7 @@ pub enum DemoModelError {
 pub enum DemoModel {
     Krr(KernelRidge),
     Svm(KernelSvm),
+    Nystrom(NystromRidge),
 }
 
 impl DemoModel {
@@ -136,6 +146,9 @@ impl DemoModel {
                 KernelRidge::fit(states, actions, num_actions).map(DemoModel::Krr)
             }
             DemoModelKind::Svm => KernelSvm::fit(states, actions, num_actions).map(DemoModel::Svm),
+            DemoModelKind::Nystrom => {
+                NystromRidge::fit(states, actions, num_actions).map(DemoModel::Nystrom)
+            }
         }
     }
 
@@ -143,6 +156,7 @@ impl DemoModel {
         match self {
             DemoModel::Krr(_) => DemoModelKind::Krr,
             DemoModel::Svm(_) => DemoModelKind::Svm,
+            DemoModel::Nystrom(_) => DemoModelKind::Nystrom,
         }
     }
 
@@ -151,6 +165,7 @@ impl DemoModel {
         match self {
             DemoModel::Krr(m) => m.num_actions(),
             DemoModel::Svm(m) => m.num_actions(),
+            DemoModel::Nystrom(m) => m.num_actions(),
         }
     }
 
@@ -159,6 +174,7 @@ impl DemoModel {
         match self {
             DemoModel::Krr(m) => m.state_dim(),
             DemoModel::Svm(m) => m.state_dim(),
+            DemoModel::Nystrom(m) => m.state_dim(),
         }
     }
 
@@ -167,6 +183,7 @@ impl DemoModel {
         match self {
             DemoModel::Krr(m) => m.num_demos(),
             DemoModel::Svm(m) => m.num_demos(),
+            DemoModel::Nystrom(m) => m.num_demos(),
         }
     }
 
@@ -179,6 +196,7 @@ impl DemoModel {
         match self {
             DemoModel::Krr(m) => m.raw(s),
             DemoModel::Svm(m) => vec![m.decision_value(s)],
+            DemoModel::Nystrom(m) => m.raw(s),
         }
     }
 
@@ -190,6 +208,7 @@ impl DemoModel {
         match self {
             DemoModel::Krr(m) => m.probs(s),
             DemoModel::Svm(m) => m.probs(s),
+            DemoModel::Nystrom(m) => m.probs(s),
         }
     }
 
