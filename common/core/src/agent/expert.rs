@@ -333,7 +333,7 @@ mod tests {
     /// restored at once (as a restarted expert fits it).
     fn grown_and_restored(choice: DemoModelChoice, n: usize) -> (DemoModel, DemoModel) {
         let schedule = crate::config::ShapingConfig::default().schedule();
-        let mut core = ExpertCore::new(n as u32, choice, 2, schedule.clone());
+        let mut core = ExpertCore::new(n as u32, choice, 2, schedule);
         for i in 0..n {
             let x = i as f64;
             let state = [(x * 0.37).sin() * 3.0, (x * 0.11).cos() * 3.0];
