@@ -2,7 +2,9 @@
 //! and SIGSTOP of actors, learner and expert, expert swaps, the launcher killed and the run
 //! resumed, and, as root, the run directory's file system filled and freed) keeps every
 //! invariant: it finishes, every episode is in `episodes.csv` once, `demos.jsonl` is gap-free
-//! within the budget and as counted, every checkpoint loads, nothing is left running.
+//! within the budget and as counted, every checkpoint loads, nothing is left running. Two more
+//! variants: Python environment adapters among the targets, and a joined host (`alfd join` on
+//! 127.0.0.1) among them.
 
 use std::path::Path;
 
@@ -105,4 +107,48 @@ fn a_seeded_chaos_run_with_python_adapters_keeps_every_invariant() {
         .count();
     assert!(events.len() >= 10, "{} faults", events.len());
     assert!(adapters_hit >= 1, "no adapter was hit: {events:#?}");
+}
+
+#[test]
+fn a_seeded_chaos_run_with_a_joined_host_keeps_every_invariant() {
+    let _time = timed!();
+    let dir = tmp("chaos-remote");
+    let out = dir.join("run");
+    let o = alfd()
+        .args(["chaos", "--out", out.to_str().unwrap(), "--seed", "5"])
+        .args(["--actors", "1", "--join-actors", "1"])
+        .args(["--duration", "40", "--every", "1.2"])
+        // A resumed run listens on no port (`alfd chaos` drops launcher kills on its own).
+        .args(["--faults", "kill=4,pause=3,swap=1"])
+        .args(["--checkpoint-every", "300", "--grace", "300"])
+        .args([
+            "--set",
+            "episodes=400",
+            "--set",
+            "env.max_episode_steps=200",
+        ])
+        .output()
+        .unwrap();
+    let report = held(&out, &o);
+    let events = report["events"].as_array().unwrap();
+    let host_hit = events
+        .iter()
+        .filter(|e| e["fault"].to_string().contains("host"))
+        .filter(|e| e["carried_out"] == true)
+        .count();
+    assert!(events.len() >= 10, "{} faults", events.len());
+    assert!(host_hit >= 1, "the joined host was not hit: {events:#?}");
+    // A killed host was started again (seed 5 kills it several times).
+    assert!(
+        report["joined_host"]["starts"].as_u64().unwrap() >= 2,
+        "{report:#}"
+    );
+    // The joined host's actor (id 1, above the local actor 0) played episodes of the run.
+    let episodes = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    let remote = episodes
+        .lines()
+        .skip(1)
+        .filter(|l| l.split(',').nth(8) == Some("1"))
+        .count();
+    assert!(remote >= 1, "no episode of the joined host's actor");
 }

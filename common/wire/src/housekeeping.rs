@@ -156,18 +156,30 @@ fn node_counters(run_id: &str) -> Vec<PathBuf> {
     found
 }
 
-/// Whether `run_id` has the form the launcher gives run ids, `r<unix seconds>-<pid>`: the only
-/// runs `alfd clean` looks at (such an id holds no `_`, so its file prefix is no other run's).
+/// Whether `run_id` has the form the launcher gives run ids, `r<unix seconds>-<pid>` (such an
+/// id holds no `_`, so its file prefix is no other run's).
 pub fn is_launcher_run_id(run_id: &str) -> bool {
-    let Some((secs, pid)) = run_id.strip_prefix('r').and_then(|r| r.split_once('-')) else {
+    has_id_form(run_id, 'r')
+}
+
+/// `<letter><unix seconds>-<pid>`.
+fn has_id_form(run_id: &str, letter: char) -> bool {
+    let Some((secs, pid)) = run_id.strip_prefix(letter).and_then(|r| r.split_once('-')) else {
         return false;
     };
     let digits = |t: &str| !t.is_empty() && t.len() <= 20 && t.bytes().all(|b| b.is_ascii_digit());
     digits(secs) && digits(pid)
 }
 
-/// The launcher-made runs (see [`is_launcher_run_id`]) that have files in iceoryx2's
-/// directories, live or not, sorted.
+/// Whether `run_id` is one `alfd clean` looks at: a launcher's run ([`is_launcher_run_id`]) or
+/// the local copy of a run's services that `alfd join` makes for its actors (`j<secs>-<pid>`)
+/// or its expert (`k<secs>-<pid>`), which a host killed with SIGKILL leaves behind.
+pub fn is_alfd_run_id(run_id: &str) -> bool {
+    ['r', 'j', 'k'].into_iter().any(|l| has_id_form(run_id, l))
+}
+
+/// The runs of alfd (see [`is_alfd_run_id`]) that have files in iceoryx2's directories, live or
+/// not, sorted.
 pub fn runs_with_files() -> Vec<String> {
     let mut runs = std::collections::BTreeSet::new();
     let mut stack = vec![PathBuf::from("/tmp/iceoryx2"), PathBuf::from("/dev/shm")];
@@ -181,7 +193,7 @@ pub fn runs_with_files() -> Vec<String> {
                 .strip_prefix("alfd_")
                 .and_then(|rest| rest.split_once('_'))
                 .map(|(id, _)| id)
-                .filter(|id| is_launcher_run_id(id))
+                .filter(|id| is_alfd_run_id(id))
             {
                 runs.insert(id.to_owned());
             } else if entry.file_type().is_ok_and(|t| t.is_dir()) {
@@ -260,6 +272,21 @@ mod tests {
         let files = leftover_files(run);
         assert!(files.iter().all(|p| p.exists()), "{files:?}");
         files
+    }
+
+    #[test]
+    fn alfd_clean_looks_at_launcher_runs_and_the_copies_joined_hosts_make() {
+        for id in [
+            "r1796205976-30847",
+            "j1796205976-30847",
+            "k1796205976-30847",
+        ] {
+            assert!(is_alfd_run_id(id), "{id}");
+        }
+        assert!(is_launcher_run_id("r1-2") && !is_launcher_run_id("j1-2"));
+        for id in ["x1-2", "j1_2", "j-2", "j1-", "jj1-2", "r1-2_x", "test-live"] {
+            assert!(!is_alfd_run_id(id), "{id}");
+        }
     }
 
     #[test]

@@ -15,6 +15,9 @@ pub enum Target {
     Expert,
     /// The Python environment adapter of an actor (a Gymnasium environment's run).
     Adapter(u16),
+    /// The joined host (`alfd join` on 127.0.0.1 with actors of its own); killed, it is started
+    /// again.
+    Host,
 }
 
 impl Target {
@@ -25,6 +28,7 @@ impl Target {
             Target::Learner => "alfd-learner",
             Target::Expert => "alfd-expert",
             Target::Adapter(_) => "",
+            Target::Host => "alfd",
         }
     }
 }
@@ -93,6 +97,7 @@ pub struct Injector {
     experts: Vec<String>,
     mix: Mix,
     adapters: bool,
+    host: bool,
     next: Duration,
 }
 
@@ -111,6 +116,7 @@ impl Injector {
             experts,
             mix,
             adapters: false,
+            host: false,
             next: Duration::ZERO,
         };
         injector.next = injector.draw_gap();
@@ -121,6 +127,13 @@ impl Injector {
     /// actor (with `false`, a seed gives the schedule of a run without adapters).
     pub fn with_adapters(mut self, adapters: bool) -> Self {
         self.adapters = adapters;
+        self
+    }
+
+    /// Aims kills and pauses at a joined host too, as likely as the learner (with `false`, a
+    /// seed gives the schedule of a run without one).
+    pub fn with_host(mut self, host: bool) -> Self {
+        self.host = host;
         self
     }
 
@@ -168,16 +181,18 @@ impl Injector {
         unreachable!("the pick is below the total of the weights")
     }
 
-    /// An actor, the learner, the expert or (with adapters) an actor's adapter, each as likely
-    /// as the learner.
+    /// An actor, the learner, the expert, (with adapters) an actor's adapter or (with a joined
+    /// host) the host, each as likely as the learner.
     fn target(&mut self) -> Target {
         let actors = u32::from(self.actors);
         let adapters = if self.adapters { actors } else { 0 };
-        match self.rng.random_range(0..actors + adapters + 2) {
+        let host = u32::from(self.host);
+        match self.rng.random_range(0..actors + adapters + 2 + host) {
             0 => Target::Learner,
             1 => Target::Expert,
             a if a < actors + 2 => Target::Actor((a - 2) as u16),
-            a => Target::Adapter((a - 2 - actors) as u16),
+            a if a < actors + adapters + 2 => Target::Adapter((a - 2 - actors) as u16),
+            _ => Target::Host,
         }
     }
 
@@ -240,6 +255,25 @@ mod tests {
             hit.iter().all(|&a| a < 2),
             "only the 2 actors' adapters: {hit:?}"
         );
+    }
+
+    #[test]
+    fn a_joined_host_is_aimed_at_only_when_there_is_one() {
+        let schedule = |host: bool| {
+            let mut inj = Injector::new(6, Duration::from_secs(1), 2, vec![], ALL).with_host(host);
+            (0..400)
+                .filter_map(|t| inj.due(Duration::from_millis(t * 100)))
+                .collect::<Vec<_>>()
+        };
+        let at_host = |faults: &[Fault]| {
+            faults
+                .iter()
+                .filter(|f| matches!(f, Fault::Kill(Target::Host) | Fault::Pause(Target::Host, _)))
+                .count()
+        };
+        let (without, with) = (schedule(false), schedule(true));
+        assert_eq!(at_host(&without), 0);
+        assert!(at_host(&with) > 0, "{with:?}");
     }
 
     #[test]

@@ -65,6 +65,12 @@ pub struct ChaosArgs {
     /// Seconds the run may take after the faults end before it counts as hung.
     #[arg(long, default_value_t = 900)]
     pub grace: u64,
+    /// Also play with this many actors on a joined host: the run listens on a free port of
+    /// 127.0.0.1 (plain TCP, `--insecure`) and an `alfd join` with these actors connects to it;
+    /// kills and pauses aim at that host too, and a killed host is started again. No launcher
+    /// kills then (a resumed run listens on no port).
+    #[arg(long, default_value_t = 0)]
+    pub join_actors: usize,
     /// Run nothing: re-make `RUN_DIR/chaos.md` from the `chaos.json` of an earlier chaos run.
     #[arg(long)]
     pub summarize: bool,
@@ -96,6 +102,20 @@ struct Chaos<'a> {
     events: Vec<Event>,
     run_ids: Vec<String>,
     launches: u32,
+    /// The joined host, if the run has one.
+    joined: Option<Joined>,
+}
+
+/// The `alfd join` of a chaos run's joined host, started again whenever it is gone.
+struct Joined {
+    connect: String,
+    actors: usize,
+    child: Option<Child>,
+    /// Hosts started so far (each in a directory of its own).
+    starts: u32,
+    /// The process ids of the hosts started: their copies of the run's services are named by
+    /// them (`j<secs>-<pid>`, `k<secs>-<pid>`).
+    pids: Vec<u32>,
 }
 
 /// Runs `alfd chaos`.
@@ -111,7 +131,10 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
         )));
     }
     let alfd = std::env::current_exe().context("cannot locate the running alfd binary")?;
-    let launcher = spawn_run(&alfd, &args)?;
+    let listen = (args.join_actors > 0)
+        .then(free_loopback_port)
+        .transpose()?;
+    let launcher = spawn_run(&alfd, &args, listen)?;
     let mut chaos = Chaos {
         args: &args,
         alfd,
@@ -123,6 +146,13 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
         events: Vec::new(),
         run_ids: Vec::new(),
         launches: 1,
+        joined: listen.map(|port| Joined {
+            connect: format!("tcp/127.0.0.1:{port}"),
+            actors: args.join_actors,
+            child: None,
+            starts: 0,
+            pids: Vec::new(),
+        }),
     };
     let cfg = run_config(&args.out);
     let experts = if args.experts.is_empty() {
@@ -139,7 +169,13 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
         eprintln!("chaos: a Gymnasium run cannot be resumed: no launcher kills");
         mix.launcher = 0;
     }
-    let mut injector = Injector::new(args.seed, gap, actors, experts, mix).with_adapters(adapters);
+    if chaos.joined.is_some() && mix.launcher > 0 {
+        eprintln!("chaos: a resumed run listens on no port: no launcher kills with a joined host");
+        mix.launcher = 0;
+    }
+    let mut injector = Injector::new(args.seed, gap, actors, experts, mix)
+        .with_adapters(adapters)
+        .with_host(chaos.joined.is_some());
     let ended = chaos.drive(&mut injector);
     chaos.settle();
     report::report(&chaos, ended)
@@ -176,11 +212,28 @@ fn parse_mix(faults: &[String]) -> anyhow::Result<Mix> {
     Ok(mix)
 }
 
-/// `alfd run` for the chaos: quiet, with restarts enough for every fault.
-fn spawn_run(alfd: &Path, args: &ChaosArgs) -> anyhow::Result<Child> {
+/// A port of 127.0.0.1 free at this moment.
+fn free_loopback_port() -> anyhow::Result<u16> {
+    let probe = std::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, 0))
+        .context("cannot find a free port on 127.0.0.1")?;
+    Ok(probe.local_addr()?.port())
+}
+
+/// `alfd run` for the chaos: quiet, with restarts enough for every fault; listening on
+/// `listen` of 127.0.0.1 for a joined host.
+fn spawn_run(alfd: &Path, args: &ChaosArgs, listen: Option<u16>) -> anyhow::Result<Child> {
     let mut cmd = Command::new(alfd);
-    cmd.arg("run")
-        .args(["--out", &args.out.to_string_lossy()])
+    if let Some(port) = listen {
+        cmd.args([
+            "run",
+            "--listen",
+            &format!("tcp/127.0.0.1:{port}"),
+            "--insecure",
+        ]);
+    } else {
+        cmd.arg("run");
+    }
+    cmd.args(["--out", &args.out.to_string_lossy()])
         .args(["--actors", &args.actors.to_string()])
         .args(["--checkpoint-every", &args.checkpoint_every.to_string()])
         .args(["--max-restarts", "100000", "--quiet"]);
@@ -246,6 +299,7 @@ impl Chaos<'_> {
         loop {
             self.release(false);
             self.run_id();
+            self.keep_host();
             if let Some(status) = self.launcher.try_wait().map_err(|e| e.to_string())? {
                 self.release(true);
                 if self.finished() {
@@ -308,6 +362,9 @@ impl Chaos<'_> {
     }
 
     fn pid_of(&mut self, target: Target) -> Option<u32> {
+        if target == Target::Host {
+            return self.joined.as_ref()?.child.as_ref().map(Child::id);
+        }
         let mut args = vec![format!("--run-id={}", self.run_id()?)];
         match target {
             Target::Actor(id) => args.push(format!("--actor-id={id}")),
@@ -416,12 +473,74 @@ impl Chaos<'_> {
         outcome
     }
 
-    /// Nothing left paused, filled or swapping.
+    /// Starts the joined host when it is not running (at first, and after a kill); it
+    /// connects once the run has written its `run.json`.
+    fn keep_host(&mut self) {
+        let out = self.args.out.clone();
+        let Some(j) = &mut self.joined else { return };
+        if let Some(child) = &mut j.child {
+            if matches!(child.try_wait(), Ok(None)) {
+                return;
+            }
+        }
+        if !out.join("run.json").is_file() {
+            return;
+        }
+        j.starts += 1;
+        let dir = out.join(format!("joined-{}", j.starts));
+        let spawned = Command::new(&self.alfd)
+            .args(["join", "--connect", &j.connect, "--insecure"])
+            .args(["--actors", &j.actors.to_string()])
+            .args(["--dir", &dir.to_string_lossy()])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn();
+        match spawned {
+            Ok(child) => {
+                j.pids.push(child.id());
+                j.child = Some(child);
+            }
+            Err(e) => tracing::warn!("cannot start alfd join: {e}"),
+        }
+    }
+
+    /// Nothing left paused, filled or swapping; the joined host told to go.
     fn settle(&mut self) {
         self.release(true);
         if let Some(mut child) = self.swap.take() {
             let _ = child.wait();
         }
+        if let Some(mut child) = self.joined.as_mut().and_then(|j| j.child.take()) {
+            signal("TERM", child.id());
+            let _ = child.wait();
+        }
+        self.clean_hosts();
+    }
+
+    /// Removes what the killed hosts left in iceoryx2's directories, as `alfd clean` would,
+    /// once their orphaned actors have seen their host gone and exited (up to 30 s); their
+    /// copies' ids join the run's, for the "nothing left" invariant.
+    fn clean_hosts(&mut self) {
+        let Some(j) = &self.joined else { return };
+        let ours = |id: &str| {
+            alfd_wire::is_alfd_run_id(id)
+                && !id.starts_with('r')
+                && j.pids.iter().any(|pid| id.ends_with(&format!("-{pid}")))
+        };
+        let copies: Vec<String> = alfd_wire::runs_with_files()
+            .into_iter()
+            .filter(|id| ours(id))
+            .collect();
+        let deadline = Instant::now() + Duration::from_secs(30);
+        for id in &copies {
+            while matches!(alfd_wire::clean_run(id), Ok(alfd_wire::Cleaned::Live(_)))
+                && Instant::now() < deadline
+            {
+                std::thread::sleep(Duration::from_millis(200));
+            }
+        }
+        self.run_ids.extend(copies);
     }
 }
 

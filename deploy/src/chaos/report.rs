@@ -46,6 +46,10 @@ pub(super) fn report(chaos: &Chaos<'_>, ended: Result<(), String>) -> anyhow::Re
         "date": today(),
         "wall_clock_s": chaos.start.elapsed().as_secs_f64(),
         "launches": chaos.launches,
+        "joined_host": chaos.joined.as_ref().map(|j| serde_json::json!({
+            "actors": j.actors,
+            "starts": j.starts,
+        })),
         "faults": counts,
         "events": chaos.events,
         "invariants": verdicts,
@@ -150,7 +154,7 @@ fn markdown(report: &Value, summary: &Value) -> String {
             summary["mean_return_last_50"]
                 .as_f64()
                 .map_or("?".to_owned(), |x| format!("{x:.1}")),
-        ),
+        ) + &joined_host(&report["joined_host"]),
         String::new(),
         "## Faults".to_owned(),
         String::new(),
@@ -182,6 +186,17 @@ fn markdown(report: &Value, summary: &Value) -> String {
     lines.join("\n") + "\n"
 }
 
+/// The joined host's sentence of the report (empty without one).
+fn joined_host(host: &Value) -> String {
+    match (host["actors"].as_u64(), host["starts"].as_u64()) {
+        (Some(actors), Some(starts)) => format!(
+            " A joined host (`alfd join` on 127.0.0.1) with {actors} actor(s), started {starts} \
+             time(s)."
+        ),
+        _ => String::new(),
+    }
+}
+
 /// No process of any of the run's launches is alive, and none left iceoryx2 files.
 pub(super) fn nothing_left(run_ids: &[String]) -> Verdict {
     let mut left = Vec::new();
@@ -201,7 +216,7 @@ pub(super) fn nothing_left(run_ids: &[String]) -> Verdict {
         ok: left.is_empty(),
         detail: if left.is_empty() {
             format!(
-                "{} launches' processes gone, their files removed",
+                "{} runs' processes gone (launches and joined hosts' copies), their files removed",
                 run_ids.len()
             )
         } else {
