@@ -3,8 +3,8 @@ Stable-Baselines3's DQN with rl-zoo's CartPole-v1 settings, seeds interleaved in
 
 Ours: `alfd local` with the recommended CartPole preset on CartPole-v1's 500-step episodes,
 evaluated greedily every 5 episodes over 10 episodes; the clock runs from the process's start
-until `episodes.csv` shows an evaluation of at least 475 (read as it is written), then the run is
-stopped. Twice: as the preset asks the expert (its demonstrations count; the evaluation is the
+to the end of the episode whose evaluation first reaches 475 (the run is made once whole to find
+that episode's environment step, then again, timed, cut there; `ours` says why). Twice: as the preset asks the expert (its demonstrations count; the evaluation is the
 learner's own greedy play), and with `query.rule = "never"` (no demonstrations: the same kind of
 learner as the peer). Theirs: `DQN("MlpPolicy", ...)` with rl-zoo's hyperparameters
 (`hyperparams/dqn.yml`: learning rate 2.3e-3, batch 64, buffer 100,000, learning starts 1,000,
@@ -36,45 +36,48 @@ VARIANTS = {
 THEIR_STEPS = 100_000
 
 
-def first_eval_at_threshold(path):
-    """The first evaluation of at least THRESHOLD in an episodes.csv being written, if any."""
-    try:
-        with open(path, newline="") as f:
-            for row in csv.DictReader(f):
-                if row.get("eval_return") and float(row["eval_return"]) >= THRESHOLD:
-                    return int(row["episode"])
-    except (OSError, ValueError, csv.Error):
-        return None
+def first_at_threshold(path):
+    """(episode, environment steps so far) of the first evaluation of at least THRESHOLD in an
+    episodes.csv, or None."""
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            if row["eval_return"] and float(row["eval_return"]) >= THRESHOLD:
+                return int(row["episode"]), int(row["total_steps"])
     return None
 
 
-def ours(alfd, sets, seed, workdir):
-    """Seconds from the start of `alfd local` to its first evaluation >= THRESHOLD (None if its
-    run ended first), and the episode it came at."""
-    out = os.path.join(workdir, f"ours-{seed}-{len(sets)}")
+def local(alfd, sets, out):
+    """Runs `alfd local` on the preset with `sets`; its wall-clock in seconds."""
     cmd = [alfd, "local", "--config", PRESET, "--out", out, "--quiet"]
-    for s in OUR_SETS + sets + [f"seed={seed}"]:
+    for s in OUR_SETS + sets:
         cmd += ["--set", s]
     start = time.perf_counter()
-    child = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    episodes = os.path.join(out, "episodes.csv")
-    try:
-        while True:
-            episode = first_eval_at_threshold(episodes)
-            if episode is not None:
-                return time.perf_counter() - start, episode
-            if child.poll() is not None:
-                episode = first_eval_at_threshold(episodes)
-                if episode is not None:
-                    return time.perf_counter() - start, episode
-                if child.returncode != 0:
-                    sys.exit(f"solve.py: {' '.join(cmd)} failed: {child.stderr.read().decode()}")
-                return None, None
-            time.sleep(0.05)
-    finally:
-        if child.poll() is None:
-            child.kill()
-            child.wait()
+    done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    took = time.perf_counter() - start
+    if done.returncode != 0:
+        sys.exit(f"solve.py: {' '.join(cmd)} failed: {done.stderr}")
+    return took
+
+
+def ours(alfd, sets, seed, workdir):
+    """Seconds of `alfd local` from its start to its first evaluation >= THRESHOLD (None if its
+    50,000 steps end first), and the episode it came at. `alfd local` writes `episodes.csv` at its
+    end, so the run is made twice: once whole, to find the environment steps N at the end of
+    that evaluation's episode, then again, timed, with `steps = N` (the same seed plays the same
+    episodes, so it ends with that evaluation, which is checked)."""
+    tag = "-".join(sets).replace("=", "").replace('"', "") or "preset"
+    probe = os.path.join(workdir, f"probe-{seed}-{tag}")
+    local(alfd, sets + [f"seed={seed}"], probe)
+    found = first_at_threshold(os.path.join(probe, "episodes.csv"))
+    if found is None:
+        return None, None
+    episode, steps = found
+    timed = os.path.join(workdir, f"timed-{seed}-{tag}")
+    took = local(alfd, sets + [f"seed={seed}", f"steps={steps}"], timed)
+    if first_at_threshold(os.path.join(timed, "episodes.csv")) != found:
+        sys.exit(f"solve.py: the run cut at {steps} steps did not end with the evaluation of "
+                 f"episode {episode} ({timed})")
+    return took, episode
 
 
 def theirs(seed):
@@ -84,6 +87,7 @@ def theirs(seed):
     import torch
     from stable_baselines3 import DQN
     from stable_baselines3.common.callbacks import EvalCallback, StopTrainingOnRewardThreshold
+    from stable_baselines3.common.monitor import Monitor
 
     torch.set_num_threads(1)
     start = time.perf_counter()
@@ -93,7 +97,7 @@ def theirs(seed):
                 gradient_steps=128, exploration_fraction=0.16, exploration_final_eps=0.04,
                 policy_kwargs=dict(net_arch=[256, 256]), seed=seed, verbose=0)
     stop = StopTrainingOnRewardThreshold(reward_threshold=THRESHOLD, verbose=0)
-    evaluate = EvalCallback(gymnasium.make("CartPole-v1"), eval_freq=1000, n_eval_episodes=10,
+    evaluate = EvalCallback(Monitor(gymnasium.make("CartPole-v1")), eval_freq=1000, n_eval_episodes=10,
                             deterministic=True, callback_on_new_best=stop, verbose=0)
     model.learn(total_timesteps=THEIR_STEPS, callback=evaluate)
     took = time.perf_counter() - start
