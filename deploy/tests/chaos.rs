@@ -6,7 +6,8 @@
 //! variants: Python environment adapters among the targets, and a joined host (`alfd join` on
 //! 127.0.0.1) among them.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::process::Output;
 
 use crate::support::{alfd, text, timed, tmp, Tmpfs};
 
@@ -26,6 +27,21 @@ fn held(out: &Path, o: &std::process::Output) -> serde_json::Value {
     report
 }
 
+/// `alfd chaos --out DIR/run --seed SEED ARGS` with a checkpoint every 300 updates, 300 s of
+/// grace and 200-step episodes, `--set`ting `episodes`; the run directory and the output.
+fn chaos(dir: &Path, seed: &str, episodes: u32, args: &[&str]) -> (PathBuf, Output) {
+    let out = dir.join("run");
+    let o = alfd()
+        .args(["chaos", "--out", out.to_str().unwrap(), "--seed", seed])
+        .args(["--checkpoint-every", "300", "--grace", "300"])
+        .args(["--set", &format!("episodes={episodes}")])
+        .args(["--set", "env.max_episode_steps=200"])
+        .args(args)
+        .output()
+        .unwrap();
+    (out, o)
+}
+
 #[test]
 fn a_seeded_chaos_run_keeps_every_invariant() {
     let _time = timed!();
@@ -37,19 +53,8 @@ fn a_seeded_chaos_run_keeps_every_invariant() {
         eprintln!("chaos: no tmpfs (not root, or mount refused): the run goes without disk faults");
         "kill=4,pause=3,swap=1,launcher=1"
     };
-    let out = dir.join("run");
-    let o = alfd()
-        .args(["chaos", "--out", out.to_str().unwrap(), "--seed", "3"])
-        .args(["--duration", "60", "--every", "1.2", "--faults", faults])
-        .args(["--checkpoint-every", "300", "--grace", "300"])
-        .args([
-            "--set",
-            "episodes=500",
-            "--set",
-            "env.max_episode_steps=200",
-        ])
-        .output()
-        .unwrap();
+    let args = ["--duration", "60", "--every", "1.2", "--faults", faults];
+    let (out, o) = chaos(&dir, "3", 500, &args);
     let report = held(&out, &o);
     let events = report["events"].as_array().unwrap();
     let carried_out = |kind: &str, word: &str| {
@@ -81,23 +86,22 @@ fn a_seeded_chaos_run_keeps_every_invariant() {
 fn a_seeded_chaos_run_with_python_adapters_keeps_every_invariant() {
     let _time = timed!();
     let dir = tmp("chaos-gym");
-    let out = dir.join("run");
-    let o = alfd()
-        .args(["chaos", "--out", out.to_str().unwrap(), "--seed", "4"])
-        .args(["--duration", "40", "--every", "1.2"])
+    let args = [
+        "--duration",
+        "40",
+        "--every",
+        "1.2",
         // A Gymnasium run cannot be resumed (`alfd chaos` drops launcher kills on its own).
-        .args(["--faults", "kill=4,pause=3,launcher=1"])
-        .args(["--checkpoint-every", "300", "--grace", "300"])
-        .args([
-            "--set",
-            "episodes=300",
-            "--set",
-            "env.max_episode_steps=200",
-        ])
-        .args(["--set", "env.name=gymnasium", "--set", "env.id=CartPole-v1"])
-        .args(["--set", "expert.name=python:alfd_examples:cartpole_balance"])
-        .output()
-        .unwrap();
+        "--faults",
+        "kill=4,pause=3,launcher=1",
+        "--set",
+        "env.name=gymnasium",
+        "--set",
+        "env.id=CartPole-v1",
+        "--set",
+        "expert.name=python:alfd_examples:cartpole_balance",
+    ];
+    let (out, o) = chaos(&dir, "4", 300, &args);
     let report = held(&out, &o);
     let events = report["events"].as_array().unwrap();
     let adapters_hit = events
@@ -113,22 +117,20 @@ fn a_seeded_chaos_run_with_python_adapters_keeps_every_invariant() {
 fn a_seeded_chaos_run_with_a_joined_host_keeps_every_invariant() {
     let _time = timed!();
     let dir = tmp("chaos-remote");
-    let out = dir.join("run");
-    let o = alfd()
-        .args(["chaos", "--out", out.to_str().unwrap(), "--seed", "5"])
-        .args(["--actors", "1", "--join-actors", "1"])
-        .args(["--duration", "40", "--every", "1.2"])
+    let args = [
+        "--actors",
+        "1",
+        "--join-actors",
+        "1",
+        "--duration",
+        "40",
+        "--every",
+        "1.2",
         // A resumed run listens on no port (`alfd chaos` drops launcher kills on its own).
-        .args(["--faults", "kill=4,pause=3,swap=1"])
-        .args(["--checkpoint-every", "300", "--grace", "300"])
-        .args([
-            "--set",
-            "episodes=400",
-            "--set",
-            "env.max_episode_steps=200",
-        ])
-        .output()
-        .unwrap();
+        "--faults",
+        "kill=4,pause=3,swap=1",
+    ];
+    let (out, o) = chaos(&dir, "5", 400, &args);
     let report = held(&out, &o);
     let events = report["events"].as_array().unwrap();
     let host_hit = events

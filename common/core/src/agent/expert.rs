@@ -245,8 +245,12 @@ impl ExpertCore {
             return Ok(());
         }
         self.model = Some(match kind {
-            DemoModelKind::Krr => DemoModel::Krr(self.grow_krr()?.model()),
-            DemoModelKind::Nystrom => DemoModel::Nystrom(self.grow_nystrom()?.model()?),
+            DemoModelKind::Krr => {
+                DemoModel::Krr(grown(&mut self.krr, &self.demos, self.num_actions)?.model())
+            }
+            DemoModelKind::Nystrom => DemoModel::Nystrom(
+                grown(&mut self.nystrom, &self.demos, self.num_actions)?.model()?,
+            ),
             DemoModelKind::Svm => {
                 let states: Vec<Vec<f64>> = self.demos.iter().map(|d| d.state.clone()).collect();
                 let actions: Vec<usize> = self.demos.iter().map(|d| d.action).collect();
@@ -255,41 +259,6 @@ impl ExpertCore {
         });
         self.model_version += 1;
         Ok(())
-    }
-
-    /// The KRR factor over every demonstration: the one held, grown by the newest
-    /// demonstration (O(n²)), or factored anew (O(n³)) when it does not hold all the others;
-    /// the same bits either way.
-    fn grow_krr(&mut self) -> Result<&KrrFactor, DemoModelError> {
-        let n = self.demos.len();
-        match (&mut self.krr, self.demos.last()) {
-            (Some(f), Some(d)) if f.len() + 1 == n => f.push(&d.state, d.action)?,
-            (Some(f), _) if f.len() == n => {}
-            _ => {
-                self.krr = None;
-                let states: Vec<&[f64]> = self.demos.iter().map(|d| d.state.as_slice()).collect();
-                let actions: Vec<usize> = self.demos.iter().map(|d| d.action).collect();
-                self.krr = Some(KrrFactor::fit(&states, &actions, self.num_actions)?);
-            }
-        }
-        Ok(self.krr.as_ref().expect("factored above"))
-    }
-
-    /// The Nyström sums over every demonstration: those held, grown by the newest
-    /// demonstration, or summed anew when they do not hold all the others (the same bits).
-    fn grow_nystrom(&mut self) -> Result<&NystromFactor, DemoModelError> {
-        let n = self.demos.len();
-        match (&mut self.nystrom, self.demos.last()) {
-            (Some(f), Some(d)) if f.len() + 1 == n => f.push(&d.state, d.action)?,
-            (Some(f), _) if f.len() == n => {}
-            _ => {
-                self.nystrom = None;
-                let states: Vec<&[f64]> = self.demos.iter().map(|d| d.state.as_slice()).collect();
-                let actions: Vec<usize> = self.demos.iter().map(|d| d.action).collect();
-                self.nystrom = Some(NystromFactor::fit(&states, &actions, self.num_actions)?);
-            }
-        }
-        Ok(self.nystrom.as_ref().expect("summed above"))
     }
 
     pub fn budget(&self) -> Budget {
@@ -323,6 +292,64 @@ impl ExpertCore {
             self.model.as_ref(),
         )
     }
+}
+
+/// A model's state kept across demonstrations and grown by each: KRR's factor, the Nyström
+/// sums.
+trait Grows: Sized {
+    fn len(&self) -> usize;
+    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError>;
+    fn fit(
+        states: &[&[f64]],
+        actions: &[usize],
+        num_actions: usize,
+    ) -> Result<Self, DemoModelError>;
+}
+
+impl Grows for KrrFactor {
+    fn len(&self) -> usize {
+        KrrFactor::len(self)
+    }
+    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
+        KrrFactor::push(self, state, action)
+    }
+    fn fit(s: &[&[f64]], a: &[usize], n: usize) -> Result<Self, DemoModelError> {
+        KrrFactor::fit(s, a, n)
+    }
+}
+
+impl Grows for NystromFactor {
+    fn len(&self) -> usize {
+        NystromFactor::len(self)
+    }
+    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
+        NystromFactor::push(self, state, action)
+    }
+    fn fit(s: &[&[f64]], a: &[usize], n: usize) -> Result<Self, DemoModelError> {
+        NystromFactor::fit(s, a, n)
+    }
+}
+
+/// The state in `slot` over every demonstration of `demos`: the one held, grown by the newest
+/// demonstration (KRR: O(n²)), or made anew (KRR: O(n³)) when it does not hold all the others;
+/// the same bits either way.
+fn grown<'a, G: Grows>(
+    slot: &'a mut Option<G>,
+    demos: &[DemoRecord],
+    num_actions: usize,
+) -> Result<&'a G, DemoModelError> {
+    let n = demos.len();
+    match (slot.as_mut(), demos.last()) {
+        (Some(f), Some(d)) if f.len() + 1 == n => f.push(&d.state, d.action)?,
+        (Some(f), _) if f.len() == n => {}
+        _ => {
+            *slot = None;
+            let states: Vec<&[f64]> = demos.iter().map(|d| d.state.as_slice()).collect();
+            let actions: Vec<usize> = demos.iter().map(|d| d.action).collect();
+            *slot = Some(G::fit(&states, &actions, num_actions)?);
+        }
+    }
+    Ok(slot.as_ref().expect("made above"))
 }
 
 #[cfg(test)]
