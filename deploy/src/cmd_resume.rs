@@ -234,7 +234,12 @@ fn cut_lines(path: &std::path::Path, lines: usize) -> anyhow::Result<bool> {
         },
     };
     if keep < text.len() {
-        alfd_harness::write_atomically(path, &text[..keep])?;
+        // Waiting out a full disk: a resume must not fail on a disk filled for a moment.
+        alfd_harness::write_atomically_patiently(
+            path,
+            &text[..keep],
+            alfd_harness::DISK_FULL_PATIENCE,
+        )?;
     }
     Ok(true)
 }

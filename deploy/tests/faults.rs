@@ -340,6 +340,63 @@ fn a_lockstep_run_stopped_and_resumed_is_the_uninterrupted_run_to_the_byte() {
     assert_eq!(d2[..d1.len()], d1[..]);
 }
 
+/// A run whose launcher was killed is resumed while its disk is full: `alfd resume` waits for
+/// room to write the files a launch starts with (the run's lock, `runtime.toml`, `run.json`)
+/// instead of failing, and the run then finishes whole.
+#[test]
+fn alfd_resume_on_a_full_disk_waits_for_room_and_finishes_the_run() {
+    let _time = timed!();
+    let dir = tmp("resume-disk-full");
+    let Some(_disk) = crate::support::Tmpfs::mount(&dir, 24) else {
+        assert!(
+            !crate::support::under_ci(),
+            "CI is set and no tmpfs could be mounted (needs root): the test cannot run"
+        );
+        eprintln!("\n*** SKIPPED: no tmpfs (needs root); the resume test did not run ***\n");
+        return;
+    };
+    let out = dir.join("run");
+    let mut child = checkpointed_fault_run(&out);
+    let id = run_id(&out);
+    signal("KILL", child.child().id());
+    let _ = child.0.take().unwrap().wait();
+    let killed = Instant::now();
+    while !processes_of(&id).is_empty() {
+        assert!(
+            killed.elapsed() < Duration::from_secs(8),
+            "{:?}",
+            processes_of(&id)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // The file system full to the last byte while the resume starts, room made 2 s later.
+    let filler = dir.join("filler");
+    let mut f = std::fs::File::create(&filler).unwrap();
+    let block = vec![0u8; 1 << 16];
+    while std::io::Write::write_all(&mut f, &block).is_ok() {}
+    for small in [4096, 512, 64, 1] {
+        while std::io::Write::write_all(&mut f, &block[..small]).is_ok() {}
+    }
+    let resume = alfd()
+        .args(["resume", out.to_str().unwrap(), "--quiet"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_secs(2));
+    drop(f);
+    std::fs::remove_file(&filler).unwrap();
+    let o = resume.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let s = summary(&out);
+    assert_eq!(
+        (s["episodes"].as_u64(), s["interrupted"].as_bool()),
+        (Some(300), Some(false))
+    );
+    check_run_dir(&out, 1500);
+    check_rows_and_demos(&out, 300);
+}
+
 /// A full disk refuses a demonstration: the expert does not exit (no restart), leaves queries
 /// unanswered for a moment, rolls its budget and model back to what `demos.jsonl` holds, and
 /// answers again once there is room; `demos.jsonl` stays gap-free and as counted.

@@ -204,9 +204,9 @@ pub fn launch(plan: &Plan) -> Result<RunSummary> {
     std::fs::create_dir_all(&plan.run_dir)
         .what(|| format!("cannot create run directory {}", plan.run_dir.display()))?;
     if !plan.resume {
-        write(&plan.run_dir, "config.toml", plan.cfg.to_toml().as_bytes())?;
+        write_patiently(&plan.run_dir, "config.toml", plan.cfg.to_toml().as_bytes())?;
     }
-    write(
+    write_patiently(
         &plan.run_dir,
         RUNTIME_FILE,
         plan.runtime.to_toml().as_bytes(),
@@ -220,7 +220,7 @@ pub fn launch(plan: &Plan) -> Result<RunSummary> {
         launches: plan.launches,
         max_restarts: plan.max_restarts,
     };
-    write(
+    write_patiently(
         &plan.run_dir,
         "run.json",
         serde_json::to_string_pretty(&info)?.as_bytes(),
@@ -1015,6 +1015,17 @@ impl<'a, 'w> Launcher<'a, 'w> {
 /// Writes `bytes` to `dir/name`, replacing the file whole (a reader never sees half of it).
 fn write(dir: &Path, name: &str, bytes: &[u8]) -> Result<()> {
     Ok(alfd_harness::write_atomically(&dir.join(name), bytes)?)
+}
+
+/// [`write`], waiting out a full disk (up to `DISK_FULL_PATIENCE`): the files a launch starts
+/// with, which a resume on a disk filled for a moment must not fail on.
+fn write_patiently(dir: &Path, name: &str, bytes: &[u8]) -> Result<()> {
+    let path = dir.join(name);
+    Ok(alfd_harness::write_atomically_patiently(
+        &path,
+        bytes,
+        alfd_harness::DISK_FULL_PATIENCE,
+    )?)
 }
 
 /// Reads `run.json` of a run directory.
