@@ -261,6 +261,13 @@ impl ExpertLifecycle {
         if incoming_died {
             let inc = self.incoming.take().expect("checked");
             match inc.why {
+                // Killed by a signal on its way in (not a failure of its own): the run's first
+                // expert is started again, a restart like any other.
+                Why::Start if exit.code.is_none() && self.restarts < self.max_restarts => {
+                    self.restarts += 1;
+                    self.spawn(&inc.name, Why::Start, now, &mut out);
+                    self.newest = self.last_generation;
+                }
                 Why::Start => out.push(Action::Fail {
                     generation,
                     message: format!(
@@ -612,6 +619,35 @@ mod tests {
     }
 
     #[test]
+    fn the_first_expert_killed_on_its_way_in_is_started_again_and_one_that_fails_is_not() {
+        let t0 = Instant::now();
+        let mut e = ExpertLifecycle::new(1);
+        assert_eq!(spawned(&e.start("cartpole-1000", t0)), vec![1]);
+        // SIGKILL before it answered: generation 2, the same expert, is the run's first now.
+        assert_eq!(spawned(&e.exited(1, &killed(), t0)), vec![2]);
+        assert_eq!(e.restarts(), 1);
+        assert_eq!(last_control(&e.standby(2, t0)), Some((2, 2)));
+        assert!(e.running(2, t0).is_empty());
+        assert!(e.settled());
+        assert_eq!(e.current_name(), Some("cartpole-1000"));
+        // An expert that fails on its own at start (bad input, exit 2) fails the run, and so
+        // does a kill once no restart is left.
+        let bad = Exit {
+            how: "exited with status 2".to_owned(),
+            code: Some(2),
+            reason: Some("unknown expert".to_owned()),
+        };
+        let mut e = ExpertLifecycle::new(5);
+        e.start("nobody", t0);
+        let a = e.exited(1, &bad, t0);
+        assert!(matches!(a.last(), Some(Action::Fail { .. })), "{a:?}");
+        let mut e = ExpertLifecycle::new(0);
+        e.start("cartpole-1000", t0);
+        let a = e.exited(1, &killed(), t0);
+        assert!(matches!(a.last(), Some(Action::Fail { .. })), "{a:?}");
+    }
+
+    #[test]
     fn restarts_are_limited_and_a_refusing_restart_fails_the_run_at_once() {
         let t0 = Instant::now();
         let mut e = running(2, t0);
@@ -654,7 +690,13 @@ mod tests {
         let t0 = Instant::now();
         let mut e = ExpertLifecycle::new(5);
         e.start("cartpole-1000", t0);
-        let a = e.exited(1, &killed(), t0);
+        // Failing on its own (an exit status; a kill is started again, tested above).
+        let failed = Exit {
+            how: "exited with status 1".to_owned(),
+            code: Some(1),
+            reason: None,
+        };
+        let a = e.exited(1, &failed, t0);
         assert!(
             matches!(a.last(), Some(Action::Fail { generation: 1, .. })),
             "{a:?}"

@@ -414,7 +414,7 @@ impl Chaos<'_> {
         }
         let spawned = Command::new(&self.alfd)
             .args(["swap-expert", "--run", &self.args.out.to_string_lossy()])
-            .args(["--expert", name, "--timeout", "60"])
+            .args(["--expert", name, "--timeout", "10"])
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::null())
