@@ -892,11 +892,20 @@ impl<'a, 'w> Launcher<'a, 'w> {
         if !ok {
             warn!(message = %r.message, "expert swap failed");
         }
-        write(
+        // A response a full disk refuses is lost to the asker (its `alfd swap-expert` times
+        // out and says so), never the run's end: the swap itself is done or refused already.
+        let written = write(
             &self.plan.run_dir,
             SWAP_RESPONSE,
             serde_json::to_string_pretty(&r)?.as_bytes(),
-        )
+        );
+        if let Err(e) = written {
+            warn!(
+                "the swap's response was not written ({}): its alfd swap-expert will time out",
+                alfd_harness::describe(&e)
+            );
+        }
+        Ok(())
     }
 
     /// Tells every process to stop and waits for them (the learner saves its weights).
