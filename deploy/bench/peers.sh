@@ -9,7 +9,7 @@
 #   bash deploy/bench/peers.sh --solve-only  # only the wall-clock to 475 (solve.py)
 #
 # After the speed table, in the same sitting, solve.py times alfd and Stable-Baselines3's DQN to
-# a greedy evaluation of 475 on CartPole-v1 (three seeds each; about 10 minutes) into
+# a greedy evaluation of 475 on CartPole-v1 (three seeds each) into
 # results/peers/solve.md (with solve.json); --quick leaves it out.
 #
 # On first use it makes the virtual environment .venv-bench/ (or $ALFD_BENCH_VENV) with Python

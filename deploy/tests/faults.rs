@@ -347,12 +347,7 @@ fn a_lockstep_run_stopped_and_resumed_is_the_uninterrupted_run_to_the_byte() {
 fn alfd_resume_on_a_full_disk_waits_for_room_and_finishes_the_run() {
     let _time = timed!();
     let dir = tmp("resume-disk-full");
-    let Some(_disk) = crate::support::Tmpfs::mount(&dir, 24) else {
-        assert!(
-            !crate::support::under_ci(),
-            "CI is set and no tmpfs could be mounted (needs root): the test cannot run"
-        );
-        eprintln!("\n*** SKIPPED: no tmpfs (needs root); the resume test did not run ***\n");
+    let Some(_disk) = crate::support::tmpfs_or_skip(&dir, 24, "the resume test") else {
         return;
     };
     let out = dir.join("run");
@@ -371,12 +366,7 @@ fn alfd_resume_on_a_full_disk_waits_for_room_and_finishes_the_run() {
     }
     // The file system full to the last byte while the resume starts, room made 2 s later.
     let filler = dir.join("filler");
-    let mut f = std::fs::File::create(&filler).unwrap();
-    let block = vec![0u8; 1 << 16];
-    while std::io::Write::write_all(&mut f, &block).is_ok() {}
-    for small in [4096, 512, 64, 1] {
-        while std::io::Write::write_all(&mut f, &block[..small]).is_ok() {}
-    }
+    let f = crate::support::fill_up(&filler);
     let resume = alfd()
         .args(["resume", out.to_str().unwrap(), "--quiet"])
         .stdout(std::process::Stdio::piped())
@@ -404,12 +394,7 @@ fn alfd_resume_on_a_full_disk_waits_for_room_and_finishes_the_run() {
 fn a_full_disk_pauses_the_expert_without_a_restart() {
     let _time = timed!();
     let dir = tmp("expert-disk-full");
-    let Some(_disk) = crate::support::Tmpfs::mount(&dir, 24) else {
-        assert!(
-            !crate::support::under_ci(),
-            "CI is set and no tmpfs could be mounted (needs root): the test cannot run"
-        );
-        eprintln!("\n*** SKIPPED: no tmpfs (needs root); the full-disk test did not run ***\n");
+    let Some(_disk) = crate::support::tmpfs_or_skip(&dir, 24, "the full-disk test") else {
         return;
     };
     let out = dir.join("run");
@@ -435,12 +420,7 @@ fn a_full_disk_pauses_the_expert_without_a_restart() {
     // Fill the file system to the last byte, hold it full for 2 s (dozens of queries at this
     // rate), then free it.
     let filler = dir.join("filler");
-    let mut f = std::fs::File::create(&filler).unwrap();
-    let block = vec![0u8; 1 << 16];
-    while std::io::Write::write_all(&mut f, &block).is_ok() {}
-    for small in [4096, 512, 64, 1] {
-        while std::io::Write::write_all(&mut f, &block[..small]).is_ok() {}
-    }
+    let f = crate::support::fill_up(&filler);
     std::thread::sleep(Duration::from_secs(2));
     drop(f);
     std::fs::remove_file(&filler).unwrap();

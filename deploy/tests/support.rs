@@ -220,6 +220,33 @@ impl Drop for Tmpfs<'_> {
 
 /// Whether the tests run under CI (`CI` set, and not to `false` or `0`): a test that cannot run
 /// there fails instead of skipping.
+/// [`Tmpfs::mount`] for a test that needs it: `None` when no tmpfs can be mounted (not root), after
+/// saying the test `what` did not run; under CI (which runs as root) that fails the test instead.
+pub(crate) fn tmpfs_or_skip<'a>(dir: &'a Path, mb: u32, what: &str) -> Option<Tmpfs<'a>> {
+    let disk = Tmpfs::mount(dir, mb);
+    if disk.is_none() {
+        assert!(
+            !under_ci(),
+            "CI is set and no tmpfs could be mounted (needs root): the test cannot run"
+        );
+        eprintln!("\n*** SKIPPED: no tmpfs (needs root); {what} did not run ***\n");
+    }
+    disk
+}
+
+/// Fills the file system of `path` to the last byte with the file `path`; room comes back when
+/// the returned file is dropped and removed.
+pub(crate) fn fill_up(path: &Path) -> std::fs::File {
+    use std::io::Write as _;
+    let mut f = std::fs::File::create(path).unwrap();
+    let block = vec![0u8; 1 << 16];
+    while f.write_all(&block).is_ok() {}
+    for small in [4096, 512, 64, 1] {
+        while f.write_all(&block[..small]).is_ok() {}
+    }
+    f
+}
+
 pub(crate) fn under_ci() -> bool {
     std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0")
 }

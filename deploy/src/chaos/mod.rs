@@ -412,13 +412,11 @@ impl Chaos<'_> {
                 return ("skipped: a swap is under way".to_owned(), false);
             }
         }
-        let spawned = Command::new(&self.alfd)
-            .args(["swap-expert", "--run", &self.args.out.to_string_lossy()])
-            .args(["--expert", name, "--timeout", "10"])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn();
+        let spawned = silent(
+            Command::new(&self.alfd)
+                .args(["swap-expert", "--run", &self.args.out.to_string_lossy()])
+                .args(["--expert", name, "--timeout", "10"]),
+        );
         match spawned {
             Ok(child) => {
                 self.swap = Some(child);
@@ -488,14 +486,12 @@ impl Chaos<'_> {
         }
         j.starts += 1;
         let dir = out.join(format!("joined-{}", j.starts));
-        let spawned = Command::new(&self.alfd)
-            .args(["join", "--connect", &j.connect, "--insecure"])
-            .args(["--actors", &j.actors.to_string()])
-            .args(["--dir", &dir.to_string_lossy()])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn();
+        let spawned = silent(
+            Command::new(&self.alfd)
+                .args(["join", "--connect", &j.connect, "--insecure"])
+                .args(["--actors", &j.actors.to_string()])
+                .args(["--dir", &dir.to_string_lossy()]),
+        );
         match spawned {
             Ok(child) => {
                 j.pids.push(child.id());
@@ -558,6 +554,14 @@ fn fill(file: &Path, cap_mb: u64) -> std::io::Result<(u64, bool)> {
         }
     }
     Ok((cap_mb, false))
+}
+
+/// Starts `cmd` with no input and its output dropped (a helper the chaos starts beside the run).
+fn silent(cmd: &mut Command) -> std::io::Result<Child> {
+    cmd.stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
 }
 
 /// `kill -SIG pid`, its failure ignored (the process may have gone).

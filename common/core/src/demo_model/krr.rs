@@ -47,6 +47,22 @@ impl KernelRidge {
         Ok(KrrFactor::fit(states, actions, num_actions)?.model())
     }
 
+    /// The regression over the kernel at `states` (row-major) with these coefficients
+    /// (row-major, `states × num_actions`): how the Nyström model answers, over its landmarks.
+    pub(crate) fn over(
+        state_dim: usize,
+        num_actions: usize,
+        states: Vec<f64>,
+        dual_coef: Vec<f64>,
+    ) -> KernelRidge {
+        KernelRidge {
+            state_dim,
+            num_actions,
+            states,
+            dual_coef,
+        }
+    }
+
     pub fn num_actions(&self) -> usize {
         self.num_actions
     }
@@ -275,32 +291,30 @@ impl KrrFactor {
         for (i, &a) in self.actions.iter().enumerate() {
             coef[i * m + a] = 1.0;
         }
-        {
-            let mut l = DMatrix::<f64>::zeros(n, n);
-            for i in 0..n {
-                for (j, v) in self.row(i).iter().enumerate() {
-                    l[(i, j)] = *v;
-                }
+        let mut l = DMatrix::<f64>::zeros(n, n);
+        for i in 0..n {
+            for (j, v) in self.row(i).iter().enumerate() {
+                l[(i, j)] = *v;
             }
-            let mut y = DMatrix::from_row_slice(n, m, &coef);
-            l.solve_lower_triangular_unchecked_mut(&mut y);
-            l.ad_solve_lower_triangular_unchecked_mut(&mut y);
-            for i in 0..n {
-                for a in 0..m {
-                    coef[i * m + a] = y[(i, a)];
-                }
-            }
-            self.with_coef(coef)
         }
+        let mut y = DMatrix::from_row_slice(n, m, &coef);
+        l.solve_lower_triangular_unchecked_mut(&mut y);
+        l.ad_solve_lower_triangular_unchecked_mut(&mut y);
+        for i in 0..n {
+            for a in 0..m {
+                coef[i * m + a] = y[(i, a)];
+            }
+        }
+        self.with_coef(coef)
     }
 
     fn with_coef(&self, dual_coef: Vec<f64>) -> KernelRidge {
-        KernelRidge {
-            state_dim: self.state_dim,
-            num_actions: self.num_actions,
-            states: self.states.clone(),
+        KernelRidge::over(
+            self.state_dim,
+            self.num_actions,
+            self.states.clone(),
             dual_coef,
-        }
+        )
     }
 
     /// `Lᵀ X = W` for the dual coefficients X (row-major `n × actions`), W = L⁻¹ Y being kept

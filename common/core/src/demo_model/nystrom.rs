@@ -13,7 +13,7 @@
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
-use super::krr::{probs_from_outputs, ALPHA};
+use super::krr::{KernelRidge, ALPHA};
 use super::{check_demo, rbf, validate, DemoModelError};
 
 /// The landmarks of the approximate model: its first demonstrations.
@@ -27,16 +27,11 @@ pub const MAX_APPROX_DEMOS: usize = 1_000_000;
 /// make `K_mm` singular; this splits their weight rather than failing.
 const JITTER: f64 = 1e-10;
 
-/// A fitted Nyström KRR: the landmark states and one coefficient per (landmark, action).
+/// A fitted Nyström KRR: the regression over the kernel at the landmarks (a [`KernelRidge`]
+/// whose states are the landmarks), and the demonstrations it was fitted on.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NystromRidge {
-    state_dim: usize,
-    num_actions: usize,
-    /// Landmark states, row-major, `landmarks * state_dim`.
-    landmarks: Vec<f64>,
-    /// Coefficients, row-major, `landmarks * num_actions`.
-    coef: Vec<f64>,
-    /// Demonstrations it was fitted on.
+    over_landmarks: KernelRidge,
     demos: usize,
 }
 
@@ -51,11 +46,11 @@ impl NystromRidge {
     }
 
     pub fn num_actions(&self) -> usize {
-        self.num_actions
+        self.over_landmarks.num_actions()
     }
 
     pub fn state_dim(&self) -> usize {
-        self.state_dim
+        self.over_landmarks.state_dim()
     }
 
     pub fn num_demos(&self) -> usize {
@@ -64,24 +59,12 @@ impl NystromRidge {
 
     /// The regression outputs at `s`, one per action.
     pub fn raw(&self, s: &[f64]) -> Vec<f64> {
-        let m = self.num_actions;
-        let mut out = vec![0.0; m];
-        for (l, c) in self
-            .landmarks
-            .chunks_exact(self.state_dim)
-            .zip(self.coef.chunks_exact(m))
-        {
-            let k = rbf(s, l);
-            for (o, c) in out.iter_mut().zip(c) {
-                *o += k * c;
-            }
-        }
-        out
+        self.over_landmarks.raw(s)
     }
 
-    /// p(a|s) from the outputs, as the exact KRR's ([`probs_from_outputs`]).
+    /// p(a|s) from the outputs, as the exact KRR's.
     pub fn probs(&self, s: &[f64]) -> Vec<f64> {
-        probs_from_outputs(&self.raw(s))
+        self.over_landmarks.probs(s)
     }
 }
 
@@ -166,37 +149,34 @@ impl NystromFactor {
         }
         let d = self.state_dim;
         let m = self.num_landmarks();
-        if m < LANDMARKS {
-            // Every demonstration so far is a landmark: the new landmark's entries of the sum
-            // are over them.
-            let to_new: Vec<f64> = self
-                .landmarks
-                .chunks_exact(d)
-                .map(|x| rbf(x, state))
-                .collect();
-            for (l, k) in to_new.iter().enumerate() {
-                self.kmm[m * LANDMARKS + l] = *k;
-                self.kmm[l * LANDMARKS + m] = *k;
-            }
-            self.kmm[m * LANDMARKS + m] = rbf(state, state);
-            for l in 0..m {
-                let kl = &self.kmm[l * LANDMARKS..l * LANDMARKS + m];
-                let v: f64 = kl.iter().zip(&to_new).map(|(a, b)| a * b).sum();
-                self.gram[m * LANDMARKS + l] = v;
-                self.gram[l * LANDMARKS + m] = v;
-            }
-            self.gram[m * LANDMARKS + m] = to_new.iter().map(|k| k * k).sum();
-            for (k, &a) in to_new.iter().zip(&self.landmark_actions) {
-                self.rhs[m * self.num_actions + a] += k;
-            }
-            self.landmarks.extend_from_slice(state);
-            self.landmark_actions.push(action);
-        }
-        let k: Vec<f64> = self
+        // The kernel between the landmarks and the new state (and itself, if it becomes one).
+        let mut k: Vec<f64> = self
             .landmarks
             .chunks_exact(d)
             .map(|x| rbf(x, state))
             .collect();
+        if m < LANDMARKS {
+            // Every demonstration so far is a landmark: the new landmark's entries of the sum
+            // are over them.
+            for (l, kl) in k.iter().enumerate() {
+                self.kmm[m * LANDMARKS + l] = *kl;
+                self.kmm[l * LANDMARKS + m] = *kl;
+            }
+            self.kmm[m * LANDMARKS + m] = rbf(state, state);
+            for l in 0..m {
+                let row = &self.kmm[l * LANDMARKS..l * LANDMARKS + m];
+                let v: f64 = row.iter().zip(&k).map(|(a, b)| a * b).sum();
+                self.gram[m * LANDMARKS + l] = v;
+                self.gram[l * LANDMARKS + m] = v;
+            }
+            self.gram[m * LANDMARKS + m] = k.iter().map(|v| v * v).sum();
+            for (kl, &a) in k.iter().zip(&self.landmark_actions) {
+                self.rhs[m * self.num_actions + a] += kl;
+            }
+            self.landmarks.extend_from_slice(state);
+            self.landmark_actions.push(action);
+            k.push(self.kmm[m * LANDMARKS + m]);
+        }
         for (i, ki) in k.iter().enumerate() {
             let row = &mut self.gram[i * LANDMARKS..i * LANDMARKS + k.len()];
             for (g, kj) in row.iter_mut().zip(&k) {
@@ -238,10 +218,7 @@ impl NystromFactor {
             }
         }
         Ok(NystromRidge {
-            state_dim: d,
-            num_actions: a,
-            landmarks: self.landmarks.clone(),
-            coef,
+            over_landmarks: KernelRidge::over(d, a, self.landmarks.clone(), coef),
             demos: self.demos,
         })
     }
