@@ -40,7 +40,7 @@ if ! up_to_date; then
         echo "setup-venv.sh: installing alfd's Python adapter into $venv (once)" >&2
         [[ -x "$venv/bin/python" ]] || "$python" -m venv "$venv"
         "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps -r "$requirements" >&2
-        "$venv/bin/python" -c 'import iceoryx2, gymnasium, numpy' >&2
+        "$venv/bin/python" -c 'import iceoryx2, gymnasium, numpy, minari, pyarrow' >&2
         echo "$want" >"$stamp"
     fi
 fi

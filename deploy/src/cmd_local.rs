@@ -14,8 +14,8 @@ use alfd_common::config::{EnvName, ExperimentConfig};
 use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration, CliffWalk};
 use alfd_common::record::{episodes_csv, EpisodeRecord, RunSummary};
 use alfd_common::runner::{
-    run_neural_checkpointed, run_neural_on, run_tabular_checkpointed, Checkpoints, NeuralEnvs,
-    NeuralRun, RunError, RunState,
+    run_neural_on, run_tabular_checkpointed, Checkpoints, NeuralEnvs, NeuralRun, PriorDemo,
+    RunError, RunState,
 };
 use anyhow::Context as _;
 
@@ -23,8 +23,10 @@ use crate::checkpoint_file::{self, CheckpointFile};
 use crate::setup;
 use crate::usage::usage;
 use alfd_harness::run_dir;
+use alfd_lab::minari::Dataset;
 use alfd_lab::output::write;
 use alfd_lab::report::{self, Output};
+use alfd_lab::transitions;
 
 #[derive(Debug, clap::Args)]
 pub struct LocalArgs {
@@ -48,6 +50,11 @@ pub struct LocalArgs {
     /// run if it stops.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub checkpoint_every: Option<u32>,
+    /// Also write every transition of the run, episode by episode, to `OUT/transitions.jsonl`
+    /// (what `alfd demos export` makes a Minari dataset of). Neural agents; not with
+    /// `--checkpoint-every`.
+    #[arg(long)]
+    pub transitions: bool,
     /// Testing: stop (as a crash would, without the final files) after this many episodes.
     #[arg(long, hide = true, value_name = "N")]
     pub stop_after_episodes: Option<u32>,
@@ -63,6 +70,12 @@ pub fn run(args: LocalArgs) -> anyhow::Result<()> {
              checkpointing it is not supported",
         ));
     }
+    if args.transitions && (args.checkpoint_every.is_some() || cfg.env.name == EnvName::Cliffwalk) {
+        return Err(usage(
+            "--transitions: a neural agent's run without --checkpoint-every (a resumed run's \
+             transitions.jsonl would miss or repeat episodes)",
+        ));
+    }
     let _lock = run_dir::claim_new(&args.out)?;
     let resumable = Resumable {
         config_toml: cfg.to_toml(),
@@ -74,7 +87,14 @@ pub fn run(args: LocalArgs) -> anyhow::Result<()> {
         json: args.json,
         quiet: args.quiet,
     };
-    let summary = run_pieces(&cfg, pieces, &args.out, output.progress(), resumable)?;
+    let summary = run_pieces(
+        &cfg,
+        pieces,
+        &args.out,
+        output.progress(),
+        resumable,
+        args.transitions,
+    )?;
     finish(&cfg, &args.out, summary, output)
 }
 
@@ -175,13 +195,16 @@ pub(crate) enum Pieces {
     },
     Neural {
         demonstrator: Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>,
+        /// `demos.prior`'s dataset.
+        prior: Option<Dataset>,
     },
     /// A Gymnasium environment or an external expert (see `local_remote`).
-    Remote,
+    Remote { prior: Option<Dataset> },
 }
 
 impl Pieces {
     pub(crate) fn of(cfg: &ExperimentConfig) -> anyhow::Result<Self> {
+        let prior = read_prior(cfg)?;
         Ok(match cfg.env.name {
             EnvName::Cliffwalk => {
                 let env = setup::cliffwalk(cfg)?;
@@ -194,9 +217,16 @@ impl Pieces {
             // Python pieces start with the run (their logs go to its directory).
             _ if crate::local_remote::needed(cfg) => {
                 setup::check_demonstrator(cfg)?;
-                Self::Remote
+                Self::Remote { prior }
             }
             _ => Self::Neural {
+                prior: match prior {
+                    Some(ds) => {
+                        prior_demos(Some(&ds), &builtin_envs(cfg)?)?;
+                        Some(ds)
+                    }
+                    None => None,
+                },
                 demonstrator: setup::neural_demonstrator(cfg)?,
             },
         })
@@ -209,17 +239,26 @@ pub fn run_config(
     out: &Path,
     progress: bool,
 ) -> anyhow::Result<RunSummary> {
-    let summary = run_pieces(cfg, Pieces::of(cfg)?, out, progress, Resumable::none(cfg))?;
+    let summary = run_pieces(
+        cfg,
+        Pieces::of(cfg)?,
+        out,
+        progress,
+        Resumable::none(cfg),
+        false,
+    )?;
     Ok(summary.expect("a run without --stop-after-episodes ends"))
 }
 
-/// Runs `cfg` to its end (`Some` summary) or until `resumable.stop_after` episodes (`None`).
+/// Runs `cfg` to its end (`Some` summary) or until `resumable.stop_after` episodes (`None`);
+/// with `transitions`, records them (see `--transitions`).
 pub(crate) fn run_pieces(
     cfg: &ExperimentConfig,
     pieces: Pieces,
     out: &Path,
     progress: bool,
     resumable: Resumable,
+    transitions: bool,
 ) -> anyhow::Result<Option<RunSummary>> {
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create output directory {}", out.display()))?;
@@ -234,6 +273,7 @@ pub(crate) fn run_pieces(
         cfg,
         out,
         resumable,
+        transitions,
         bar,
         stopped: Cell::new(false),
         save_error: Cell::new(None),
@@ -244,8 +284,11 @@ pub(crate) fn run_pieces(
             env,
             mut demonstrator,
         } => run_tabular(&watch, &env, demonstrator.as_mut())?,
-        Pieces::Remote => run_remote(&watch)?,
-        Pieces::Neural { mut demonstrator } => run_neural(&watch, demonstrator.as_mut())?,
+        Pieces::Remote { prior } => run_remote(&watch, prior.as_ref())?,
+        Pieces::Neural {
+            mut demonstrator,
+            prior,
+        } => run_neural(&watch, demonstrator.as_mut(), prior.as_ref())?,
     };
     let Some(produced) = produced else {
         return Ok(None);
@@ -274,6 +317,8 @@ struct Watch<'a> {
     cfg: &'a ExperimentConfig,
     out: &'a Path,
     resumable: Resumable,
+    /// Record every transition (`--transitions`).
+    transitions: bool,
     bar: indicatif::ProgressBar,
     /// Set when the run stops as asked (`--stop-after-episodes`).
     stopped: Cell<bool>,
@@ -315,6 +360,20 @@ impl Watch<'_> {
                 ControlFlow::Break(())
             }
         }
+    }
+
+    /// The run's environments, the training one recording its transitions with
+    /// `--transitions`.
+    fn envs(&self, envs: NeuralEnvs) -> anyhow::Result<NeuralEnvs> {
+        if !self.transitions {
+            return Ok(envs);
+        }
+        let name = self.cfg.env.name.as_str();
+        let env = transitions::Recorder::create(envs.env, self.out, name)?;
+        Ok(NeuralEnvs {
+            env: Box::new(env),
+            eval_env: envs.eval_env,
+        })
     }
 
     /// See [`interrupted`].
@@ -360,21 +419,20 @@ fn run_tabular(
 
 /// Runs a neural run whose environment or expert lives in Python pieces that it starts (see
 /// `local_remote`), and writes its weights; `None` when it stopped before its end.
-fn run_remote(watch: &Watch<'_>) -> anyhow::Result<Option<Produced>> {
+fn run_remote(watch: &Watch<'_>, prior: Option<&Dataset>) -> anyhow::Result<Option<Produced>> {
     let cfg = watch.cfg;
     let (_adapters, envs, mut demonstrator) = crate::local_remote::start(cfg, watch.out)?;
     let envs = match envs {
         Some(envs) => envs,
-        None => NeuralEnvs {
-            env: alfd_common::env::vector_env(&cfg.env).context("a vector environment")?,
-            eval_env: alfd_common::env::vector_env(&cfg.env).context("a vector environment")?,
-        },
+        None => builtin_envs(cfg)?,
     };
+    let prior = prior_demos(prior, &envs)?;
     let checkpoints = watch.resumable.checkpoints(RunState::neural, "neural")?;
     let run = run_neural_on(
         cfg,
-        envs,
+        watch.envs(envs)?,
         demonstrator.as_mut(),
+        &prior,
         checkpoints,
         |s| watch.save(RunState::Neural(Box::new(s.clone()))),
         |r, _| watch.show(r),
@@ -382,6 +440,7 @@ fn run_remote(watch: &Watch<'_>) -> anyhow::Result<Option<Produced>> {
     .map_err(|e| match e {
         RunError::Mismatch(e) => usage(format!("cannot resume from the checkpoint: {e}")),
         RunError::Loop(e) => anyhow::Error::new(e).context("the run failed"),
+        RunError::Prior(e) => usage(e.to_string()),
     })?;
     if watch.interrupted()? {
         return Ok(None);
@@ -394,20 +453,67 @@ fn run_remote(watch: &Watch<'_>) -> anyhow::Result<Option<Produced>> {
 fn run_neural(
     watch: &Watch<'_>,
     demonstrator: &mut dyn Demonstrator<[f32]>,
+    prior: Option<&Dataset>,
 ) -> anyhow::Result<Option<Produced>> {
+    let envs = builtin_envs(watch.cfg)?;
+    let prior = prior_demos(prior, &envs)?;
     let checkpoints = watch.resumable.checkpoints(RunState::neural, "neural")?;
-    let run = run_neural_checkpointed(
+    let run = run_neural_on(
         watch.cfg,
+        watch.envs(envs)?,
         demonstrator,
+        &prior,
         checkpoints,
         |s| watch.save(RunState::Neural(Box::new(s.clone()))),
         |r, _| watch.show(r),
     )
-    .map_err(|e| usage(format!("cannot resume from the checkpoint: {e}")))?;
+    .map_err(|e| match e {
+        RunError::Mismatch(e) => usage(format!("cannot resume from the checkpoint: {e}")),
+        RunError::Prior(e) => usage(e.to_string()),
+        RunError::Loop(e) => unreachable!("an in-process neural run cannot fail: {e}"),
+    })?;
     if watch.interrupted()? {
         return Ok(None);
     }
     neural_outputs(watch.out, run).map(Some)
+}
+
+/// The config's built-in environment, to train on and to evaluate on.
+fn builtin_envs(cfg: &ExperimentConfig) -> anyhow::Result<NeuralEnvs> {
+    let env = || alfd_common::env::vector_env(&cfg.env).context("a vector environment");
+    Ok(NeuralEnvs {
+        env: env()?,
+        eval_env: env()?,
+    })
+}
+
+/// The prior demonstrations of `demos.prior` for the run's environment (none without one).
+fn prior_demos(prior: Option<&Dataset>, envs: &NeuralEnvs) -> anyhow::Result<Vec<PriorDemo>> {
+    let Some(ds) = prior else {
+        return Ok(Vec::new());
+    };
+    let (dim, actions) = (envs.env.observation_dim(), envs.env.num_actions());
+    Ok(transitions::prior_demos(ds, dim, actions)?)
+}
+
+/// The dataset `demos.prior` names, read and checked (`None` without one); refused for a
+/// tabular run.
+fn read_prior(cfg: &ExperimentConfig) -> anyhow::Result<Option<Dataset>> {
+    let Some(dir) = &cfg.demos.prior else {
+        return Ok(None);
+    };
+    if cfg.env.name == EnvName::Cliffwalk {
+        return Err(usage(
+            "demos.prior: prior demonstrations are for the neural agents' environments",
+        ));
+    }
+    let ds = alfd_lab::minari::read(Path::new(dir))
+        .map_err(|e| usage(format!("demos.prior: {}", alfd_harness::describe(&e))))?;
+    tracing::info!(
+        dataset = %ds.id, episodes = ds.episodes.len(), steps = ds.total_steps(),
+        "prior demonstrations read"
+    );
+    Ok(Some(ds))
 }
 
 /// Writes a neural run's `weights.safetensors`.

@@ -94,7 +94,7 @@ pub fn run(args: ResumeArgs) -> anyhow::Result<()> {
         stop_after: args.stop_after_episodes,
     };
     let output = args.output();
-    let summary = run_pieces(&cfg, pieces, dir, output.progress(), resumable)?;
+    let summary = run_pieces(&cfg, pieces, dir, output.progress(), resumable, false)?;
     finish(&cfg, dir, summary, output)
 }
 
@@ -154,6 +154,7 @@ fn resume_multi_process(
         bin_dir: alfd_launcher::bin_dir()?,
         resume: true,
         launches: info.launches.saturating_add(1),
+        earlier_run_ids: [info.earlier_run_ids.clone(), vec![info.run_id.clone()]].concat(),
         restore_actors,
         listen: None,
     };

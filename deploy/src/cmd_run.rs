@@ -100,6 +100,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             "`alfd run` runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
         ));
     }
+    if cfg.demos.prior.is_some() {
+        return Err(usage(
+            "demos.prior: `alfd run` does not read prior demonstrations; run the config with \
+             `alfd local` or in a sweep",
+        ));
+    }
     let env_spec = env_spec(&cfg)?;
     let listen = args
         .listen
@@ -155,6 +161,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         bin_dir: launcher::bin_dir()?,
         resume: false,
         launches: 1,
+        earlier_run_ids: Vec::new(),
         restore_actors: Vec::new(),
         listen,
     };

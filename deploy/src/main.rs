@@ -8,6 +8,7 @@ mod cmd_clean;
 mod cmd_config;
 mod cmd_demo_model;
 mod cmd_demo_model_policy;
+mod cmd_demos;
 mod cmd_docs;
 mod cmd_env;
 mod cmd_expert;
@@ -58,6 +59,8 @@ enum Command {
     Expert(cmd_expert::ExpertArgs),
     /// Train the demonstrators of known quality and save them.
     TrainExperts(cmd_expert::TrainExpertsArgs),
+    /// Demonstrations as datasets: a run's episodes exported to Minari.
+    Demos(cmd_demos::DemosArgs),
     /// Fit a demonstration model (KRR or SVM) on demonstrations and query it.
     DemoModel(cmd_demo_model::DemoModelArgs),
     /// Run an experiment file over many seeds: curves, plot, summary table.
@@ -94,6 +97,7 @@ fn main() {
         Command::Env(a) => cmd_env::run(a),
         Command::Expert(a) => cmd_expert::run(a),
         Command::TrainExperts(a) => cmd_expert::train(a),
+        Command::Demos(a) => cmd_demos::run(a),
         Command::DemoModel(a) => cmd_demo_model::run(a),
         Command::Sweep(a) => cmd_sweep::run(a),
         Command::DemoModelPolicy(a) => cmd_demo_model_policy::run(a),

@@ -6,6 +6,7 @@ mod faults;
 mod golden;
 mod gymnasium;
 mod human;
+mod minari;
 mod query_rules;
 mod remote;
 mod report;

@@ -63,6 +63,28 @@ pub struct ExperimentConfig {
     pub expert: ExpertConfig,
     #[serde(default)]
     pub shaping: ShapingConfig,
+    #[serde(default, skip_serializing_if = "DemosConfig::is_default")]
+    pub demos: DemosConfig,
+}
+
+/// Demonstrations the run starts with, besides the ones it asks for.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DemosConfig {
+    /// A Minari dataset (`arrow` data format: its directory, or the `data` directory in it) of
+    /// the config's environment whose expert steps seed the run: every step, or only the steps
+    /// its `infos.demonstrated` marks when it has that field (as `alfd demos export` writes).
+    /// They go to the replay buffer as demonstrations and into the demonstration model before
+    /// the first step; budget B counts only the demonstrations the run asks for. Neural agents,
+    /// `alfd local` and sweeps only. Relative to the working directory.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior: Option<String>,
+}
+
+impl DemosConfig {
+    fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
 }
 
 fn is_zero_u32(v: &u32) -> bool {

@@ -8,8 +8,8 @@ use std::ops::ControlFlow;
 use serde::{Deserialize, Serialize};
 
 use crate::agent::{
-    ActorSnapshot, Demonstrator, ExpertCore, ExpertSnapshot, LearnerSnapshot, NeuralActor,
-    NeuralLearner, TabularAgent, TabularSnapshot,
+    ActorSnapshot, DemoRecord, Demonstrator, ExpertCore, ExpertSnapshot, LearnerSnapshot,
+    NeuralActor, NeuralLearner, TabularAgent, TabularSnapshot,
 };
 use crate::checkpoint::StateMismatch;
 use crate::config::ExperimentConfig;
@@ -19,6 +19,7 @@ use crate::environment_loop::{self, GenericActor, Progress, Schedule};
 use crate::evaluate::evaluate_greedy;
 use crate::nn::Mlp;
 use crate::record::EpisodeRecord;
+use crate::replay::Transition;
 use crate::rng::{derive_seed, seeded};
 
 /// What a tabular run leaves behind.
@@ -278,10 +279,60 @@ pub fn run_neural_checkpointed(
     let env = vector_env(&cfg.env).expect("a neural agent runs on a vector environment");
     let eval_env = vector_env(&cfg.env).expect("the same environment");
     let envs = NeuralEnvs { env, eval_env };
-    run_neural_on(cfg, envs, demonstrator, checkpoints, save, on_episode).map_err(|e| match e {
+    let prior = &[];
+    run_neural_on(
+        cfg,
+        envs,
+        demonstrator,
+        prior,
+        checkpoints,
+        save,
+        on_episode,
+    )
+    .map_err(|e| match e {
         RunError::Mismatch(m) => m,
         RunError::Loop(e) => unreachable!("an in-process neural run cannot fail: {e}"),
+        RunError::Prior(e) => unreachable!("a run without prior demonstrations fits none: {e}"),
     })
+}
+
+/// A step of an expert given before the run (`demos.prior`): a demonstration for the
+/// demonstration model and a transition for the replay buffer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PriorDemo {
+    pub state: Vec<f32>,
+    pub action: usize,
+    /// The environment's reward (unshaped).
+    pub reward: f64,
+    pub next_state: Vec<f32>,
+    pub terminated: bool,
+}
+
+impl PriorDemo {
+    /// Its demonstration record (`index`: its place among the prior ones).
+    fn record(&self, index: usize) -> DemoRecord {
+        DemoRecord {
+            index: index as u32,
+            state: self.state.iter().map(|&x| f64::from(x)).collect(),
+            action: self.action,
+            step: 0,
+            expert: "prior".to_owned(),
+        }
+    }
+
+    /// Its transition: a demonstration, so every head trains on it (as on the run's own).
+    fn transition(&self, heads: usize) -> Transition {
+        Transition {
+            state: self.state.clone(),
+            action: self.action as u32,
+            reward: self.reward as f32,
+            next_state: self.next_state.clone(),
+            terminated: self.terminated,
+            mask: vec![1.0; heads],
+            demo: true,
+            horizon: 1,
+        }
+    }
 }
 
 /// The environments of a neural run built outside the core (a Gymnasium environment in another
@@ -299,14 +350,20 @@ pub enum RunError {
     /// The environment or the expert (in another process) failed.
     #[error("{0}")]
     Loop(#[from] environment_loop::LoopError),
+    /// No demonstration model fits the prior demonstrations.
+    #[error("the prior demonstrations (demos.prior): {0}")]
+    Prior(crate::demo_model::DemoModelError),
 }
 
 /// [`run_neural_checkpointed`] on the environments `envs` (the config's environment, made by
-/// the caller); an environment or expert that fails stops the run with [`RunError::Loop`].
+/// the caller), starting from the `prior` demonstrations (in the demonstration model, and in
+/// the replay buffer of a run from scratch: a restored one holds them already); an environment
+/// or expert that fails stops the run with [`RunError::Loop`].
 pub fn run_neural_on(
     cfg: &ExperimentConfig,
     envs: NeuralEnvs,
     demonstrator: &mut dyn Demonstrator<[f32]>,
+    prior: &[PriorDemo],
     checkpoints: Checkpoints<'_, NeuralRunState>,
     mut save: impl FnMut(&NeuralRunState) -> ControlFlow<()>,
     mut on_episode: impl FnMut(&EpisodeRecord, &Mlp) -> ControlFlow<()>,
@@ -331,8 +388,17 @@ pub fn run_neural_on(
         seeded(derive_seed(cfg.seed, "actor-0")),
     );
     let mut expert_core = ExpertCore::for_config(cfg, actions);
+    if !prior.is_empty() {
+        let records = prior.iter().enumerate().map(|(i, p)| p.record(i)).collect();
+        expert_core.set_prior(records).map_err(RunError::Prior)?;
+    }
     let mut records = Vec::new();
     let mut progress = Progress::default();
+    if checkpoints.from.is_none() {
+        for p in prior {
+            learner.insert(&p.transition(cfg.agent.heads()));
+        }
+    }
     if let Some(s) = checkpoints.from {
         learner.restore(&s.learner)?;
         core.restore(&s.actor)?;

@@ -2,18 +2,20 @@
 //! methods of an experiment file (`sweep`: running them, sharding, statistics with bootstrap
 //! intervals, summaries, plots, the query-rule study's tables against the budget), how a run
 //! ends and reports (`report`: the summary, the learning curve), files and PNGs (`output`), the
-//! demonstration model alone as a policy (`policy`) and the Q-value check of a run directory
-//! (`q_values`).
+//! demonstration model alone as a policy (`policy`), the Q-value check of a run directory
+//! (`q_values`) and Minari datasets read and written (`minari`).
 //!
 //! The lab trains nothing itself: a sweep's runs are trained by the [`Trainer`] its caller passes
 //! in (the `alfd` binary's single-process runner), so this crate holds no copy of a run.
 
 pub mod error;
+pub mod minari;
 pub mod output;
 pub mod policy;
 pub mod q_values;
 pub mod report;
 pub mod sweep;
+pub mod transitions;
 
 pub use error::{LabError, Result};
 

@@ -83,6 +83,9 @@ pub struct Plan {
     pub resume: bool,
     /// Which launcher of the run this is (1, plus one per resume).
     pub launches: u32,
+    /// The run ids of the run's earlier launches (`alfd resume`), oldest first: what their
+    /// processes left is removed when this launch ends.
+    pub earlier_run_ids: Vec<String>,
     /// A resumed run: the global step of the state in `actor-<id>.ckpt` each actor id starts
     /// from (`alfd-actor --restore-step`); none: a fresh actor.
     pub restore_actors: Vec<Option<u64>>,
@@ -112,6 +115,9 @@ pub struct RunInfo {
     /// by `alfd resume`.
     #[serde(default = "default_max_restarts")]
     pub max_restarts: u32,
+    /// The run ids of the run's earlier launches, oldest first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub earlier_run_ids: Vec<String>,
 }
 
 fn one() -> u32 {
@@ -219,6 +225,7 @@ pub fn launch(plan: &Plan) -> Result<RunSummary> {
         schema_version: wire::SCHEMA_VERSION,
         launches: plan.launches,
         max_restarts: plan.max_restarts,
+        earlier_run_ids: plan.earlier_run_ids.clone(),
     };
     write_patiently(
         &plan.run_dir,
@@ -249,7 +256,26 @@ pub fn launch(plan: &Plan) -> Result<RunSummary> {
     if !left.is_empty() {
         warn!(files = ?left, "iceoryx2 files left behind");
     }
+    clean_earlier_launches(&plan.earlier_run_ids);
     result
+}
+
+/// Removes what the processes of the run's earlier launches left: `alfd resume` cleans the
+/// launch before it as it starts, but a process of a killed launcher that came up (or was
+/// killed) after that leaves its files until now. A launch with a live process is left alone.
+fn clean_earlier_launches(run_ids: &[String]) {
+    for id in run_ids.iter().filter(|id| wire::is_launcher_run_id(id)) {
+        match wire::clean_run(id) {
+            Ok(wire::Cleaned::Removed(files)) if !files.is_empty() => {
+                info!(run_id = %id, files = files.len(), "removed what an earlier launch left");
+            }
+            Ok(wire::Cleaned::Live(nodes)) => {
+                warn!(run_id = %id, ?nodes, "an earlier launch's processes are still alive");
+            }
+            Ok(_) => {}
+            Err(e) => warn!(run_id = %id, "cannot remove what an earlier launch left: {e}"),
+        }
+    }
 }
 
 struct Launcher<'a, 'w> {

@@ -115,6 +115,8 @@ pub struct ExpertSnapshot {
 #[derive(Debug, Clone)]
 pub struct ExpertCore {
     budget: Budget,
+    /// Demonstrations the run started with (`demos.prior`): in the model, not in the budget.
+    prior: Vec<DemoRecord>,
     demos: Vec<DemoRecord>,
     choice: DemoModelChoice,
     num_actions: usize,
@@ -136,6 +138,7 @@ impl ExpertCore {
     ) -> Self {
         Self {
             budget: Budget::new(budget),
+            prior: Vec::new(),
             demos: Vec::new(),
             choice,
             num_actions,
@@ -155,6 +158,16 @@ impl ExpertCore {
             num_actions,
             cfg.shaping.schedule(),
         )
+    }
+
+    /// Starts the model from `prior`, demonstrations given before the run (they spend no
+    /// budget and are not among [`ExpertCore::demos`]); the model is fitted on them, then on
+    /// them and the run's demonstrations.
+    pub fn set_prior(&mut self, prior: Vec<DemoRecord>) -> Result<(), DemoModelError> {
+        self.prior = prior;
+        self.krr = None;
+        self.nystrom = None;
+        self.refit()
     }
 
     /// Restores the demonstrations of an earlier expert process (its `demos.jsonl`): the budget
@@ -238,7 +251,13 @@ impl ExpertCore {
             DemoModelChoice::Svm => DemoModelKind::Svm,
             DemoModelChoice::Nystrom => DemoModelKind::Nystrom,
         };
-        if self.demos.is_empty() {
+        // The prior demonstrations first, so that the grown factors keep their rows.
+        let set: std::borrow::Cow<'_, [DemoRecord]> = if self.prior.is_empty() {
+            std::borrow::Cow::Borrowed(&self.demos)
+        } else {
+            std::borrow::Cow::Owned([&self.prior[..], &self.demos[..]].concat())
+        };
+        if set.is_empty() {
             self.model = None;
             self.krr = None;
             self.nystrom = None;
@@ -246,14 +265,14 @@ impl ExpertCore {
         }
         self.model = Some(match kind {
             DemoModelKind::Krr => {
-                DemoModel::Krr(grown(&mut self.krr, &self.demos, self.num_actions)?.model())
+                DemoModel::Krr(grown(&mut self.krr, &set, self.num_actions)?.model())
             }
-            DemoModelKind::Nystrom => DemoModel::Nystrom(
-                grown(&mut self.nystrom, &self.demos, self.num_actions)?.model()?,
-            ),
+            DemoModelKind::Nystrom => {
+                DemoModel::Nystrom(grown(&mut self.nystrom, &set, self.num_actions)?.model()?)
+            }
             DemoModelKind::Svm => {
-                let states: Vec<Vec<f64>> = self.demos.iter().map(|d| d.state.clone()).collect();
-                let actions: Vec<usize> = self.demos.iter().map(|d| d.action).collect();
+                let states: Vec<Vec<f64>> = set.iter().map(|d| d.state.clone()).collect();
+                let actions: Vec<usize> = set.iter().map(|d| d.action).collect();
                 DemoModel::fit(kind, &states, &actions, self.num_actions)?
             }
         });
@@ -287,7 +306,7 @@ impl ExpertCore {
     pub fn shaping_model(&self, step: u64) -> Option<(&DemoModel, f64)> {
         self.schedule.model_for(
             step,
-            self.demos.len(),
+            self.prior.len() + self.demos.len(),
             self.last_demo_step(),
             self.model.as_ref(),
         )
@@ -355,6 +374,46 @@ fn grown<'a, G: Grows>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn prior_demonstrations_shape_the_model_but_spend_no_budget() {
+        let schedule = crate::config::ShapingConfig::default().schedule();
+        let record = |i: usize| DemoRecord {
+            index: i as u32,
+            state: vec![i as f64 * 0.3 - 1.0, (i as f64).sin()],
+            action: i % 2,
+            step: 0,
+            expert: "prior".into(),
+        };
+        let prior: Vec<DemoRecord> = (0..6).map(record).collect();
+        for choice in [
+            DemoModelChoice::Krr,
+            DemoModelChoice::Nystrom,
+            DemoModelChoice::Svm,
+        ] {
+            let mut core = ExpertCore::new(2, choice, 2, schedule);
+            core.set_prior(prior.clone()).unwrap();
+            assert!(core.model().is_some() && core.demos().is_empty());
+            assert_eq!(core.budget().used(), 0);
+            for i in 6..9 {
+                let d = record(i);
+                let given = core
+                    .record(&d.state, d.action, 10 + i as u64, "e")
+                    .is_some();
+                assert_eq!(given, i < 8, "budget 2: the prior spent none of it");
+            }
+            assert_eq!(core.demos().len(), 2);
+            // The same model as one fitted on the prior and the run's demonstrations at once.
+            let mut all = ExpertCore::new(8, choice, 2, schedule);
+            all.restore((0..8).map(record).collect()).unwrap();
+            let s = [0.1, -0.4];
+            assert_eq!(
+                core.model().unwrap().probs(&s),
+                all.model().unwrap().probs(&s),
+                "{choice:?}"
+            );
+        }
+    }
 
     /// The model after each demonstration, grown, against the model of the same demonstrations
     /// restored at once (as a restarted expert fits it).
