@@ -95,7 +95,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     core.continue_exploration(args.explored_steps);
     let mut variables = WireVariables::new(&session)?;
     let mut adder = WireAdder::new(&session, me, runtime.window, obs_dim, cfg.agent.heads())?;
-    let mut expert = wire_expert(&session, me, &setup)?;
+    let mut expert = wire_expert(&session, me, &setup, &args.process.run_dir)?;
     // A restored actor continues where its checkpoint stands.
     let run_dir = &args.process.run_dir;
     let config_toml = std::fs::read_to_string(run_dir.join("config.toml"))
@@ -203,17 +203,22 @@ fn identity(args: &Args) -> alfd_harness::Result<Identity> {
     })
 }
 
-/// The expert as this actor's client: budget, shaping schedule and timeouts of the run.
+/// The expert as this actor's client: budget, shaping schedule and timeouts of the run, and the
+/// run's prior demonstrations (`RUN_DIR/prior-demos.jsonl`), which its model counts too.
 fn wire_expert<'s, 'w>(
     session: &'s Session<'w>,
     me: Identity,
     setup: &alfd_harness::Setup,
+    run_dir: &std::path::Path,
 ) -> alfd_harness::Result<WireExpert<'s, 'w>> {
     let (cfg, runtime) = (&setup.config, &setup.runtime);
     let schedule = cfg.shaping_enabled().then(|| cfg.shaping.schedule());
+    let (obs_dim, actions) = setup.env_dims()?;
+    let prior = alfd_harness::read_prior(run_dir, obs_dim, actions)?.len();
     Ok(
         WireExpert::new(session, me, cfg.budget(), schedule, runtime.query_timeout())?
-            .with_human_timeout(runtime.query_timeout_for(alfd_harness::HUMAN_EXPERT)),
+            .with_human_timeout(runtime.query_timeout_for(alfd_harness::HUMAN_EXPERT))
+            .with_prior_demos(prior),
     )
 }
 

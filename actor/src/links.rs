@@ -276,6 +276,9 @@ pub struct WireExpert<'s, 'w> {
     human_active: bool,
     /// `Some` when the config shapes the reward.
     schedule: Option<ShapingSchedule>,
+    /// The run's prior demonstrations (`demos.prior`): in every published model, not in the
+    /// budget.
+    prior_demos: usize,
     pub timeouts: u64,
 }
 
@@ -306,8 +309,15 @@ impl<'s, 'w> WireExpert<'s, 'w> {
             human_timeout: timeout,
             human_active: false,
             schedule,
+            prior_demos: 0,
             timeouts: 0,
         })
+    }
+
+    /// The models it receives are fitted on `n` prior demonstrations too (shaping counts them).
+    pub fn with_prior_demos(mut self, n: usize) -> Self {
+        self.prior_demos = n;
+        self
     }
 
     /// Waits `timeout` for the answer while a person is the expert.
@@ -342,7 +352,7 @@ impl<'s, 'w> WireExpert<'s, 'w> {
                         LoopError::link(format!("malformed demonstration model: {e}"))
                     })?)
                 };
-            v.model_demos = h.demos as usize;
+            v.model_demos = h.demos as usize + self.prior_demos;
             v.last_demo_step = h.last_demo_step;
             v.budget_left = h.budget_left;
             v.demos = v.demos.max(u64::from(h.demos));

@@ -498,7 +498,7 @@ fn prior_demos(prior: Option<&Dataset>, envs: &NeuralEnvs) -> anyhow::Result<Vec
 
 /// The dataset `demos.prior` names, read and checked (`None` without one); refused for a
 /// tabular run.
-fn read_prior(cfg: &ExperimentConfig) -> anyhow::Result<Option<Dataset>> {
+pub(crate) fn read_prior(cfg: &ExperimentConfig) -> anyhow::Result<Option<Dataset>> {
     let Some(dir) = &cfg.demos.prior else {
         return Ok(None);
     };

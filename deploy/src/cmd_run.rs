@@ -100,13 +100,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             "`alfd run` runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
         ));
     }
-    if cfg.demos.prior.is_some() {
-        return Err(usage(
-            "demos.prior: `alfd run` does not read prior demonstrations; run the config with \
-             `alfd local` or in a sweep",
-        ));
-    }
     let env_spec = env_spec(&cfg)?;
+    let prior = prior_demos(&cfg, env_spec.as_ref())?;
     let listen = args
         .listen
         .as_deref()
@@ -145,6 +140,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| PathBuf::from("runs").join(&run_id));
     // A run directory belongs to one run: refused if it holds one, locked while this one runs.
     let _lock = run_dir::claim_new(&run_dir)?;
+    if !prior.is_empty() {
+        std::fs::create_dir_all(&run_dir)?;
+        alfd_harness::write_prior(&run_dir, &prior)?;
+    }
     let output = Output {
         json: args.json,
         quiet: args.quiet,
@@ -190,6 +189,26 @@ fn env_spec(
             .map_err(|e| usage(e.to_string()))?;
         Ok(None)
     }
+}
+
+/// The expert steps of the dataset `demos.prior` names, checked against the run's environment
+/// (none without one): the processes read them from `RUN_DIR/prior-demos.jsonl`.
+fn prior_demos(
+    cfg: &alfd_common::config::ExperimentConfig,
+    spec: Option<&alfd_harness::python::EnvSpec>,
+) -> anyhow::Result<Vec<alfd_common::runner::PriorDemo>> {
+    let Some(ds) = crate::cmd_local::read_prior(cfg)? else {
+        return Ok(Vec::new());
+    };
+    let (obs_dim, actions) = match spec {
+        Some(s) => (s.obs_dim, s.num_actions),
+        None => {
+            let env = alfd_common::env::vector_env(&cfg.env)
+                .ok_or_else(|| anyhow::anyhow!("no vector environment"))?;
+            (env.observation_dim(), env.num_actions())
+        }
+    };
+    Ok(alfd_lab::transitions::prior_demos(&ds, obs_dim, actions)?)
 }
 
 /// The runtime settings every process reads, from `alfd run`'s flags, validated (the error names

@@ -46,6 +46,15 @@ fn local(out: &Path, sets: &[&str], extra: &[&str]) -> std::process::Output {
     c.args(extra).output().unwrap()
 }
 
+/// `alfd demos export RUN --out OUT`.
+fn export(run: &Path, out: &Path) -> std::process::Output {
+    let (run, out) = (run.to_str().unwrap(), out.to_str().unwrap());
+    alfd()
+        .args(["demos", "export", run, "--out", out])
+        .output()
+        .unwrap()
+}
+
 fn json_lines(path: &Path) -> Vec<Value> {
     std::fs::read_to_string(path)
         .unwrap()
@@ -69,16 +78,7 @@ fn a_run_exported_loads_in_minari_and_a_minari_dataset_seeds_a_run() {
     let o = local(&run, &sets, &["--transitions"]);
     assert!(o.status.success(), "{}", text(&o));
     let out = root.join("alfd/cartpole-run-v0");
-    let o = alfd()
-        .args([
-            "demos",
-            "export",
-            run.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
+    let o = export(&run, &out);
     assert!(o.status.success(), "{}", text(&o));
     let m = minari(&root, &["load", "alfd/cartpole-run-v0"]);
     let recorded = json_lines(&run.join("transitions.jsonl"));
@@ -127,16 +127,7 @@ fn a_run_exported_loads_in_minari_and_a_minari_dataset_seeds_a_run() {
         (serde_json::json!([4]), serde_json::json!(2))
     );
     // Exporting again into the same directory is refused, the dataset kept.
-    let again = alfd()
-        .args([
-            "demos",
-            "export",
-            run.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
+    let again = export(&run, &out);
     assert_eq!(again.status.code(), Some(2), "{}", text(&again));
     assert!(text(&again).contains("holds a dataset already"));
 
@@ -207,19 +198,33 @@ fn a_run_exported_loads_in_minari_and_a_minari_dataset_seeds_a_run() {
         "{}",
         text(&acrobot)
     );
-    let multi = alfd()
+    // `alfd run` seeds its learner and its expert from the same dataset.
+    let multi = dir.join("multi");
+    let o = alfd()
+        .args(["run", "--config", CONFIG, "--actors", "1", "--quiet"])
+        .args(["--out", multi.to_str().unwrap()])
+        .args(["--set", "episodes=4", "--set", "budget.total=0"])
         .args([
-            "run",
-            "--config",
-            CONFIG,
             "--set",
-            &format!("demos.prior=\"{}\"", weak.display()),
+            "shaping.kind=\"potential\"",
+            "--set",
+            "shaping.min_demos=1",
         ])
-        .args(["--out", dir.join("bad").to_str().unwrap()])
+        .args(["--set", &format!("demos.prior=\"{}\"", weak.display())])
         .output()
         .unwrap();
-    assert_eq!(multi.status.code(), Some(2), "{}", text(&multi));
-    assert!(text(&multi).contains("does not read prior demonstrations"));
+    assert!(o.status.success(), "{}", text(&o));
+    let lines = std::fs::read_to_string(multi.join("prior-demos.jsonl")).unwrap();
+    assert_eq!(lines.lines().count() as u64, prior_steps);
+    let log = |name: &str| std::fs::read_to_string(multi.join(name)).unwrap();
+    assert!(log("learner.log").contains("prior demonstrations in the replay buffer"));
+    assert!(log("expert-1.log").contains("prior demonstrations in the demonstration model"));
+    let csv = std::fs::read_to_string(multi.join("episodes.csv")).unwrap();
+    let shaped = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(6).unwrap().parse::<u64>().unwrap());
+    assert!(shaped.sum::<u64>() > 0, "{csv}");
     // A run without recorded transitions cannot be exported.
     let plain = alfd()
         .args([

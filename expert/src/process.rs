@@ -80,7 +80,17 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let source = source(args, cfg.env.name, &name, me, schema, actions)?;
     let wire = args.process.connect(me, schema)?;
     let session = Session::join(&wire, Doorbell::Expert, runtime.handshake_timeout())?;
-    let core = ExpertCore::for_config(cfg, actions);
+    let mut core = ExpertCore::for_config(cfg, actions);
+    let prior = alfd_harness::read_prior(&args.process.run_dir, obs_dim, actions)?;
+    if !prior.is_empty() {
+        let records = prior.iter().enumerate().map(|(i, p)| p.record(i)).collect();
+        core.set_prior(records)
+            .what(|| "the demonstration model of the prior demonstrations".to_owned())?;
+        info!(
+            demos = prior.len(),
+            "prior demonstrations in the demonstration model"
+        );
+    }
     let page = match source {
         Source::Person => Some(start_page(
             args,

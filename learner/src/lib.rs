@@ -193,6 +193,19 @@ fn machine(
             actions: num_actions,
         },
     );
+    if restored.is_none() {
+        // A run from scratch starts from its prior demonstrations (`demos.prior`), if any.
+        let prior = alfd_harness::read_prior(run_dir, obs_dim, num_actions)?;
+        for p in &prior {
+            learner.insert(&p.transition(cfg.agent.heads()));
+        }
+        if !prior.is_empty() {
+            info!(
+                transitions = prior.len(),
+                "prior demonstrations in the replay buffer"
+            );
+        }
+    }
     if let Some(ckpt) = restored {
         learner
             .restore(&ckpt.learner)

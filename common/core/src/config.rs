@@ -75,8 +75,8 @@ pub struct DemosConfig {
     /// the config's environment whose expert steps seed the run: every step, or only the steps
     /// its `infos.demonstrated` marks when it has that field (as `alfd demos export` writes).
     /// They go to the replay buffer as demonstrations and into the demonstration model before
-    /// the first step; budget B counts only the demonstrations the run asks for. Neural agents,
-    /// `alfd local` and sweeps only. Relative to the working directory.
+    /// the first step; budget B counts only the demonstrations the run asks for. Neural agents;
+    /// relative to the working directory.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prior: Option<String>,
 }

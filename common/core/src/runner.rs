@@ -298,7 +298,7 @@ pub fn run_neural_checkpointed(
 
 /// A step of an expert given before the run (`demos.prior`): a demonstration for the
 /// demonstration model and a transition for the replay buffer.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PriorDemo {
     pub state: Vec<f32>,
     pub action: usize,
@@ -310,7 +310,7 @@ pub struct PriorDemo {
 
 impl PriorDemo {
     /// Its demonstration record (`index`: its place among the prior ones).
-    fn record(&self, index: usize) -> DemoRecord {
+    pub fn record(&self, index: usize) -> DemoRecord {
         DemoRecord {
             index: index as u32,
             state: self.state.iter().map(|&x| f64::from(x)).collect(),
@@ -321,7 +321,7 @@ impl PriorDemo {
     }
 
     /// Its transition: a demonstration, so every head trains on it (as on the run's own).
-    fn transition(&self, heads: usize) -> Transition {
+    pub fn transition(&self, heads: usize) -> Transition {
         Transition {
             state: self.state.clone(),
             action: self.action as u32,

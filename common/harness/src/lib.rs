@@ -8,6 +8,7 @@
 
 mod bad_input;
 mod fs;
+mod prior;
 mod process;
 pub mod python;
 pub mod run_dir;
@@ -22,6 +23,7 @@ pub use fs::{
     append_whole, disk_full, load_checkpoint, save_checkpoint, write_atomically,
     write_atomically_patiently, write_private, DISK_FULL_PATIENCE,
 };
+pub use prior::{read_prior, write_prior, PRIOR_FILE};
 pub use process::{check_wire_limits, main, read_text, ProcessArgs, Setup};
 pub use runtime::{
     RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY, DEFAULT_HUMAN_QUERY_TIMEOUT_MS,

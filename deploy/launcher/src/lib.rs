@@ -261,8 +261,9 @@ pub fn launch(plan: &Plan) -> Result<RunSummary> {
 }
 
 /// Removes what the processes of the run's earlier launches left: `alfd resume` cleans the
-/// launch before it as it starts, but a process of a killed launcher that came up (or was
-/// killed) after that leaves its files until now. A launch with a live process is left alone.
+/// launch before it as it starts, but a process of a killed launcher that comes up (or is
+/// killed) after that cleaning leaves files that only this removes. A launch with a live
+/// process is left alone.
 fn clean_earlier_launches(run_ids: &[String]) {
     for id in run_ids.iter().filter(|id| wire::is_launcher_run_id(id)) {
         match wire::clean_run(id) {

@@ -302,11 +302,16 @@ impl ExpertCore {
         self.demos.last().map_or(0, |d| d.step)
     }
 
+    /// The demonstrations the model is fitted on: the prior ones and the run's.
+    pub fn model_demos(&self) -> usize {
+        self.prior.len() + self.demos.len()
+    }
+
     /// The model to shape the reward of global step `step` with, if shaping is on then.
     pub fn shaping_model(&self, step: u64) -> Option<(&DemoModel, f64)> {
         self.schedule.model_for(
             step,
-            self.prior.len() + self.demos.len(),
+            self.model_demos(),
             self.last_demo_step(),
             self.model.as_ref(),
         )
