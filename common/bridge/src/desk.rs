@@ -14,8 +14,9 @@
 
 use std::collections::HashMap;
 
-use alfd_wire::{DemoModelHeader, QueryResponse};
+use alfd_wire::{DemoModelHeader, QueryResponse, Role};
 
+use crate::frame::Frame;
 use crate::link::{HasSeq, HeldQueries};
 
 /// What the hub's thread does with a remote expert's answer.
@@ -136,6 +137,31 @@ impl<Q> ExpertDesk<Q> {
         Some((header, bytes))
     }
 
+    /// Why a frame about a remote expert (its answer, its status, its exit) from the joined host
+    /// `from` is refused, if it is: its generation is not one `from` was told to start.
+    pub(crate) fn refusal(&self, f: &Frame, from: &str) -> Option<String> {
+        let generation = match f {
+            Frame::ExpertAnswer(r, _) => r.expert,
+            Frame::ExpertExited { generation, .. } => u32::from(*generation),
+            Frame::Progress(p) if p.header.role == Role::Expert as u16 => u32::from(p.header.id),
+            _ => return None,
+        };
+        let host = u16::try_from(generation)
+            .ok()
+            .and_then(|g| self.hosts.get(&g));
+        match host {
+            Some(h) if h == from => None,
+            Some(h) => Some(format!(
+                "a message from host {from} for the expert of generation {generation}, which \
+                 host {h} serves"
+            )),
+            None => Some(format!(
+                "a message from host {from} for the expert of generation {generation}, which no \
+                 joined host serves"
+            )),
+        }
+    }
+
     /// Checks a remote expert's answer before its demonstration (if any) is written: `Err` with
     /// why it is dropped (its generation gone, or not the file's next line).
     pub(crate) fn check_answer(&self, r: &QueryResponse, demo: Option<&str>) -> Result<(), String> {
@@ -182,6 +208,45 @@ impl<Q> ExpertDesk<Q> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_the_host_serving_a_generation_speaks_for_its_expert() {
+        let mut d = ExpertDesk::<u8>::default();
+        d.started(3, "a");
+        let answer = |g: u32| {
+            Frame::ExpertAnswer(
+                QueryResponse {
+                    expert: g,
+                    ..Default::default()
+                },
+                None,
+            )
+        };
+        let exited = |g: u16| Frame::ExpertExited {
+            generation: g,
+            how: "exit status: 0".into(),
+            code: Some(0),
+        };
+        assert_eq!(d.refusal(&answer(3), "a"), None);
+        assert_eq!(d.refusal(&exited(3), "a"), None);
+        let other = d.refusal(&answer(3), "b").unwrap();
+        assert!(other.contains("which host a serves"), "{other}");
+        assert!(d.refusal(&exited(3), "b").is_some());
+        assert!(d
+            .refusal(&answer(5), "a")
+            .unwrap()
+            .contains("no joined host serves"));
+        let status = |g: u16| {
+            let mut p = alfd_wire::Progress::default();
+            p.header.role = Role::Expert as u16;
+            p.header.id = g;
+            Frame::Progress(p)
+        };
+        assert_eq!(d.refusal(&status(3), "a"), None);
+        assert!(d.refusal(&status(3), "b").is_some());
+        // Frames about actors are the roster's to check.
+        assert_eq!(d.refusal(&Frame::Progress(Default::default()), "b"), None);
+    }
 
     /// A held query: its sequence number.
     #[derive(Debug, PartialEq)]

@@ -76,7 +76,7 @@ impl ExpertHost {
                 .map_err(zenoh_error)?
         };
         let up = session
-            .declare_publisher(keys::up(&run_id))
+            .declare_publisher(keys::up(&run_id, remote.join_id()))
             .congestion_control(CongestionControl::Block)
             .wait()
             .map_err(zenoh_error)?;
@@ -311,7 +311,7 @@ fn forward(
                     how,
                     code,
                 }),
-                Mail::Joined | Mail::Order(_) | Mail::Left(_) => {}
+                Mail::Joined | Mail::Order(_) | Mail::Left(_) | Mail::Up { .. } => {}
             }
         }
         host.up(exits)?;

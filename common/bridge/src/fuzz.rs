@@ -70,7 +70,7 @@ fn valid_frames() -> Vec<Vec<u8>> {
 fn take_in(bytes: &[u8]) {
     if let Ok(f) = decode::<Frame>(SCHEMA_VERSION, bytes) {
         let _ = f.service();
-        let _ = crate::hub::refusal(&f, |id| id < 4);
+        let _ = crate::hub::refusal(&f, "a", |id| id < 4);
         match &f {
             Frame::Transitions(b) => {
                 let _ = b.check(4, 2, 2);
@@ -165,6 +165,6 @@ fn the_valid_frames_are_taken_in_whole() {
     }
     let f = decode::<Frame>(SCHEMA_VERSION, &valid_frames()[0]).unwrap();
     // Actor 1 is held by a remote host here; actor 9 is not.
-    assert_eq!(crate::hub::refusal(&f, |id| id == 1), None);
-    assert!(crate::hub::refusal(&f, |id| id == 9).is_some());
+    assert_eq!(crate::hub::refusal(&f, "a", |id| id == 1), None);
+    assert!(crate::hub::refusal(&f, "a", |id| id == 9).is_some());
 }

@@ -131,9 +131,14 @@ impl Hub {
         {
             let post = post.clone();
             session
-                .declare_subscriber(keys::up(&opts.run_id))
+                .declare_subscriber(keys::up_all(&opts.run_id))
                 .callback(move |sample| {
-                    post.send(Mail::Frame(sample.payload().to_bytes().into_owned()))
+                    if let Some(from) = keys::up_sender(sample.key_expr().as_str()) {
+                        post.send(Mail::Up {
+                            from: from.to_owned(),
+                            bytes: sample.payload().to_bytes().into_owned(),
+                        })
+                    }
                 })
                 .background()
                 .wait()
@@ -526,20 +531,22 @@ impl<'w, 'a> Forwarder<'w, 'a> {
                 }
             }
             Mail::Exited { .. } => {}
-            Mail::Frame(b) => {
-                if let Some(f) = link::take_in(&b, &mut self.refused, "a remote host") {
-                    self.frame(f)?;
+            Mail::Up { from, bytes } => {
+                if let Some(f) = link::take_in(&bytes, &mut self.refused, "a remote host") {
+                    self.frame(f, &from)?;
                 }
             }
+            Mail::Frame(_) => debug!("a frame without its sender; dropped"),
         }
         Ok(())
     }
 
-    /// A frame from a remote host.
-    fn frame(&mut self, f: Frame) -> Result<()> {
+    /// A frame from the joined host `from`.
+    fn frame(&mut self, f: Frame, from: &str) -> Result<()> {
         let refused = {
             let roster = self.roster.lock().expect("roster");
-            refusal(&f, |id| roster.is_remote(id))
+            refusal(&f, from, |id| roster.holder(id) == Some(from))
+                .or_else(|| self.desk.refusal(&f, from))
         };
         if let Some(why) = refused {
             self.impostors += 1;
@@ -725,10 +732,11 @@ impl<'w, 'a> Forwarder<'w, 'a> {
     }
 }
 
-/// Why the hub refuses an up frame from a remote host, if it does: a message of another schema
-/// version than this run's, or one speaking for an actor id that no remote host holds (a local
-/// actor's, or nobody's): a remote host may act only as the actors the run gave it.
-pub(crate) fn refusal(f: &Frame, held: impl Fn(u16) -> bool) -> Option<String> {
+/// Why the hub refuses an up frame from the joined host `from`, if it does: a message of another
+/// schema version than this run's, or one speaking for an actor id that `from` does not hold
+/// (`held`: a local actor's, another host's, or nobody's): a remote host may act only as the
+/// actors the run gave it.
+pub(crate) fn refusal(f: &Frame, from: &str, held: impl Fn(u16) -> bool) -> Option<String> {
     let (service, header, actor) = match f {
         Frame::Transitions(b) => ("transitions", b.header, Some(b.actor)),
         Frame::Query(q) => ("query", q.header, Some(q.actor)),
@@ -747,7 +755,7 @@ pub(crate) fn refusal(f: &Frame, held: impl Fn(u16) -> bool) -> Option<String> {
     }
     match actor {
         Some(a) if !u16::try_from(a).is_ok_and(&held) => Some(format!(
-            "a {service} message for actor {a}, which no remote host holds"
+            "a {service} message from host {from} for actor {a}, which it does not hold"
         )),
         _ => None,
     }
@@ -769,18 +777,33 @@ mod tests {
 
     #[test]
     fn a_remote_host_speaks_only_for_the_actors_it_holds_in_this_run_s_schema() {
-        // Actors 0 and 1 are this host's; a remote host holds 2 and 3.
-        let held = |id: u16| (2..4).contains(&id);
+        // Actors 0 and 1 are this host's; the joined host "a" holds 2 and 3, "b" holds 4; the
+        // frames come from "a".
+        let holder = |id: u16| match id {
+            2 | 3 => Some("a"),
+            4 => Some("b"),
+            _ => None,
+        };
+        let held = |id: u16| holder(id) == Some("a");
         let batch = |actor: u32, schema: u32| {
             let mut b = TransitionBatch::new(actor as u16, 1, 4, 2, 0).unwrap();
             b.header = header(Role::Actor, actor as u16, schema);
             Frame::Transitions(b)
         };
-        assert_eq!(refusal(&batch(2, SCHEMA_VERSION), held), None);
-        let local = refusal(&batch(0, SCHEMA_VERSION), held).unwrap();
-        assert!(local.contains("transitions message for actor 0"), "{local}");
-        assert!(refusal(&batch(9, SCHEMA_VERSION), held).is_some());
-        let old = refusal(&batch(3, SCHEMA_VERSION + 1), held).unwrap();
+        assert_eq!(refusal(&batch(2, SCHEMA_VERSION), "a", held), None);
+        let local = refusal(&batch(0, SCHEMA_VERSION), "a", held).unwrap();
+        assert!(
+            local.contains("transitions message from host a for actor 0"),
+            "{local}"
+        );
+        // Another joined host's actor.
+        let other = refusal(&batch(4, SCHEMA_VERSION), "a", held).unwrap();
+        assert!(
+            other.contains("for actor 4, which it does not hold"),
+            "{other}"
+        );
+        assert!(refusal(&batch(9, SCHEMA_VERSION), "a", held).is_some());
+        let old = refusal(&batch(3, SCHEMA_VERSION + 1), "a", held).unwrap();
         assert!(old.contains("schema version"), "{old}");
 
         let query = |actor: u32| {
@@ -790,9 +813,9 @@ mod tests {
                 ..Default::default()
             })
         };
-        assert_eq!(refusal(&query(3), held), None);
-        assert!(refusal(&query(1), held).is_some());
-        assert!(refusal(&query(70_000), held).is_some());
+        assert_eq!(refusal(&query(3), "a", held), None);
+        assert!(refusal(&query(1), "a", held).is_some());
+        assert!(refusal(&query(70_000), "a", held).is_some());
 
         let progress = |role: Role, id: u16| {
             Frame::Progress(alfd_wire::Progress {
@@ -800,11 +823,14 @@ mod tests {
                 ..Default::default()
             })
         };
-        assert_eq!(refusal(&progress(Role::Actor, 2), held), None);
-        assert!(refusal(&progress(Role::Actor, 0), held).is_some());
+        assert_eq!(refusal(&progress(Role::Actor, 2), "a", held), None);
+        assert!(refusal(&progress(Role::Actor, 0), "a", held).is_some());
         // A remote expert's status speaks for no actor.
-        assert_eq!(refusal(&progress(Role::Expert, 0), held), None);
+        assert_eq!(refusal(&progress(Role::Expert, 0), "a", held), None);
         // Frames that go down are not a remote host's to send, and are dropped elsewhere.
-        assert_eq!(refusal(&Frame::Control(Default::default()), held), None);
+        assert_eq!(
+            refusal(&Frame::Control(Default::default()), "a", held),
+            None
+        );
     }
 }

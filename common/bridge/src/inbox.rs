@@ -16,6 +16,8 @@ use tracing::warn;
 pub(crate) enum Mail {
     /// A frame's bytes.
     Frame(Vec<u8>),
+    /// A frame's bytes from the joined host `from` (the key it came on).
+    Up { from: String, bytes: Vec<u8> },
     /// A remote host joined: the hub sends it the newest of every down service again.
     Joined,
     /// The launcher's order to a remote expert (the hub sends it down).

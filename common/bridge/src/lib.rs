@@ -64,8 +64,19 @@ pub(crate) mod keys {
     pub fn restart(run: &str) -> String {
         format!("alfd/{run}/restart")
     }
-    pub fn up(run: &str) -> String {
-        format!("alfd/{run}/up")
+    /// Where the joined host `join` sends its frames up: the hub knows the sender by the key.
+    pub fn up(run: &str, join: &str) -> String {
+        format!("alfd/{run}/up/{join}")
+    }
+    /// Every joined host's up key.
+    pub fn up_all(run: &str) -> String {
+        format!("alfd/{run}/up/*")
+    }
+    /// The joined host whose up key `key` is.
+    pub fn up_sender(key: &str) -> Option<&str> {
+        key.rsplit_once("/up/")
+            .map(|(_, join)| join)
+            .filter(|j| !j.contains('/'))
     }
     pub fn down(run: &str) -> String {
         format!("alfd/{run}/down")

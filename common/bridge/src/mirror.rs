@@ -170,7 +170,7 @@ impl Mirror {
                 .map_err(zenoh_error)?
         };
         let up = session
-            .declare_publisher(keys::up(&joined.run_id))
+            .declare_publisher(keys::up(&joined.run_id, &join_id))
             .congestion_control(CongestionControl::Block)
             .wait()
             .map_err(zenoh_error)?;

@@ -195,6 +195,11 @@ impl Roster {
             .is_some_and(|h| h.is_some())
     }
 
+    /// The joined host holding actor `id`, if one does.
+    pub fn holder(&self, id: u16) -> Option<&str> {
+        self.holders.get(usize::from(id))?.as_deref()
+    }
+
     /// The first incarnation of this launch's actors.
     pub fn first_incarnation(&self) -> u64 {
         self.first_incarnation

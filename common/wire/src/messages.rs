@@ -9,8 +9,10 @@ use iceoryx2::prelude::ZeroCopySend;
 
 use crate::error::{Result, WireError};
 
-/// The version of the messages below. Bump it whenever a message changes.
-pub const SCHEMA_VERSION: u32 = 4;
+/// The version of the messages below. Bump it whenever a message changes, or the zenoh keys the
+/// bridges send them on (`alfd_bridge`), so that a process or host of another build is refused
+/// by name.
+pub const SCHEMA_VERSION: u32 = 5;
 /// Actors per run (the credit table has one slot per actor id).
 pub const MAX_ACTORS: usize = 16;
 /// Largest observation a transition or a query can carry.
