@@ -16,7 +16,10 @@ pub fn run(args: CleanArgs) -> anyhow::Result<()> {
     let (mut cleaned, mut files, mut live) = (0usize, 0usize, 0usize);
     for run_id in &runs {
         if args.dry_run {
-            let alive = wire::alive_nodes(run_id)?;
+            let mut alive = wire::alive_nodes(run_id)?;
+            if let Some(pid) = wire::owner_alive(run_id) {
+                alive.push(format!("its launcher, pid {pid}"));
+            }
             if alive.is_empty() {
                 let left = wire::leftover_files(run_id);
                 println!("{run_id}: dead, {} files would be removed", left.len());

@@ -162,6 +162,24 @@ pub fn is_launcher_run_id(run_id: &str) -> bool {
     has_id_form(run_id, 'r')
 }
 
+/// The process that made run `run_id` (`alfd run` or `alfd resume`, or `alfd join`: the pid in
+/// its id), if it is alive: such a run is live even before (or between) its nodes are up, so that
+/// `alfd clean` never takes the files of a run that is starting.
+pub fn owner_alive(run_id: &str) -> Option<u32> {
+    if !is_alfd_run_id(run_id) {
+        return None;
+    }
+    let pid: u32 = run_id.rsplit_once('-')?.1.parse().ok()?;
+    // A pid of a dead launcher that another program took is not the run's.
+    let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).ok()?;
+    let program = cmdline.split(|&b| b == 0).next().unwrap_or_default();
+    String::from_utf8_lossy(program)
+        .rsplit('/')
+        .next()
+        .is_some_and(|name| name == "alfd")
+        .then_some(pid)
+}
+
 /// `<letter><unix seconds>-<pid>`.
 fn has_id_form(run_id: &str, letter: char) -> bool {
     let Some((secs, pid)) = run_id.strip_prefix(letter).and_then(|r| r.split_once('-')) else {
@@ -215,9 +233,13 @@ pub enum Cleaned {
 
 /// Removes everything a dead run left in iceoryx2's directories (a run whose launcher was
 /// killed, say): the dead nodes' resources, the node counter, and whatever file of the run is
-/// still there. A run with a live process is left alone.
+/// still there. A run with a live process, or whose launcher ([`owner_alive`]) lives, is left
+/// alone.
 pub fn clean_run(run_id: &str) -> Result<Cleaned> {
     validate_run_id(run_id)?;
+    if let Some(pid) = owner_alive(run_id) {
+        return Ok(Cleaned::Live(vec![format!("its launcher, pid {pid}")]));
+    }
     let alive = alive_nodes(run_id)?;
     if !alive.is_empty() {
         return Ok(Cleaned::Live(alive));
@@ -272,6 +294,29 @@ mod tests {
         let files = leftover_files(run);
         assert!(files.iter().all(|p| p.exists()), "{files:?}");
         files
+    }
+
+    #[test]
+    fn a_run_whose_launcher_lives_is_live_whatever_its_nodes() {
+        // This test binary is not an alfd program: its pid names no live run.
+        let me = std::process::id();
+        assert_eq!(owner_alive(&format!("r1796205976-{me}")), None);
+        assert_eq!(owner_alive("test-live"), None);
+        // A live program named alfd: the run of its pid is live, and `clean_run` leaves it.
+        let dir = tempfile::tempdir().unwrap();
+        let program = dir.path().join("alfd");
+        std::fs::copy("/bin/sleep", &program).unwrap();
+        let mut child = std::process::Command::new(&program)
+            .arg("30")
+            .spawn()
+            .unwrap();
+        let id = format!("r1796205976-{}", child.id());
+        assert_eq!(owner_alive(&id), Some(child.id()));
+        assert!(matches!(clean_run(&id).unwrap(), Cleaned::Live(_)));
+        child.kill().unwrap();
+        child.wait().unwrap();
+        assert_eq!(owner_alive(&id), None);
+        assert_eq!(clean_run(&id).unwrap(), Cleaned::Removed(Vec::new()));
     }
 
     #[test]
