@@ -51,8 +51,8 @@ pub struct LocalArgs {
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub checkpoint_every: Option<u32>,
     /// Also write every transition of the run, episode by episode, to `OUT/transitions.jsonl`
-    /// (what `alfd demos export` makes a Minari dataset of). Neural agents; not with
-    /// `--checkpoint-every`.
+    /// (what `alfd demos export` makes a Minari dataset of; `alfd resume` goes on with it).
+    /// Neural agents.
     #[arg(long)]
     pub transitions: bool,
     /// Testing: stop (as a crash would, without the final files) after this many episodes.
@@ -70,10 +70,9 @@ pub fn run(args: LocalArgs) -> anyhow::Result<()> {
              checkpointing it is not supported",
         ));
     }
-    if args.transitions && (args.checkpoint_every.is_some() || cfg.env.name == EnvName::Cliffwalk) {
+    if args.transitions && cfg.env.name == EnvName::Cliffwalk {
         return Err(usage(
-            "--transitions: a neural agent's run without --checkpoint-every (a resumed run's \
-             transitions.jsonl would miss or repeat episodes)",
+            "--transitions: the environments of the neural agents (observations as vectors)",
         ));
     }
     let _lock = run_dir::claim_new(&args.out)?;
@@ -368,8 +367,13 @@ impl Watch<'_> {
         if !self.transitions {
             return Ok(envs);
         }
-        let name = self.cfg.env.name.as_str();
-        let env = transitions::Recorder::create(envs.env, self.out, name)?;
+        let env = match &self.resumable.from {
+            Some(f) => {
+                let p = f.state.progress();
+                transitions::Recorder::resume(envs.env, self.out, p.episodes, p.steps)?
+            }
+            None => transitions::Recorder::create(envs.env, self.out, self.cfg.env.name.as_str())?,
+        };
         Ok(NeuralEnvs {
             env: Box::new(env),
             eval_env: envs.eval_env,

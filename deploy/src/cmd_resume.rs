@@ -94,7 +94,8 @@ pub fn run(args: ResumeArgs) -> anyhow::Result<()> {
         stop_after: args.stop_after_episodes,
     };
     let output = args.output();
-    let summary = run_pieces(&cfg, pieces, dir, output.progress(), resumable, false)?;
+    let transitions = dir.join(alfd_lab::transitions::FILE).is_file();
+    let summary = run_pieces(&cfg, pieces, dir, output.progress(), resumable, transitions)?;
     finish(&cfg, dir, summary, output)
 }
 

@@ -126,6 +126,24 @@ fn a_run_exported_loads_in_minari_and_a_minari_dataset_seeds_a_run() {
         (m["observation_shape"].clone(), m["actions"].clone()),
         (serde_json::json!([4]), serde_json::json!(2))
     );
+    // A run stopped and resumed records the same transitions as the run without a stop.
+    let stopped = dir.join("stopped");
+    let extra = [
+        "--transitions",
+        "--checkpoint-every",
+        "3",
+        "--stop-after-episodes",
+        "7",
+    ];
+    let o = local(&stopped, &sets, &extra);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = alfd()
+        .args(["resume", stopped.to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let read = |d: &Path| std::fs::read_to_string(d.join("transitions.jsonl")).unwrap();
+    assert_eq!(read(&stopped), read(&run));
     // Exporting again into the same directory is refused, the dataset kept.
     let again = export(&run, &out);
     assert_eq!(again.status.code(), Some(2), "{}", text(&again));

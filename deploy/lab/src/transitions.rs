@@ -53,6 +53,37 @@ pub struct Recorder {
 }
 
 impl Recorder {
+    /// Continues recording into `dir/transitions.jsonl` from a checkpoint of the run taken after
+    /// `episodes` episodes and `steps` steps: the episodes written after it (the run went on
+    /// past its checkpoint before it stopped) are taken off the file, which then grows again.
+    pub fn resume(env: Box<VectorEnv>, dir: &Path, episodes: u32, steps: u64) -> Result<Self> {
+        let path = dir.join(FILE);
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        let mut kept = String::new();
+        for (n, line) in text.lines().enumerate() {
+            let keep = n == 0
+                || serde_json::from_str::<Recorded>(line)
+                    .is_ok_and(|e| e.episode < u64::from(episodes));
+            if keep {
+                kept.push_str(line);
+                kept.push('\n');
+            }
+        }
+        alfd_harness::write_atomically(&path, kept.as_bytes())?;
+        let file = std::fs::OpenOptions::new()
+            .append(true)
+            .open(&path)
+            .with_context(|| format!("cannot open {}", path.display()))?;
+        Ok(Self {
+            env,
+            out: BufWriter::new(file),
+            episode: None,
+            episodes: u64::from(episodes),
+            steps,
+        })
+    }
+
     /// Records `env`'s episodes into `dir/transitions.jsonl` (made new, with its header).
     pub fn create(env: Box<VectorEnv>, dir: &Path, env_name: &str) -> Result<Self> {
         let path = dir.join(FILE);
