@@ -194,10 +194,11 @@ pub(crate) enum Pieces {
     },
     Neural {
         demonstrator: Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>,
-        /// `demos.prior`'s dataset.
-        prior: Option<Dataset>,
+        /// `demos.prior`'s expert steps.
+        prior: Vec<PriorDemo>,
     },
-    /// A Gymnasium environment or an external expert (see `local_remote`).
+    /// A Gymnasium environment or an external expert (see `local_remote`); `demos.prior`'s
+    /// dataset, checked against the environment once its adapter is up.
     Remote { prior: Option<Dataset> },
 }
 
@@ -219,13 +220,7 @@ impl Pieces {
                 Self::Remote { prior }
             }
             _ => Self::Neural {
-                prior: match prior {
-                    Some(ds) => {
-                        prior_demos(Some(&ds), &builtin_envs(cfg)?)?;
-                        Some(ds)
-                    }
-                    None => None,
-                },
+                prior: prior_demos(prior.as_ref(), &builtin_envs(cfg)?)?,
                 demonstrator: setup::neural_demonstrator(cfg)?,
             },
         })
@@ -287,7 +282,7 @@ pub(crate) fn run_pieces(
         Pieces::Neural {
             mut demonstrator,
             prior,
-        } => run_neural(&watch, demonstrator.as_mut(), prior.as_ref())?,
+        } => run_neural(&watch, demonstrator.as_mut(), &prior)?,
     };
     let Some(produced) = produced else {
         return Ok(None);
@@ -457,16 +452,15 @@ fn run_remote(watch: &Watch<'_>, prior: Option<&Dataset>) -> anyhow::Result<Opti
 fn run_neural(
     watch: &Watch<'_>,
     demonstrator: &mut dyn Demonstrator<[f32]>,
-    prior: Option<&Dataset>,
+    prior: &[PriorDemo],
 ) -> anyhow::Result<Option<Produced>> {
     let envs = builtin_envs(watch.cfg)?;
-    let prior = prior_demos(prior, &envs)?;
     let checkpoints = watch.resumable.checkpoints(RunState::neural, "neural")?;
     let run = run_neural_on(
         watch.cfg,
         watch.envs(envs)?,
         demonstrator,
-        &prior,
+        prior,
         checkpoints,
         |s| watch.save(RunState::Neural(Box::new(s.clone()))),
         |r, _| watch.show(r),
