@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use alfd_common::agent::{DemoRecord, Demonstrator};
-use alfd_common::config::{EnvName, ExperimentConfig};
+use alfd_common::config::{DemoModelChoice, EnvName, ExperimentConfig};
 use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration, CliffWalk};
 use alfd_common::record::{episodes_csv, EpisodeRecord, RunSummary};
 use alfd_common::runner::{
@@ -220,7 +220,7 @@ impl Pieces {
                 Self::Remote { prior }
             }
             _ => Self::Neural {
-                prior: prior_demos(prior.as_ref(), &builtin_envs(cfg)?)?,
+                prior: prior_demos(cfg, prior.as_ref(), &builtin_envs(cfg)?)?,
                 demonstrator: setup::neural_demonstrator(cfg)?,
             },
         })
@@ -425,7 +425,7 @@ fn run_remote(watch: &Watch<'_>, prior: Option<&Dataset>) -> anyhow::Result<Opti
         Some(envs) => envs,
         None => builtin_envs(cfg)?,
     };
-    let prior = prior_demos(prior, &envs)?;
+    let prior = prior_demos(cfg, prior, &envs)?;
     let checkpoints = watch.resumable.checkpoints(RunState::neural, "neural")?;
     let run = run_neural_on(
         cfg,
@@ -486,12 +486,39 @@ fn builtin_envs(cfg: &ExperimentConfig) -> anyhow::Result<NeuralEnvs> {
 }
 
 /// The prior demonstrations of `demos.prior` for the run's environment (none without one).
-fn prior_demos(prior: Option<&Dataset>, envs: &NeuralEnvs) -> anyhow::Result<Vec<PriorDemo>> {
+fn prior_demos(
+    cfg: &ExperimentConfig,
+    prior: Option<&Dataset>,
+    envs: &NeuralEnvs,
+) -> anyhow::Result<Vec<PriorDemo>> {
+    let (dim, actions) = (envs.env.observation_dim(), envs.env.num_actions());
+    prior_steps(cfg, prior, dim, actions)
+}
+
+/// The expert steps of `prior` for an environment of `obs_dim` values and `num_actions` actions,
+/// refused when the config's demonstration model cannot take them with budget B.
+pub(crate) fn prior_steps(
+    cfg: &ExperimentConfig,
+    prior: Option<&Dataset>,
+    obs_dim: usize,
+    num_actions: usize,
+) -> anyhow::Result<Vec<PriorDemo>> {
     let Some(ds) = prior else {
         return Ok(Vec::new());
     };
-    let (dim, actions) = (envs.env.observation_dim(), envs.env.num_actions());
-    Ok(transitions::prior_demos(ds, dim, actions)?)
+    let steps = transitions::prior_demos(ds, obs_dim, num_actions)?;
+    let max = cfg.max_model_demos();
+    if cfg.expert.model != DemoModelChoice::None && steps.len() + cfg.budget() as usize > max {
+        return Err(usage(format!(
+            "demos.prior: {} demonstrations of dataset {} and a budget of {} are more than \
+             the demonstration model (`expert.model`) takes, {max} (`nystrom` takes up to \
+             1,000,000)",
+            steps.len(),
+            ds.id,
+            cfg.budget()
+        )));
+    }
+    Ok(steps)
 }
 
 /// The dataset `demos.prior` names, read and checked (`None` without one); refused for a

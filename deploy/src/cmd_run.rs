@@ -197,9 +197,10 @@ fn prior_demos(
     cfg: &alfd_common::config::ExperimentConfig,
     spec: Option<&alfd_harness::python::EnvSpec>,
 ) -> anyhow::Result<Vec<alfd_common::runner::PriorDemo>> {
-    let Some(ds) = crate::cmd_local::read_prior(cfg)? else {
+    let prior = crate::cmd_local::read_prior(cfg)?;
+    if prior.is_none() {
         return Ok(Vec::new());
-    };
+    }
     let (obs_dim, actions) = match spec {
         Some(s) => (s.obs_dim, s.num_actions),
         None => {
@@ -208,7 +209,7 @@ fn prior_demos(
             (env.observation_dim(), env.num_actions())
         }
     };
-    Ok(alfd_lab::transitions::prior_demos(&ds, obs_dim, actions)?)
+    crate::cmd_local::prior_steps(cfg, prior.as_ref(), obs_dim, actions)
 }
 
 /// The runtime settings every process reads, from `alfd run`'s flags, validated (the error names

@@ -202,6 +202,10 @@ fn a_run_exported_loads_in_minari_and_a_minari_dataset_seeds_a_run() {
         text(&bad)
     );
     assert!(!dir.join("bad/config.toml").exists());
+    let weak_prior = format!("demos.prior=\"{}\"", weak.display());
+    let too_many = local(&dir.join("bad"), &["budget.total=9900", &weak_prior], &[]);
+    assert_eq!(too_many.status.code(), Some(2), "{}", text(&too_many));
+    assert!(text(&too_many).contains("more than the demonstration model"));
     let acrobot = local(
         &dir.join("bad"),
         &[

@@ -40,6 +40,15 @@ fn valid_gym_id(id: &str) -> bool {
 }
 
 impl ExperimentConfig {
+    /// The most demonstrations the config's demonstration model takes (`nystrom`: up to
+    /// 1,000,000; the exact ones 10,000).
+    pub fn max_model_demos(&self) -> usize {
+        match self.expert.model {
+            DemoModelChoice::Nystrom => MAX_APPROX_DEMOS,
+            _ => MAX_DEMOS,
+        }
+    }
+
     /// Checks every value; the error names the field.
     pub fn validate(&self) -> Result<()> {
         self.validate_run()?;
@@ -383,10 +392,7 @@ impl ExperimentConfig {
                 format!("must be >= 0, got {}", s.stop_multiple),
             ));
         }
-        let max_demos = match self.expert.model {
-            DemoModelChoice::Nystrom => MAX_APPROX_DEMOS,
-            _ => MAX_DEMOS,
-        };
+        let max_demos = self.max_model_demos();
         if self.shaping_enabled() && self.budget.total > max_demos as i64 {
             return Err(invalid(
                 "budget.total",
