@@ -311,6 +311,11 @@ mod tests {
             .spawn()
             .unwrap();
         let id = format!("r1796205976-{}", child.id());
+        // Until its exec, the child is a copy of this test binary.
+        let start = std::time::Instant::now();
+        while owner_alive(&id).is_none() && start.elapsed() < std::time::Duration::from_secs(5) {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
         assert_eq!(owner_alive(&id), Some(child.id()));
         assert!(matches!(clean_run(&id).unwrap(), Cleaned::Live(_)));
         child.kill().unwrap();
