@@ -234,7 +234,8 @@ pub fn run(args: DemoModelArgs) -> anyhow::Result<()> {
         "fitting the demonstration model"
     );
 
-    let model = match DemoModel::fit(kind, &demos.states, &demos.actions, num_actions) {
+    let lanes = alfd_harness::Threads::machine();
+    let model = match DemoModel::fit_on(kind, &demos.states, &demos.actions, num_actions, &lanes) {
         Ok(m) => m,
         Err(
             e @ (DemoModelError::Unsupported(_)

@@ -15,6 +15,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use alfd_common::agent::{Demonstrator, ExpertCore};
+use alfd_common::demo_model::lanes::SharedLanes;
 use alfd_harness::python::Adapter;
 use alfd_harness::{BadInput, ProcessArgs, Session};
 use alfd_harness::{HarnessError, What as _};
@@ -81,6 +82,8 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let wire = args.process.connect(me, schema)?;
     let session = Session::join(&wire, Doorbell::Expert, runtime.handshake_timeout())?;
     let mut core = ExpertCore::for_config(cfg, actions);
+    // Models fitted anew (the prior's, the SVM's at each demonstration) on this machine's cores.
+    core.set_lanes(SharedLanes::new(alfd_harness::Threads::machine()));
     let prior = alfd_harness::read_prior(&args.process.run_dir, obs_dim, actions)?;
     if !prior.is_empty() {
         let records = prior.iter().enumerate().map(|(i, p)| p.record(i)).collect();

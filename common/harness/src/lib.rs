@@ -3,8 +3,9 @@
 //! (`process`), the runtime settings every process reads from `runtime.toml` (`runtime`),
 //! joining the run and the one `should_stop` (`session`), the Python adapters of Gymnasium
 //! environments and external experts (`python`), start-up (logging, the schema-version
-//! hook: `startup`), durable file writes (`fs`), and a run directory's ownership (`run_dir`:
-//! one run per directory, held by a `flock`).
+//! hook: `startup`), durable file writes (`fs`), a run directory's ownership (`run_dir`:
+//! one run per directory, held by a `flock`), and the demonstration model's lanes on the
+//! machine's cores (`threads`).
 
 mod bad_input;
 mod fs;
@@ -15,6 +16,7 @@ pub mod run_dir;
 mod runtime;
 mod session;
 mod startup;
+mod threads;
 
 pub use bad_input::{chain, describe, exit_code, BadInput, HarnessError, Result, What};
 #[cfg(any(test, feature = "testing"))]
@@ -33,3 +35,4 @@ pub use session::{Session, SessionError, LAUNCHER_SILENCE, STOP_REQUESTED, TERMI
 pub use startup::{
     init_process_logging, log_filter, portable_kernels_from_env, schema_version_from_env,
 };
+pub use threads::Threads;

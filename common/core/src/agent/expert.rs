@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::checkpoint::StateMismatch;
 use crate::config::DemoModelChoice;
 use crate::demo_model::krr::KrrFactor;
+use crate::demo_model::lanes::{Lanes, SharedLanes};
 use crate::demo_model::nystrom::NystromFactor;
 use crate::demo_model::{DemoModel, DemoModelError, DemoModelKind};
 use crate::nn::Mlp;
@@ -127,6 +128,8 @@ pub struct ExpertCore {
     nystrom: Option<NystromFactor>,
     model_version: u64,
     schedule: ShapingSchedule,
+    /// Where a model fitted anew does its independent work ([`Serial`] unless set).
+    lanes: SharedLanes,
 }
 
 impl ExpertCore {
@@ -147,7 +150,14 @@ impl ExpertCore {
             nystrom: None,
             model_version: 0,
             schedule,
+            lanes: SharedLanes::default(),
         }
+    }
+
+    /// Fits models anew with their independent work on `lanes` (the same models, bit for bit):
+    /// for a process with cores of its own, such as the expert process.
+    pub fn set_lanes(&mut self, lanes: SharedLanes) {
+        self.lanes = lanes;
     }
 
     /// The expert's side of a config: budget B, demonstration model, shaping schedule.
@@ -265,15 +275,19 @@ impl ExpertCore {
         }
         self.model = Some(match kind {
             DemoModelKind::Krr => {
-                DemoModel::Krr(grown(&mut self.krr, &set, self.num_actions)?.model())
+                let lanes = self.lanes.get();
+                DemoModel::Krr(grown(&mut self.krr, &set, self.num_actions, lanes)?.model())
             }
             DemoModelKind::Nystrom => {
-                DemoModel::Nystrom(grown(&mut self.nystrom, &set, self.num_actions)?.model()?)
+                let lanes = self.lanes.get();
+                DemoModel::Nystrom(
+                    grown(&mut self.nystrom, &set, self.num_actions, lanes)?.model()?,
+                )
             }
             DemoModelKind::Svm => {
                 let states: Vec<Vec<f64>> = set.iter().map(|d| d.state.clone()).collect();
                 let actions: Vec<usize> = set.iter().map(|d| d.action).collect();
-                DemoModel::fit(kind, &states, &actions, self.num_actions)?
+                DemoModel::fit_on(kind, &states, &actions, self.num_actions, self.lanes.get())?
             }
         });
         self.model_version += 1;
@@ -327,6 +341,7 @@ trait Grows: Sized {
         states: &[&[f64]],
         actions: &[usize],
         num_actions: usize,
+        lanes: &dyn Lanes,
     ) -> Result<Self, DemoModelError>;
 }
 
@@ -337,8 +352,8 @@ impl Grows for KrrFactor {
     fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
         KrrFactor::push(self, state, action)
     }
-    fn fit(s: &[&[f64]], a: &[usize], n: usize) -> Result<Self, DemoModelError> {
-        KrrFactor::fit(s, a, n)
+    fn fit(s: &[&[f64]], a: &[usize], n: usize, lanes: &dyn Lanes) -> Result<Self, DemoModelError> {
+        KrrFactor::fit_on(s, a, n, lanes)
     }
 }
 
@@ -349,7 +364,7 @@ impl Grows for NystromFactor {
     fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
         NystromFactor::push(self, state, action)
     }
-    fn fit(s: &[&[f64]], a: &[usize], n: usize) -> Result<Self, DemoModelError> {
+    fn fit(s: &[&[f64]], a: &[usize], n: usize, _: &dyn Lanes) -> Result<Self, DemoModelError> {
         NystromFactor::fit(s, a, n)
     }
 }
@@ -361,6 +376,7 @@ fn grown<'a, G: Grows>(
     slot: &'a mut Option<G>,
     demos: &[DemoRecord],
     num_actions: usize,
+    lanes: &dyn Lanes,
 ) -> Result<&'a G, DemoModelError> {
     let n = demos.len();
     match (slot.as_mut(), demos.last()) {
@@ -370,7 +386,7 @@ fn grown<'a, G: Grows>(
             *slot = None;
             let states: Vec<&[f64]> = demos.iter().map(|d| d.state.as_slice()).collect();
             let actions: Vec<usize> = demos.iter().map(|d| d.action).collect();
-            *slot = Some(G::fit(&states, &actions, num_actions)?);
+            *slot = Some(G::fit(&states, &actions, num_actions, lanes)?);
         }
     }
     Ok(slot.as_ref().expect("made above"))

@@ -1,36 +1,70 @@
 //! A blocked Cholesky factorisation for the large kernel matrices of KRR: right-looking, in
-//! blocks of [`BLOCK`] columns, so that the O(n³) trailing update streams through memory a block
-//! at a time instead of once per column. Plain multiplications and additions in a fixed order
-//! (no fused multiply-add, no run-time choice of kernel), so the same binary gives the same bits
-//! on every x86-64 CPU.
+//! blocks of [`BLOCK`] columns. Each block's panel is factored in chunks of rows that stay in
+//! cache, and the O(n³) update of the columns after it runs over register tiles of 8 rows × 4
+//! columns against a packed copy of the panel, in row blocks that stay in the L2 cache, the
+//! columns dealt in turn to the lanes the caller passes (`lanes.rs`). Plain multiplications and
+//! subtractions in a fixed order per element (no fused multiply-add; wider registers where the
+//! CPU has AVX2 change the speed, never a bit), so the same binary gives the same bits on every
+//! x86-64 CPU and on any lanes.
+
+use super::lanes::{share, Lanes, Serial};
 
 /// Columns per block.
-pub const BLOCK: usize = 96;
+pub const BLOCK: usize = 256;
+
+/// Rows of a register tile of the trailing update (two AVX2 registers of f64).
+const TILE_ROWS: usize = 8;
+
+/// Columns of a register tile of the trailing update.
+const TILE_COLS: usize = 4;
+
+/// Row tiles per row block of the trailing update: 128 rows, whose packed panel (256 KB) stays
+/// in the L2 cache while every column tile is updated over them.
+const ROW_TILES: usize = 16;
+
+/// Rows per chunk when a panel is factored below its diagonal block.
+const PANEL_ROWS: usize = 256;
+
+/// From this many rows below a block on, its work is shared among the lanes.
+const THREADED_FROM: usize = 512;
 
 /// Factors the symmetric positive-definite `a` (column-major, `n × n`; only its lower triangle is
-/// read) in place into its lower Cholesky factor L, `a = L Lᵀ`. `false` if `a` is not positive
-/// definite (a pivot is not positive); `a` is then partly overwritten.
+/// read) in place into its lower Cholesky factor L, `a = L Lᵀ`, the large updates shared among
+/// `lanes`. `false` if `a` is not positive definite (a pivot is not positive); `a` is
+/// then partly overwritten. Only the lower triangle is written.
+///
+/// Every element of L is `(a_ij - l_i0 l_j0 - l_i1 l_j1 - ...) / l_jj`, the products subtracted
+/// in that order: the bits of nalgebra's factorisation, and of a factor grown one row at a time
+/// (`krr::KrrFactor`).
 ///
 /// # Panics
 /// If `a.len() != n * n`.
-pub fn factor(a: &mut [f64], n: usize) -> bool {
+pub fn factor(a: &mut [f64], n: usize, lanes: &dyn Lanes) -> bool {
     assert_eq!(a.len(), n * n, "the matrix must hold n * n values");
     let mut kb = 0;
     while kb < n {
         let end = (kb + BLOCK).min(n);
-        if !factor_panel(a, n, kb, end) {
+        let lanes = if n - end >= THREADED_FROM {
+            lanes
+        } else {
+            &Serial
+        };
+        if !factor_panel(a, n, kb, end, lanes) {
             return false;
         }
-        for j in end..n {
-            update_column(a, n, j, kb, end);
+        if end < n {
+            update_trailing(a, n, kb, end, lanes);
         }
         kb = end;
     }
     true
 }
 
-/// Columns `kb..end` of L: the diagonal block left-looking, and the rows below it.
-fn factor_panel(a: &mut [f64], n: usize, kb: usize, end: usize) -> bool {
+/// Columns `kb..end` of L: the diagonal block column by column, then the rows below it in chunks
+/// of [`PANEL_ROWS`] (dealt to the lanes), each column of a chunk minus the block's columns before
+/// it, in order, then divided by its diagonal.
+fn factor_panel(a: &mut [f64], n: usize, kb: usize, end: usize, lanes: &dyn Lanes) -> bool {
+    let w = end - kb;
     for j in kb..end {
         let mut d = a[j + j * n];
         for p in kb..j {
@@ -42,40 +76,224 @@ fn factor_panel(a: &mut [f64], n: usize, kb: usize, end: usize) -> bool {
         }
         let d = d.sqrt();
         a[j + j * n] = d;
-        for i in j + 1..n {
-            let mut s = a[i + j * n];
-            for p in kb..j {
-                s -= a[i + p * n] * a[j + p * n];
-            }
-            a[i + j * n] = s / d;
+        let (left, right) = a.split_at_mut(j * n);
+        let lj: Vec<f64> = (kb..j).map(|p| left[j + p * n]).collect();
+        let cols: Vec<&[f64]> = (kb..j).map(|p| &left[p * n + j + 1..p * n + end]).collect();
+        crate::nn::wide(|| subtract_then_divide(&mut right[j + 1..end], &cols, &lj, d));
+    }
+    // L[kb..end, kb..end] row by row.
+    let diag: Vec<f64> = (kb..end)
+        .flat_map(|j| (kb..end).map(move |p| (j, p)))
+        .map(|(j, p)| a[j + p * n])
+        .collect();
+    let mut chunks: Vec<(usize, Vec<f64>)> = (end..n)
+        .step_by(PANEL_ROWS)
+        .map(|r0| {
+            let r1 = (r0 + PANEL_ROWS).min(n);
+            let copy = (kb..end).flat_map(|p| a[p * n + r0..p * n + r1].iter().copied());
+            (r0, copy.collect())
+        })
+        .collect();
+    share(&mut chunks, lanes, |lane| {
+        for (_, c) in lane.iter_mut() {
+            panel_chunk(c, &diag, w);
+        }
+    });
+    for (r0, c) in &chunks {
+        let m = c.len() / w;
+        for (p, col) in (kb..end).zip(c.chunks_exact(m)) {
+            a[p * n + r0..p * n + r0 + m].copy_from_slice(col);
         }
     }
     true
 }
 
-/// Column `j` (below the block) minus the contribution of block columns `kb..end`:
-/// `a[j.., j] -= L[j.., kb..end] L[j, kb..end]ᵀ`, four columns of L per pass over the column but
-/// one subtraction at a time in column order, so that every element of L is
-/// `(a_ij - l_i0 l_j0 - l_i1 l_j1 - ...) / l_jj` in that order: the bits of nalgebra's
-/// factorisation, and of a factor grown one row at a time (`krr::KrrFactor`).
-fn update_column(a: &mut [f64], n: usize, j: usize, kb: usize, end: usize) {
-    let (left, right) = a.split_at_mut(j * n);
-    let col = &mut right[j..n];
-    let l = |p: usize| &left[p * n + j..(p + 1) * n];
-    let mut p = kb;
-    while p + 4 <= end {
-        let (l0, l1, l2, l3) = (l(p), l(p + 1), l(p + 2), l(p + 3));
-        let (c0, c1, c2, c3) = (l0[0], l1[0], l2[0], l3[0]);
-        for (i, x) in col.iter_mut().enumerate() {
-            *x = (((*x - l0[i] * c0) - l1[i] * c1) - l2[i] * c2) - l3[i] * c3;
-        }
-        p += 4;
+/// A chunk of rows below the diagonal block (column-major, `w` columns), solved against the
+/// diagonal block `diag` (row-major `w × w`, L's values).
+fn panel_chunk(c: &mut [f64], diag: &[f64], w: usize) {
+    let m = c.len() / w;
+    for j in 0..w {
+        let (left, right) = c.split_at_mut(j * m);
+        let cols: Vec<&[f64]> = left.chunks_exact(m).collect();
+        let lj = &diag[j * w..j * w + j];
+        let d = diag[j * w + j];
+        crate::nn::wide(|| subtract_then_divide(&mut right[..m], &cols, lj, d));
     }
-    for p in p..end {
-        let l0 = l(p);
-        let c0 = l0[0];
-        for (x, v) in col.iter_mut().zip(l0) {
-            *x -= v * c0;
+}
+
+/// `x = (x - cols[0] lj[0] - cols[1] lj[1] - ...) / d`, element by element, the products
+/// subtracted in order of the columns.
+#[inline(always)]
+fn subtract_then_divide(x: &mut [f64], cols: &[&[f64]], lj: &[f64], d: f64) {
+    for (col, &c) in cols.iter().zip(lj) {
+        for (v, l) in x.iter_mut().zip(col.iter()) {
+            *v -= l * c;
+        }
+    }
+    for v in x.iter_mut() {
+        *v /= d;
+    }
+}
+
+/// The columns after the block minus the block's contribution, `a[i, j] -= Σ_p L[i, p] L[j, p]`
+/// for `i ≥ j ≥ end`, p from `kb` to `end` in order. The panel's rows from `end` on are packed
+/// in tiles of [`TILE_ROWS`] rows (`packed[tile][p][row]`, zeros past `n`); the columns go in
+/// tiles of [`TILE_COLS`], dealt to the lanes in turn.
+fn update_trailing(a: &mut [f64], n: usize, kb: usize, end: usize, lanes: &dyn Lanes) {
+    let w = end - kb;
+    let tiles = (n - end).div_ceil(TILE_ROWS);
+    let mut packed = vec![0.0; tiles * w * TILE_ROWS];
+    for p in 0..w {
+        let col = &a[(kb + p) * n + end..(kb + p + 1) * n];
+        for (i, v) in col.iter().enumerate() {
+            packed[(i / TILE_ROWS * w + p) * TILE_ROWS + i % TILE_ROWS] = *v;
+        }
+    }
+    let panel = Panel {
+        packed: &packed,
+        w,
+        n,
+        end,
+        tiles,
+    };
+    let mut columns: Vec<(usize, &mut [f64])> = a[end * n..]
+        .chunks_mut(TILE_COLS * n)
+        .enumerate()
+        .map(|(t, cols)| (end + t * TILE_COLS, cols))
+        .collect();
+    share(&mut columns, lanes, |lane| panel.update(lane));
+}
+
+/// The packed rows of a panel below its block (see [`update_trailing`]).
+struct Panel<'a> {
+    packed: &'a [f64],
+    /// The block's width.
+    w: usize,
+    n: usize,
+    /// The first row (and column) after the block.
+    end: usize,
+    tiles: usize,
+}
+
+impl Panel<'_> {
+    /// One tile of packed rows.
+    #[inline(always)]
+    fn tile(&self, t: usize) -> &[f64] {
+        let size = self.w * TILE_ROWS;
+        &self.packed[t * size..(t + 1) * size]
+    }
+
+    /// Updates these column tiles (first column, its values), a block of row tiles at a time.
+    #[inline(always)]
+    fn update(&self, columns: &mut [&mut (usize, &mut [f64])]) {
+        for block in (0..self.tiles).step_by(ROW_TILES) {
+            let block_end = (block + ROW_TILES).min(self.tiles);
+            for (j0, cols) in columns.iter_mut().map(|c| (c.0, &mut *c.1)) {
+                let jt = (j0 - self.end) / TILE_ROWS;
+                let jtile = self.tile(jt);
+                let joff = (j0 - self.end) % TILE_ROWS;
+                for t in block.max(jt)..block_end {
+                    self.update_tile(t, jtile, joff, j0, cols);
+                }
+            }
+        }
+    }
+
+    /// Rows of tile `t` of the columns `j0..` held in `cols` (column-major, up to [`TILE_COLS`]
+    /// of them), in registers, written back on and below the diagonal.
+    #[inline(always)]
+    fn update_tile(&self, t: usize, jtile: &[f64], joff: usize, j0: usize, cols: &mut [f64]) {
+        let row0 = self.end + t * TILE_ROWS;
+        let rows = TILE_ROWS.min(self.n - row0);
+        let ncols = cols.len() / self.n;
+        let mut acc = [0.0f64; TILE_ROWS * TILE_COLS];
+        for (c, acc_c) in acc.chunks_exact_mut(TILE_ROWS).enumerate().take(ncols) {
+            acc_c[..rows].copy_from_slice(&cols[c * self.n + row0..c * self.n + row0 + rows]);
+        }
+        tile_update(&mut acc, self.tile(t), &jtile[joff..]);
+        for (c, acc_c) in acc.chunks_exact(TILE_ROWS).enumerate().take(ncols) {
+            let first = (j0 + c).max(row0) - row0;
+            if first < rows {
+                cols[c * self.n + row0 + first..c * self.n + row0 + rows]
+                    .copy_from_slice(&acc_c[first..rows]);
+            }
+        }
+    }
+}
+
+/// The register tile: `acc[c * 8 + r] -= li[8 p + r] * lj[8 p + c]` for every p in order (`li`
+/// and `lj` hold the panel's values of 8 rows per p, `lj` from the tile's first column on).
+/// AVX2 where the CPU has it; the same operations, so the same bits, without.
+fn tile_update(acc: &mut [f64; TILE_ROWS * TILE_COLS], li: &[f64], lj: &[f64]) {
+    let w = li.len() / TILE_ROWS;
+    assert!(w == 0 || lj.len() >= (w - 1) * TILE_ROWS + TILE_COLS);
+    #[cfg(target_arch = "x86_64")]
+    if x86::available() {
+        return x86::tile_update(acc, li, lj, w);
+    }
+    for p in 0..w {
+        let li = &li[p * TILE_ROWS..(p + 1) * TILE_ROWS];
+        for (c, acc_c) in acc.chunks_exact_mut(TILE_ROWS).enumerate() {
+            let x = lj[p * TILE_ROWS + c];
+            for (v, l) in acc_c.iter_mut().zip(li) {
+                *v -= l * x;
+            }
+        }
+    }
+}
+
+/// The AVX2 register tile of [`tile_update`]: multiplications and subtractions, never fused.
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_code)]
+mod x86 {
+    use std::arch::x86_64::*;
+
+    use super::{TILE_COLS, TILE_ROWS};
+
+    pub(super) fn available() -> bool {
+        crate::nn::wide_available()
+    }
+
+    /// See [`super::tile_update`]; `li` holds `w * 8` values, `lj` at least `(w - 1) * 8 + 4`.
+    pub(super) fn tile_update(
+        acc: &mut [f64; TILE_ROWS * TILE_COLS],
+        li: &[f64],
+        lj: &[f64],
+        w: usize,
+    ) {
+        assert!(available() && li.len() >= w * TILE_ROWS);
+        assert!(w == 0 || lj.len() >= (w - 1) * TILE_ROWS + TILE_COLS);
+        // SAFETY: the CPU has AVX2 (asserted); the lengths are checked above.
+        unsafe { tile_update_avx2(acc, li, lj, w) }
+    }
+
+    /// # Safety
+    /// The CPU has AVX2; `li` holds `w * 8` values and `lj` at least `(w - 1) * 8 + 4`.
+    #[target_feature(enable = "avx2")]
+    unsafe fn tile_update_avx2(
+        acc: &mut [f64; TILE_ROWS * TILE_COLS],
+        li: &[f64],
+        lj: &[f64],
+        w: usize,
+    ) {
+        let a = acc.as_mut_ptr();
+        let (pi, pj) = (li.as_ptr(), lj.as_ptr());
+        // SAFETY: every offset below is within `acc` (32 values), `li` (p * 8 + 8 <= w * 8) and
+        // `lj` (p * 8 + 4 <= (w - 1) * 8 + 4).
+        unsafe {
+            let mut r: [__m256d; 8] = std::array::from_fn(|q| _mm256_loadu_pd(a.add(4 * q)));
+            for p in 0..w {
+                let lo = _mm256_loadu_pd(pi.add(p * TILE_ROWS));
+                let hi = _mm256_loadu_pd(pi.add(p * TILE_ROWS + 4));
+                for c in 0..TILE_COLS {
+                    let x = _mm256_broadcast_sd(&*pj.add(p * TILE_ROWS + c));
+                    r[2 * c] = _mm256_sub_pd(r[2 * c], _mm256_mul_pd(lo, x));
+                    r[2 * c + 1] = _mm256_sub_pd(r[2 * c + 1], _mm256_mul_pd(hi, x));
+                }
+            }
+            for (q, v) in r.into_iter().enumerate() {
+                _mm256_storeu_pd(a.add(4 * q), v);
+            }
         }
     }
 }
@@ -104,6 +322,7 @@ pub fn solve(l: &[f64], n: usize, b: &mut [f64]) {
 
 #[cfg(test)]
 mod tests {
+    use super::super::lanes::Backwards;
     use super::*;
     use nalgebra::DMatrix;
 
@@ -119,7 +338,7 @@ mod tests {
     fn a_two_by_two_factor_is_the_hand_computed_one() {
         // [[4, 2], [2, 5]] = L Lᵀ with L = [[2, 0], [1, 2]].
         let mut a = vec![4.0, 2.0, 2.0, 5.0];
-        assert!(factor(&mut a, 2));
+        assert!(factor(&mut a, 2, &Serial));
         assert_eq!((a[0], a[1], a[3]), (2.0, 1.0, 2.0));
         // 4x + 2y = 8 and 2x + 5y = 9: y = 1.25, x = 1.375.
         let mut b = vec![8.0, 9.0];
@@ -132,7 +351,7 @@ mod tests {
         let n = 2 * BLOCK + 37;
         let k = kernel(n);
         let mut a = k.as_slice().to_vec();
-        assert!(factor(&mut a, n));
+        assert!(factor(&mut a, n, &Serial));
         let l = k.clone().cholesky().unwrap().l();
         for j in 0..n {
             for i in j..n {
@@ -149,8 +368,35 @@ mod tests {
     }
 
     #[test]
+    fn any_lanes_give_the_same_bits_and_only_the_lower_triangle_changes() {
+        let n = BLOCK + THREADED_FROM + 2 * TILE_ROWS + 3;
+        let k = kernel(n);
+        let mut one = k.as_slice().to_vec();
+        assert!(factor(&mut one, n, &Serial));
+        for width in [2, 3] {
+            let mut many = k.as_slice().to_vec();
+            assert!(factor(&mut many, n, &Backwards(width)));
+            assert!(one
+                .iter()
+                .zip(&many)
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
+        for j in 0..n {
+            for i in 0..j {
+                assert_eq!(one[i + j * n], k[(i, j)], "upper triangle at ({i}, {j})");
+            }
+        }
+        let l = k.cholesky().unwrap().l();
+        for j in 0..n {
+            for i in j..n {
+                assert!((one[i + j * n] - l[(i, j)]).abs() < 1e-12, "L[{i}, {j}]");
+            }
+        }
+    }
+
+    #[test]
     fn a_matrix_that_is_not_positive_definite_is_refused() {
         let mut a = vec![1.0, 2.0, 2.0, 1.0];
-        assert!(!factor(&mut a, 2));
+        assert!(!factor(&mut a, 2, &Serial));
     }
 }

@@ -12,6 +12,7 @@
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
+use super::lanes::{share, Lanes, Serial};
 use super::{check_demo, rbf, validate, DemoModelError, MAX_DEMOS};
 
 /// The ridge penalty added to the kernel's diagonal.
@@ -115,6 +116,64 @@ fn not_positive_definite() -> DemoModelError {
     DemoModelError::Solver("K + alpha I is not positive definite".to_string())
 }
 
+/// L of `K + alpha I` by nalgebra's Cholesky (below [`BLOCKED_FROM`] demonstrations), rows up
+/// to the diagonal.
+fn small_factor(flat: &[f64], state_dim: usize) -> Result<Vec<f64>, DemoModelError> {
+    let n = flat.len() / state_dim;
+    let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
+    let mut k = DMatrix::<f64>::zeros(n, n);
+    for i in 0..n {
+        for j in 0..=i {
+            let v = rbf(row(i), row(j));
+            k[(i, j)] = v;
+            k[(j, i)] = v;
+        }
+        k[(i, i)] += ALPHA;
+    }
+    let full = k.cholesky().ok_or_else(not_positive_definite)?.l();
+    Ok((0..n)
+        .flat_map(|i| (0..=i).map(move |j| (i, j)))
+        .map(|(i, j)| full[(i, j)])
+        .collect())
+}
+
+/// L of `K + alpha I` by the blocked Cholesky, rows up to the diagonal: the kernel's lower
+/// triangle built column by column (columns dealt to the lanes in turn), factored, then read
+/// out in square tiles so that neither layout is walked across.
+fn large_factor(
+    flat: &[f64],
+    state_dim: usize,
+    lanes: &dyn Lanes,
+) -> Result<Vec<f64>, DemoModelError> {
+    let n = flat.len() / state_dim;
+    let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
+    let mut k = vec![0.0; n * n];
+    let mut columns: Vec<(usize, &mut [f64])> = k.chunks_mut(n).enumerate().collect();
+    share(&mut columns, lanes, |lane| {
+        for (j, col) in lane.iter_mut() {
+            let xj = row(*j);
+            for (i, v) in col.iter_mut().enumerate().skip(*j) {
+                *v = rbf(row(i), xj);
+            }
+            col[*j] += ALPHA;
+        }
+    });
+    if !super::cholesky::factor(&mut k, n, lanes) {
+        return Err(not_positive_definite());
+    }
+    const T: usize = 64;
+    let mut l = vec![0.0; n * (n + 1) / 2];
+    for jb in (0..n).step_by(T) {
+        for i in jb..n {
+            let start = i * (i + 1) / 2;
+            for j in jb..(jb + T).min(i + 1) {
+                l[start + j] = k[i + j * n];
+            }
+        }
+    }
+    Ok(l)
+}
+
 /// The Cholesky factor L of `K + alpha I` over the demonstrations so far, with them: what a
 /// [`KernelRidge`] is solved from, grown by one row per demonstration ([`KrrFactor::push`]).
 #[derive(Debug, Clone, PartialEq)]
@@ -133,39 +192,29 @@ pub struct KrrFactor {
 
 impl KrrFactor {
     /// Factors the kernel matrix of the demonstrations (nalgebra's Cholesky below
-    /// [`BLOCKED_FROM`] of them, the blocked one from there).
+    /// [`BLOCKED_FROM`] of them, the blocked one from there), on the caller's thread.
     pub fn fit<S: AsRef<[f64]>>(
         states: &[S],
         actions: &[usize],
         num_actions: usize,
     ) -> Result<KrrFactor, DemoModelError> {
+        KrrFactor::fit_on(states, actions, num_actions, &Serial)
+    }
+
+    /// [`KrrFactor::fit`], the large factorisations' work shared among `lanes` (the same bits).
+    pub fn fit_on<S: AsRef<[f64]>>(
+        states: &[S],
+        actions: &[usize],
+        num_actions: usize,
+        lanes: &dyn Lanes,
+    ) -> Result<KrrFactor, DemoModelError> {
         let (flat, state_dim) = validate(states, actions, num_actions)?;
         let n = actions.len();
-        let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
-        let mut k = DMatrix::<f64>::zeros(n, n);
-        for i in 0..n {
-            for j in 0..=i {
-                let v = rbf(row(i), row(j));
-                k[(i, j)] = v;
-                k[(j, i)] = v;
-            }
-            k[(i, i)] += ALPHA;
-        }
-        let full: Vec<f64> = if n < BLOCKED_FROM {
-            let chol = k.cholesky().ok_or_else(not_positive_definite)?;
-            chol.l().data.into()
+        let l = if n < BLOCKED_FROM {
+            small_factor(&flat, state_dim)?
         } else {
-            let mut l: Vec<f64> = k.data.into();
-            if !super::cholesky::factor(&mut l, n) {
-                return Err(not_positive_definite());
-            }
-            l
+            large_factor(&flat, state_dim, lanes)?
         };
-        // Column-major n × n to rows up to the diagonal.
-        let mut l = Vec::with_capacity(n * (n + 1) / 2);
-        for i in 0..n {
-            l.extend((0..=i).map(|j| full[i + j * n]));
-        }
         tracing::debug!(
             demos = n,
             state_dim,
@@ -375,6 +424,7 @@ pub fn probs_from_outputs(f: &[f64]) -> Vec<f64> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::lanes::Backwards;
     use super::*;
 
     #[test]
@@ -444,6 +494,14 @@ mod tests {
                 assert!((got - expected[(i, a)]).abs() < 1e-8, "coef {i},{a}");
             }
         }
+    }
+
+    #[test]
+    fn a_factor_fitted_on_lanes_is_the_one_fitted_in_turn() {
+        let (states, actions) = scattered(BLOCKED_FROM + super::super::cholesky::BLOCK + 530);
+        let serial = KrrFactor::fit(&states, &actions, 3).unwrap();
+        let on_lanes = KrrFactor::fit_on(&states, &actions, 3, &Backwards(2)).unwrap();
+        assert!(on_lanes == serial);
     }
 
     /// `n` scattered two-dimensional demonstrations of three actions.

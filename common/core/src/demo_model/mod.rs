@@ -12,6 +12,7 @@
 
 mod cholesky;
 pub mod krr;
+pub mod lanes;
 pub mod nystrom;
 pub mod smo;
 pub mod svm;
@@ -21,6 +22,9 @@ pub use nystrom::NystromRidge;
 pub use svm::{KernelSvm, Platt};
 
 use serde::{Deserialize, Serialize};
+
+use krr::KrrFactor;
+use lanes::{Lanes, Serial};
 
 /// The RBF kernel width used by both models, `k(x, y) = exp(-GAMMA |x - y|^2)`.
 pub const GAMMA: f64 = 0.1;
@@ -141,11 +145,24 @@ impl DemoModel {
         actions: &[usize],
         num_actions: usize,
     ) -> Result<DemoModel, DemoModelError> {
+        DemoModel::fit_on(kind, states, actions, num_actions, &Serial)
+    }
+
+    /// [`DemoModel::fit`] with the large fits' independent work shared among `lanes` (the same
+    /// model, bit for bit).
+    pub fn fit_on<S: AsRef<[f64]>>(
+        kind: DemoModelKind,
+        states: &[S],
+        actions: &[usize],
+        num_actions: usize,
+        lanes: &dyn Lanes,
+    ) -> Result<DemoModel, DemoModelError> {
         match kind {
-            DemoModelKind::Krr => {
-                KernelRidge::fit(states, actions, num_actions).map(DemoModel::Krr)
+            DemoModelKind::Krr => KrrFactor::fit_on(states, actions, num_actions, lanes)
+                .map(|f| DemoModel::Krr(f.model())),
+            DemoModelKind::Svm => {
+                KernelSvm::fit_on(states, actions, num_actions, lanes).map(DemoModel::Svm)
             }
-            DemoModelKind::Svm => KernelSvm::fit(states, actions, num_actions).map(DemoModel::Svm),
             DemoModelKind::Nystrom => {
                 NystromRidge::fit(states, actions, num_actions).map(DemoModel::Nystrom)
             }

@@ -4,9 +4,10 @@
 //!
 //! Written here rather than taken from a crate so that every number comes from the core's own
 //! arithmetic: the RBF kernel through `crate::math::exp`, the same bits on every CPU (a
-//! crate calling the platform's `exp` would not give them). No shrinking and no kernel cache: the
-//! whole kernel matrix is given (the SVM computes every pair of demonstrations once and takes
-//! each fold's matrix from it), and the columns the gradient update needs are read as rows.
+//! crate calling the platform's `exp` would not give them). No shrinking; the kernel's rows come
+//! from [`KernelRows`], which the SVM computes when a working pair first needs them and keeps
+//! for the final SVM and every fold's (libsvm's kernel cache, with room for every row), and the
+//! columns the gradient update needs are read as rows.
 //!
 //! The problem, with `y_i = ±1`, `Q_ij = y_i y_j K(x_i, x_j)`:
 //! minimise `½ αᵀQα − Σ α_i` subject to `0 ≤ α_i ≤ C` and `Σ y_i α_i = 0`.
@@ -24,16 +25,56 @@ pub struct Dual {
 /// libsvm's floor on the curvature of a working pair.
 const TAU: f64 = 1e-12;
 
+/// Rows of a symmetric kernel matrix, given on demand.
+pub trait KernelRows: Sync {
+    /// Row `r` (its column too).
+    fn row(&self, r: usize) -> &[f64];
+    /// `K(x_r, x_r)`.
+    fn diag(&self, r: usize) -> f64;
+}
+
+/// A whole kernel matrix: row-major, `n × n`.
+pub struct Dense<'k> {
+    pub k: &'k [f64],
+    pub n: usize,
+}
+
+impl KernelRows for Dense<'_> {
+    fn row(&self, r: usize) -> &[f64] {
+        &self.k[r * self.n..(r + 1) * self.n]
+    }
+    fn diag(&self, r: usize) -> f64 {
+        self.k[r * self.n + r]
+    }
+}
+
 /// Solves the C-SVC dual for the kernel matrix `k` (row-major, `n × n`, symmetric) and labels
 /// `positive` (`y = +1` when true), to the stopping tolerance `eps` on the maximal violating pair
 /// (libsvm's `-e`), in at most `max_iter` iterations (then it stops where it is, as libsvm does).
 pub fn solve(k: &[f64], positive: &[bool], c: f64, eps: f64, max_iter: usize) -> Dual {
     let n = positive.len();
     assert_eq!(k.len(), n * n, "the kernel matrix is n × n");
+    let rows: Vec<usize> = (0..n).collect();
+    solve_on(&Dense { k, n }, &rows, positive, c, eps, max_iter)
+}
+
+/// [`solve`] on the rows `rows` of the kernel `k`: the problem of those rows, in their order,
+/// `positive` giving their labels.
+pub fn solve_on(
+    k: &dyn KernelRows,
+    rows: &[usize],
+    positive: &[bool],
+    c: f64,
+    eps: f64,
+    max_iter: usize,
+) -> Dual {
+    let n = positive.len();
+    assert_eq!(rows.len(), n, "one label per row");
     let problem = Problem {
         k,
+        rows,
         n,
-        diag: (0..n).map(|t| k[t * n + t]).collect(),
+        diag: rows.iter().map(|&r| k.diag(r)).collect(),
         y: positive
             .iter()
             .map(|&p| if p { 1.0 } else { -1.0 })
@@ -65,9 +106,11 @@ pub fn solve(k: &[f64], positive: &[bool], c: f64, eps: f64, max_iter: usize) ->
     }
 }
 
-/// The dual's data: the kernel matrix, the labels `y = ±1` and the box `[0, C]`.
+/// The dual's data: the kernel matrix of its rows, the labels `y = ±1` and the box `[0, C]`.
 struct Problem<'k> {
-    k: &'k [f64],
+    k: &'k dyn KernelRows,
+    /// The problem's rows of it.
+    rows: &'k [usize],
     n: usize,
     /// `K_tt`, kept apart: read at every candidate of every working pair.
     diag: Vec<f64>,
@@ -77,17 +120,23 @@ struct Problem<'k> {
 
 impl Problem<'_> {
     fn kij(&self, i: usize, j: usize) -> f64 {
-        self.k[i * self.n + j]
+        self.row(i)[self.rows[j]]
     }
 
-    /// Row `i` of the kernel matrix (its column too: the matrix is symmetric).
+    /// Row `i` of the whole kernel matrix (its column too: the matrix is symmetric), to be read
+    /// at the problem's rows.
     fn row(&self, i: usize) -> &[f64] {
-        &self.k[i * self.n..(i + 1) * self.n]
+        self.k.row(self.rows[i])
     }
 
     /// The curvature of the objective along the pair (i, j), floored at TAU.
     fn curvature(&self, i: usize, j: usize) -> f64 {
-        let a = self.diag[i] + self.diag[j] - 2.0 * self.kij(i, j);
+        self.curvature_with(i, j, self.kij(i, j))
+    }
+
+    /// [`Problem::curvature`] given `K_ij`.
+    fn curvature_with(&self, i: usize, j: usize, kij: f64) -> f64 {
+        let a = self.diag[i] + self.diag[j] - 2.0 * kij;
         if a > 0.0 {
             a
         } else {
@@ -132,6 +181,7 @@ impl Problem<'_> {
         let mut gmax2 = f64::NEG_INFINITY;
         let mut j = usize::MAX;
         let mut best = f64::INFINITY;
+        let ki = self.row(i);
         for t in (0..n).filter(|&t| self.low(t, alpha[t])) {
             let yg = y[t] * grad[t];
             if yg >= gmax2 {
@@ -139,7 +189,7 @@ impl Problem<'_> {
             }
             let b = gmax + yg;
             if b > 0.0 {
-                let gain = -(b * b) / self.curvature(i, t);
+                let gain = -(b * b) / self.curvature_with(i, t, ki[self.rows[t]]);
                 if gain <= best {
                     best = gain;
                     j = t;
@@ -209,8 +259,8 @@ impl Problem<'_> {
         let y = &self.y;
         let (yi, yj) = (y[i], y[j]);
         let (ki, kj) = (self.row(i), self.row(j));
-        for (((g, &yt), &kti), &ktj) in grad.iter_mut().zip(y).zip(ki).zip(kj) {
-            *g += yt * (yi * kti * di + yj * ktj * dj);
+        for ((g, &yt), &r) in grad.iter_mut().zip(y).zip(self.rows) {
+            *g += yt * (yi * ki[r] * di + yj * kj[r] * dj);
         }
     }
 

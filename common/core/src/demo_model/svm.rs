@@ -19,9 +19,13 @@
 //! - an action demonstrated only once: cross-validation would train folds without that action, so
 //!   the sigmoid is fitted on the final model's in-sample decision values instead.
 
+use std::sync::OnceLock;
+
 use rand::seq::SliceRandom;
 use serde::{Deserialize, Serialize};
 
+use super::lanes::{share, Lanes, Serial};
+use super::smo::KernelRows;
 use super::{rbf, smo, validate, DemoModelError};
 use crate::{math, rng};
 
@@ -162,40 +166,47 @@ struct Svc {
     rho: f64,
 }
 
-/// The RBF kernel of every pair of demonstrations, computed once for the final SVM and every
-/// fold's (each pair once: `rbf` is symmetric to the bit), `n × n` row-major.
-struct Gram {
-    n: usize,
-    k: Vec<f64>,
+/// The RBF kernel of the demonstrations a row at a time: computed when a solve first reads it
+/// (on whichever lane), then kept for the final SVM and every fold's. `rbf` is symmetric to the
+/// bit, so a row is also the column.
+struct Gram<'a> {
+    flat: &'a [f64],
+    state_dim: usize,
+    rows: Vec<OnceLock<Box<[f64]>>>,
 }
 
-impl Gram {
-    fn new(flat: &[f64], state_dim: usize) -> Gram {
+impl<'a> Gram<'a> {
+    fn new(flat: &'a [f64], state_dim: usize) -> Gram<'a> {
         let n = flat.len() / state_dim;
-        let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
-        let mut k = vec![0.0; n * n];
-        for i in 0..n {
-            for j in i..n {
-                let v = rbf(row(i), row(j));
-                k[i * n + j] = v;
-                k[j * n + i] = v;
-            }
+        Gram {
+            flat,
+            state_dim,
+            rows: (0..n).map(|_| OnceLock::new()).collect(),
         }
-        Gram { n, k }
     }
 
+    fn state(&self, i: usize) -> &[f64] {
+        &self.flat[i * self.state_dim..(i + 1) * self.state_dim]
+    }
+
+    /// `K(x_i, x_j)`, from row j.
     fn at(&self, i: usize, j: usize) -> f64 {
-        self.k[i * self.n + j]
+        self.row(j)[i]
+    }
+}
+
+impl KernelRows for Gram<'_> {
+    fn row(&self, r: usize) -> &[f64] {
+        self.rows[r].get_or_init(|| {
+            let x = self.state(r);
+            (0..self.rows.len())
+                .map(|j| rbf(x, self.state(j)))
+                .collect()
+        })
     }
 
-    /// The kernel matrix of the rows `idx`, in their order.
-    fn sub(&self, idx: &[usize]) -> Vec<f64> {
-        let mut out = Vec::with_capacity(idx.len() * idx.len());
-        for &i in idx {
-            let row = &self.k[i * self.n..(i + 1) * self.n];
-            out.extend(idx.iter().map(|&j| row[j]));
-        }
-        out
+    fn diag(&self, r: usize) -> f64 {
+        rbf(self.state(r), self.state(r))
     }
 }
 
@@ -231,9 +242,8 @@ impl Svc {
         positive: &[bool],
     ) -> Result<FoldFit, DemoModelError> {
         let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
-        let k = gram.sub(idx);
         let labels: Vec<bool> = idx.iter().map(|&i| positive[i]).collect();
-        let dual = smo::solve(&k, &labels, C, SOLVER_EPS, SOLVER_MAX_ITER);
+        let dual = smo::solve_on(gram, idx, &labels, C, SOLVER_EPS, SOLVER_MAX_ITER);
         if !dual.rho.is_finite() || dual.coef.iter().any(|c| !c.is_finite()) {
             return Err(DemoModelError::Solver(format!(
                 "the SMO solver ended with a non-finite solution after {} iterations",
@@ -296,6 +306,17 @@ impl KernelSvm {
         actions: &[usize],
         num_actions: usize,
     ) -> Result<KernelSvm, DemoModelError> {
+        KernelSvm::fit_on(states, actions, num_actions, &Serial)
+    }
+
+    /// [`KernelSvm::fit`], the six independent solves (the final SVM's and the five folds')
+    /// shared among `lanes` (the same model, bit for bit).
+    pub fn fit_on<S: AsRef<[f64]>>(
+        states: &[S],
+        actions: &[usize],
+        num_actions: usize,
+        lanes: &dyn Lanes,
+    ) -> Result<KernelSvm, DemoModelError> {
         let (flat, state_dim) = validate(states, actions, num_actions)?;
         if num_actions != 2 {
             return Err(DemoModelError::Unsupported(format!(
@@ -320,18 +341,20 @@ impl KernelSvm {
             });
         }
 
-        let all: Vec<usize> = (0..num_demos).collect();
         let gram = Gram::new(&flat, state_dim);
-        let fitted = Svc::fit(&gram, &flat, state_dim, &all, &positive)?;
-        let decision = if n_pos.min(n_neg) >= 2 {
-            cross_validated_decision_values(&gram, &flat, state_dim, &positive)?
+        let cross_validated = n_pos.min(n_neg) >= 2;
+        let (fitted, decision) = if cross_validated {
+            fit_with_folds(&gram, &flat, state_dim, &positive, lanes)?
         } else {
             tracing::debug!(
                 n_pos,
                 n_neg,
                 "SVM: an action demonstrated once, Platt fitted in-sample"
             );
-            all.iter().map(|&i| fitted.decision_at(&gram, i)).collect()
+            let all: Vec<usize> = (0..num_demos).collect();
+            let fitted = Svc::fit(&gram, &flat, state_dim, &all, &positive)?;
+            let decision = all.iter().map(|&i| fitted.decision_at(&gram, i)).collect();
+            (fitted, decision)
         };
         let svc = fitted.svc;
         let platt = Platt::fit(&decision, &positive);
@@ -434,31 +457,45 @@ pub fn stratified_folds(positive: &[bool]) -> Vec<usize> {
     fold
 }
 
-/// Out-of-fold decision values: for each fold, an SVM fitted on the other folds evaluates it.
-fn cross_validated_decision_values(
+/// The SVM on every demonstration, and the out-of-fold decision values (for each fold, an SVM
+/// fitted on the other folds evaluates it): six independent solves, dealt to the lanes.
+fn fit_with_folds(
     gram: &Gram,
     flat: &[f64],
     state_dim: usize,
     positive: &[bool],
-) -> Result<Vec<f64>, DemoModelError> {
+    lanes: &dyn Lanes,
+) -> Result<(FoldFit, Vec<f64>), DemoModelError> {
+    let n = positive.len();
     let fold = stratified_folds(positive);
-    let mut decision = vec![0.0; positive.len()];
-    for k in 0..PLATT_FOLDS {
-        let held_out: Vec<usize> = (0..positive.len()).filter(|&i| fold[i] == k).collect();
-        if held_out.is_empty() {
-            continue;
+    // Job 0 trains on every row; job k + 1 on all but fold k.
+    type Job = (Vec<usize>, Option<Result<FoldFit, DemoModelError>>);
+    let mut jobs: Vec<Job> = (0..=PLATT_FOLDS)
+        .map(|job| {
+            let train = (0..n).filter(|&i| job == 0 || fold[i] != job - 1).collect();
+            (train, None)
+        })
+        .collect();
+    share(&mut jobs, lanes, |lane| {
+        for (train, out) in lane.iter_mut() {
+            *out = Some(Svc::fit(gram, flat, state_dim, train, positive));
         }
-        let train: Vec<usize> = (0..positive.len()).filter(|&i| fold[i] != k).collect();
-        let fitted = Svc::fit(gram, flat, state_dim, &train, positive)?;
-        for i in held_out {
-            decision[i] = fitted.decision_at(gram, i);
+    });
+    let mut fits = jobs.into_iter().map(|(_, out)| out.expect("every job ran"));
+    let fitted = fits.next().expect("the final SVM's job")?;
+    let mut decision = vec![0.0; n];
+    for (k, fit) in fits.enumerate() {
+        let fit = fit?;
+        for i in (0..n).filter(|&i| fold[i] == k) {
+            decision[i] = fit.decision_at(gram, i);
         }
     }
-    Ok(decision)
+    Ok((fitted, decision))
 }
 
 #[cfg(test)]
 mod tests {
+    use super::super::lanes::Backwards;
     use super::*;
 
     #[test]
@@ -509,6 +546,24 @@ mod tests {
     }
 
     #[test]
+    fn the_svm_fitted_on_lanes_is_the_one_fitted_in_turn() {
+        let mut rng = rng::seeded(8);
+        let states: Vec<[f64; 2]> = (0..90)
+            .map(|_| std::array::from_fn(|_| rand::Rng::random_range(&mut rng, -2.0..2.0)))
+            .collect();
+        let actions: Vec<usize> = states
+            .iter()
+            .map(|s| usize::from(s[0] * s[1] > 0.1))
+            .collect();
+        let serial = KernelSvm::fit(&states, &actions, 2).unwrap();
+        for width in [2, 4] {
+            let on_lanes = KernelSvm::fit_on(&states, &actions, 2, &Backwards(width)).unwrap();
+            assert_eq!(on_lanes, serial, "{width} lanes");
+        }
+        assert!(serial.platt().is_some() && serial.num_support() > 0);
+    }
+
+    #[test]
     fn the_gram_matrix_gives_the_decision_values_of_the_states_to_the_bit() {
         let mut rng = rng::seeded(5);
         let states: Vec<Vec<f64>> = (0..60)
@@ -535,10 +590,6 @@ mod tests {
             let from_state = fitted.svc.decision_value(s);
             assert_eq!(fitted.decision_at(&gram, i).to_bits(), from_state.to_bits());
         }
-        assert_eq!(
-            gram.sub(&[2, 0])[..],
-            [gram.at(2, 2), gram.at(2, 0), gram.at(0, 2), gram.at(0, 0)]
-        );
     }
 
     #[test]

@@ -264,6 +264,15 @@ pub fn fma_peak_probe(rounds: u64) -> Option<f32> {
     None
 }
 
+/// Whether [`wide`] runs its function compiled for AVX2: the CPU has AVX2 and FMA and the
+/// portable kernels were not asked for.
+pub(crate) fn wide_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return x86::available();
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// Runs `f` compiled for AVX2 when the CPU has it (and the portable kernels were not asked for), else as
 /// it is: for element-wise loops and reductions whose order the source fixes, so that wider
 /// registers change their speed, never their results (Rust never fuses a multiply and an add on
