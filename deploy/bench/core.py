@@ -33,7 +33,7 @@ NYSTROM = "target/release/examples/nystrom_agreement"
 NYSTROM_SIZES = [1000, 3000, 10000, 100000]
 GROWN = 10
 SIZES = [500, 1000, 2000, 3000, 10000]
-SVM_SIZES = [500, 1000, 3000]
+SVM_SIZES = [500, 1000, 3000, 10000]
 # KRR grown by one from B: B + GROWN demonstrations at most (the exact model's limit, 10,000).
 GROW_SIZES = [500, 1000, 2000, 3000, 9990]
 QUERIES = 100
@@ -86,10 +86,12 @@ def sklearn_svc(demos, queries):
     return time.perf_counter() - t
 
 
-def ours(kind, demos, queries):
+def ours(kind, demos, queries, threads=None):
+    """The whole command, on every core unless `threads` is given."""
+    extra = [] if threads is None else ["--threads", str(threads)]
     t = time.perf_counter()
     out = subprocess.run(
-        [ALFD, "demo-model", "--kind", kind, "--demos", demos, "--query", queries],
+        [ALFD, "demo-model", "--kind", kind, "--demos", demos, "--query", queries] + extra,
         check=True,
         capture_output=True,
         text=True,
@@ -122,8 +124,8 @@ def main():
 
     train = {64: [], 128: []}
     steps = {64: 20000, 128: 10000}
-    krr = {n: {"ours": [], "sklearn": [], "max_diff": 0.0} for n in SIZES}
-    svm = {n: {"ours": [], "sklearn": []} for n in SVM_SIZES}
+    krr = {n: {"ours": [], "ours_1": [], "sklearn": [], "max_diff": 0.0} for n in SIZES}
+    svm = {n: {"ours": [], "ours_1": [], "sklearn": []} for n in SVM_SIZES}
     grow = {n: {"grow": [], "push": [], "model": [], "fit": [], "same_bits": True}
             for n in GROW_SIZES}
     for r in range(args.rounds):
@@ -137,6 +139,7 @@ def main():
             for who, _ in pair if r % 2 == 0 else reversed(pair):
                 if who == "ours":
                     t, raw_ours = ours("krr", demos[n], queries)
+                    krr[n]["ours_1"].append(ours("krr", demos[n], queries, threads=1)[0])
                 else:
                     t, raw_sk = sklearn_krr(demos[n], queries)
                 krr[n][who].append(t)
@@ -153,6 +156,7 @@ def main():
             grow[n]["same_bits"] = grow[n]["same_bits"] and out["same_bits"]
         for n in SVM_SIZES:
             svm[n]["ours"].append(ours("svm", demos[n], queries)[0])
+            svm[n]["ours_1"].append(ours("svm", demos[n], queries, threads=1)[0])
             svm[n]["sklearn"].append(sklearn_svc(demos[n], queries))
     # Once: the approximate model against the exact one (deterministic apart from its times).
     print("core.py: the Nyström model against the exact KRR", flush=True)
@@ -202,22 +206,26 @@ def main():
         "Fit on B CartPole-like demonstrations (two actions), then 100 queries: ours is the "
         "whole `alfd demo-model` command, scikit-learn's the fit and predictions in its process "
         "(reading the same files). KRR: `KernelRidge(alpha=0.1, kernel=\"rbf\", gamma=0.1)` on "
-        "one-hot actions; SVM: `SVC(C=10, gamma=0.1, probability=True)`. \"max |Δ|\": the "
+        "one-hot actions; SVM: `SVC(C=10, gamma=0.1, probability=True)`. \"ours\" shares the "
+        "fit's independent work among the machine's cores (the default), \"1 thread\" is "
+        "`--threads 1` (the same numbers); scikit-learn's KRR runs on NumPy's BLAS threads, its "
+        "SVC (libsvm) on one core. \"ours / theirs\" compares \"ours\". \"max |Δ|\": the "
         "largest difference between the two KRR's outputs on the queries.",
         "",
-        "| demonstrations | KRR ours | KRR scikit-learn | ours / theirs | max \\|Δ\\| | SVM ours | SVC scikit-learn | ours / theirs |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| demonstrations | KRR ours | KRR ours, 1 thread | KRR scikit-learn | ours / theirs | max \\|Δ\\| | SVM ours | SVM ours, 1 thread | SVC scikit-learn | ours / theirs |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for n in SIZES:
         k = krr[n]
         ratio = statistics.median(k["ours"]) / statistics.median(k["sklearn"])
-        row = f"| {n:,} | {span(k['ours'], s)} | {span(k['sklearn'], s)} | {ratio:.2f} | {k['max_diff']:.1e} |"
+        row = (f"| {n:,} | {span(k['ours'], s)} | {span(k['ours_1'], s)} | {span(k['sklearn'], s)} | "
+               f"{ratio:.2f} | {k['max_diff']:.1e} |")
         if n in svm:
             v = svm[n]
             vr = statistics.median(v["ours"]) / statistics.median(v["sklearn"])
-            row += f" {span(v['ours'], s)} | {span(v['sklearn'], s)} | {vr:.2f} |"
+            row += f" {span(v['ours'], s)} | {span(v['ours_1'], s)} | {span(v['sklearn'], s)} | {vr:.2f} |"
         else:
-            row += " | | |"
+            row += " | | | |"
         lines.append(row)
     ms = lambda x: f"{x * 1e3:.1f} ms"  # noqa: E731
     lines += [
@@ -227,7 +235,8 @@ def main():
         f"KRR's cost of a demonstration arriving at B: the factor grown by one row and the model "
         f"solved from it (`KrrFactor::push` + `model`, the mean over {GROWN} arrivals from B on; "
         "\"new row\" and \"solve\" are the two parts), "
-        f"against a fit anew on B + {GROWN} (`KrrFactor::fit` + `model`); in-process times of the "
+        f"against a fit anew on B + {GROWN} (`KrrFactor::fit` + `model`, on one thread); "
+        "in-process times of the "
         "example `common/core/examples/krr_grow.rs`. \"same bits\": the grown model equals the "
         "fitted one bit for bit. scikit-learn's `KernelRidge` has no update: it refits (its fit "
         "column above).",

@@ -51,6 +51,10 @@ pub struct DemoModelArgs {
     /// Number of actions (default: the largest demonstrated action + 1, at least 2), at most 1024.
     #[arg(long)]
     pub actions: Option<usize>,
+    /// Threads the fit shares its independent work among (default: every core this process may
+    /// use). The model is the same, bit for bit, on any number.
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=1024))]
+    pub threads: Option<u16>,
 }
 
 #[derive(Deserialize)]
@@ -234,7 +238,11 @@ pub fn run(args: DemoModelArgs) -> anyhow::Result<()> {
         "fitting the demonstration model"
     );
 
-    let lanes = alfd_harness::Threads::machine();
+    let lanes = args
+        .threads
+        .map_or_else(alfd_harness::Threads::machine, |t| {
+            alfd_harness::Threads::new(usize::from(t))
+        });
     let model = match DemoModel::fit_on(kind, &demos.states, &demos.actions, num_actions, &lanes) {
         Ok(m) => m,
         Err(

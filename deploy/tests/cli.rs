@@ -650,6 +650,66 @@ fn a_map_over_the_size_limit_is_refused_wherever_a_map_is_read() {
 }
 
 #[test]
+fn demo_model_gives_the_same_numbers_on_any_number_of_threads() {
+    let _time = timed!();
+    let dir = tmp("demo-model-threads");
+    let (demos, query) = (dir.join("demos.jsonl"), dir.join("query.jsonl"));
+    // 1,200 demonstrations: KRR's factorisation shares its blocks' updates among the threads.
+    let line = |i: usize| {
+        let t = i as f64;
+        let s = [
+            (t * 0.37).sin() * 2.0,
+            (t * 0.11).cos() * 3.0,
+            (t * 0.05).sin() * 0.2,
+        ];
+        format!(
+            "{{\"state\":{s:?},\"action\":{}}}\n",
+            u8::from(s[2] + 0.05 * s[1] > 0.0)
+        )
+    };
+    std::fs::write(&demos, (0..1200).map(line).collect::<String>()).unwrap();
+    std::fs::write(
+        &query,
+        "{\"state\":[0.1,-0.5,0.02]}\n{\"state\":[1,2,-0.1]}\n",
+    )
+    .unwrap();
+    let (d, q) = (demos.to_str().unwrap(), query.to_str().unwrap());
+    for kind in ["krr", "svm"] {
+        let out = |threads: &str| {
+            let args = [
+                "demo-model",
+                "--kind",
+                kind,
+                "--demos",
+                d,
+                "--query",
+                q,
+                "--threads",
+                threads,
+            ];
+            let o = alfd(&args);
+            assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+            String::from_utf8(o.stdout).unwrap()
+        };
+        let one = out("1");
+        assert_eq!(one.lines().count(), 2, "{one}");
+        assert_eq!(out("3"), one, "{kind}");
+    }
+    let args = [
+        "demo-model",
+        "--kind",
+        "krr",
+        "--demos",
+        d,
+        "--query",
+        q,
+        "--threads",
+        "0",
+    ];
+    assert_usage_error(&args, "--threads");
+}
+
+#[test]
 fn demo_model_refuses_an_absurd_number_of_actions_or_demonstrations() {
     let _time = timed!();
     let dir = tmp("demo-model-limits");
