@@ -175,17 +175,34 @@ fn log_end(
     expert: &WireExpert<'_, '_>,
     checkpoints: &Checkpoints<'_>,
 ) {
+    let waits = &expert.answer_waits;
     info!(
         reason = end.stopped.map_or("done", |s| s.0),
         episodes = end.progress.episodes,
         steps = end.progress.steps,
         timeouts = expert.timeouts,
+        answers = waits.len(),
+        answer_wait_p50_ms = quantile_ms(waits, 0.5),
+        answer_wait_p99_ms = quantile_ms(waits, 0.99),
+        answer_wait_max_ms = quantile_ms(waits, 1.0),
         credit_waits = actor.adder.credit_waits,
         credit_wait_s = actor.adder.credit_wait.as_secs_f64(),
         checkpoints = checkpoints.written,
         checkpoint_write_s = checkpoints.time.as_secs_f64(),
         "actor stopping"
     );
+}
+
+/// The `q` quantile of `waits` in milliseconds (the nearest rank: the smallest wait with at least
+/// a share `q` of them at or below it); 0 without any.
+fn quantile_ms(waits: &[Duration], q: f64) -> f64 {
+    if waits.is_empty() {
+        return 0.0;
+    }
+    let mut sorted = waits.to_vec();
+    sorted.sort_unstable();
+    let rank = (q * sorted.len() as f64).ceil().max(1.0) as usize;
+    sorted[rank.min(sorted.len()) - 1].as_secs_f64() * 1e3
 }
 
 /// This actor's id and incarnation, checked.
@@ -360,6 +377,25 @@ fn wait_for_stop(session: &Session<'_>) -> alfd_harness::Result<&'static str> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn answer_wait_quantiles_take_the_nearest_rank() {
+        let ms = |v: &[u64]| {
+            v.iter()
+                .map(|&m| Duration::from_millis(m))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(quantile_ms(&[], 0.99), 0.0);
+        let waits = ms(&[5, 1, 4, 2, 3]);
+        assert_eq!(quantile_ms(&waits, 0.5), 3.0);
+        assert_eq!(quantile_ms(&waits, 0.99), 5.0);
+        assert_eq!(quantile_ms(&waits, 0.0), 1.0);
+        // 100 waits, one slow: the 99th percentile is the 99th smallest, not the slow one.
+        let mut many = ms(&[1; 99]);
+        many.push(Duration::from_millis(500));
+        assert_eq!(quantile_ms(&many, 0.99), 1.0);
+        assert_eq!(quantile_ms(&many, 1.0), 500.0);
+    }
 
     #[test]
     fn actor_zero_uses_the_single_process_streams_and_restarts_new_ones() {

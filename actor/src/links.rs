@@ -280,6 +280,8 @@ pub struct WireExpert<'s, 'w> {
     /// budget.
     prior_demos: usize,
     pub timeouts: u64,
+    /// How long each answered query waited for its answer, from asking to the answer in hand.
+    pub answer_waits: Vec<Duration>,
 }
 
 impl<'s, 'w> WireExpert<'s, 'w> {
@@ -311,6 +313,7 @@ impl<'s, 'w> WireExpert<'s, 'w> {
             schedule,
             prior_demos: 0,
             timeouts: 0,
+            answer_waits: Vec::new(),
         })
     }
 
@@ -397,7 +400,12 @@ impl<'s, 'w> WireExpert<'s, 'w> {
             let poll = wait.poll(epoch.elapsed(), response, held, then, interrupted);
             late.map_err(LoopError::link)?;
             match poll {
-                Poll::Done(answer) => return Ok(answer),
+                Poll::Done(answer) => {
+                    if matches!(answer, Answer::Demo(_)) {
+                        self.answer_waits.push(epoch.elapsed());
+                    }
+                    return Ok(answer);
+                }
                 Poll::Wait(d) => {
                     interrupted = self.session.wait(d).map_err(LoopError::link)?.is_some();
                 }
@@ -420,8 +428,9 @@ impl<O: AsRef<[f32]>> ExpertClient<O> for WireExpert<'_, '_> {
             .map_err(LoopError::link)?;
         match self.query(request)? {
             Answer::Demo(r) => {
-                // The expert published the model refitted with this demonstration before
-                // answering: shape this very step with it, as Algorithm 1 does.
+                // With inline refits (`--refit inline`) the expert published the model refitted
+                // with this demonstration before answering: shape this very step with it, as
+                // Algorithm 1 does. In the background, the newest model the expert has.
                 self.take_model()?;
                 self.view.budget_left = r.budget_left;
                 self.view.demos = self.view.demos.max(u64::from(r.demo_index) + 1);

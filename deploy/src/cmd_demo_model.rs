@@ -385,6 +385,7 @@ mod tests {
             demos: PathBuf::from("/nonexistent/alfd-demos.jsonl"),
             query: PathBuf::from("/nonexistent/alfd-query.jsonl"),
             actions: None,
+            threads: None,
         };
         let e = run(args).unwrap_err();
         let usage = e.downcast_ref::<BadInput>().expect("a BadInput");

@@ -77,6 +77,12 @@ pub struct RunArgs {
     /// restarted from its last checkpoint, and `alfd resume` continues from them.
     #[arg(long, default_value_t = alfd_harness::DEFAULT_CHECKPOINT_EVERY)]
     pub checkpoint_every: u64,
+    /// When the expert refits its demonstration model: `inline`, before it answers the query
+    /// that brought the demonstration (the actor shapes that very step with it; one actor's run
+    /// is `alfd local`'s to the byte), or `background`, on a thread of its own while it answers
+    /// (queries never wait for a refit: for large models; the model is published when ready).
+    #[arg(long, value_enum, default_value_t = alfd_harness::Refit::Inline)]
+    pub refit: alfd_harness::Refit,
     /// Restarts allowed per actor, of the expert and of the learner, before the run fails (kept
     /// by `alfd resume`).
     #[arg(long, default_value_t = alfd_launcher::DEFAULT_MAX_RESTARTS)]
@@ -226,6 +232,7 @@ fn runtime_config(
         human_port: args.human_port,
         weights_every: args.weights_every,
         checkpoint_every: args.checkpoint_every,
+        refit: args.refit,
         env_spec,
         ..RuntimeConfig::default()
     };

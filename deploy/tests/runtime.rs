@@ -200,6 +200,36 @@ fn a_small_run_with_two_actors_fills_its_run_directory() {
     );
 }
 
+#[test]
+fn refits_in_the_background_answer_every_query_and_the_models_still_shape() {
+    let _time = timed!();
+    let out = tmp("background-refits");
+    let o = run(
+        &out,
+        1,
+        &[
+            "--refit=background",
+            "episodes=40",
+            "budget.total=20",
+            "query.rule=first",
+        ],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let demos = check_run_dir(&out, 20);
+    assert_eq!(demos.len(), 20);
+    let runtime = std::fs::read_to_string(out.join("runtime.toml")).unwrap();
+    assert!(runtime.contains("refit = \"background\""), "{runtime}");
+    let actor = std::fs::read_to_string(out.join("actor-0.log")).unwrap();
+    assert!(actor.contains("answers=20"), "{actor}");
+    assert!(actor.contains("answer_wait_p99_ms="), "{actor}");
+    // The models refitted in the background were published: steps were shaped with them.
+    let shaped: u64 = rows(&out)
+        .iter()
+        .map(|r| r[6].parse::<u64>().unwrap())
+        .sum();
+    assert!(shaped > 0, "no shaped step");
+}
+
 /// `alfd local` and `alfd run --actors=1 --window=1` on the KRR config with `sets`: the
 /// directories of both runs.
 fn local_and_lockstep(name: &str, sets: &[&str]) -> (TestDir, TestDir) {

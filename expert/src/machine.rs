@@ -10,6 +10,9 @@
 //!   [`ExpertMachine::activate`]), so the budget counts what every predecessor spent;
 //! - a demonstration is recorded on disk, then the model is published, then the actor hears the
 //!   answer ([`Action::Record`], [`Action::PublishModel`], [`Action::Reply`], in that order);
+//!   with refits in the background ([`ExpertMachine::refit_in_background`]) the actor hears the
+//!   answer once it is on disk, and the model refitted with it is published when its refit
+//!   ([`Action::StartRefit`], one at a time) ends;
 //! - a query whose actor stopped waiting spends no budget; a decision for a query that is no
 //!   longer waiting (answered, abandoned, or dropped by a swap) is ignored;
 //! - queries waiting for a person are answered "declined" when this expert stops answering, and
@@ -18,7 +21,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use alfd_common::agent::{DemoRecord, Demonstrator, ExpertCore};
+use alfd_common::agent::{DemoRecord, Demonstrator, ExpertCore, RefitJob, Refitted};
 use alfd_common::demo_model::DemoModelError;
 use alfd_wire::{name_to_bytes, outcome, process_state, QueryResponse};
 
@@ -45,6 +48,9 @@ pub enum Action<Q> {
     Record(DemoRecord),
     /// Publish the current demonstration model ([`ExpertMachine::core`]).
     PublishModel,
+    /// Take the refit the model owes ([`ExpertMachine::take_refit_job`]), run it off the query
+    /// path, and give what it returns to [`ExpertMachine::refitted`].
+    StartRefit,
     /// Answer the query and ring its actor's doorbell.
     Reply {
         query: Q,
@@ -106,6 +112,11 @@ pub struct ExpertMachine<Q> {
     next_shown: u64,
     counts: Counts,
     last_status: Option<Duration>,
+    /// Whether refits run off the query path.
+    background: bool,
+    /// Whether a refit is out (taken by [`ExpertMachine::take_refit_job`], not yet given back to
+    /// [`ExpertMachine::refitted`]).
+    refitting: bool,
 }
 
 impl<Q> ExpertMachine<Q> {
@@ -122,7 +133,45 @@ impl<Q> ExpertMachine<Q> {
             next_shown: 0,
             counts: Counts::default(),
             last_status: None,
+            background: false,
+            refitting: false,
         }
+    }
+
+    /// Answers queries without waiting for the model's refit: each demonstration is recorded
+    /// and answered, and the model refitted with it is published when its refit, run by the
+    /// shell ([`Action::StartRefit`]), ends.
+    pub fn refit_in_background(&mut self) {
+        self.background = true;
+        self.core.defer_refits();
+    }
+
+    /// The refit [`Action::StartRefit`] asked for (`None` if nothing is owed any more or one is
+    /// out already).
+    pub fn take_refit_job(&mut self) -> Option<RefitJob> {
+        let job = self.core.refit_job();
+        self.refitting |= job.is_some();
+        job
+    }
+
+    /// A refit ended: its model is published (while this expert answers), and the next refit
+    /// started if demonstrations arrived meanwhile.
+    pub fn refitted(&mut self, r: Refitted) -> Vec<Action<Q>> {
+        self.refitting = false;
+        if let Err(e) = self.core.finish_refit(r) {
+            tracing::warn!(error = %e, "demonstration model not refitted");
+        }
+        if self.mode == Mode::Standby {
+            return Vec::new();
+        }
+        let mut out = vec![Action::PublishModel];
+        out.extend(self.next_refit());
+        out
+    }
+
+    /// [`Action::StartRefit`] if a refit is owed and none is out.
+    fn next_refit(&self) -> Option<Action<Q>> {
+        (self.background && !self.refitting && self.core.stale()).then_some(Action::StartRefit)
     }
 
     pub fn generation(&self) -> u16 {
@@ -272,15 +321,18 @@ impl<Q> ExpertMachine<Q> {
                     budget_left: self.core.budget().remaining(),
                     ..self.response()
                 };
-                let mut out = vec![
-                    Action::Record(record),
-                    Action::PublishModel,
-                    Action::Reply {
-                        query,
-                        actor,
-                        response,
-                    },
-                ];
+                let reply = Action::Reply {
+                    query,
+                    actor,
+                    response,
+                };
+                let mut out = if self.background {
+                    let mut out = vec![Action::Record(record), reply];
+                    out.extend(self.next_refit());
+                    out
+                } else {
+                    vec![Action::Record(record), Action::PublishModel, reply]
+                };
                 // The last of the budget: nothing more to ask the person, the rest act on their
                 // own now.
                 if self.core.budget().is_exhausted() {
@@ -519,6 +571,64 @@ mod tests {
         assert_eq!(m.core().budget().remaining(), 2);
         // Control repeating the same generation does not load again.
         assert_eq!(m.control(2, 2), vec![]);
+    }
+
+    #[test]
+    fn with_refits_in_the_background_answers_wait_for_the_disk_not_the_model() {
+        let mut m = machine(10, false);
+        m.refit_in_background();
+        assert_eq!(m.control(2, 2), vec![Action::LoadDemos]);
+        m.activate((0..3).map(record).collect()).unwrap();
+        let version = m.core().model_version();
+        let out = ask_and_answer(&mut m, 1, 1);
+        assert!(
+            matches!(
+                out.as_slice(),
+                [
+                    Action::Record(_),
+                    Action::Reply { query: 1, .. },
+                    Action::StartRefit
+                ]
+            ),
+            "{out:?}"
+        );
+        let job = m.take_refit_job().expect("the refit owed");
+        assert_eq!(job.covers(), 4);
+        // Two more queries while it runs: answered, and no second refit goes out.
+        for id in [2, 3] {
+            let out = ask_and_answer(&mut m, id, 0);
+            assert!(
+                matches!(out.as_slice(), [Action::Record(_), Action::Reply { .. }]),
+                "{out:?}"
+            );
+        }
+        assert_eq!(
+            m.core().model_version(),
+            version,
+            "nothing refitted on the query path"
+        );
+        // Its end publishes the model of four, and starts the refit of the two newcomers.
+        let out = m.refitted(job.run());
+        assert_eq!(out, vec![Action::PublishModel, Action::StartRefit]);
+        assert_eq!(m.core().model_version(), version + 1);
+        let job = m.take_refit_job().unwrap();
+        assert_eq!(job.covers(), 6);
+        assert_eq!(m.refitted(job.run()), vec![Action::PublishModel]);
+        assert!(!m.core().stale());
+        assert_eq!(m.counts().answered, 3);
+    }
+
+    #[test]
+    fn a_refit_ending_after_the_expert_stood_by_publishes_nothing() {
+        let mut m = machine(5, false);
+        m.refit_in_background();
+        m.control(2, 2);
+        m.activate(Vec::new()).unwrap();
+        ask_and_answer(&mut m, 1, 1);
+        let job = m.take_refit_job().unwrap();
+        m.control(0, 2);
+        assert_eq!(m.mode(), Mode::Standby);
+        assert_eq!(m.refitted(job.run()), vec![]);
     }
 
     #[test]

@@ -12,12 +12,13 @@
 //! wire, the page and the clock into events and carries out the machine's actions.
 
 use std::path::PathBuf;
+use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use alfd_common::agent::{Demonstrator, ExpertCore};
+use alfd_common::agent::{Demonstrator, ExpertCore, Refitted};
 use alfd_common::demo_model::lanes::SharedLanes;
 use alfd_harness::python::Adapter;
-use alfd_harness::{BadInput, ProcessArgs, Session};
+use alfd_harness::{BadInput, ProcessArgs, Refit, Session};
 use alfd_harness::{HarnessError, What as _};
 use alfd_wire::{
     name_to_bytes, progress_kind, ActorBells, DemoModelHeader, Doorbell, IncomingQuery, Process,
@@ -110,6 +111,9 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         matches!(source, Source::Person),
         core,
     );
+    if runtime.refit == Refit::Background {
+        machine.refit_in_background();
+    }
     let mut shell = Shell {
         server: wire.query_server()?,
         model_tx: wire.demo_model_sender()?,
@@ -126,6 +130,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         clock: Instant::now(),
         disk_full_until: None,
         refused: 0,
+        refit: None,
     };
     let start = machine.start(shell.now());
     shell.apply(&mut machine, start)?;
@@ -140,11 +145,14 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         }
         shell.poll_queries(&mut machine)?;
         shell.poll_page(&mut machine)?;
+        if let Some(reason) = shell.poll_refit(&mut machine)? {
+            break reason;
+        }
         let tick = machine.tick(shell.now());
         shell.apply(&mut machine, tick)?;
         // An actor that subscribed since the last publication gets the history sample now.
         shell.model_tx.update_connections()?;
-        if let Some(stop) = session.wait(Duration::from_millis(100))? {
+        if let Some(stop) = session.wait(shell.patience())? {
             break stop.0;
         }
     };
@@ -261,6 +269,8 @@ struct Shell<'w> {
     disk_full_until: Option<Duration>,
     /// Demonstrations a full disk refused since the last one recorded.
     refused: u32,
+    /// Where the refit running on its own thread sends its result.
+    refit: Option<mpsc::Receiver<Refitted>>,
 }
 
 /// How long the expert leaves queries unanswered after a full disk refused a demonstration, before
@@ -270,6 +280,49 @@ const DISK_FULL_PAUSE: Duration = Duration::from_secs(1);
 impl<'w> Shell<'w> {
     fn now(&self) -> Duration {
         self.clock.elapsed()
+    }
+
+    /// The refit the machine owes, on a thread of its own (the queries are answered meanwhile).
+    fn start_refit(&mut self, m: &mut Machine<'w>) {
+        let Some(job) = m.take_refit_job() else {
+            return;
+        };
+        let (tx, rx) = mpsc::channel();
+        debug!(demos = job.covers(), "refitting the demonstration model");
+        std::thread::spawn(move || {
+            // The receiver is gone only when the process is stopping.
+            let _ = tx.send(job.run());
+        });
+        self.refit = Some(rx);
+    }
+
+    /// The refit's result, if it has ended, as an event.
+    fn poll_refit(&mut self, m: &mut Machine<'w>) -> alfd_harness::Result<Option<&'static str>> {
+        let Some(rx) = &self.refit else {
+            return Ok(None);
+        };
+        let refitted = match rx.try_recv() {
+            Ok(r) => r,
+            Err(mpsc::TryRecvError::Empty) => return Ok(None),
+            Err(mpsc::TryRecvError::Disconnected) => {
+                return Err(HarnessError::Run(
+                    "the demonstration model's refit ended without a result".into(),
+                ))
+            }
+        };
+        self.refit = None;
+        let next = m.refitted(refitted);
+        self.apply(m, next)
+    }
+
+    /// How long the loop may wait for its doorbell: briefly while a refit runs, so that its
+    /// model is published soon after it ends.
+    fn patience(&self) -> Duration {
+        if self.refit.is_some() {
+            Duration::from_millis(2)
+        } else {
+            Duration::from_millis(100)
+        }
     }
 
     /// Every query waiting on the wire, as events.
@@ -370,6 +423,7 @@ impl<'w> Shell<'w> {
                     }
                 }
                 Action::PublishModel => publish_model(&mut self.model_tx, m)?,
+                Action::StartRefit => self.start_refit(m),
                 Action::Reply {
                     query,
                     actor,

@@ -28,8 +28,8 @@ pub use fs::{
 pub use prior::{read_prior, write_prior, PRIOR_FILE};
 pub use process::{check_wire_limits, main, read_text, ProcessArgs, Setup};
 pub use runtime::{
-    RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY, DEFAULT_HUMAN_QUERY_TIMEOUT_MS,
-    HUMAN_EXPERT, RUNTIME_FILE,
+    Refit, RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY,
+    DEFAULT_HUMAN_QUERY_TIMEOUT_MS, HUMAN_EXPERT, RUNTIME_FILE,
 };
 pub use session::{Session, SessionError, LAUNCHER_SILENCE, STOP_REQUESTED, TERMINATION_SIGNAL};
 pub use startup::{

@@ -45,10 +45,27 @@ pub struct RuntimeConfig {
     /// 0: only when it stops. A learner that dies is restarted from it.
     #[serde(default = "default_checkpoint_every")]
     pub checkpoint_every: u64,
+    /// When the expert refits its demonstration model: `inline` (before it answers the query
+    /// that brought the demonstration, so that the actor shapes that very step with it) or
+    /// `background` (on a thread of its own while it answers; the model is published when it
+    /// is ready: queries never wait for a refit, and runs no longer repeat to the byte).
+    #[serde(default)]
+    pub refit: Refit,
     /// A Gymnasium environment's spaces and limit, as its adapter reported them when the run
     /// started (absent for the built-in environments).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub env_spec: Option<crate::python::EnvSpec>,
+}
+
+/// When the expert refits its demonstration model ([`RuntimeConfig::refit`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Refit {
+    /// Before answering the query that brought the demonstration.
+    #[default]
+    Inline,
+    /// On a thread of its own, while the expert answers.
+    Background,
 }
 
 /// The default of [`RuntimeConfig::checkpoint_every`] (see BENCHMARKS.md: a CartPole checkpoint
@@ -79,6 +96,7 @@ impl Default for RuntimeConfig {
             handshake_timeout_s: 20,
             weights_every: 1,
             checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
+            refit: Refit::Inline,
             env_spec: None,
         }
     }

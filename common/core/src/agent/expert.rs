@@ -4,12 +4,13 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::refit::{RefitJob, RefitOutcome, Refitted};
 use crate::checkpoint::StateMismatch;
 use crate::config::DemoModelChoice;
 use crate::demo_model::krr::KrrFactor;
-use crate::demo_model::lanes::{Lanes, SharedLanes};
+use crate::demo_model::lanes::SharedLanes;
 use crate::demo_model::nystrom::NystromFactor;
-use crate::demo_model::{DemoModel, DemoModelError, DemoModelKind};
+use crate::demo_model::{DemoModel, DemoModelError};
 use crate::nn::Mlp;
 use crate::policy::argmax;
 use crate::query::Budget;
@@ -130,6 +131,15 @@ pub struct ExpertCore {
     schedule: ShapingSchedule,
     /// Where a model fitted anew does its independent work ([`Serial`] unless set).
     lanes: SharedLanes,
+    /// Demonstrations (prior and the run's) the last refit was fitted on, or tried to be.
+    fitted: usize,
+    /// Whether [`ExpertCore::record`] leaves the refit to the caller.
+    deferred: bool,
+    /// Incremented whenever the demonstrations are replaced (a refit out for the old ones is
+    /// then dropped).
+    epoch: u64,
+    /// The epoch of the refit out, if one is.
+    out: Option<u64>,
 }
 
 impl ExpertCore {
@@ -151,6 +161,10 @@ impl ExpertCore {
             model_version: 0,
             schedule,
             lanes: SharedLanes::default(),
+            fitted: 0,
+            deferred: false,
+            epoch: 0,
+            out: None,
         }
     }
 
@@ -175,8 +189,7 @@ impl ExpertCore {
     /// them and the run's demonstrations.
     pub fn set_prior(&mut self, prior: Vec<DemoRecord>) -> Result<(), DemoModelError> {
         self.prior = prior;
-        self.krr = None;
-        self.nystrom = None;
+        self.replaced();
         self.refit()
     }
 
@@ -185,9 +198,15 @@ impl ExpertCore {
     pub fn restore(&mut self, records: Vec<DemoRecord>) -> Result<(), DemoModelError> {
         self.budget = Budget::with_used(self.budget.total(), records.len() as u32);
         self.demos = records;
+        self.replaced();
+        self.refit()
+    }
+
+    /// The demonstrations were replaced: the grown factors and any refit out are of old ones.
+    fn replaced(&mut self) {
         self.krr = None;
         self.nystrom = None;
-        self.refit()
+        self.epoch += 1;
     }
 
     pub fn snapshot(&self) -> ExpertSnapshot {
@@ -214,7 +233,8 @@ impl ExpertCore {
     }
 
     /// Spends one unit of budget on `action`, the demonstrator's answer at `state` (global step
-    /// `step`), records it and refits the model. `None` when the budget is exhausted.
+    /// `step`), records it and refits the model (unless refits are deferred:
+    /// [`ExpertCore::defer_refits`]). `None` when the budget is exhausted.
     pub fn record(
         &mut self,
         state: &[f64],
@@ -232,8 +252,10 @@ impl ExpertCore {
             step,
             expert: expert.to_owned(),
         });
-        if let Err(e) = self.refit() {
-            tracing::warn!(error = %e, "demonstration model not refitted");
+        if !self.deferred {
+            if let Err(e) = self.refit() {
+                tracing::warn!(error = %e, "demonstration model not refitted");
+            }
         }
         self.demos.last()
     }
@@ -254,43 +276,66 @@ impl ExpertCore {
         self.record(&state, action, step, expert).map(|d| d.action)
     }
 
+    /// The model refitted on every demonstration now, here.
     fn refit(&mut self) -> Result<(), DemoModelError> {
-        let kind = match self.choice {
-            DemoModelChoice::None => return Ok(()),
-            DemoModelChoice::Krr => DemoModelKind::Krr,
-            DemoModelChoice::Svm => DemoModelKind::Svm,
-            DemoModelChoice::Nystrom => DemoModelKind::Nystrom,
-        };
+        let job = self.take_refit_job();
+        self.finish_refit(job.run())
+    }
+
+    /// From now on [`ExpertCore::record`] leaves the refit to the caller, who takes it out with
+    /// [`ExpertCore::refit_job`], runs it where it likes, and gives it back with
+    /// [`ExpertCore::finish_refit`]: the expert process answers while the model fits.
+    pub fn defer_refits(&mut self) {
+        self.deferred = true;
+    }
+
+    /// Whether the model is older than the demonstrations (a deferred refit is owed).
+    pub fn stale(&self) -> bool {
+        self.choice != DemoModelChoice::None && self.fitted != self.model_demos()
+    }
+
+    /// The refit the model owes, taken out of the core to run elsewhere (its grown factor goes
+    /// with it); `None` when the model is up to date or a refit is out already.
+    pub fn refit_job(&mut self) -> Option<RefitJob> {
+        (self.out.is_none() && self.stale()).then(|| self.take_refit_job())
+    }
+
+    fn take_refit_job(&mut self) -> RefitJob {
+        self.out = Some(self.epoch);
         // The prior demonstrations first, so that the grown factors keep their rows.
-        let set: std::borrow::Cow<'_, [DemoRecord]> = if self.prior.is_empty() {
-            std::borrow::Cow::Borrowed(&self.demos)
-        } else {
-            std::borrow::Cow::Owned([&self.prior[..], &self.demos[..]].concat())
-        };
-        if set.is_empty() {
-            self.model = None;
-            self.krr = None;
-            self.nystrom = None;
+        let set = [&self.prior[..], &self.demos[..]].concat();
+        RefitJob::new(
+            self.epoch,
+            self.choice,
+            set,
+            self.num_actions,
+            (self.krr.take(), self.nystrom.take()),
+            self.lanes.clone(),
+        )
+    }
+
+    /// Takes back a refit ([`ExpertCore::refit_job`]): its model and grown factor become the
+    /// core's, unless the demonstrations were replaced since it went out (then it is dropped).
+    /// The model stays as it was if the refit failed.
+    pub fn finish_refit(&mut self, r: Refitted) -> Result<(), DemoModelError> {
+        if self.out == Some(r.epoch) {
+            self.out = None;
+        }
+        if r.epoch != self.epoch {
             return Ok(());
         }
-        self.model = Some(match kind {
-            DemoModelKind::Krr => {
-                let lanes = self.lanes.get();
-                DemoModel::Krr(grown(&mut self.krr, &set, self.num_actions, lanes)?.model())
+        let (krr, nystrom) = r.factors;
+        (self.krr, self.nystrom) = (krr, nystrom);
+        // Tried on these: a failed refit is tried again at the next demonstration, not at once.
+        self.fitted = r.covers;
+        match r.outcome? {
+            RefitOutcome::Unchanged => {}
+            RefitOutcome::Cleared => self.model = None,
+            RefitOutcome::Fitted(model) => {
+                self.model = Some(model);
+                self.model_version += 1;
             }
-            DemoModelKind::Nystrom => {
-                let lanes = self.lanes.get();
-                DemoModel::Nystrom(
-                    grown(&mut self.nystrom, &set, self.num_actions, lanes)?.model()?,
-                )
-            }
-            DemoModelKind::Svm => {
-                let states: Vec<Vec<f64>> = set.iter().map(|d| d.state.clone()).collect();
-                let actions: Vec<usize> = set.iter().map(|d| d.action).collect();
-                DemoModel::fit_on(kind, &states, &actions, self.num_actions, self.lanes.get())?
-            }
-        });
-        self.model_version += 1;
+        }
         Ok(())
     }
 
@@ -332,69 +377,80 @@ impl ExpertCore {
     }
 }
 
-/// A model's state kept across demonstrations and grown by each: KRR's factor, the Nyström
-/// sums.
-trait Grows: Sized {
-    fn len(&self) -> usize;
-    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError>;
-    fn fit(
-        states: &[&[f64]],
-        actions: &[usize],
-        num_actions: usize,
-        lanes: &dyn Lanes,
-    ) -> Result<Self, DemoModelError>;
-}
-
-impl Grows for KrrFactor {
-    fn len(&self) -> usize {
-        KrrFactor::len(self)
-    }
-    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
-        KrrFactor::push(self, state, action)
-    }
-    fn fit(s: &[&[f64]], a: &[usize], n: usize, lanes: &dyn Lanes) -> Result<Self, DemoModelError> {
-        KrrFactor::fit_on(s, a, n, lanes)
-    }
-}
-
-impl Grows for NystromFactor {
-    fn len(&self) -> usize {
-        NystromFactor::len(self)
-    }
-    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
-        NystromFactor::push(self, state, action)
-    }
-    fn fit(s: &[&[f64]], a: &[usize], n: usize, _: &dyn Lanes) -> Result<Self, DemoModelError> {
-        NystromFactor::fit(s, a, n)
-    }
-}
-
-/// The state in `slot` over every demonstration of `demos`: the one held, grown by the newest
-/// demonstration (KRR: O(n²)), or made anew (KRR: O(n³)) when it does not hold all the others;
-/// the same bits either way.
-fn grown<'a, G: Grows>(
-    slot: &'a mut Option<G>,
-    demos: &[DemoRecord],
-    num_actions: usize,
-    lanes: &dyn Lanes,
-) -> Result<&'a G, DemoModelError> {
-    let n = demos.len();
-    match (slot.as_mut(), demos.last()) {
-        (Some(f), Some(d)) if f.len() + 1 == n => f.push(&d.state, d.action)?,
-        (Some(f), _) if f.len() == n => {}
-        _ => {
-            *slot = None;
-            let states: Vec<&[f64]> = demos.iter().map(|d| d.state.as_slice()).collect();
-            let actions: Vec<usize> = demos.iter().map(|d| d.action).collect();
-            *slot = Some(G::fit(&states, &actions, num_actions, lanes)?);
-        }
-    }
-    Ok(slot.as_ref().expect("made above"))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Demonstration `i` of a scattered two-dimensional set.
+    fn demo(i: usize) -> (Vec<f64>, usize) {
+        let t = i as f64;
+        (vec![(t * 0.7).sin() * 2.0, (t * 1.3).cos()], i % 2)
+    }
+
+    #[test]
+    fn deferred_refits_run_outside_and_give_the_inline_model() {
+        let schedule = crate::config::ShapingConfig::default().schedule();
+        for choice in [
+            DemoModelChoice::Krr,
+            DemoModelChoice::Nystrom,
+            DemoModelChoice::Svm,
+        ] {
+            let mut inline = ExpertCore::new(10, choice, 2, schedule);
+            let mut deferred = ExpertCore::new(10, choice, 2, schedule);
+            deferred.defer_refits();
+            let record = |core: &mut ExpertCore, i: usize| {
+                let (s, a) = demo(i);
+                core.record(&s, a, i as u64, "e").unwrap();
+            };
+            for i in 0..4 {
+                record(&mut inline, i);
+                record(&mut deferred, i);
+            }
+            assert!(deferred.model().is_none() && deferred.stale(), "{choice:?}");
+            let job = deferred.refit_job().expect("a refit is owed");
+            assert_eq!(job.covers(), 4);
+            assert!(deferred.refit_job().is_none(), "one refit out at a time");
+            // Two more demonstrations arrive while it runs: the model it gives is of four.
+            for i in 4..6 {
+                record(&mut inline, i);
+                record(&mut deferred, i);
+            }
+            deferred.finish_refit(job.run()).unwrap();
+            assert_eq!(deferred.model_version(), 1);
+            assert!(deferred.stale());
+            let job = deferred.refit_job().expect("the two newcomers are owed");
+            assert_eq!(job.covers(), 6);
+            deferred.finish_refit(job.run()).unwrap();
+            assert!(!deferred.stale() && deferred.refit_job().is_none());
+            assert_eq!(deferred.model(), inline.model(), "{choice:?}");
+        }
+    }
+
+    #[test]
+    fn a_refit_out_when_the_demonstrations_are_replaced_is_dropped() {
+        let schedule = crate::config::ShapingConfig::default().schedule();
+        let mut core = ExpertCore::new(10, DemoModelChoice::Krr, 2, schedule);
+        core.defer_refits();
+        for i in 0..3 {
+            let (s, a) = demo(i);
+            core.record(&s, a, 0, "e").unwrap();
+        }
+        let job = core.refit_job().unwrap();
+        let kept: Vec<DemoRecord> = core.demos()[..1].to_vec();
+        core.restore(kept).unwrap();
+        let version = core.model_version();
+        assert_eq!(core.model().unwrap().num_actions(), 2);
+        core.finish_refit(job.run()).unwrap();
+        assert_eq!(
+            core.model_version(),
+            version,
+            "the old refit changed nothing"
+        );
+        assert!(!core.stale(), "the restore refitted at once");
+        let (s, a) = demo(7);
+        core.record(&s, a, 0, "e").unwrap();
+        assert!(core.refit_job().is_some(), "a new refit may go out");
+    }
 
     #[test]
     fn prior_demonstrations_shape_the_model_but_spend_no_budget() {

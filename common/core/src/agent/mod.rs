@@ -6,6 +6,7 @@
 
 pub mod expert;
 pub mod neural;
+pub mod refit;
 pub mod tabular;
 
 pub use expert::{
@@ -13,6 +14,7 @@ pub use expert::{
     TablePolicy,
 };
 pub use neural::{ActorSnapshot, LearnerSnapshot, NeuralActor, NeuralLearner};
+pub use refit::{RefitJob, Refitted};
 pub use tabular::{TabularAgent, TabularSnapshot};
 
 use rand::Rng as _;

@@ -1,0 +1,176 @@
+//! A refit of the demonstration model as a value: taken out of [`super::ExpertCore`] with the
+//! demonstrations and grown factor it needs ([`RefitJob`]), run anywhere ([`RefitJob::run`]:
+//! pure computation), and given back ([`Refitted`]). The core refits inline this way; the expert
+//! process can run it on a thread of its own and answer queries meanwhile.
+
+use super::expert::DemoRecord;
+use crate::config::DemoModelChoice;
+use crate::demo_model::krr::KrrFactor;
+use crate::demo_model::lanes::{Lanes, SharedLanes};
+use crate::demo_model::nystrom::NystromFactor;
+use crate::demo_model::{DemoModel, DemoModelError, DemoModelKind};
+
+/// The grown factors a refit takes with it and gives back.
+pub(crate) type Factors = (Option<KrrFactor>, Option<NystromFactor>);
+
+/// A refit to run: the demonstrations (prior first), the model's choice and its grown factor.
+#[derive(Debug)]
+pub struct RefitJob {
+    epoch: u64,
+    choice: DemoModelChoice,
+    set: Vec<DemoRecord>,
+    num_actions: usize,
+    factors: Factors,
+    lanes: SharedLanes,
+}
+
+/// What a refit gives back to the core.
+#[derive(Debug)]
+pub struct Refitted {
+    pub(crate) epoch: u64,
+    /// Demonstrations the refit covers.
+    pub(crate) covers: usize,
+    pub(crate) factors: Factors,
+    pub(crate) outcome: Result<RefitOutcome, DemoModelError>,
+}
+
+/// The model after a refit.
+#[derive(Debug)]
+pub(crate) enum RefitOutcome {
+    /// No model is kept (`expert.model = "none"`).
+    Unchanged,
+    /// No demonstrations: no model.
+    Cleared,
+    Fitted(DemoModel),
+}
+
+impl RefitJob {
+    pub(crate) fn new(
+        epoch: u64,
+        choice: DemoModelChoice,
+        set: Vec<DemoRecord>,
+        num_actions: usize,
+        factors: Factors,
+        lanes: SharedLanes,
+    ) -> RefitJob {
+        RefitJob {
+            epoch,
+            choice,
+            set,
+            num_actions,
+            factors,
+            lanes,
+        }
+    }
+
+    /// Demonstrations the refit covers.
+    pub fn covers(&self) -> usize {
+        self.set.len()
+    }
+
+    /// Fits the model (growing the factor where it can: the same bits as a fit anew).
+    pub fn run(mut self) -> Refitted {
+        let outcome = self.fit();
+        Refitted {
+            epoch: self.epoch,
+            covers: self.set.len(),
+            factors: self.factors,
+            outcome,
+        }
+    }
+
+    fn fit(&mut self) -> Result<RefitOutcome, DemoModelError> {
+        let kind = match self.choice {
+            DemoModelChoice::None => return Ok(RefitOutcome::Unchanged),
+            DemoModelChoice::Krr => DemoModelKind::Krr,
+            DemoModelChoice::Svm => DemoModelKind::Svm,
+            DemoModelChoice::Nystrom => DemoModelKind::Nystrom,
+        };
+        if self.set.is_empty() {
+            self.factors = (None, None);
+            return Ok(RefitOutcome::Cleared);
+        }
+        let (set, m, lanes) = (&self.set, self.num_actions, self.lanes.get());
+        let (krr, nystrom) = &mut self.factors;
+        Ok(RefitOutcome::Fitted(match kind {
+            DemoModelKind::Krr => DemoModel::Krr(grown(krr, set, m, lanes)?.model()),
+            DemoModelKind::Nystrom => DemoModel::Nystrom(grown(nystrom, set, m, lanes)?.model()?),
+            DemoModelKind::Svm => {
+                let states: Vec<&[f64]> = set.iter().map(|d| d.state.as_slice()).collect();
+                let actions: Vec<usize> = set.iter().map(|d| d.action).collect();
+                DemoModel::fit_on(kind, &states, &actions, m, lanes)?
+            }
+        }))
+    }
+}
+
+/// A model's state kept across demonstrations and grown by each: KRR's factor, the Nyström
+/// sums.
+trait Grows: Sized {
+    fn len(&self) -> usize;
+    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError>;
+    fn fit(
+        states: &[&[f64]],
+        actions: &[usize],
+        num_actions: usize,
+        lanes: &dyn Lanes,
+    ) -> Result<Self, DemoModelError>;
+}
+
+impl Grows for KrrFactor {
+    fn len(&self) -> usize {
+        KrrFactor::len(self)
+    }
+    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
+        KrrFactor::push(self, state, action)
+    }
+    fn fit(s: &[&[f64]], a: &[usize], n: usize, lanes: &dyn Lanes) -> Result<Self, DemoModelError> {
+        KrrFactor::fit_on(s, a, n, lanes)
+    }
+}
+
+impl Grows for NystromFactor {
+    fn len(&self) -> usize {
+        NystromFactor::len(self)
+    }
+    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
+        NystromFactor::push(self, state, action)
+    }
+    fn fit(s: &[&[f64]], a: &[usize], n: usize, _: &dyn Lanes) -> Result<Self, DemoModelError> {
+        NystromFactor::fit(s, a, n)
+    }
+}
+
+/// A factor grows by one demonstration, or by at most one in this many it holds; more newcomers
+/// are cheaper fitted anew (KRR: each costs O(n²), a fit O(n³)).
+const GROW_AT_MOST_ONE_IN: usize = 8;
+
+/// The state in `slot` over every demonstration of `demos`: the one held, grown by the
+/// demonstrations after its own (KRR: O(n²) each), or made anew (KRR: O(n³)) when it holds none
+/// or too few of them; the same bits either way. The factor's rows are the first of `demos`
+/// (demonstrations are only appended; replacing them empties the slot).
+fn grown<'a, G: Grows>(
+    slot: &'a mut Option<G>,
+    demos: &[DemoRecord],
+    num_actions: usize,
+    lanes: &dyn Lanes,
+) -> Result<&'a G, DemoModelError> {
+    let n = demos.len();
+    match slot.as_mut() {
+        Some(f)
+            if f.len() <= n
+                && (n - f.len() <= 1 || (n - f.len()) * GROW_AT_MOST_ONE_IN <= f.len()) =>
+        {
+            for d in &demos[f.len()..] {
+                f.push(&d.state, d.action)?;
+            }
+        }
+        _ => {
+            *slot = None;
+            let states: Vec<&[f64]> = demos.iter().map(|d| d.state.as_slice()).collect();
+            let actions: Vec<usize> = demos.iter().map(|d| d.action).collect();
+            *slot = Some(G::fit(&states, &actions, num_actions, lanes)?);
+        }
+    }
+    Ok(slot.as_ref().expect("made above"))
+}
