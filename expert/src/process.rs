@@ -250,6 +250,18 @@ fn start_page(
     Ok(page)
 }
 
+/// The nice value of a background refit's thread (and of the threads it starts): the query path,
+/// the learner and the actors go first when the cores are busy.
+const REFIT_NICE: i32 = 10;
+
+/// Puts the calling thread at [`REFIT_NICE`] (a no-op where the system refuses).
+fn lower_priority() {
+    let me = rustix::thread::gettid();
+    if let Err(e) = rustix::process::setpriority_process(Some(me), REFIT_NICE) {
+        debug!(error = %e, "the refit's thread keeps its priority");
+    }
+}
+
 /// The expert's I/O: the wire's ports, the demonstration log, the demonstrator, the page.
 struct Shell<'w> {
     server: QueryServer<'w>,
@@ -290,6 +302,7 @@ impl<'w> Shell<'w> {
         let (tx, rx) = mpsc::channel();
         debug!(demos = job.covers(), "refitting the demonstration model");
         std::thread::spawn(move || {
+            lower_priority();
             // The receiver is gone only when the process is stopping.
             let _ = tx.send(job.run());
         });
