@@ -2,6 +2,7 @@
 
 mod chaos;
 mod cli;
+mod demo_model;
 mod faults;
 mod golden;
 mod gymnasium;
