@@ -12,7 +12,7 @@
 //! |------------------------------|----------------------------------------------------|
 //! | `alfd/<run>/join`            | queryable: a remote host asks for actor ids        |
 //! | `alfd/<run>/restart`         | queryable: a remote host restarts a crashed actor (a new incarnation) |
-//! | `alfd/<run>/up`              | remote hosts → hub: transitions, progress, queries |
+//! | `alfd/<run>/up/<join>`       | a remote host → hub: transitions, progress, queries, a remote expert's answers |
 //! | `alfd/<run>/down`            | hub → remote hosts: credits, weights, model, control, answers; to a remote expert: orders, queries, `demos.jsonl` |
 //! | `alfd/<run>/hub`             | liveliness: the hub                                |
 //! | `alfd/<run>/member/<join>`   | liveliness: a joined host (gone = its actors crashed) |
@@ -37,6 +37,8 @@ mod hub;
 mod inbox;
 mod link;
 mod mirror;
+#[doc(hidden)]
+pub mod peer_bytes;
 mod roster;
 mod tls;
 mod worker;

@@ -302,8 +302,13 @@ impl ExpertCore {
 
     fn take_refit_job(&mut self) -> RefitJob {
         self.out = Some(self.epoch);
-        // The prior demonstrations first, so that the grown factors keep their rows.
-        let set = [&self.prior[..], &self.demos[..]].concat();
+        // The prior demonstrations first, so that the grown factors keep their rows; none to
+        // copy when no model is kept.
+        let set = if self.choice == DemoModelChoice::None {
+            Vec::new()
+        } else {
+            [&self.prior[..], &self.demos[..]].concat()
+        };
         RefitJob::new(
             self.epoch,
             self.choice,
