@@ -230,7 +230,9 @@ fn start_page(
             active: false,
             budget_total: core.budget().total(),
             budget_left: core.budget().remaining(),
-            demos: core.budget().used(),
+            // The demonstrations in this model (with refits in the background, possibly fewer
+            // than recorded): the actors start shaping at `shaping.min_demos` of them.
+            demos: core.model_run_demos(),
             waiting: 0,
             query: None,
             answered: 0,
@@ -569,7 +571,9 @@ fn publish_model(
         DemoModelHeader {
             version: (u64::from(m.generation()) << 32) | core.model_version(),
             last_demo_step: core.last_demo_step(),
-            demos: core.budget().used(),
+            // The demonstrations in this model (with refits in the background, possibly fewer
+            // than recorded): the actors start shaping at `shaping.min_demos` of them.
+            demos: core.model_run_demos(),
             budget_total: core.budget().total(),
             budget_left: core.budget().remaining(),
             expert: u32::from(m.generation()),

@@ -477,6 +477,7 @@ pub struct DemoModelHeader {
     pub version: u64,
     /// Global step of the last demonstration (shaping stops at a multiple of it).
     pub last_demo_step: u64,
+    /// The run's demonstrations the model was fitted on (not the prior ones).
     pub demos: u32,
     pub budget_total: u32,
     pub budget_left: u32,

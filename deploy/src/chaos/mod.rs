@@ -101,6 +101,9 @@ struct Chaos<'a> {
     swap: Option<Child>,
     events: Vec<Event>,
     run_ids: Vec<String>,
+    /// iceoryx2 files of dead processes of the run's launches removed at the end, as `alfd clean`
+    /// would (a process of a killed launch can die after the last launch's own cleaning).
+    swept: usize,
     launches: u32,
     /// The joined host, if the run has one.
     joined: Option<Joined>,
@@ -145,6 +148,7 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
         swap: None,
         events: Vec::new(),
         run_ids: Vec::new(),
+        swept: 0,
         launches: 1,
         joined: listen.map(|port| Joined {
             connect: format!("tcp/127.0.0.1:{port}"),
@@ -512,6 +516,28 @@ impl Chaos<'_> {
             let _ = child.wait();
         }
         self.clean_hosts();
+        self.sweep_launches();
+    }
+
+    /// Waits (up to 30 s) for the processes of the run's launches to be gone, then removes what
+    /// dead ones left, as `alfd clean` would, counting the files: "nothing left" then checks
+    /// that no process stayed and nothing stayed that `alfd clean` could not remove.
+    fn sweep_launches(&mut self) {
+        let deadline = Instant::now() + Duration::from_secs(30);
+        for id in self.run_ids.iter().filter(|id| id.starts_with('r')) {
+            loop {
+                match alfd_wire::clean_run(id) {
+                    Ok(alfd_wire::Cleaned::Live(_)) if Instant::now() < deadline => {
+                        std::thread::sleep(Duration::from_millis(200));
+                    }
+                    Ok(alfd_wire::Cleaned::Removed(files)) => {
+                        self.swept += files.len();
+                        break;
+                    }
+                    _ => break,
+                }
+            }
+        }
     }
 
     /// Removes what the killed hosts left in iceoryx2's directories, as `alfd clean` would,

@@ -32,7 +32,7 @@ pub(super) fn report(chaos: &Chaos<'_>, ended: Result<(), String>) -> anyhow::Re
             .unwrap_or_else(|| "the launcher finished the run".to_owned()),
     }];
     verdicts.extend(check::check(dir, &config_toml, want));
-    verdicts.push(nothing_left(&chaos.run_ids));
+    verdicts.push(nothing_left(&chaos.run_ids, chaos.swept));
     let mut counts = BTreeMap::<&str, usize>::new();
     for e in &chaos.events {
         *counts.entry(e.fault.kind()).or_default() += 1;
@@ -198,7 +198,7 @@ fn joined_host(host: &Value) -> String {
 }
 
 /// No process of any of the run's launches is alive, and none left iceoryx2 files.
-pub(super) fn nothing_left(run_ids: &[String]) -> Verdict {
+pub(super) fn nothing_left(run_ids: &[String], swept: usize) -> Verdict {
     let mut left = Vec::new();
     for id in run_ids {
         let alive = alfd_wire::alive_nodes(id).unwrap_or_default();
@@ -216,7 +216,8 @@ pub(super) fn nothing_left(run_ids: &[String]) -> Verdict {
         ok: left.is_empty(),
         detail: if left.is_empty() {
             format!(
-                "{} runs' processes gone (launches and joined hosts' copies), their files removed",
+                "{} runs' processes gone (launches and joined hosts' copies), their files removed \
+                 ({swept} of dead processes swept at the end, as `alfd clean` would)",
                 run_ids.len()
             )
         } else {

@@ -366,6 +366,15 @@ impl ExpertCore {
         self.demos.last().map_or(0, |d| d.step)
     }
 
+    /// The run's demonstrations (not the prior ones) the current model was fitted on: every one
+    /// recorded, unless a deferred refit is still owed. With no model kept, every one recorded.
+    pub fn model_run_demos(&self) -> u32 {
+        if self.choice == DemoModelChoice::None {
+            return self.budget.used();
+        }
+        self.fitted.saturating_sub(self.prior.len()) as u32
+    }
+
     /// The demonstrations the model is fitted on: the prior ones and the run's.
     pub fn model_demos(&self) -> usize {
         self.prior.len() + self.demos.len()
@@ -420,9 +429,14 @@ mod tests {
                 record(&mut inline, i);
                 record(&mut deferred, i);
             }
+            assert_eq!(deferred.model_run_demos(), 0);
             deferred.finish_refit(job.run()).unwrap();
             assert_eq!(deferred.model_version(), 1);
             assert!(deferred.stale());
+            assert_eq!(
+                (deferred.model_run_demos(), inline.model_run_demos()),
+                (4, 6)
+            );
             let job = deferred.refit_job().expect("the two newcomers are owed");
             assert_eq!(job.covers(), 6);
             deferred.finish_refit(job.run()).unwrap();
