@@ -231,6 +231,11 @@ fn tile_update(acc: &mut [f64; TILE_ROWS * TILE_COLS], li: &[f64], lj: &[f64]) {
     if x86::available() {
         return x86::tile_update(acc, li, lj, w);
     }
+    tile_update_portable(acc, li, lj, w);
+}
+
+/// [`tile_update`] without AVX2: the same operations in the same order.
+fn tile_update_portable(acc: &mut [f64; TILE_ROWS * TILE_COLS], li: &[f64], lj: &[f64], w: usize) {
     for p in 0..w {
         let li = &li[p * TILE_ROWS..(p + 1) * TILE_ROWS];
         for (c, acc_c) in acc.chunks_exact_mut(TILE_ROWS).enumerate() {
@@ -391,6 +396,26 @@ mod tests {
             for i in j..n {
                 assert!((one[i + j * n] - l[(i, j)]).abs() < 1e-12, "L[{i}, {j}]");
             }
+        }
+    }
+
+    #[test]
+    fn the_avx2_register_tile_gives_the_portable_tile_s_bits() {
+        #[cfg(target_arch = "x86_64")]
+        if x86::available() {
+            let w = 37;
+            let v = |k: usize| ((k * 7919 % 1013) as f64 - 500.0) / 97.0;
+            let li: Vec<f64> = (0..w * TILE_ROWS).map(v).collect();
+            let lj: Vec<f64> = (0..w * TILE_ROWS).map(|k| v(k + 3)).collect();
+            let start: [f64; TILE_ROWS * TILE_COLS] = std::array::from_fn(|k| v(k + 11));
+            let (mut wide, mut portable) = (start, start);
+            x86::tile_update(&mut wide, &li, &lj[4..], w);
+            tile_update_portable(&mut portable, &li, &lj[4..], w);
+            assert!(wide
+                .iter()
+                .zip(&portable)
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+            assert_ne!(wide, start);
         }
     }
 
