@@ -548,13 +548,16 @@ impl<'a, 'w> Launcher<'a, 'w> {
     }
 
     fn record_episode(&mut self, p: &Progress) -> Result<()> {
-        if self.done()
-            || self
-                .plan
-                .cfg
-                .step_limit()
-                .is_some_and(|n| p.episode.0.total_steps > n)
-        {
+        let cfg = &self.plan.cfg;
+        let episodes_done = cfg
+            .episode_limit()
+            .is_some_and(|n| self.recorded >= u64::from(n));
+        // By its own global step, not by when its message comes: the learner's count that ends
+        // a step-limited run can arrive before the last episodes within the limit.
+        let past_steps = cfg
+            .step_limit()
+            .is_some_and(|n| p.episode.0.total_steps > n);
+        if episodes_done || past_steps {
             // Past the run's end: not recorded (an episode running at the step limit is not).
             return Ok(());
         }
