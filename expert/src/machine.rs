@@ -112,11 +112,6 @@ pub struct ExpertMachine<Q> {
     next_shown: u64,
     counts: Counts,
     last_status: Option<Duration>,
-    /// Whether refits run off the query path.
-    background: bool,
-    /// Whether a refit is out (taken by [`ExpertMachine::take_refit_job`], not yet given back to
-    /// [`ExpertMachine::refitted`]).
-    refitting: bool,
 }
 
 impl<Q> ExpertMachine<Q> {
@@ -133,8 +128,6 @@ impl<Q> ExpertMachine<Q> {
             next_shown: 0,
             counts: Counts::default(),
             last_status: None,
-            background: false,
-            refitting: false,
         }
     }
 
@@ -142,22 +135,18 @@ impl<Q> ExpertMachine<Q> {
     /// and answered, and the model refitted with it is published when its refit, run by the
     /// shell ([`Action::StartRefit`]), ends.
     pub fn refit_in_background(&mut self) {
-        self.background = true;
         self.core.defer_refits();
     }
 
     /// The refit [`Action::StartRefit`] asked for (`None` if nothing is owed any more or one is
     /// out already).
     pub fn take_refit_job(&mut self) -> Option<RefitJob> {
-        let job = self.core.refit_job();
-        self.refitting |= job.is_some();
-        job
+        self.core.refit_job()
     }
 
     /// A refit ended: its model is published (while this expert answers), and the next refit
     /// started if demonstrations arrived meanwhile.
     pub fn refitted(&mut self, r: Refitted) -> Vec<Action<Q>> {
-        self.refitting = false;
         if let Err(e) = self.core.finish_refit(r) {
             tracing::warn!(error = %e, "demonstration model not refitted");
         }
@@ -169,9 +158,10 @@ impl<Q> ExpertMachine<Q> {
         out
     }
 
-    /// [`Action::StartRefit`] if a refit is owed and none is out.
+    /// [`Action::StartRefit`] if refits run in the background, one is owed and none is out.
     fn next_refit(&self) -> Option<Action<Q>> {
-        (self.background && !self.refitting && self.core.stale()).then_some(Action::StartRefit)
+        let c = &self.core;
+        (c.refits_deferred() && !c.refit_out() && c.stale()).then_some(Action::StartRefit)
     }
 
     pub fn generation(&self) -> u16 {
@@ -326,7 +316,7 @@ impl<Q> ExpertMachine<Q> {
                     actor,
                     response,
                 };
-                let mut out = if self.background {
+                let mut out = if self.core.refits_deferred() {
                     let mut out = vec![Action::Record(record), reply];
                     out.extend(self.next_refit());
                     out

@@ -289,6 +289,16 @@ impl ExpertCore {
         self.deferred = true;
     }
 
+    /// Whether [`ExpertCore::record`] leaves the refit to the caller.
+    pub fn refits_deferred(&self) -> bool {
+        self.deferred
+    }
+
+    /// Whether a refit is out ([`ExpertCore::refit_job`] taken, not yet given back).
+    pub fn refit_out(&self) -> bool {
+        self.out.is_some()
+    }
+
     /// Whether the model is older than the demonstrations (a deferred refit is owed).
     pub fn stale(&self) -> bool {
         self.choice != DemoModelChoice::None && self.fitted != self.model_demos()
