@@ -122,18 +122,35 @@ fn panel_chunk(c: &mut [f64], diag: &[f64], w: usize) {
 }
 
 /// `x = (x - cols[0] lj[0] - cols[1] lj[1] - ...) / d`, element by element, the products
-/// subtracted in order of the columns.
+/// subtracted in order of the columns: [`SUBTRACT_ROWS`] elements at a time held in registers
+/// over every column, the last few one by one.
 #[inline(always)]
 fn subtract_then_divide(x: &mut [f64], cols: &[&[f64]], lj: &[f64], d: f64) {
-    for (col, &c) in cols.iter().zip(lj) {
-        for (v, l) in x.iter_mut().zip(col.iter()) {
-            *v -= l * c;
+    let full = x.len() - x.len() % SUBTRACT_ROWS;
+    for i in (0..full).step_by(SUBTRACT_ROWS) {
+        let v: &mut [f64; SUBTRACT_ROWS] = (&mut x[i..i + SUBTRACT_ROWS]).try_into().unwrap();
+        let mut acc = *v;
+        for (col, &c) in cols.iter().zip(lj) {
+            let col: &[f64; SUBTRACT_ROWS] = col[i..i + SUBTRACT_ROWS].try_into().unwrap();
+            for (a, l) in acc.iter_mut().zip(col) {
+                *a -= l * c;
+            }
+        }
+        for (v, a) in v.iter_mut().zip(acc) {
+            *v = a / d;
         }
     }
-    for v in x.iter_mut() {
-        *v /= d;
+    for (i, v) in x.iter_mut().enumerate().skip(full) {
+        let mut a = *v;
+        for (col, &c) in cols.iter().zip(lj) {
+            a -= col[i] * c;
+        }
+        *v = a / d;
     }
 }
+
+/// Rows held in registers by [`subtract_then_divide`] (four AVX2 registers of f64).
+const SUBTRACT_ROWS: usize = 16;
 
 /// The columns after the block minus the block's contribution, `a[i, j] -= Σ_p L[i, p] L[j, p]`
 /// for `i ≥ j ≥ end`, p from `kb` to `end` in order. The panel's rows from `end` on are packed

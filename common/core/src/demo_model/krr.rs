@@ -13,7 +13,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use super::lanes::{share, Lanes, Serial};
-use super::{check_demo, rbf, validate, DemoModelError, MAX_DEMOS};
+use super::{check_demo, rbf, rbf_row, validate, DemoModelError, MAX_DEMOS};
 
 /// The ridge penalty added to the kernel's diagonal.
 pub const ALPHA: f64 = 0.1;
@@ -88,15 +88,20 @@ impl KernelRidge {
             s.len(),
             self.state_dim
         );
+        const CHUNK: usize = 64;
         let mut f = vec![0.0; self.num_actions];
-        for (x, coef) in self
+        let mut k = [0.0; CHUNK];
+        for (xs, coefs) in self
             .states
-            .chunks_exact(self.state_dim)
-            .zip(self.dual_coef.chunks_exact(self.num_actions))
+            .chunks(CHUNK * self.state_dim)
+            .zip(self.dual_coef.chunks(CHUNK * self.num_actions))
         {
-            let k = rbf(s, x);
-            for (fa, c) in f.iter_mut().zip(coef) {
-                *fa += k * c;
+            let k = &mut k[..xs.len() / self.state_dim];
+            rbf_row(s, xs, k);
+            for (kx, coef) in k.iter().zip(coefs.chunks_exact(self.num_actions)) {
+                for (fa, c) in f.iter_mut().zip(coef) {
+                    *fa += kx * c;
+                }
             }
         }
         f
@@ -122,9 +127,10 @@ fn small_factor(flat: &[f64], state_dim: usize) -> Result<Vec<f64>, DemoModelErr
     let n = flat.len() / state_dim;
     let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
     let mut k = DMatrix::<f64>::zeros(n, n);
+    let mut kx = vec![0.0; n];
     for i in 0..n {
-        for j in 0..=i {
-            let v = rbf(row(i), row(j));
+        rbf_row(row(i), &flat[..(i + 1) * state_dim], &mut kx[..=i]);
+        for (j, &v) in kx[..=i].iter().enumerate() {
             k[(i, j)] = v;
             k[(j, i)] = v;
         }
@@ -151,10 +157,7 @@ fn large_factor(
     let mut columns: Vec<(usize, &mut [f64])> = k.chunks_mut(n).enumerate().collect();
     share(&mut columns, lanes, |lane| {
         for (j, col) in lane.iter_mut() {
-            let xj = row(*j);
-            for (i, v) in col.iter_mut().enumerate().skip(*j) {
-                *v = rbf(row(i), xj);
-            }
+            rbf_row(row(*j), &flat[*j * state_dim..], &mut col[*j..]);
             col[*j] += ALPHA;
         }
     });
@@ -274,16 +277,17 @@ impl KrrFactor {
         if n + 1 > MAX_DEMOS {
             return Err(DemoModelError::TooManyDemos(n + 1));
         }
+        let mut kx = vec![0.0; n];
+        rbf_row(state, &self.states, &mut kx);
         let mut z = Vec::with_capacity(n + 1);
         let mut j = 0;
         while j + 4 <= n {
-            self.forward_four(state, j, &mut z);
+            self.forward_four(&kx[j..j + 4], j, &mut z);
             j += 4;
         }
         for j in j..n {
             let lj = self.row(j);
-            let x = &self.states[j * self.state_dim..(j + 1) * self.state_dim];
-            let mut s = rbf(state, x);
+            let mut s = kx[j];
             for (l, zp) in lj[..j].iter().zip(&z) {
                 s -= l * zp;
             }
@@ -305,13 +309,11 @@ impl KrrFactor {
     }
 
     /// Rows `j..j + 4` of the forward substitution for a new row of L (`z` holds its first `j`
-    /// values): four chains of subtractions at once, so that one does not wait on the last, each
+    /// values; `kx` the kernel between the new state and states `j..j + 4`): four chains of subtractions at once, so that one does not wait on the last, each
     /// taking its products in order of the column, as one row alone would.
-    fn forward_four(&self, state: &[f64], j: usize, z: &mut Vec<f64>) {
-        let d = self.state_dim;
+    fn forward_four(&self, kx: &[f64], j: usize, z: &mut Vec<f64>) {
         let rows: [&[f64]; 4] = std::array::from_fn(|t| self.row(j + t));
-        let mut acc: [f64; 4] =
-            std::array::from_fn(|t| rbf(state, &self.states[(j + t) * d..(j + t + 1) * d]));
+        let mut acc: [f64; 4] = std::array::from_fn(|t| kx[t]);
         let [r0, r1, r2, r3] = rows.map(|r| &r[..j]);
         for ((((&zk, l0), l1), l2), l3) in z[..j].iter().zip(r0).zip(r1).zip(r2).zip(r3) {
             acc[0] -= l0 * zk;

@@ -249,6 +249,24 @@ pub(crate) fn rbf(x: &[f64], y: &[f64]) -> f64 {
     crate::math::exp(-GAMMA * d2)
 }
 
+/// `out[t] = rbf(x, y_t)` for the rows `y_t` of `flat` (row-major, `x.len()` values each):
+/// the bits of [`rbf`] (whose arguments commute to the bit), the exponentials taken four at a
+/// time ([`crate::math::exp_in_place`]).
+pub(crate) fn rbf_row(x: &[f64], flat: &[f64], out: &mut [f64]) {
+    let d = x.len();
+    assert_eq!(
+        flat.len(),
+        out.len() * d,
+        "rows and outputs differ in number"
+    );
+    for (t, o) in out.iter_mut().enumerate() {
+        let y = &flat[t * d..(t + 1) * d];
+        let d2: f64 = x.iter().zip(y).map(|(a, b)| (a - b) * (a - b)).sum();
+        *o = -GAMMA * d2;
+    }
+    crate::math::exp_in_place(out);
+}
+
 fn check_row(row: usize, s: &[f64], dim: usize) -> Result<(), DemoModelError> {
     if s.len() != dim {
         return Err(DemoModelError::DimensionMismatch {

@@ -14,7 +14,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use super::krr::{KernelRidge, ALPHA};
-use super::{check_demo, rbf, validate, DemoModelError};
+use super::{check_demo, rbf, rbf_row, validate, DemoModelError};
 
 /// The landmarks of the approximate model: its first demonstrations.
 pub const LANDMARKS: usize = 512;
@@ -150,11 +150,8 @@ impl NystromFactor {
         let d = self.state_dim;
         let m = self.num_landmarks();
         // The kernel between the landmarks and the new state (and itself, if it becomes one).
-        let mut k: Vec<f64> = self
-            .landmarks
-            .chunks_exact(d)
-            .map(|x| rbf(x, state))
-            .collect();
+        let mut k = vec![0.0; m];
+        rbf_row(state, &self.landmarks[..m * d], &mut k);
         if m < LANDMARKS {
             // Every demonstration so far is a landmark: the new landmark's entries of the sum
             // are over them.

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use super::lanes::{share, Lanes, Serial};
 use super::smo::KernelRows;
-use super::{rbf, smo, validate, DemoModelError};
+use super::{rbf, rbf_row, smo, validate, DemoModelError};
 use crate::{math, rng};
 
 /// The SVM's penalty on margin violations.
@@ -198,10 +198,9 @@ impl<'a> Gram<'a> {
 impl KernelRows for Gram<'_> {
     fn row(&self, r: usize) -> &[f64] {
         self.rows[r].get_or_init(|| {
-            let x = self.state(r);
-            (0..self.rows.len())
-                .map(|j| rbf(x, self.state(j)))
-                .collect()
+            let mut row = vec![0.0; self.rows.len()].into_boxed_slice();
+            rbf_row(self.state(r), self.flat, &mut row);
+            row
         })
     }
 
@@ -271,13 +270,9 @@ impl Svc {
     }
 
     fn decision_value(&self, s: &[f64]) -> f64 {
-        let state_dim = s.len();
-        let sum: f64 = self
-            .support
-            .chunks_exact(state_dim)
-            .zip(&self.coef)
-            .map(|(x, c)| c * rbf(s, x))
-            .sum();
+        let mut k = vec![0.0; self.coef.len()];
+        rbf_row(s, &self.support, &mut k);
+        let sum: f64 = k.iter().zip(&self.coef).map(|(kx, c)| c * kx).sum();
         sum - self.rho
     }
 }
