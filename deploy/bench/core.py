@@ -37,6 +37,13 @@ SVM_SIZES = [500, 1000, 3000, 10000]
 # KRR grown by one from B: B + GROWN demonstrations at most (the exact model's limit, 10,000).
 GROW_SIZES = [500, 1000, 2000, 3000, 9990]
 QUERIES = 100
+# The train steps timed: name -> (arguments after N, steps per run, hidden, heads, batch, double).
+TRAIN_SHAPES = {
+    "hidden 64": (["64"], 20000, 64, 2, 64, False),
+    "hidden 128": (["128"], 10000, 128, 2, 64, False),
+    "preset": (["preset"], 2000, 128, 4, 128, True),
+}
+PEAK_ROUNDS = 100_000_000
 
 
 def machine():
@@ -49,6 +56,24 @@ def cpu_seconds(cmd):
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), out
+
+
+def step_flops(hidden, heads, batch, double, obs=4, actions=2):
+    """Flops of the products of one train step (2 per multiply-add): the forward passes (online
+    on the states, target on the next states, and online on the next states for double DQN)
+    and the backward pass (every weight's gradient, the input gradients of the two upper
+    layers; the first layer's input gradient is not computed)."""
+    out = heads * actions
+    forward = obs * hidden + hidden * hidden + hidden * out
+    backward = forward + hidden * hidden + hidden * out
+    return 2 * batch * ((3 if double else 2) * forward + backward)
+
+
+def peak_flops():
+    """One core's f32 FMA peak now: `train_steps peak` (12 independent chains of 8-lane fused
+    multiply-adds, 192 flops a round) in flops per second of CPU time."""
+    cpu, _ = cpu_seconds([TRAIN_STEPS, "peak", str(PEAK_ROUNDS)])
+    return PEAK_ROUNDS * 192 / cpu
 
 
 def states(n, rng):
@@ -122,17 +147,18 @@ def main():
         demos[n] = os.path.join(tmp, f"demos-{n}.jsonl")
         write_jsonl(demos[n], [{"state": s, "action": a} for s, a in zip(xs, acts)])
 
-    train = {64: [], 128: []}
-    steps = {64: 20000, 128: 10000}
+    train = {name: [] for name in TRAIN_SHAPES}
+    peak = []
     krr = {n: {"ours": [], "ours_1": [], "sklearn": [], "max_diff": 0.0} for n in SIZES}
     svm = {n: {"ours": [], "ours_1": [], "sklearn": []} for n in SVM_SIZES}
     grow = {n: {"grow": [], "push": [], "model": [], "fit": [], "same_bits": True}
             for n in GROW_SIZES}
     for r in range(args.rounds):
         print(f"core.py: round {r + 1} of {args.rounds}", flush=True)
-        for hidden in train:
-            cpu, _ = cpu_seconds([TRAIN_STEPS, str(steps[hidden]), str(hidden)])
-            train[hidden].append(cpu / steps[hidden] * 1e6)
+        peak.append(peak_flops())
+        for name, (shape, steps, *_) in TRAIN_SHAPES.items():
+            cpu, _ = cpu_seconds([TRAIN_STEPS, str(steps)] + shape)
+            train[name].append(cpu / steps * 1e6)
         for n in SIZES:
             # Alternate which goes first, so neither always meets a warmer cache.
             pair = [("ours", None), ("sklearn", None)]
@@ -169,7 +195,9 @@ def main():
     m["load_average_before"] = round(load_before, 2)
     m["load_average_after"] = round(load_after, 2)
     m["rounds"] = args.rounds
-    results = {"machine": m, "train_step_us": train, "train_steps": steps, "krr_s": krr, "svm_s": svm,
+    flops = {name: step_flops(*shape[2:]) for name, shape in TRAIN_SHAPES.items()}
+    results = {"machine": m, "train_step_us": train, "train_step_flops": flops,
+               "peak_flops": peak, "krr_s": krr, "svm_s": svm,
                "krr_grow_s": grow, "nystrom": nystrom}
     with open(os.path.join(args.out, "results.json"), "w") as f:
         json.dump(results, f, indent=1, sort_keys=True)
@@ -190,15 +218,27 @@ def main():
         "",
         "## Train step",
         "",
-        "One `nn::train_step` (online and target forward, Huber TD loss, backward, Adam; K = 2 "
-        "heads, A = 2 actions, batch 64): the CPU time of `train_steps N HIDDEN` (the example "
-        "`common/core/examples/train_steps.rs`) divided by N.",
+        "One train step of the 4-HIDDEN-HIDDEN-K·A network: the CPU time of `train_steps N "
+        "HIDDEN` (the example `common/core/examples/train_steps.rs`: online and target forward, "
+        "Huber TD loss, backward, Adam; K = 2 heads, A = 2 actions, batch 64) divided by N, and "
+        "of `train_steps N preset`, the recommended CartPole preset's step (hidden 128, K = 4, "
+        "batch 128, double DQN: one more forward pass, the large-margin loss, clipped gradients). "
+        "\"Flops\" counts the products' multiply-adds twice (the forward passes, every weight's "
+        "gradient, the input gradients of the two upper layers); \"of peak\" divides the flops "
+        "per second of CPU time by one core's f32 FMA peak measured in the same rounds, "
+        f"{span([p / 1e9 for p in peak], lambda x: f'{x:.1f}')} GFLOP/s (`train_steps peak`: "
+        "independent chains of 8-lane fused multiply-adds, at the clock the core runs then).",
         "",
-        "| hidden | CPU time per step | steps per run |",
-        "|---:|---:|---:|",
+        "| step | CPU time per step | flops per step | GFLOP/s | of peak | steps per run |",
+        "|---|---:|---:|---:|---:|---:|",
     ]
-    for hidden in train:
-        lines.append(f"| {hidden} | {span(train[hidden], us)} | {steps[hidden]:,} |")
+    peak_median = statistics.median(peak)
+    for name, (_, steps, *_) in TRAIN_SHAPES.items():
+        step_us = statistics.median(train[name])
+        rate = flops[name] / (step_us * 1e-6)
+        lines.append(
+            f"| {name} | {span(train[name], us)} | {flops[name] / 1e6:.2f} M | "
+            f"{rate / 1e9:.1f} | {100 * rate / peak_median:.1f}% | {steps:,} |")
     lines += [
         "",
         "## Demonstration model",
