@@ -370,9 +370,11 @@ impl KrrFactor {
 
     /// `Lᵀ X = W` for the dual coefficients X (row-major `n × actions`), W = L⁻¹ Y being kept
     /// ([`KrrFactor::forward_row`]): back substitution from the last row up, each action's
-    /// column apart so that a row of L updates it in one pass over contiguous values, compiled
-    /// for AVX2 where the CPU has it (`nn::wide`: wider registers, the same operations). Every
-    /// coefficient takes the same products in the same order as a row-major back substitution.
+    /// column apart, compiled for AVX2 where the CPU has it (`nn::wide`: wider registers, the
+    /// same operations). Rows are taken [`BACK_ROWS`] at a time: their own triangle first, then
+    /// every value above it minus the block's products held in a register, so that L is read
+    /// once per column. Every coefficient takes the same products in the same order as a
+    /// row-major back substitution.
     fn back_solve(&self) -> Vec<f64> {
         let (n, m) = (self.len(), self.num_actions);
         let mut cols = vec![0.0; n * m];
@@ -382,15 +384,25 @@ impl KrrFactor {
             }
         }
         crate::nn::wide(|| {
-            for i in (0..n).rev() {
-                let row = self.row(i);
+            let mut end = n;
+            while end > 0 {
+                let top = end.saturating_sub(BACK_ROWS);
                 for col in cols.chunks_exact_mut(n) {
-                    let xi = col[i] / row[i];
-                    col[i] = xi;
-                    for (v, l) in col[..i].iter_mut().zip(&row[..i]) {
-                        *v -= l * xi;
+                    self.back_triangle(col, top, end);
+                }
+                if top > 0 {
+                    // The rows above the block, a segment at a time for every column, so that
+                    // the block's part of L is read from memory once.
+                    let rows: [&[f64]; BACK_ROWS] = std::array::from_fn(|r| self.row(end - 1 - r));
+                    for j in (0..top).step_by(BACK_SEGMENT) {
+                        let seg = j..(j + BACK_SEGMENT).min(top);
+                        for col in cols.chunks_exact_mut(n) {
+                            let x = std::array::from_fn(|r| col[end - 1 - r]);
+                            back_segment(&mut col[seg.clone()], rows.map(|r| &r[seg.clone()]), x);
+                        }
                     }
                 }
+                end = top;
             }
         });
         let mut x = vec![0.0; n * m];
@@ -401,7 +413,44 @@ impl KrrFactor {
         }
         x
     }
+
+    /// Rows `top..end` of the back substitution of one column among themselves: each row's
+    /// coefficient, and its products taken off the rows of the block above it, the last row
+    /// first.
+    #[inline(always)]
+    fn back_triangle(&self, col: &mut [f64], top: usize, end: usize) {
+        for i in (top..end).rev() {
+            let row = self.row(i);
+            let xi = col[i] / row[i];
+            col[i] = xi;
+            for (v, l) in col[top..i].iter_mut().zip(&row[top..i]) {
+                *v -= l * xi;
+            }
+        }
+    }
 }
+
+/// Values of a column above a block of rows minus the block's products, the last row's first
+/// (`rows[0]`, `x[0]`), held in a register between them.
+#[inline(always)]
+fn back_segment(col: &mut [f64], rows: [&[f64]; BACK_ROWS], x: [f64; BACK_ROWS]) {
+    let [r0, r1, r2, r3] = rows;
+    for ((((v, l0), l1), l2), l3) in col.iter_mut().zip(r0).zip(r1).zip(r2).zip(r3) {
+        let mut c = *v;
+        c -= l0 * x[0];
+        c -= l1 * x[1];
+        c -= l2 * x[2];
+        c -= l3 * x[3];
+        *v = c;
+    }
+}
+
+/// Values per segment of [`back_segment`]: a block's rows of L over it stay in the L1 cache
+/// for every action's column.
+const BACK_SEGMENT: usize = 512;
+
+/// Rows of L per block of [`KrrFactor`]'s back substitution.
+const BACK_ROWS: usize = 4;
 
 /// p(a|s) from the regression outputs, as described at [`KernelRidge::probs`].
 pub fn probs_from_outputs(f: &[f64]) -> Vec<f64> {

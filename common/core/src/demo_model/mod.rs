@@ -435,6 +435,24 @@ mod tests {
     }
 
     #[test]
+    fn a_row_of_the_kernel_has_the_bits_of_rbf_either_way_round() {
+        let mut r = crate::rng::seeded(3);
+        let flat: Vec<f64> = (0..4 * 203)
+            .map(|i| (rand::Rng::random::<f64>(&mut r) - 0.5) * [0.1, 6.0, 40.0][i % 3])
+            .collect();
+        let x = [0.3, -1.7, 25.0, 0.01];
+        let mut row = vec![0.0; 203];
+        rbf_row(&x, &flat, &mut row);
+        for (t, (y, k)) in flat.chunks_exact(4).zip(&row).enumerate() {
+            assert_eq!(k.to_bits(), rbf(&x, y).to_bits(), "row {t}");
+            assert_eq!(k.to_bits(), rbf(y, &x).to_bits(), "row {t}, swapped");
+        }
+        // Far states give zeros (the scalar path of the exponential) and the same bits.
+        rbf_row(&[1e3; 4], &flat, &mut row);
+        assert!(row.iter().all(|&k| k == 0.0));
+    }
+
+    #[test]
     fn rbf_matches_its_definition() {
         assert_eq!(rbf(&[1.0, 2.0], &[1.0, 2.0]), 1.0);
         let expected = (-0.1f64 * (1.0 + 4.0)).exp();
