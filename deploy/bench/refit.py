@@ -84,7 +84,8 @@ def write(results, out):
         f"`alfd run` on `{CONFIG}` with one actor, B = {BUDGET} asked uniformly (probability "
         f"0.05 a step), {EPISODES} episodes, the exact KRR model; with the dataset, "
         f"`demos.prior` holds {PRIOR_STEPS:,} steps of the preset's expert, so every refit grows "
-        "a factor of over 9,000 rows (about 45 ms, the core benchmarks). The wait is the "
+        "a factor of over 9,000 rows (its cost: \"One more demonstration\" of the core "
+        "benchmarks). The wait is the "
         "actor's, from asking to the answer in hand (`answer_wait_*` in `actor-0.log`), over "
         "every answered query of a run; \"p99 / no refits\" divides the median p99 by the "
         "first row's, whose expert keeps no model (`expert.model = \"none\"`).",

@@ -67,7 +67,6 @@ pub fn cos(x: f64) -> f64 {
 #[allow(unsafe_code)]
 mod x86 {
     use std::arch::x86_64::*;
-    use std::sync::OnceLock;
 
     /// musl's constants (`src/math/exp.c`), by their bits.
     const LN2HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
@@ -82,9 +81,10 @@ mod x86 {
     /// `y 2^k` are normal numbers.
     const VECTOR_BELOW: f64 = 704.0;
 
+    /// The CPU has AVX2 and the portable kernels were not asked for (as for the products:
+    /// `ALFD_PORTABLE_KERNELS=1` runs every value through [`super::exp`]).
     pub(super) fn available() -> bool {
-        static DETECTED: OnceLock<bool> = OnceLock::new();
-        *DETECTED.get_or_init(|| std::arch::is_x86_feature_detected!("avx2"))
+        crate::nn::wide_available()
     }
 
     pub(super) fn exp_in_place(xs: &mut [f64]) {
