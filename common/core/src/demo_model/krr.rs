@@ -309,8 +309,9 @@ impl KrrFactor {
     }
 
     /// Rows `j..j + 4` of the forward substitution for a new row of L (`z` holds its first `j`
-    /// values; `kx` the kernel between the new state and states `j..j + 4`): four chains of subtractions at once, so that one does not wait on the last, each
-    /// taking its products in order of the column, as one row alone would.
+    /// values; `kx` the kernel between the new state and states `j..j + 4`): four chains of
+    /// subtractions at once, so that one does not wait on the last, each taking its products in
+    /// order of the column, as one row alone would.
     fn forward_four(&self, kx: &[f64], j: usize, z: &mut Vec<f64>) {
         let rows: [&[f64]; 4] = std::array::from_fn(|t| self.row(j + t));
         let mut acc: [f64; 4] = std::array::from_fn(|t| kx[t]);
@@ -372,8 +373,8 @@ impl KrrFactor {
     /// ([`KrrFactor::forward_row`]): back substitution from the last row up, each action's
     /// column apart, compiled for AVX2 where the CPU has it (`nn::wide`: wider registers, the
     /// same operations). Rows are taken [`BACK_ROWS`] at a time: their own triangle first, then
-    /// every value above it minus the block's products held in a register, so that L is read
-    /// once per column. Every coefficient takes the same products in the same order as a
+    /// every value above it minus the block's products held in a register, a segment at a time
+    /// for every column, so that L is read from memory once. Every coefficient takes the same products in the same order as a
     /// row-major back substitution.
     fn back_solve(&self) -> Vec<f64> {
         let (n, m) = (self.len(), self.num_actions);
