@@ -194,9 +194,14 @@ impl ExpertCore {
     }
 
     /// Restores the demonstrations of an earlier expert process (its `demos.jsonl`): the budget
-    /// left and the model are those they imply.
+    /// left and the model are those they imply. Demonstrations the model already covers (no
+    /// run's demonstrations yet after [`ExpertCore::set_prior`], say) keep it as it is: a refit
+    /// would give the same model.
     pub fn restore(&mut self, records: Vec<DemoRecord>) -> Result<(), DemoModelError> {
         self.budget = Budget::with_used(self.budget.total(), records.len() as u32);
+        if records == self.demos && self.out.is_none() && !self.stale() {
+            return Ok(());
+        }
         self.demos = records;
         self.replaced();
         self.refit()
@@ -501,6 +506,13 @@ mod tests {
             core.set_prior(prior.clone()).unwrap();
             assert!(core.model().is_some() && core.demos().is_empty());
             assert_eq!(core.budget().used(), 0);
+            // Becoming active with no run's demonstrations keeps the prior's model, unrefitted.
+            let (model, version) = (core.model().cloned(), core.model_version());
+            core.restore(Vec::new()).unwrap();
+            assert_eq!(
+                (core.model().cloned(), core.model_version()),
+                (model, version)
+            );
             for i in 6..9 {
                 let d = record(i);
                 let given = core
