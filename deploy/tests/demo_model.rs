@@ -8,7 +8,8 @@ fn demo_model_gives_the_same_numbers_on_any_number_of_threads() {
     let _time = timed!();
     let dir = tmp("demo-model-threads");
     let (demos, query) = (dir.join("demos.jsonl"), dir.join("query.jsonl"));
-    // 1,200 demonstrations: KRR's factorisation shares its blocks' updates among the threads.
+    // 2,400 demonstrations: KRR's factorisation shares its blocks' updates among the threads
+    // from `LANES_FROM` (2,048) demonstrations on.
     let line = |i: usize| {
         let t = i as f64;
         let s = [
@@ -21,7 +22,7 @@ fn demo_model_gives_the_same_numbers_on_any_number_of_threads() {
             u8::from(s[2] + 0.05 * s[1] > 0.0)
         )
     };
-    std::fs::write(&demos, (0..1200).map(line).collect::<String>()).unwrap();
+    std::fs::write(&demos, (0..2400).map(line).collect::<String>()).unwrap();
     std::fs::write(
         &query,
         "{\"state\":[0.1,-0.5,0.02]}\n{\"state\":[1,2,-0.1]}\n",

@@ -131,6 +131,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         disk_full_until: None,
         refused: 0,
         refit: None,
+        wire_model: None,
     };
     let start = machine.start(shell.now());
     shell.apply(&mut machine, start)?;
@@ -284,8 +285,15 @@ struct Shell<'w> {
     /// Demonstrations a full disk refused since the last one recorded.
     refused: u32,
     /// Where the refit running on its own thread sends its result.
-    refit: Option<mpsc::Receiver<Refitted>>,
+    refit: Option<mpsc::Receiver<RefitResult>>,
+    /// The model a refit just gave the core, serialised for the wire on the refit's thread, with
+    /// the core's model version it became: taken by the next publication if it is still that
+    /// version, so that the query path copies bytes instead of serialising the model.
+    wire_model: Option<(u64, Vec<u8>)>,
 }
+
+/// A refit's result, with its model serialised for the wire.
+type RefitResult = (Refitted, Option<Vec<u8>>);
 
 /// How long the expert leaves queries unanswered after a full disk refused a demonstration, before
 /// it tries to record one again.
@@ -305,8 +313,12 @@ impl<'w> Shell<'w> {
         debug!(demos = job.covers(), "refitting the demonstration model");
         std::thread::spawn(move || {
             lower_priority();
+            let refitted = job.run();
+            // A model that cannot be serialised here is serialised again, and its error
+            // reported, when it is published.
+            let bytes = refitted.model().and_then(|m| postcard::to_stdvec(m).ok());
             // The receiver is gone only when the process is stopping.
-            let _ = tx.send(job.run());
+            let _ = tx.send((refitted, bytes));
         });
         self.refit = Some(rx);
     }
@@ -316,7 +328,7 @@ impl<'w> Shell<'w> {
         let Some(rx) = &self.refit else {
             return Ok(None);
         };
-        let refitted = match rx.try_recv() {
+        let (refitted, bytes) = match rx.try_recv() {
             Ok(r) => r,
             Err(mpsc::TryRecvError::Empty) => return Ok(None),
             Err(mpsc::TryRecvError::Disconnected) => {
@@ -326,7 +338,13 @@ impl<'w> Shell<'w> {
             }
         };
         self.refit = None;
+        let before = m.core().model_version();
         let next = m.refitted(refitted);
+        let version = m.core().model_version();
+        let publishes = next.iter().any(|a| matches!(a, Action::PublishModel));
+        if version != before && publishes {
+            self.wire_model = bytes.map(|b| (version, b));
+        }
         self.apply(m, next)
     }
 
@@ -437,7 +455,10 @@ impl<'w> Shell<'w> {
                         return self.apply(m, vec![Action::LoadDemos]);
                     }
                 }
-                Action::PublishModel => publish_model(&mut self.model_tx, m)?,
+                Action::PublishModel => {
+                    let ready = self.wire_model.take();
+                    publish_model(&mut self.model_tx, m, ready)?;
+                }
                 Action::StartRefit => self.start_refit(m),
                 Action::Reply {
                     query,
@@ -555,17 +576,20 @@ fn ring_actor(actors: &mut ActorBells<'_>, actor: u32) -> alfd_harness::Result<(
 }
 
 /// Publishes the current demonstration model (empty bytes when there is none yet), with the
-/// budget and the step of the last demonstration.
+/// budget and the step of the last demonstration. `ready`: the model already serialised, with
+/// the model version it is, used if that is still the core's.
 fn publish_model(
     tx: &mut alfd_wire::DemoModelSender<'_>,
     m: &Machine<'_>,
+    ready: Option<(u64, Vec<u8>)>,
 ) -> alfd_harness::Result<()> {
     let core = m.core();
-    let bytes = match core.model() {
-        Some(model) => {
+    let bytes = match (core.model(), ready) {
+        (None, _) => Vec::new(),
+        (Some(_), Some((version, bytes))) if version == core.model_version() => bytes,
+        (Some(model), _) => {
             postcard::to_stdvec(model).what(|| "cannot serialise the demonstration model".into())?
         }
-        None => Vec::new(),
     };
     tx.publish(
         DemoModelHeader {

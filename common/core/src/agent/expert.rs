@@ -2,6 +2,8 @@
 //! budget B, keeps the demonstration set `D_dem`, and refits the demonstration model on it
 //! (Algorithm 1 lines 8-10 and 21).
 
+use std::sync::Arc;
+
 use serde::{Deserialize, Serialize};
 
 use super::refit::{RefitJob, RefitOutcome, Refitted};
@@ -117,8 +119,9 @@ pub struct ExpertSnapshot {
 #[derive(Debug, Clone)]
 pub struct ExpertCore {
     budget: Budget,
-    /// Demonstrations the run started with (`demos.prior`): in the model, not in the budget.
-    prior: Vec<DemoRecord>,
+    /// Demonstrations the run started with (`demos.prior`): in the model, not in the budget;
+    /// shared with the refits that take them, never copied.
+    prior: Arc<[DemoRecord]>,
     demos: Vec<DemoRecord>,
     choice: DemoModelChoice,
     num_actions: usize,
@@ -151,7 +154,7 @@ impl ExpertCore {
     ) -> Self {
         Self {
             budget: Budget::new(budget),
-            prior: Vec::new(),
+            prior: Arc::from([]),
             demos: Vec::new(),
             choice,
             num_actions,
@@ -188,7 +191,7 @@ impl ExpertCore {
     /// budget and are not among [`ExpertCore::demos`]); the model is fitted on them, then on
     /// them and the run's demonstrations.
     pub fn set_prior(&mut self, prior: Vec<DemoRecord>) -> Result<(), DemoModelError> {
-        self.prior = prior;
+        self.prior = prior.into();
         self.replaced();
         self.refit()
     }
@@ -319,15 +322,15 @@ impl ExpertCore {
         self.out = Some(self.epoch);
         // The prior demonstrations first, so that the grown factors keep their rows; none to
         // copy when no model is kept.
-        let set = if self.choice == DemoModelChoice::None {
-            Vec::new()
+        let (prior, run) = if self.choice == DemoModelChoice::None {
+            (Arc::from([]), Vec::new())
         } else {
-            [&self.prior[..], &self.demos[..]].concat()
+            (Arc::clone(&self.prior), self.demos.clone())
         };
         RefitJob::new(
             self.epoch,
             self.choice,
-            set,
+            (prior, run),
             self.num_actions,
             (self.krr.take(), self.nystrom.take()),
             self.lanes.clone(),

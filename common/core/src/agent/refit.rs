@@ -3,6 +3,8 @@
 //! pure computation), and given back ([`Refitted`]). The core refits inline this way; the expert
 //! process can run it on a thread of its own and answer queries meanwhile.
 
+use std::sync::Arc;
+
 use super::expert::DemoRecord;
 use crate::config::DemoModelChoice;
 use crate::demo_model::krr::KrrFactor;
@@ -13,12 +15,16 @@ use crate::demo_model::{DemoModel, DemoModelError, DemoModelKind};
 /// The grown factors a refit takes with it and gives back.
 pub(crate) type Factors = (Option<KrrFactor>, Option<NystromFactor>);
 
+/// The demonstrations of a refit: the prior ones (shared with the core, not copied), then the
+/// run's.
+pub(crate) type DemoSet = (Arc<[DemoRecord]>, Vec<DemoRecord>);
+
 /// A refit to run: the demonstrations (prior first), the model's choice and its grown factor.
 #[derive(Debug)]
 pub struct RefitJob {
     epoch: u64,
     choice: DemoModelChoice,
-    set: Vec<DemoRecord>,
+    set: DemoSet,
     num_actions: usize,
     factors: Factors,
     lanes: SharedLanes,
@@ -32,6 +38,16 @@ pub struct Refitted {
     pub(crate) covers: usize,
     pub(crate) factors: Factors,
     pub(crate) outcome: Result<RefitOutcome, DemoModelError>,
+}
+
+impl Refitted {
+    /// The model the refit fitted, if it fitted one.
+    pub fn model(&self) -> Option<&DemoModel> {
+        match &self.outcome {
+            Ok(RefitOutcome::Fitted(model)) => Some(model),
+            _ => None,
+        }
+    }
 }
 
 /// The model after a refit.
@@ -48,7 +64,7 @@ impl RefitJob {
     pub(crate) fn new(
         epoch: u64,
         choice: DemoModelChoice,
-        set: Vec<DemoRecord>,
+        set: DemoSet,
         num_actions: usize,
         factors: Factors,
         lanes: SharedLanes,
@@ -65,7 +81,7 @@ impl RefitJob {
 
     /// Demonstrations the refit covers.
     pub fn covers(&self) -> usize {
-        self.set.len()
+        self.set.0.len() + self.set.1.len()
     }
 
     /// Fits the model (growing the factor where it can: the same bits as a fit anew).
@@ -73,7 +89,7 @@ impl RefitJob {
         let outcome = self.fit();
         Refitted {
             epoch: self.epoch,
-            covers: self.set.len(),
+            covers: self.covers(),
             factors: self.factors,
             outcome,
         }
@@ -86,11 +102,12 @@ impl RefitJob {
             DemoModelChoice::Svm => DemoModelKind::Svm,
             DemoModelChoice::Nystrom => DemoModelKind::Nystrom,
         };
-        if self.set.is_empty() {
+        let set: Vec<&DemoRecord> = self.set.0.iter().chain(&self.set.1).collect();
+        if set.is_empty() {
             self.factors = (None, None);
             return Ok(RefitOutcome::Cleared);
         }
-        let (set, m, lanes) = (&self.set, self.num_actions, self.lanes.get());
+        let (set, m, lanes) = (&set[..], self.num_actions, self.lanes.get());
         let (krr, nystrom) = &mut self.factors;
         Ok(RefitOutcome::Fitted(match kind {
             DemoModelKind::Krr => DemoModel::Krr(grown(krr, set, m, lanes)?.model()),
@@ -151,7 +168,7 @@ const GROW_AT_MOST_ONE_IN: usize = 8;
 /// (demonstrations are only appended; replacing them empties the slot).
 fn grown<'a, G: Grows>(
     slot: &'a mut Option<G>,
-    demos: &[DemoRecord],
+    demos: &[&DemoRecord],
     num_actions: usize,
     lanes: &dyn Lanes,
 ) -> Result<&'a G, DemoModelError> {

@@ -22,6 +22,11 @@ pub const ALPHA: f64 = 0.1;
 /// (below it, by nalgebra's, whose numbers every run with fewer demonstrations keeps).
 pub const BLOCKED_FROM: usize = 512;
 
+/// Below this many demonstrations a fit runs on the caller's thread whatever lanes it is given:
+/// on the 2-core benchmark machine a second lane saves nothing there (2,000 demonstrations:
+/// the same time on one thread or two) and, its core shared, sometimes costs a third more.
+pub const LANES_FROM: usize = 2048;
+
 /// Below this total of clipped outputs (more than two actions), the outputs are taken to have
 /// vanished (the state is far from every demonstration) and p(a|s) is uniform.
 pub const VANISHING: f64 = 1e-12;
@@ -213,6 +218,7 @@ impl KrrFactor {
     ) -> Result<KrrFactor, DemoModelError> {
         let (flat, state_dim) = validate(states, actions, num_actions)?;
         let n = actions.len();
+        let lanes = if n < LANES_FROM { &Serial } else { lanes };
         let l = if n < BLOCKED_FROM {
             small_factor(&flat, state_dim)?
         } else {
@@ -550,7 +556,7 @@ mod tests {
 
     #[test]
     fn a_factor_fitted_on_lanes_is_the_one_fitted_in_turn() {
-        let (states, actions) = scattered(BLOCKED_FROM + super::super::cholesky::BLOCK + 530);
+        let (states, actions) = scattered(LANES_FROM + super::super::cholesky::BLOCK + 30);
         let serial = KrrFactor::fit(&states, &actions, 3).unwrap();
         let on_lanes = KrrFactor::fit_on(&states, &actions, 3, &Backwards(2)).unwrap();
         assert!(on_lanes == serial);
