@@ -88,6 +88,7 @@ fn factor_panel(a: &mut [f64], n: usize, kb: usize, end: usize, lanes: &dyn Lane
         .flat_map(|j| (kb..end).map(move |p| (j, p)))
         .map(|(j, p)| a[j + p * n])
         .collect();
+    let by_column = diag_by_column(&diag, w);
     let mut chunks: Vec<(usize, Vec<f64>)> = (end..n)
         .step_by(PANEL_ROWS)
         .map(|r0| {
@@ -98,7 +99,7 @@ fn factor_panel(a: &mut [f64], n: usize, kb: usize, end: usize, lanes: &dyn Lane
         .collect();
     share(&mut chunks, lanes, |lane| {
         for (_, c) in lane.iter_mut() {
-            panel_chunk(c, &diag, w);
+            panel_chunk(c, &diag, &by_column, w);
         }
     });
     for (r0, c) in &chunks {
@@ -110,16 +111,77 @@ fn factor_panel(a: &mut [f64], n: usize, kb: usize, end: usize, lanes: &dyn Lane
     true
 }
 
-/// A chunk of rows below the diagonal block (column-major, `w` columns), solved against the
-/// diagonal block `diag` (row-major `w × w`, L's values).
-fn panel_chunk(c: &mut [f64], diag: &[f64], w: usize) {
-    let m = c.len() / w;
+/// The diagonal block's rows (row-major `w × w`) packed for the register tile: for each tile of
+/// [`TILE_COLS`] rows j, `packed[tile][p][j]` = L[j, p], zeros past `w`.
+fn diag_by_column(diag: &[f64], w: usize) -> Vec<f64> {
+    let mut packed = vec![0.0; w.div_ceil(TILE_COLS) * w * TILE_COLS];
     for j in 0..w {
+        let (t, c) = (j / TILE_COLS, j % TILE_COLS);
+        for p in 0..j {
+            packed[(t * w + p) * TILE_COLS + c] = diag[j * w + p];
+        }
+    }
+    packed
+}
+
+/// A chunk of rows below the diagonal block (column-major, `w` columns), solved against the
+/// diagonal block `diag` (row-major `w × w`, L's values; `by_column` the same packed by
+/// [`diag_by_column`]). Rows go [`TILE_ROWS`] at a time: each tile of [`TILE_COLS`] columns
+/// takes the products of the columns before it in a register tile, then those among its own
+/// columns, then divides; the rows left over go column by column. Either way every element
+/// subtracts its products in order of the column, then divides.
+fn panel_chunk(c: &mut [f64], diag: &[f64], by_column: &[f64], w: usize) {
+    let m = c.len() / w;
+    let full = m - m % TILE_ROWS;
+    let mut x = vec![0.0; w * TILE_ROWS];
+    for r0 in (0..full).step_by(TILE_ROWS) {
+        for (p, xp) in x.chunks_exact_mut(TILE_ROWS).enumerate() {
+            xp.copy_from_slice(&c[p * m + r0..p * m + r0 + TILE_ROWS]);
+        }
+        crate::nn::wide(|| panel_tile_rows(&mut x, diag, by_column, w));
+        for (p, xp) in x.chunks_exact(TILE_ROWS).enumerate() {
+            c[p * m + r0..p * m + r0 + TILE_ROWS].copy_from_slice(xp);
+        }
+    }
+    for j in (0..w).filter(|_| full < m) {
         let (left, right) = c.split_at_mut(j * m);
-        let cols: Vec<&[f64]> = left.chunks_exact(m).collect();
+        let cols: Vec<&[f64]> = left.chunks_exact(m).map(|col| &col[full..]).collect();
         let lj = &diag[j * w..j * w + j];
         let d = diag[j * w + j];
-        crate::nn::wide(|| subtract_then_divide(&mut right[..m], &cols, lj, d));
+        crate::nn::wide(|| subtract_then_divide(&mut right[full..m], &cols, lj, d));
+    }
+}
+
+/// [`TILE_ROWS`] rows of a panel chunk, `x[p * 8 + r]` (row r, column p), solved in place.
+#[inline(always)]
+fn panel_tile_rows(x: &mut [f64], diag: &[f64], by_column: &[f64], w: usize) {
+    for j0 in (0..w).step_by(TILE_COLS) {
+        let cols = TILE_COLS.min(w - j0);
+        let mut acc = [0.0f64; TILE_ROWS * TILE_COLS];
+        acc[..cols * TILE_ROWS].copy_from_slice(&x[j0 * TILE_ROWS..(j0 + cols) * TILE_ROWS]);
+        let packed = &by_column[j0 * w..];
+        tile_update(&mut acc, &x[..j0 * TILE_ROWS], &packed[..j0 * TILE_COLS]);
+        for k in 0..cols {
+            let j = j0 + k;
+            let (done, acc_k) = (
+                &x[..j * TILE_ROWS],
+                &mut acc[k * TILE_ROWS..(k + 1) * TILE_ROWS],
+            );
+            for p in j0..j {
+                let l = diag[j * w + p];
+                for (a, v) in acc_k
+                    .iter_mut()
+                    .zip(&done[p * TILE_ROWS..(p + 1) * TILE_ROWS])
+                {
+                    *a -= v * l;
+                }
+            }
+            let d = diag[j * w + j];
+            for a in acc_k.iter_mut() {
+                *a /= d;
+            }
+            x[j * TILE_ROWS..(j + 1) * TILE_ROWS].copy_from_slice(acc_k);
+        }
     }
 }
 
