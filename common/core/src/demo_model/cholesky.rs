@@ -143,7 +143,10 @@ fn panel_chunk(c: &mut [f64], diag: &[f64], by_column: &[f64], w: usize) {
             c[p * m + r0..p * m + r0 + TILE_ROWS].copy_from_slice(xp);
         }
     }
-    for j in (0..w).filter(|_| full < m) {
+    if full == m {
+        return;
+    }
+    for j in 0..w {
         let (left, right) = c.split_at_mut(j * m);
         let cols: Vec<&[f64]> = left.chunks_exact(m).map(|col| &col[full..]).collect();
         let lj = &diag[j * w..j * w + j];

@@ -23,8 +23,9 @@ pub const ALPHA: f64 = 0.1;
 pub const BLOCKED_FROM: usize = 512;
 
 /// Below this many demonstrations a fit runs on the caller's thread whatever lanes it is given:
-/// on the 2-core benchmark machine a second lane saves nothing there (2,000 demonstrations:
-/// the same time on one thread or two) and, its core shared, sometimes costs a third more.
+/// on the 2-core benchmark machine a second lane saved nothing there (2,000 demonstrations:
+/// 0.176 s on two threads, 0.174 s on one) and, its core shared, sometimes cost half again
+/// (1,000: 0.063 s against 0.042 s; medians of one five-round sitting of `deploy/bench/core.sh`).
 pub const LANES_FROM: usize = 2048;
 
 /// Below this total of clipped outputs (more than two actions), the outputs are taken to have
