@@ -150,8 +150,8 @@ fn small_factor(flat: &[f64], state_dim: usize) -> Result<Vec<f64>, DemoModelErr
 }
 
 /// L of `K + alpha I` by the blocked Cholesky, rows up to the diagonal: the kernel's lower
-/// triangle built column by column (columns dealt to the lanes in turn), factored, then read
-/// out in square tiles so that neither layout is walked across.
+/// triangle built column by column (columns dealt to the lanes in turn), factored, then turned
+/// into rows in the same buffer ([`rows_in_place`]), so that no second matrix is touched.
 fn large_factor(
     flat: &[f64],
     state_dim: usize,
@@ -159,7 +159,7 @@ fn large_factor(
 ) -> Result<Vec<f64>, DemoModelError> {
     let n = flat.len() / state_dim;
     let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
-    let mut k = vec![0.0; n * n];
+    let mut k = super::pages::zeroed(n * n);
     let mut columns: Vec<(usize, &mut [f64])> = k.chunks_mut(n).enumerate().collect();
     share(&mut columns, lanes, |lane| {
         for (j, col) in lane.iter_mut() {
@@ -170,17 +170,31 @@ fn large_factor(
     if !super::cholesky::factor(&mut k, n, lanes) {
         return Err(not_positive_definite());
     }
+    rows_in_place(&mut k, n);
+    Ok(k)
+}
+
+/// The column-major lower triangle of an `n × n` matrix (`a[i + j * n]`, `i >= j`) as its rows up
+/// to the diagonal, one after another (`a[i * (i + 1) / 2 + j]`), in the same buffer, truncated
+/// to them. First the strict lower triangle is mirrored into the upper one in square tiles (so
+/// that neither direction is walked across), which puts row i in column i's first `i + 1` values;
+/// then the rows move to the front in order: row i's place ends before row i + 1's source starts.
+fn rows_in_place(a: &mut Vec<f64>, n: usize) {
     const T: usize = 64;
-    let mut l = vec![0.0; n * (n + 1) / 2];
     for jb in (0..n).step_by(T) {
-        for i in jb..n {
-            let start = i * (i + 1) / 2;
-            for j in jb..(jb + T).min(i + 1) {
-                l[start + j] = k[i + j * n];
+        for ib in (jb..n).step_by(T) {
+            for j in jb..(jb + T).min(n) {
+                for i in ib.max(j + 1)..(ib + T).min(n) {
+                    a[j + i * n] = a[i + j * n];
+                }
             }
         }
     }
-    Ok(l)
+    for i in 1..n {
+        a.copy_within(i * n..i * n + i + 1, i * (i + 1) / 2);
+    }
+    a.truncate(n * (n + 1) / 2);
+    a.shrink_to_fit();
 }
 
 /// The Cholesky factor L of `K + alpha I` over the demonstrations so far, with them: what a
@@ -485,6 +499,28 @@ pub fn probs_from_outputs(f: &[f64]) -> Vec<f64> {
 mod tests {
     use super::super::lanes::Backwards;
     use super::*;
+
+    #[test]
+    fn rows_in_place_reads_the_lower_triangle_out_row_by_row() {
+        for n in [0, 1, 2, 7, 64, 65, 130] {
+            // Lower values name their place; the upper triangle holds what must not be read.
+            let mut a: Vec<f64> = (0..n * n)
+                .map(|p| {
+                    let (i, j) = (p % n, p / n);
+                    if i >= j {
+                        (i * 1000 + j) as f64
+                    } else {
+                        -1.0
+                    }
+                })
+                .collect();
+            rows_in_place(&mut a, n);
+            let want: Vec<f64> = (0..n)
+                .flat_map(|i| (0..=i).map(move |j| (i * 1000 + j) as f64))
+                .collect();
+            assert_eq!(a, want, "n = {n}");
+        }
+    }
 
     #[test]
     fn two_action_probabilities_follow_the_paper() {

@@ -14,6 +14,7 @@ mod cholesky;
 pub mod krr;
 pub mod lanes;
 pub mod nystrom;
+mod pages;
 pub mod smo;
 pub mod svm;
 
