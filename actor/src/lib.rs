@@ -70,6 +70,8 @@ pub fn seed_streams(actor_id: u16, incarnation: u64) -> (String, String) {
 
 /// Runs the actor until the launcher says stop or a termination signal arrives.
 pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
+    // Woken by its answer, the actor runs before a busy learner or refit.
+    alfd_harness::Sched::query_path().apply();
     let me = identity(args)?;
     let setup = args.process.load()?;
     let (cfg, runtime) = (&setup.config, &setup.runtime);

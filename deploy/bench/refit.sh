@@ -9,6 +9,6 @@
 #   bash deploy/bench/refit.sh [ROUNDS]      # default 3 interleaved rounds
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-cargo build --release --quiet -p alfd-deploy
+cargo build --release --quiet --workspace --bins
 exec python3 deploy/bench/refit.py --alfd "${CARGO_TARGET_DIR:-target}/release/alfd" \
     --out results/refit --rounds "${1:-3}"

@@ -66,6 +66,8 @@ type Machine<'w> = ExpertMachine<IncomingQuery<'w>>;
 /// Runs the expert until the launcher says stop, a newer expert replaces it, or a termination
 /// signal arrives.
 pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
+    // Answering is the query path: woken by an actor, it runs before a busy learner or refit.
+    alfd_harness::Sched::query_path().apply();
     let setup = args.process.load()?;
     let (cfg, runtime) = (&setup.config, &setup.runtime);
     let (obs_dim, actions) = setup.env_dims()?;
@@ -257,14 +259,6 @@ fn start_page(
 /// the learner and the actors go first when the cores are busy.
 const REFIT_NICE: i32 = 10;
 
-/// Puts the calling thread at [`REFIT_NICE`] (a no-op where the system refuses).
-fn lower_priority() {
-    let me = rustix::thread::gettid();
-    if let Err(e) = rustix::process::setpriority_process(Some(me), REFIT_NICE) {
-        debug!(error = %e, "the refit's thread keeps its priority");
-    }
-}
-
 /// The expert's I/O: the wire's ports, the demonstration log, the demonstrator, the page.
 struct Shell<'w> {
     server: QueryServer<'w>,
@@ -312,7 +306,7 @@ impl<'w> Shell<'w> {
         let (tx, rx) = mpsc::channel();
         debug!(demos = job.covers(), "refitting the demonstration model");
         std::thread::spawn(move || {
-            lower_priority();
+            alfd_harness::Sched::background(REFIT_NICE).apply();
             let refitted = job.run();
             // A model that cannot be serialised here is serialised again, and its error
             // reported, when it is published.

@@ -14,6 +14,7 @@ mod process;
 pub mod python;
 pub mod run_dir;
 mod runtime;
+mod sched;
 mod session;
 mod startup;
 mod threads;
@@ -31,6 +32,7 @@ pub use runtime::{
     Refit, RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY,
     DEFAULT_HUMAN_QUERY_TIMEOUT_MS, HUMAN_EXPERT, RUNTIME_FILE,
 };
+pub use sched::{Sched, QUERY_SLICE};
 pub use session::{Session, SessionError, LAUNCHER_SILENCE, STOP_REQUESTED, TERMINATION_SIGNAL};
 pub use startup::{
     init_process_logging, log_filter, portable_kernels_from_env, schema_version_from_env,
