@@ -16,9 +16,8 @@ if ! command -v perf >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get >/de
 fi
 command -v perf >/dev/null || { echo "whole-run.sh: perf is needed (Debian: linux-perf)" >&2; exit 2; }
 cargo build --release --quiet --workspace
-cargo build --release --quiet -p alfd-common --example replay_memory
+cargo build --release --quiet -p alfd-common --example replay_memory --example train_steps
 bin="${CARGO_TARGET_DIR:-target}/release"
-gcc -O2 -o "$bin/alfd-bench-clock" deploy/bench/clock.c
-exec python3 deploy/bench/whole_run.py --alfd "$bin/alfd" --clock "$bin/alfd-bench-clock" \
+exec python3 deploy/bench/whole_run.py --alfd "$bin/alfd" --train-steps "$bin/examples/train_steps" \
     --replay-example "$bin/examples/replay_memory" --out results/whole-run --repeats "${1:-2}" \
     "${@:2}"

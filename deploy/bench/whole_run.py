@@ -8,6 +8,7 @@ import argparse
 import csv
 import json
 import os
+import resource
 import re
 import statistics
 import subprocess
@@ -89,15 +90,20 @@ def flops_per_update(shapes, batch):
     return 2 * batch * macs * (3 + 2)
 
 
-def core_peak_flops(clock_bin):
-    """One core's f32 FMA peak at the width the network's products use (8 lanes of AVX2 with
-    FMA, else 4 of SSE): measured MHz (the median of 3 runs of clock.c) x 2 FMA units x lanes x
-    2."""
-    mhz = statistics.median(float(sh([clock_bin]).stdout) for _ in range(3))
-    with open("/proc/cpuinfo") as f:
-        flags = next((l for l in f if l.startswith("flags")), "")
-    lanes = 8 if " avx2" in flags and " fma" in flags else 4
-    return mhz * 1e6 * 2 * lanes * 2, mhz, lanes
+PEAK_ROUNDS = 100_000_000
+
+
+def core_peak_flops(train_steps):
+    """One core's f32 FMA peak now, as `deploy/bench/core.sh` measures it: `train_steps peak`
+    (12 independent chains of 8-lane fused multiply-adds, 192 flops a round) in flops per
+    second of its CPU time, the median of 3 runs."""
+    def once():
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        sh([train_steps, "peak", str(PEAK_ROUNDS)])
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+        return PEAK_ROUNDS * 192 / cpu
+    return statistics.median(once() for _ in range(3))
 
 
 def actors_sweep(alfd, tmp, counts, repeats):
@@ -152,7 +158,7 @@ def write(results, out):
     wall = p["summary"]["wall_clock_s"]
     idle = log.get("idle_running_s", 0.0)
     busy = max(wall - idle, 0.0)
-    peak, mhz, lanes = results["peak"]
+    peak = results["peak"]
     fl = results["flops_per_update"]
     achieved = p["summary"]["updates_per_s"] * fl
     L = ["# The main job near the machine's limit", "",
@@ -175,10 +181,9 @@ def write(results, out):
           "`weights.safetensors`, batch "
           f"{results['batch']}); at {p['summary']['updates_per_s']:.0f} updates/s that is "
           f"{achieved / 1e9:.2f} GFLOP/s, {100 * achieved / peak:.1f}% of one core's f32 FMA "
-          f"peak at the width the network's products use ({peak / 1e9:.0f} GFLOP/s: "
-          f"{mhz:.0f} MHz x 2 FMA units x {lanes} lanes x 2; the clock measured under load by "
-          f"`deploy/bench/clock.c`, a chain of dependent additions, as the VM's /proc/cpuinfo "
-          f"gives only its nominal clock). An estimate: the count includes the first layer's "
+          f"peak, {peak / 1e9:.1f} GFLOP/s (`train_steps peak`, as in the core benchmarks: "
+          "independent chains of 8-lane fused multiply-adds, at the clock the core runs then; "
+          "measured after the runs). An estimate: the count includes the first layer's "
           f"input gradient, which the backward pass skips.", "",
           "## Multi-process against single-process", "",
           "Environment steps per second of the training loop (the run's own wall-clock in "
@@ -220,15 +225,15 @@ def main():
     p.add_argument("--alfd", required=True)
     p.add_argument("--replay-example", required=True)
     p.add_argument("--out", required=True)
-    p.add_argument("--clock", required=True)
+    p.add_argument("--train-steps", required=True)
     p.add_argument("--repeats", type=int, default=2)
     p.add_argument("--summary-only", action="store_true",
-                   help="re-measure the clock and rewrite summary.md from results.json")
+                   help="re-measure the FMA peak and rewrite summary.md from results.json")
     a = p.parse_args()
     if a.summary_only:
         with open(os.path.join(a.out, "results.json")) as f:
             results = json.load(f)
-        results["peak"] = core_peak_flops(a.clock)
+        results["peak"] = core_peak_flops(a.train_steps)
         write(results, a.out)
         return
     os.makedirs(a.out, exist_ok=True)
@@ -246,7 +251,7 @@ def main():
         "machine": host.described(m), "date": m["date"], "load_before": load,
         "profile": prof, "actors": {str(k): v for k, v in actors.items()}, "local": local,
         "batch": batch, "flops_per_update": flops_per_update(prof["weights"], batch),
-        "peak": core_peak_flops(a.clock), "replay": replay_bytes(a.replay_example),
+        "peak": core_peak_flops(a.train_steps), "replay": replay_bytes(a.replay_example),
     }
     write(results, a.out)
     print(f"whole_run.py: wrote {a.out}/summary.md and results.json", flush=True)
