@@ -397,16 +397,19 @@ struct Graph {
 }
 
 impl Graph {
-    /// Runs `cargo metadata` (offline) on the workspace, for the host's platform: the
-    /// dependencies of other platforms are not in the local registry, and none is the
+    /// Runs `cargo metadata` (offline where it can) on the workspace, for the host's platform:
+    /// the dependencies of other platforms are not in the local registry, and none is the
     /// transport or a log sink.
     fn load() -> Graph {
         let cargo = std::env::var_os("CARGO").unwrap_or_else(|| env!("CARGO").into());
-        let run = |args: &[&str]| -> Vec<u8> {
-            let output = std::process::Command::new(&cargo)
+        let attempt = |args: &[&str]| {
+            std::process::Command::new(&cargo)
                 .args(args)
                 .output()
-                .expect("run cargo");
+                .expect("run cargo")
+        };
+        let run = |args: &[&str]| -> Vec<u8> {
+            let output = attempt(args);
             assert!(
                 output.status.success(),
                 "cargo {args:?} failed: {}",
@@ -421,16 +424,23 @@ impl Graph {
             .expect("a host line in `cargo -vV`")
             .to_owned();
         let manifest = workspace().join("Cargo.toml");
-        let stdout = run(&[
+        let metadata = [
             "metadata",
             "--format-version",
             "1",
-            "--offline",
             "--filter-platform",
             &host,
             "--manifest-path",
             manifest.to_str().unwrap(),
-        ]);
+        ];
+        // Offline first (the build has fetched what it uses); a registry cache that lacks a
+        // package the resolution reads (one the build never compiles) is filled in online.
+        let offline = attempt(&[&metadata[..], &["--offline"]].concat());
+        let stdout = if offline.status.success() {
+            offline.stdout
+        } else {
+            run(&metadata)
+        };
         let meta: Value = serde_json::from_slice(&stdout).expect("cargo metadata JSON");
         let names = meta["packages"]
             .as_array()
