@@ -4,7 +4,7 @@
 //! columns against a packed copy of the panel, in row blocks that stay in the L2 cache, the
 //! columns dealt in turn to the lanes the caller passes (`lanes.rs`). Plain multiplications and
 //! subtractions in a fixed order per element (no fused multiply-add; wider registers where the
-//! CPU has AVX2 change the speed, never a bit), so the same binary gives the same bits on every
+//! CPU has AVX2 or AVX-512 change the speed, never a bit), so the same binary gives the same bits on every
 //! x86-64 CPU and on any lanes.
 
 use super::lanes::{share, Lanes, Serial};
@@ -317,10 +317,14 @@ impl Panel<'_> {
 
 /// The register tile: `acc[c * 8 + r] -= li[8 p + r] * lj[6 p + c]` for every p in order (`li`
 /// holds the panel's values of the tile's 8 rows per p, `lj` those of its 6 columns).
-/// AVX2 where the CPU has it; the same operations, so the same bits, without.
+/// AVX-512 or AVX2 where the CPU has it; the same operations, so the same bits, without.
 fn tile_update(acc: &mut [f64; TILE_ROWS * TILE_COLS], li: &[f64], lj: &[f64]) {
     let w = li.len() / TILE_ROWS;
     assert!(lj.len() >= w * TILE_COLS);
+    #[cfg(target_arch = "x86_64")]
+    if x86::available_512() {
+        return x86::tile_update_512(acc, li, lj, w);
+    }
     #[cfg(target_arch = "x86_64")]
     if x86::available() {
         return x86::tile_update(acc, li, lj, w);
@@ -328,7 +332,7 @@ fn tile_update(acc: &mut [f64; TILE_ROWS * TILE_COLS], li: &[f64], lj: &[f64]) {
     tile_update_portable(acc, li, lj, w);
 }
 
-/// [`tile_update`] without AVX2: the same operations in the same order.
+/// [`tile_update`] without AVX2 or AVX-512: the same operations in the same order.
 fn tile_update_portable(acc: &mut [f64; TILE_ROWS * TILE_COLS], li: &[f64], lj: &[f64], w: usize) {
     for p in 0..w {
         let li = &li[p * TILE_ROWS..(p + 1) * TILE_ROWS];
@@ -341,16 +345,67 @@ fn tile_update_portable(acc: &mut [f64; TILE_ROWS * TILE_COLS], li: &[f64], lj: 
     }
 }
 
-/// The AVX2 register tile of [`tile_update`]: multiplications and subtractions, never fused.
+/// The AVX2 and AVX-512 register tiles of [`tile_update`]: multiplications and subtractions,
+/// never fused.
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
 mod x86 {
     use std::arch::x86_64::*;
+    use std::sync::OnceLock;
 
     use super::{TILE_COLS, TILE_ROWS};
 
     pub(super) fn available() -> bool {
         crate::nn::wide_available()
+    }
+
+    /// Whether the CPU has AVX-512 (foundation) besides AVX2, and the portable kernels were not
+    /// asked for.
+    pub(super) fn available_512() -> bool {
+        static DETECTED: OnceLock<bool> = OnceLock::new();
+        available() && *DETECTED.get_or_init(|| std::arch::is_x86_feature_detected!("avx512f"))
+    }
+
+    /// See [`super::tile_update`], a tile's column of 8 rows in one AVX-512 register.
+    pub(super) fn tile_update_512(
+        acc: &mut [f64; TILE_ROWS * TILE_COLS],
+        li: &[f64],
+        lj: &[f64],
+        w: usize,
+    ) {
+        assert!(available_512() && li.len() >= w * TILE_ROWS);
+        assert!(lj.len() >= w * TILE_COLS);
+        // SAFETY: the CPU has AVX-512F (asserted); the lengths are checked above.
+        unsafe { tile_update_avx512(acc, li, lj, w) }
+    }
+
+    /// # Safety
+    /// The CPU has AVX-512F; `li` holds `w * 8` values and `lj` at least `w * 6`.
+    #[target_feature(enable = "avx512f")]
+    unsafe fn tile_update_avx512(
+        acc: &mut [f64; TILE_ROWS * TILE_COLS],
+        li: &[f64],
+        lj: &[f64],
+        w: usize,
+    ) {
+        let a = acc.as_mut_ptr();
+        let (pi, pj) = (li.as_ptr(), lj.as_ptr());
+        // SAFETY: every offset below is within `acc` (48 values), `li` (p * 8 + 8 <= w * 8) and
+        // `lj` (p * 6 + 6 <= w * 6).
+        unsafe {
+            let mut r: [__m512d; TILE_COLS] =
+                std::array::from_fn(|c| _mm512_loadu_pd(a.add(TILE_ROWS * c)));
+            for p in 0..w {
+                let rows = _mm512_loadu_pd(pi.add(p * TILE_ROWS));
+                for (c, r) in r.iter_mut().enumerate() {
+                    let x = _mm512_set1_pd(*pj.add(p * TILE_COLS + c));
+                    *r = _mm512_sub_pd(*r, _mm512_mul_pd(rows, x));
+                }
+            }
+            for (c, v) in r.into_iter().enumerate() {
+                _mm512_storeu_pd(a.add(TILE_ROWS * c), v);
+            }
+        }
     }
 
     /// See [`super::tile_update`]; `li` holds `w * 8` values, `lj` at least `w * 6`.
@@ -494,7 +549,7 @@ mod tests {
     }
 
     #[test]
-    fn the_avx2_register_tile_gives_the_portable_tile_s_bits() {
+    fn the_avx2_and_avx512_register_tiles_give_the_portable_tile_s_bits() {
         #[cfg(target_arch = "x86_64")]
         if x86::available() {
             let w = 37;
@@ -510,6 +565,14 @@ mod tests {
                 .zip(&portable)
                 .all(|(a, b)| a.to_bits() == b.to_bits()));
             assert_ne!(wide, start);
+            if x86::available_512() {
+                let mut widest = start;
+                x86::tile_update_512(&mut widest, &li, &lj, w);
+                assert!(widest
+                    .iter()
+                    .zip(&portable)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()));
+            }
         }
     }
 
