@@ -69,11 +69,19 @@ def step_flops(hidden, heads, batch, double, obs=4, actions=2):
     return 2 * batch * ((3 if double else 2) * forward + backward)
 
 
+def flops_per_round(out):
+    """The flops of one round of `train_steps peak`, from its first line of output."""
+    first = out.splitlines()[0].split()
+    assert first[0] == "flops_per_round" and int(first[1]) > 0, f"unexpected: {out!r}"
+    return int(first[1])
+
+
 def peak_flops():
-    """One core's f32 FMA peak now: `train_steps peak` (12 independent chains of 8-lane fused
-    multiply-adds, 192 flops a round) in flops per second of CPU time."""
-    cpu, _ = cpu_seconds([TRAIN_STEPS, "peak", str(PEAK_ROUNDS)])
-    return PEAK_ROUNDS * 192 / cpu
+    """One core's f32 FMA peak now: `train_steps peak` (12 independent chains of fused
+    multiply-adds as wide as the products' kernels: 16 lanes, 384 flops a round, with AVX-512;
+    8 lanes, 192 flops, with AVX2) in flops per second of CPU time."""
+    cpu, out = cpu_seconds([TRAIN_STEPS, "peak", str(PEAK_ROUNDS)])
+    return PEAK_ROUNDS * flops_per_round(out) / cpu
 
 
 def states(n, rng):
@@ -227,7 +235,8 @@ def main():
         "gradient, the input gradients of the two upper layers); \"of peak\" divides the flops "
         "per second of CPU time by one core's f32 FMA peak measured in the same rounds, "
         f"{span([p / 1e9 for p in peak], lambda x: f'{x:.1f}')} GFLOP/s (`train_steps peak`: "
-        "independent chains of 8-lane fused multiply-adds, at the clock the core runs then).",
+        "independent chains of fused multiply-adds as wide as the train step's products: 16 lanes "
+        "where the CPU has AVX-512, 8 with AVX2; at the clock the core runs then).",
         "",
         "| step | CPU time per step | flops per step | GFLOP/s | of peak | steps per run |",
         "|---|---:|---:|---:|---:|---:|",

@@ -95,14 +95,17 @@ PEAK_ROUNDS = 100_000_000
 
 def core_peak_flops(train_steps):
     """One core's f32 FMA peak now, as `deploy/bench/core.sh` measures it: `train_steps peak`
-    (12 independent chains of 8-lane fused multiply-adds, 192 flops a round) in flops per
-    second of its CPU time, the median of 3 runs."""
+    (12 independent chains of fused multiply-adds as wide as the products' kernels: 384 flops a
+    round with AVX-512, 192 with AVX2, as its first line says) in flops per second of its CPU
+    time, the median of 3 runs."""
     def once():
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        sh([train_steps, "peak", str(PEAK_ROUNDS)])
+        out = sh([train_steps, "peak", str(PEAK_ROUNDS)]).stdout
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-        return PEAK_ROUNDS * 192 / cpu
+        first = out.splitlines()[0].split()
+        assert first[0] == "flops_per_round" and int(first[1]) > 0, f"unexpected: {out!r}"
+        return PEAK_ROUNDS * int(first[1]) / cpu
     return statistics.median(once() for _ in range(3))
 
 
@@ -182,7 +185,8 @@ def write(results, out):
           f"{results['batch']}); at {p['summary']['updates_per_s']:.0f} updates/s that is "
           f"{achieved / 1e9:.2f} GFLOP/s, {100 * achieved / peak:.1f}% of one core's f32 FMA "
           f"peak, {peak / 1e9:.1f} GFLOP/s (`train_steps peak`, as in the core benchmarks: "
-          "independent chains of 8-lane fused multiply-adds, at the clock the core runs then; "
+          "independent chains of fused multiply-adds as wide as the train step's products, 16 lanes "
+          "where the CPU has AVX-512, 8 with AVX2, at the clock the core runs then; "
           "measured after the runs). An estimate: the count includes the first layer's "
           f"input gradient, which the backward pass skips.", "",
           "## Multi-process against single-process", "",

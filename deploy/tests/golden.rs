@@ -1,7 +1,7 @@
 //! The golden runs: a short CartPole run, `data/golden-cartpole.toml`, must
 //! give the committed `data/golden-cartpole-episodes.csv` to the byte, and the same run with the
 //! SVM demonstration model `data/golden-cartpole-svm-episodes.csv`:
-//! - with the AVX2+FMA products;
+//! - with the widest products the CPU has (AVX-512 or AVX2+FMA);
 //! - with glibc's FMA and AVX2 code paths masked (`GLIBC_TUNABLES`), as on a CPU without them:
 //!   the core's `exp`, `ln`, `pow`, `sin` and `cos` come from the `libm` crate, not glibc, whose
 //!   choice of implementation by CPU features changed a run from episode 129 before;

@@ -130,7 +130,8 @@ fn bench_act_step(c: &mut Criterion) {
     });
 }
 
-/// The single-core FMA peak (12 independent chains of 8-wide FMAs; 192 flops a round), against
+/// The single-core FMA peak (12 independent chains of FMAs as wide as the products' kernels:
+/// 384 flops a round with AVX-512, 192 with AVX2), against
 /// which the train step's GFLOP/s are reported in BENCHMARKS.md.
 fn bench_fma_peak(c: &mut Criterion) {
     if alfd_common::nn::fma_peak_probe(1).is_none() {

@@ -4,7 +4,8 @@
 //! recommended CartPole preset's step instead (hidden 128, K = 4, batch 128, double DQN, the
 //! large-margin loss on a tenth of the batch, clipped gradients and bounded targets:
 //! `nn::train_step_with`). Prints the steps, the seconds, the last loss and a hash of the
-//! weights. `-- peak N`: N rounds of the FMA peak probe instead (192 flops a round).
+//! weights. `-- peak N`: N rounds of the FMA peak probe instead (384 flops a round where the
+//! products use AVX-512, 192 where they use AVX2; the first line of output says which).
 
 use alfd_common::nn::{train_step_with, Adam, Mlp, TdConfig, TdLoss, TrainScratch};
 use alfd_common::replay::{Batch, ReplayBuffer, Transition};
@@ -14,17 +15,19 @@ use rand::Rng as _;
 fn main() {
     let mut args = std::env::args().skip(1).peekable();
     if args.peek().map(String::as_str) == Some("peak") {
-        // The FMA peak: 192 flops a round, timed by the caller (`perf stat -e task-clock`).
+        // The FMA peak, timed by the caller (its CPU time).
         let rounds: u64 = args
             .nth(1)
             .and_then(|a| a.parse().ok())
             .unwrap_or(100_000_000);
+        let flops = alfd_common::nn::fma_peak_flops_per_round().unwrap_or(0);
+        println!("flops_per_round {flops}");
         let t = std::time::Instant::now();
         let v = alfd_common::nn::fma_peak_probe(rounds);
         let s = t.elapsed().as_secs_f64();
         println!(
-            "{rounds} rounds of 192 flops in {s:.3} s: {:.1} GFLOP/s of wall-clock ({v:?})",
-            rounds as f64 * 192.0 / s / 1e9
+            "{rounds} rounds of {flops} flops in {s:.3} s: {:.1} GFLOP/s of wall-clock ({v:?})",
+            rounds as f64 * flops as f64 / s / 1e9
         );
         return;
     }

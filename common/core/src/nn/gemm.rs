@@ -7,7 +7,7 @@
 //! an add.
 //!
 //! With AVX2 and FMA (detected at run time) a block of 16 rows by 6 columns of `C` stays in
-//! registers over the whole `k` loop; the rows are contiguous (column-major `A`, packed first when
+//! registers over the whole `k` loop (with AVX-512, 32 rows: `gemm/avx512.rs`); the rows are contiguous (column-major `A`, packed first when
 //! it is a transposed view), the elements of `B` are broadcast. Vectorising over rows leaves each
 //! element's order of operations as the scalar loop's, so the tails and the fallback give the
 //! same bits. The layers' bias, ReLU and ReLU's backward mask are applied as a block is stored
@@ -153,6 +153,11 @@ fn gemm_packed(
     c: &mut [f32],
 ) {
     #[cfg(target_arch = "x86_64")]
+    if avx512::available() {
+        avx512::gemm::<true>((m, k, n), a, b, epi, c);
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
     if x86::available() {
         x86::gemm::<true>((m, k, n), a, b, epi, c);
         return;
@@ -206,6 +211,11 @@ pub(crate) fn thin(
         );
     }
     #[cfg(target_arch = "x86_64")]
+    if avx512::available() {
+        avx512::gemm::<false>((m, k, n), a, b, epi, c);
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
     if x86::available() {
         x86::gemm::<false>((m, k, n), a, b, epi, c);
         return;
@@ -253,14 +263,32 @@ pub fn use_portable_kernels(yes: bool) {
 }
 
 /// The single-core FMA peak probe of the benchmarks: `rounds` rounds of 12 independent chains of
-/// 8-wide fused multiply-adds (`12 * 8 * 2 = 192` floating-point operations a round); returns a
-/// value that depends on all of them. `None` without AVX2 and FMA.
+/// fused multiply-adds as wide as the products' kernels use ([`fma_peak_flops_per_round`]);
+/// returns a value that depends on all of them. `None` without AVX2 and FMA.
 pub fn fma_peak_probe(rounds: u64) -> Option<f32> {
+    #[cfg(target_arch = "x86_64")]
+    if avx512::available() {
+        return Some(avx512::probe(rounds));
+    }
     #[cfg(target_arch = "x86_64")]
     if x86::available() {
         return Some(x86::probe(rounds));
     }
     let _ = rounds;
+    None
+}
+
+/// The floating-point operations of one round of [`fma_peak_probe`]: `12 * 16 * 2 = 384` where
+/// the products use AVX-512, `12 * 8 * 2 = 192` where they use AVX2; `None` without either.
+pub fn fma_peak_flops_per_round() -> Option<u64> {
+    #[cfg(target_arch = "x86_64")]
+    if avx512::available() {
+        return Some(384);
+    }
+    #[cfg(target_arch = "x86_64")]
+    if x86::available() {
+        return Some(192);
+    }
     None
 }
 
@@ -286,6 +314,10 @@ pub(crate) fn wide<R>(f: impl FnOnce() -> R) -> R {
     }
     f()
 }
+
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_code)]
+mod avx512;
 
 /// The AVX2+FMA kernels: unsafe code of the core, with `dots.rs`'s AVX2 dot products (the
 /// intrinsics' loads and stores, and calling functions compiled for features that were checked
@@ -669,6 +701,23 @@ mod tests {
         out
     }
 
+    type Kernel = fn((usize, usize, usize), &[f32], MatRef<'_>, Epi<'_>, &mut [f32]);
+
+    /// The SIMD kernels this CPU runs (name, fused order, thin order), each of them whichever
+    /// the dispatch picks, so that every one is compared with the references.
+    fn simd_kernels() -> Vec<(&'static str, Kernel, Kernel)> {
+        let mut kernels: Vec<(&'static str, Kernel, Kernel)> = Vec::new();
+        #[cfg(target_arch = "x86_64")]
+        if x86::available() {
+            kernels.push(("AVX2", x86::gemm::<true>, x86::gemm::<false>));
+        }
+        #[cfg(target_arch = "x86_64")]
+        if avx512::available() {
+            kernels.push(("AVX-512", avx512::gemm::<true>, avx512::gemm::<false>));
+        }
+        kernels
+    }
+
     fn same_bits(x: &[f32], y: &[f32]) -> bool {
         x.len() == y.len() && x.iter().zip(y).all(|(x, y)| x.to_bits() == y.to_bits())
     }
@@ -693,6 +742,8 @@ mod tests {
             (5, 0, 3),
             (5, 4, 16),
             (23, 17, 13),
+            (48, 9, 7),
+            (31, 8, 3),
         ] {
             let (a_data, b_data, c0) = (rand(m * k), rand(k * n), rand(m * n));
             // Exact zeros of both signs and a NaN where the endings look.
@@ -745,7 +796,16 @@ mod tests {
                         let mut c = c0.clone();
                         gemm_portable((m, k, n), a.data, b, epi, &mut c);
                         assert!(same_bits(&c, &expected), "portable gemm {what}");
-                        let expected = reference_thin((m, k, n), a.data, b, epi, &c0);
+                        let thin_expected = reference_thin((m, k, n), a.data, b, epi, &c0);
+                        for (name, fused, thin_order) in simd_kernels() {
+                            let mut c = c0.clone();
+                            fused((m, k, n), a.data, b, epi, &mut c);
+                            assert!(same_bits(&c, &expected), "{name} gemm {what}");
+                            let mut c = c0.clone();
+                            thin_order((m, k, n), a.data, b, epi, &mut c);
+                            assert!(same_bits(&c, &thin_expected), "{name} thin {what}");
+                        }
+                        let expected = thin_expected;
                         let mut c = c0.clone();
                         thin((m, k, n), a.data, b, epi, &mut c);
                         assert!(same_bits(&c, &expected), "thin {what}");

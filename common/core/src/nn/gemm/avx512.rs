@@ -1,0 +1,217 @@
+//! The AVX-512 kernels of [`super::gemm`] and [`super::thin`]: the AVX2 kernels' blocks with 16
+//! rows to a register instead of 8 (blocks of 32 rows by 6 columns in registers over the whole
+//! `k` loop, then 16, the last 1-15 rows under a mask). Each element gets the operations of the
+//! AVX2 kernel in the same order, so the same bits; only more elements go at once.
+
+use std::arch::x86_64::*;
+use std::sync::OnceLock;
+
+use super::{Epi, MatRef};
+
+/// Whether the CPU has AVX-512 (foundation) besides AVX2 and FMA, and the portable kernels were
+/// not asked for.
+pub(super) fn available() -> bool {
+    static DETECTED: OnceLock<bool> = OnceLock::new();
+    super::x86::available()
+        && *DETECTED.get_or_init(|| std::arch::is_x86_feature_detected!("avx512f"))
+}
+
+/// [`gemm_avx512`] once [`available`] said yes: [`super::gemm`]'s order when `FMA`,
+/// [`super::thin`]'s when not.
+pub(super) fn gemm<const FMA: bool>(
+    mkn: (usize, usize, usize),
+    a: &[f32],
+    b: MatRef<'_>,
+    epi: Epi<'_>,
+    c: &mut [f32],
+) {
+    assert!(available());
+    // SAFETY: the CPU has AVX-512F, AVX2 and FMA (asserted); the caller checked the shapes.
+    unsafe { gemm_avx512::<FMA>(mkn, a, b, epi, c) }
+}
+
+/// One core's f32 FMA peak probe with 16-lane registers: 12 independent chains, 384 flops a
+/// round.
+pub(super) fn probe(rounds: u64) -> f32 {
+    assert!(available());
+    // SAFETY: the CPU has AVX-512F (asserted).
+    unsafe { probe_avx512(rounds) }
+}
+
+/// # Safety
+/// The CPU has AVX-512F (the only caller, [`probe`], asserts it).
+#[target_feature(enable = "avx512f")]
+unsafe fn probe_avx512(rounds: u64) -> f32 {
+    let mut acc = [_mm512_set1_ps(1.0); 12];
+    let x = _mm512_set1_ps(0.999_999);
+    let y = _mm512_set1_ps(1e-7);
+    for _ in 0..rounds {
+        for a in &mut acc {
+            *a = _mm512_fmadd_ps(*a, x, y);
+        }
+    }
+    let mut sum = _mm512_setzero_ps();
+    for a in acc {
+        sum = _mm512_add_ps(sum, a);
+    }
+    let mut out = [0.0f32; 16];
+    // SAFETY: `out` holds 16 floats.
+    unsafe { _mm512_storeu_ps(out.as_mut_ptr(), sum) };
+    out.iter().sum()
+}
+
+/// `C` with AVX-512: blocks of 6 columns (then fewer), and in each, blocks of 32 rows (then 16),
+/// accumulated in registers over the whole `k` loop, the elements of `B` broadcast; the last
+/// 1-15 rows under a mask, in the same order.
+///
+/// # Safety
+/// The CPU has AVX-512F, AVX2 and FMA, and `a`, `b` and `c` hold `m × k`, `k × n` and `m × n`
+/// values (the caller, [`gemm`], asserts the features; its callers check the shapes).
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn gemm_avx512<const FMA: bool>(
+    (m, k, n): (usize, usize, usize),
+    a: &[f32],
+    b: MatRef<'_>,
+    epi: Epi<'_>,
+    c: &mut [f32],
+) {
+    macro_rules! widths {
+        ($v:literal, $masked:literal, $i:expr, $width:expr, $j:expr, $last:expr) => {
+            match $width {
+                6 => block::<$v, 6, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+                5 => block::<$v, 5, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+                4 => block::<$v, 4, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+                3 => block::<$v, 3, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+                2 => block::<$v, 2, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+                _ => block::<$v, 1, $masked, FMA>(m, k, a, b, epi, c, $i, $j, $last),
+            }
+        };
+    }
+    let mut j = 0;
+    while j < n {
+        let width = (n - j).min(6);
+        let mut i = 0;
+        // SAFETY: every block reads rows i..i + 16 V (<= m, or fewer under the mask) of the k
+        // columns of `a` (m * k values), elements (p, j..j + width) of `b` (p < k,
+        // j + width <= n: within `b`'s slice, as the caller checked), the same elements of `c`
+        // and of a mask (m * n values, checked), `bias[j..j + width]` (n values, checked), and
+        // writes `c`'s rows i..i + 16 V (or the masked ones) of those columns.
+        unsafe {
+            while i + 32 <= m {
+                widths!(2, false, i, width, j, 16);
+                i += 32;
+            }
+            while i + 16 <= m {
+                widths!(1, false, i, width, j, 16);
+                i += 16;
+            }
+            if i < m {
+                widths!(1, true, i, width, j, m - i);
+            }
+        }
+        j += width;
+    }
+}
+
+/// Rows `i..i + 16 (V - 1) + last` of columns `j..j + W`: the last vector of rows holds `last`
+/// (1-16) rows, loaded and stored under a mask when `MASKED`. With `FMA`, each element is
+/// `fma`'d from zero and then ends as [`Epi::fused`]; without, it starts at [`Epi::start`], adds
+/// rounded products and ends as [`Epi::finish`]: the AVX2 block's operations.
+///
+/// # Safety
+/// The CPU has AVX-512F; `i + 16 (V - 1) + last <= m`; `a` holds `m * k` values; `b` holds
+/// element `(k - 1, j + W - 1)` and every one before; `c` (and a mask) hold `m * (j + W)`
+/// values, a bias `j + W`.
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn block<const V: usize, const W: usize, const MASKED: bool, const FMA: bool>(
+    m: usize,
+    k: usize,
+    a: &[f32],
+    b: MatRef<'_>,
+    epi: Epi<'_>,
+    c: &mut [f32],
+    i: usize,
+    j: usize,
+    last: usize,
+) {
+    debug_assert!((1..=16).contains(&last) && i + 16 * (V - 1) + last <= m);
+    debug_assert!(MASKED || last == 16);
+    debug_assert!(a.len() >= m * k && c.len() >= m * (j + W));
+    let mask: __mmask16 = ((1u32 << last) - 1) as u16;
+    let load = |ptr: *const f32, v: usize| {
+        if MASKED && v + 1 == V {
+            _mm512_maskz_loadu_ps(mask, ptr)
+        } else {
+            _mm512_loadu_ps(ptr)
+        }
+    };
+    let c = c.as_mut_ptr();
+    let at = |q: usize, v: usize| i + 16 * v + (j + q) * m;
+    let bias = |q: usize| match epi {
+        Epi::Bias(bias, _) => _mm512_set1_ps(bias[j + q]),
+        _ => _mm512_setzero_ps(),
+    };
+    let mut acc = [[_mm512_setzero_ps(); V]; W];
+    if !FMA {
+        // The sum starts at `c` or the bias.
+        for (q, acc) in acc.iter_mut().enumerate() {
+            for (v, x) in acc.iter_mut().enumerate() {
+                *x = match epi {
+                    Epi::Add => load(c.add(at(q, v)), v),
+                    Epi::Bias(..) => bias(q),
+                    Epi::Set | Epi::Mask(_) => _mm512_setzero_ps(),
+                };
+            }
+        }
+    }
+    let a = a.as_ptr().add(i);
+    let b_cols: [*const f32; W] = std::array::from_fn(|q| b.data.as_ptr().add((j + q) * b.cs));
+    for p in 0..k {
+        let col = a.add(p * m);
+        let mut av = [_mm512_setzero_ps(); V];
+        for (v, x) in av.iter_mut().enumerate() {
+            *x = load(col.add(16 * v), v);
+        }
+        for (acc, b_col) in acc.iter_mut().zip(b_cols) {
+            let bb = _mm512_set1_ps(*b_col.add(p * b.rs));
+            for v in 0..V {
+                acc[v] = if FMA {
+                    _mm512_fmadd_ps(av[v], bb, acc[v])
+                } else {
+                    _mm512_add_ps(acc[v], _mm512_mul_ps(bb, av[v]))
+                };
+            }
+        }
+    }
+    let zero = _mm512_setzero_ps();
+    for (q, acc) in acc.iter().enumerate() {
+        for (v, &x) in acc.iter().enumerate() {
+            let out = c.add(at(q, v));
+            let x = if FMA {
+                match epi {
+                    Epi::Set | Epi::Mask(_) => x,
+                    Epi::Add => _mm512_add_ps(x, load(out, v)),
+                    Epi::Bias(..) => _mm512_add_ps(x, bias(q)),
+                }
+            } else {
+                x
+            };
+            let x = match epi {
+                // `max` returns its second operand (0) for a NaN and for -0, as the AVX2
+                // block's `maxps` does.
+                Epi::Bias(_, true) => _mm512_max_ps(x, zero),
+                Epi::Mask(h) => {
+                    let h = load(h.as_ptr().add(at(q, v)), v);
+                    _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(h, zero), x)
+                }
+                _ => x,
+            };
+            if MASKED && v + 1 == V {
+                _mm512_mask_storeu_ps(out, mask, x);
+            } else {
+                _mm512_storeu_ps(out, x);
+            }
+        }
+    }
+}
