@@ -12,7 +12,6 @@ import argparse
 import json
 import os
 import random
-import resource
 import statistics
 import subprocess
 import tempfile
@@ -50,12 +49,7 @@ def machine():
     return host.machine() | {"scikit_learn": sklearn.__version__, "numpy": np.__version__}
 
 
-def cpu_seconds(cmd):
-    """The child's user + system CPU time, and its stdout."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), out
+cpu_seconds = host.cpu_seconds
 
 
 def step_flops(hidden, heads, batch, double, obs=4, actions=2):
@@ -69,19 +63,9 @@ def step_flops(hidden, heads, batch, double, obs=4, actions=2):
     return 2 * batch * ((3 if double else 2) * forward + backward)
 
 
-def flops_per_round(out):
-    """The flops of one round of `train_steps peak`, from its first line of output."""
-    first = out.splitlines()[0].split()
-    assert first[0] == "flops_per_round" and int(first[1]) > 0, f"unexpected: {out!r}"
-    return int(first[1])
-
-
 def peak_flops():
-    """One core's f32 FMA peak now: `train_steps peak` (12 independent chains of fused
-    multiply-adds as wide as the products' kernels: 16 lanes, 384 flops a round, with AVX-512;
-    8 lanes, 192 flops, with AVX2) in flops per second of CPU time."""
-    cpu, out = cpu_seconds([TRAIN_STEPS, "peak", str(PEAK_ROUNDS)])
-    return PEAK_ROUNDS * flops_per_round(out) / cpu
+    """One core's f32 FMA peak now, in flops per second of CPU time (`host.fma_peak`)."""
+    return host.fma_peak(TRAIN_STEPS, PEAK_ROUNDS)
 
 
 def states(n, rng):

@@ -8,7 +8,6 @@ import argparse
 import csv
 import json
 import os
-import resource
 import re
 import statistics
 import subprocess
@@ -94,19 +93,9 @@ PEAK_ROUNDS = 100_000_000
 
 
 def core_peak_flops(train_steps):
-    """One core's f32 FMA peak now, as `deploy/bench/core.sh` measures it: `train_steps peak`
-    (12 independent chains of fused multiply-adds as wide as the products' kernels: 384 flops a
-    round with AVX-512, 192 with AVX2, as its first line says) in flops per second of its CPU
-    time, the median of 3 runs."""
-    def once():
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        out = sh([train_steps, "peak", str(PEAK_ROUNDS)]).stdout
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-        first = out.splitlines()[0].split()
-        assert first[0] == "flops_per_round" and int(first[1]) > 0, f"unexpected: {out!r}"
-        return PEAK_ROUNDS * int(first[1]) / cpu
-    return statistics.median(once() for _ in range(3))
+    """One core's f32 FMA peak now, as `deploy/bench/core.sh` measures it (`host.fma_peak`), the
+    median of 3 runs."""
+    return statistics.median(host.fma_peak(train_steps, PEAK_ROUNDS) for _ in range(3))
 
 
 def actors_sweep(alfd, tmp, counts, repeats):

@@ -4,7 +4,8 @@
 //! - with the widest products the CPU has (AVX-512 or AVX2+FMA);
 //! - with glibc's FMA and AVX2 code paths masked (`GLIBC_TUNABLES`), as on a CPU without them:
 //!   the core's `exp`, `ln`, `pow`, `sin` and `cos` come from the `libm` crate, not glibc, whose
-//!   choice of implementation by CPU features changed a run from episode 129 before;
+//!   choice of implementation by CPU features would make this run's numbers differ between
+//!   CPUs from episode 129;
 //! - with the portable fallback of the products (`ALFD_PORTABLE_KERNELS=1`: a correctly rounded
 //!   software FMA per element), over the first 1,500 steps (it is slow).
 //!

@@ -4,8 +4,8 @@
 //! columns against a packed copy of the panel, in row blocks that stay in the L2 cache, the
 //! columns dealt in turn to the lanes the caller passes (`lanes.rs`). Plain multiplications and
 //! subtractions in a fixed order per element (no fused multiply-add; wider registers where the
-//! CPU has AVX2 or AVX-512 change the speed, never a bit), so the same binary gives the same bits on every
-//! x86-64 CPU and on any lanes.
+//! CPU has AVX2 or AVX-512 change the speed, never a bit), so the same binary gives the same
+//! bits on every x86-64 CPU and on any lanes.
 
 use super::lanes::{share, Lanes, Serial};
 
@@ -322,12 +322,8 @@ fn tile_update(acc: &mut [f64; TILE_ROWS * TILE_COLS], li: &[f64], lj: &[f64]) {
     let w = li.len() / TILE_ROWS;
     assert!(lj.len() >= w * TILE_COLS);
     #[cfg(target_arch = "x86_64")]
-    if x86::available_512() {
-        return x86::tile_update_512(acc, li, lj, w);
-    }
-    #[cfg(target_arch = "x86_64")]
     if x86::available() {
-        return x86::tile_update(acc, li, lj, w);
+        return x86::tile_update(acc, li, lj, w, crate::nn::avx512_available());
     }
     tile_update_portable(acc, li, lj, w);
 }
@@ -351,32 +347,11 @@ fn tile_update_portable(acc: &mut [f64; TILE_ROWS * TILE_COLS], li: &[f64], lj: 
 #[allow(unsafe_code)]
 mod x86 {
     use std::arch::x86_64::*;
-    use std::sync::OnceLock;
 
     use super::{TILE_COLS, TILE_ROWS};
 
     pub(super) fn available() -> bool {
         crate::nn::wide_available()
-    }
-
-    /// Whether the CPU has AVX-512 (foundation) besides AVX2, and the portable kernels were not
-    /// asked for.
-    pub(super) fn available_512() -> bool {
-        static DETECTED: OnceLock<bool> = OnceLock::new();
-        available() && *DETECTED.get_or_init(|| std::arch::is_x86_feature_detected!("avx512f"))
-    }
-
-    /// See [`super::tile_update`], a tile's column of 8 rows in one AVX-512 register.
-    pub(super) fn tile_update_512(
-        acc: &mut [f64; TILE_ROWS * TILE_COLS],
-        li: &[f64],
-        lj: &[f64],
-        w: usize,
-    ) {
-        assert!(available_512() && li.len() >= w * TILE_ROWS);
-        assert!(lj.len() >= w * TILE_COLS);
-        // SAFETY: the CPU has AVX-512F (asserted); the lengths are checked above.
-        unsafe { tile_update_avx512(acc, li, lj, w) }
     }
 
     /// # Safety
@@ -408,17 +383,27 @@ mod x86 {
         }
     }
 
-    /// See [`super::tile_update`]; `li` holds `w * 8` values, `lj` at least `w * 6`.
+    /// See [`super::tile_update`]; `li` holds `w * 8` values, `lj` at least `w * 6`. With
+    /// `avx512`, each column's 8 rows in one AVX-512 register, else in two AVX2 registers.
     pub(super) fn tile_update(
         acc: &mut [f64; TILE_ROWS * TILE_COLS],
         li: &[f64],
         lj: &[f64],
         w: usize,
+        avx512: bool,
     ) {
         assert!(available() && li.len() >= w * TILE_ROWS);
         assert!(lj.len() >= w * TILE_COLS);
-        // SAFETY: the CPU has AVX2 (asserted); the lengths are checked above.
-        unsafe { tile_update_avx2(acc, li, lj, w) }
+        assert!(!avx512 || crate::nn::avx512_available());
+        // SAFETY: the CPU has AVX2, and AVX-512F when `avx512` (asserted); the lengths are
+        // checked above.
+        unsafe {
+            if avx512 {
+                tile_update_avx512(acc, li, lj, w)
+            } else {
+                tile_update_avx2(acc, li, lj, w)
+            }
+        }
     }
 
     /// # Safety
@@ -557,21 +542,21 @@ mod tests {
             let li: Vec<f64> = (0..w * TILE_ROWS).map(v).collect();
             let lj: Vec<f64> = (0..w * TILE_COLS).map(|k| v(k + 3)).collect();
             let start: [f64; TILE_ROWS * TILE_COLS] = std::array::from_fn(|k| v(k + 11));
-            let (mut wide, mut portable) = (start, start);
-            x86::tile_update(&mut wide, &li, &lj, w);
+            let mut portable = start;
             tile_update_portable(&mut portable, &li, &lj, w);
-            assert!(wide
-                .iter()
-                .zip(&portable)
-                .all(|(a, b)| a.to_bits() == b.to_bits()));
-            assert_ne!(wide, start);
-            if x86::available_512() {
-                let mut widest = start;
-                x86::tile_update_512(&mut widest, &li, &lj, w);
-                assert!(widest
-                    .iter()
-                    .zip(&portable)
-                    .all(|(a, b)| a.to_bits() == b.to_bits()));
+            assert_ne!(portable, start);
+            for avx512 in [false, true] {
+                if avx512 && !crate::nn::avx512_available() {
+                    continue;
+                }
+                let mut wide = start;
+                x86::tile_update(&mut wide, &li, &lj, w, avx512);
+                assert!(
+                    wide.iter()
+                        .zip(&portable)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "avx512: {avx512}"
+                );
             }
         }
     }

@@ -7,8 +7,9 @@
 //! an add.
 //!
 //! With AVX2 and FMA (detected at run time) a block of 16 rows by 6 columns of `C` stays in
-//! registers over the whole `k` loop (with AVX-512, 32 rows: `gemm/avx512.rs`); the rows are contiguous (column-major `A`, packed first when
-//! it is a transposed view), the elements of `B` are broadcast. Vectorising over rows leaves each
+//! registers over the whole `k` loop (with AVX-512, 32 rows: `gemm/avx512.rs`); the rows are
+//! contiguous (column-major `A`, packed first when it is a transposed view), the elements of `B`
+//! are broadcast. Vectorising over rows leaves each
 //! element's order of operations as the scalar loop's, so the tails and the fallback give the
 //! same bits. The layers' bias, ReLU and ReLU's backward mask are applied as a block is stored
 //! ([`Epi`]), with the operations and order of the separate passes they replace. The thin
@@ -283,13 +284,22 @@ pub fn fma_peak_probe(rounds: u64) -> Option<f32> {
 pub fn fma_peak_flops_per_round() -> Option<u64> {
     #[cfg(target_arch = "x86_64")]
     if avx512::available() {
-        return Some(384);
+        return Some(avx512::PROBE_FLOPS);
     }
     #[cfg(target_arch = "x86_64")]
     if x86::available() {
-        return Some(192);
+        return Some(x86::PROBE_FLOPS);
     }
     None
+}
+
+/// Whether the products and the Cholesky tile use AVX-512: the CPU has AVX-512F besides AVX2
+/// and FMA, and the portable kernels were not asked for.
+pub(crate) fn avx512_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return avx512::available();
+    #[cfg(not(target_arch = "x86_64"))]
+    false
 }
 
 /// Whether [`wide`] runs its function compiled for AVX2: the CPU has AVX2 and FMA and the
@@ -431,6 +441,9 @@ mod x86 {
         // SAFETY: the CPU has AVX2 and FMA (asserted).
         unsafe { probe_avx2_fma(rounds) }
     }
+
+    /// The flops of a round of [`probe`]: 12 chains of 8-lane fused multiply-adds.
+    pub(super) const PROBE_FLOPS: u64 = 12 * 8 * 2;
 
     /// # Safety
     /// The CPU has AVX2 and FMA (the only caller, [`probe`], asserts it).

@@ -30,8 +30,11 @@ pub(super) fn gemm<const FMA: bool>(
     unsafe { gemm_avx512::<FMA>(mkn, a, b, epi, c) }
 }
 
-/// One core's f32 FMA peak probe with 16-lane registers: 12 independent chains, 384 flops a
-/// round.
+/// The flops of a round of [`probe`]: 12 chains of 16-lane fused multiply-adds.
+pub(super) const PROBE_FLOPS: u64 = 12 * 16 * 2;
+
+/// One core's f32 FMA peak probe with 16-lane registers: 12 independent chains
+/// ([`PROBE_FLOPS`] a round).
 pub(super) fn probe(rounds: u64) -> f32 {
     assert!(available());
     // SAFETY: the CPU has AVX-512F (asserted).
