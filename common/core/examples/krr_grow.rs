@@ -1,12 +1,38 @@
 //! `cargo run --release -p alfd-common --example krr_grow -- B R`: the cost of one more
-//! demonstration for KRR at B demonstrations, grown (`KrrFactor::push` and the solve for the
-//! model) against fitted anew (`KrrFactor::fit` and the solve), on CartPole-like states (two
-//! actions). Prints one JSON line: the seconds per grown demonstration (the mean over R of them,
-//! from B on; `push_s` the new row of the factor, `model_s` the solve for the model) and the seconds of one fit on B + R, and whether the two models agree bit for bit.
+//! demonstration for KRR at B demonstrations, grown (`KrrFactor::push_on` and the solve for the
+//! model, `model_on`) against fitted anew (`KrrFactor::fit` and the solve), on CartPole-like
+//! states (two actions). The R arrivals from B on take turns on one lane and on two lanes that
+//! run at once; every model is solved on both. Prints one JSON line: the median seconds per grown
+//! demonstration on one lane (`grow_s`: `push_s` the new row of the factor, `model_s` the solve
+//! for the model) and on two (`grow_2_s`, `push_2_s`, `model_2_s`), the seconds of one fit on
+//! B + R, and whether every model agrees bit for bit (one lane, two lanes, fitted anew).
 
 use alfd_common::demo_model::krr::KrrFactor;
+use alfd_common::demo_model::lanes::{Lanes, Serial, Threads};
 use alfd_common::rng::seeded;
 use rand::Rng as _;
+
+/// Seconds of each push and each solve per lane count (index 0: one lane, 1: two).
+#[derive(Default)]
+struct Times {
+    push: [Vec<f64>; 2],
+    model: [Vec<f64>; 2],
+}
+
+fn median(mut xs: Vec<f64>) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    match xs.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => xs[n / 2],
+        n => (xs[n / 2 - 1] + xs[n / 2]) / 2.0,
+    }
+}
+
+fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
+    let t = std::time::Instant::now();
+    let v = f();
+    (v, t.elapsed().as_secs_f64())
+}
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -24,28 +50,45 @@ fn main() {
         })
         .collect();
     let actions: Vec<usize> = states.iter().map(|s| usize::from(s[2] > 0.0)).collect();
+    let two = Threads::new(2);
+    let lanes: [&dyn Lanes; 2] = [&Serial, &two];
 
     let mut grown = KrrFactor::fit(&states[..b], &actions[..b], 2).expect("a factor");
-    let (mut push_s, mut model_s) = (0.0, 0.0);
+    let mut times = Times::default();
+    let mut same = true;
     let mut model = None;
     for i in b..b + r {
-        let t = std::time::Instant::now();
-        grown.push(&states[i], actions[i]).expect("a new row");
-        push_s += t.elapsed().as_secs_f64();
-        let t = std::time::Instant::now();
-        model = Some(grown.model());
-        model_s += t.elapsed().as_secs_f64();
+        let on = (i - b) % 2;
+        let (pushed, s) = timed(|| grown.push_on(&states[i], actions[i], lanes[on]));
+        pushed.expect("a new row");
+        times.push[on].push(s);
+        let models = lanes.map(|l| {
+            let (m, s) = timed(|| grown.model_on(l));
+            (m, s)
+        });
+        for (t, (_, s)) in times.model.iter_mut().zip(&models) {
+            t.push(*s);
+        }
+        let [(one, _), (two, _)] = models;
+        same &= one == two;
+        model = Some(one);
     }
-    let (push_s, model_s) = (push_s / r as f64, model_s / r as f64);
-    let grow_s = push_s + model_s;
+    let push = times.push.map(median);
+    let solve = times.model.map(median);
 
-    let t = std::time::Instant::now();
-    let fitted = KrrFactor::fit(&states, &actions, 2)
-        .expect("a factor")
-        .model();
-    let fit_s = t.elapsed().as_secs_f64();
-    let same = model.as_ref() == Some(&fitted);
+    let (fitted, fit_s) = timed(|| {
+        KrrFactor::fit(&states, &actions, 2)
+            .expect("a factor")
+            .model()
+    });
+    same &= model.as_ref() == Some(&fitted);
     println!(
-        r#"{{"demos": {b}, "grown": {r}, "grow_s": {grow_s:.6}, "push_s": {push_s:.6}, "model_s": {model_s:.6}, "fit_s": {fit_s:.6}, "same_bits": {same}}}"#
+        r#"{{"demos": {b}, "grown": {r}, "grow_s": {:.6}, "push_s": {:.6}, "model_s": {:.6}, "grow_2_s": {:.6}, "push_2_s": {:.6}, "model_2_s": {:.6}, "fit_s": {fit_s:.6}, "same_bits": {same}}}"#,
+        push[0] + solve[0],
+        push[0],
+        solve[0],
+        push[1] + solve[1],
+        push[1],
+        solve[1],
     );
 }

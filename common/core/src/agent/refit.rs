@@ -110,7 +110,7 @@ impl RefitJob {
         let (set, m, lanes) = (&set[..], self.num_actions, self.lanes.get());
         let (krr, nystrom) = &mut self.factors;
         Ok(RefitOutcome::Fitted(match kind {
-            DemoModelKind::Krr => DemoModel::Krr(grown(krr, set, m, lanes)?.model()),
+            DemoModelKind::Krr => DemoModel::Krr(grown(krr, set, m, lanes)?.model_on(lanes)),
             DemoModelKind::Nystrom => DemoModel::Nystrom(grown(nystrom, set, m, lanes)?.model()?),
             DemoModelKind::Svm => {
                 let states: Vec<&[f64]> = set.iter().map(|d| d.state.as_slice()).collect();
@@ -125,7 +125,12 @@ impl RefitJob {
 /// sums.
 trait Grows: Sized {
     fn len(&self) -> usize;
-    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError>;
+    fn push(
+        &mut self,
+        state: &[f64],
+        action: usize,
+        lanes: &dyn Lanes,
+    ) -> Result<(), DemoModelError>;
     fn fit(
         states: &[&[f64]],
         actions: &[usize],
@@ -138,8 +143,8 @@ impl Grows for KrrFactor {
     fn len(&self) -> usize {
         KrrFactor::len(self)
     }
-    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
-        KrrFactor::push(self, state, action)
+    fn push(&mut self, s: &[f64], a: usize, lanes: &dyn Lanes) -> Result<(), DemoModelError> {
+        KrrFactor::push_on(self, s, a, lanes)
     }
     fn fit(s: &[&[f64]], a: &[usize], n: usize, lanes: &dyn Lanes) -> Result<Self, DemoModelError> {
         KrrFactor::fit_on(s, a, n, lanes)
@@ -150,8 +155,8 @@ impl Grows for NystromFactor {
     fn len(&self) -> usize {
         NystromFactor::len(self)
     }
-    fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
-        NystromFactor::push(self, state, action)
+    fn push(&mut self, s: &[f64], a: usize, _: &dyn Lanes) -> Result<(), DemoModelError> {
+        NystromFactor::push(self, s, a)
     }
     fn fit(s: &[&[f64]], a: &[usize], n: usize, _: &dyn Lanes) -> Result<Self, DemoModelError> {
         NystromFactor::fit(s, a, n)
@@ -179,7 +184,7 @@ fn grown<'a, G: Grows>(
                 && (n - f.len() <= 1 || (n - f.len()) * GROW_AT_MOST_ONE_IN <= f.len()) =>
         {
             for d in &demos[f.len()..] {
-                f.push(&d.state, d.action)?;
+                f.push(&d.state, d.action, lanes)?;
             }
         }
         _ => {

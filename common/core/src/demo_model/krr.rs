@@ -13,6 +13,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use super::lanes::{share, Lanes, Serial};
+use super::substitution::{self, Rows};
 use super::{check_demo, rbf, rbf_row, validate, DemoModelError, MAX_DEMOS};
 
 /// The ridge penalty added to the kernel's diagonal.
@@ -194,7 +195,9 @@ fn rows_in_place(a: &mut Vec<f64>, n: usize) {
         a.copy_within(i * n..i * n + i + 1, i * (i + 1) / 2);
     }
     a.truncate(n * (n + 1) / 2);
-    a.shrink_to_fit();
+    // The square's other half stays the buffer's capacity, its pages given back: rows pushed
+    // later fill it (to about 1.4 n rows) without moving the factor.
+    super::pages::release_spare(a);
 }
 
 /// The Cholesky factor L of `K + alpha I` over the demonstrations so far, with them: what a
@@ -293,6 +296,17 @@ impl KrrFactor {
     /// Adds a demonstration: one new row of L, by forward substitution against the rows before
     /// it (O(n²)). A state or action the factor cannot take is refused and changes nothing.
     pub fn push(&mut self, state: &[f64], action: usize) -> Result<(), DemoModelError> {
+        self.push_on(state, action, &Serial)
+    }
+
+    /// [`KrrFactor::push`], the forward substitution split between two lanes that run at once
+    /// when `lanes` has them (the same bits).
+    pub fn push_on(
+        &mut self,
+        state: &[f64],
+        action: usize,
+        lanes: &dyn Lanes,
+    ) -> Result<(), DemoModelError> {
         let n = self.len();
         check_demo(n, state, action, self.state_dim, self.num_actions)?;
         if n + 1 > MAX_DEMOS {
@@ -300,20 +314,7 @@ impl KrrFactor {
         }
         let mut kx = vec![0.0; n];
         rbf_row(state, &self.states, &mut kx);
-        let mut z = Vec::with_capacity(n + 1);
-        let mut j = 0;
-        while j + 4 <= n {
-            self.forward_four(&kx[j..j + 4], j, &mut z);
-            j += 4;
-        }
-        for j in j..n {
-            let lj = self.row(j);
-            let mut s = kx[j];
-            for (l, zp) in lj[..j].iter().zip(&z) {
-                s -= l * zp;
-            }
-            z.push(s / lj[j]);
-        }
+        let mut z = substitution::forward(Rows(&self.l), &kx, lanes);
         let mut d = rbf(state, state) + ALPHA;
         for zp in &z {
             d -= zp * zp;
@@ -329,36 +330,20 @@ impl KrrFactor {
         Ok(())
     }
 
-    /// Rows `j..j + 4` of the forward substitution for a new row of L (`z` holds its first `j`
-    /// values; `kx` the kernel between the new state and states `j..j + 4`): four chains of
-    /// subtractions at once, so that one does not wait on the last, each taking its products in
-    /// order of the column, as one row alone would.
-    fn forward_four(&self, kx: &[f64], j: usize, z: &mut Vec<f64>) {
-        let rows: [&[f64]; 4] = std::array::from_fn(|t| self.row(j + t));
-        let mut acc: [f64; 4] = std::array::from_fn(|t| kx[t]);
-        let [r0, r1, r2, r3] = rows.map(|r| &r[..j]);
-        for ((((&zk, l0), l1), l2), l3) in z[..j].iter().zip(r0).zip(r1).zip(r2).zip(r3) {
-            acc[0] -= l0 * zk;
-            acc[1] -= l1 * zk;
-            acc[2] -= l2 * zk;
-            acc[3] -= l3 * zk;
-        }
-        for t in 0..4 {
-            for u in 0..t {
-                acc[t] -= rows[t][j + u] * z[j + u];
-            }
-            z.push(acc[t] / rows[t][j + t]);
-        }
-    }
-
     /// The regression on the demonstrations factored: `L Lᵀ C = Y` solved for the dual
     /// coefficients, O(n²) per action: by nalgebra below [`BLOCKED_FROM`] demonstrations (the
     /// numbers every smaller run keeps), from there on by back substitution from the kept
     /// `L⁻¹ Y` ([`KrrFactor::back_solve`]).
     pub fn model(&self) -> KernelRidge {
+        self.model_on(&Serial)
+    }
+
+    /// [`KrrFactor::model`], the back substitution split between two lanes that run at once
+    /// when `lanes` has them (the same bits).
+    pub fn model_on(&self, lanes: &dyn Lanes) -> KernelRidge {
         let (n, m) = (self.len(), self.num_actions);
         if n >= BLOCKED_FROM {
-            return self.with_coef(self.back_solve());
+            return self.with_coef(self.back_solve(lanes));
         }
         let mut coef = vec![0.0; n * m];
         for (i, &a) in self.actions.iter().enumerate() {
@@ -392,12 +377,9 @@ impl KrrFactor {
 
     /// `Lᵀ X = W` for the dual coefficients X (row-major `n × actions`), W = L⁻¹ Y being kept
     /// ([`KrrFactor::forward_row`]): back substitution from the last row up, each action's
-    /// column apart, compiled for AVX2 where the CPU has it (`nn::wide`: wider registers, the
-    /// same operations). Rows are taken [`BACK_ROWS`] at a time: their own triangle first, then
-    /// every value above it minus the block's products held in a register, a segment at a time
-    /// for every column, so that L is read from memory once. Every coefficient takes the same products in the same order as a
-    /// row-major back substitution.
-    fn back_solve(&self) -> Vec<f64> {
+    /// column apart ([`substitution::back`]); every coefficient takes the same products in the
+    /// same order as a row-major back substitution.
+    fn back_solve(&self, lanes: &dyn Lanes) -> Vec<f64> {
         let (n, m) = (self.len(), self.num_actions);
         let mut cols = vec![0.0; n * m];
         for (i, w) in self.w.chunks_exact(m).enumerate() {
@@ -405,28 +387,7 @@ impl KrrFactor {
                 cols[a * n + i] = *v;
             }
         }
-        crate::nn::wide(|| {
-            let mut end = n;
-            while end > 0 {
-                let top = end.saturating_sub(BACK_ROWS);
-                for col in cols.chunks_exact_mut(n) {
-                    self.back_triangle(col, top, end);
-                }
-                if top > 0 {
-                    // The rows above the block, a segment at a time for every column, so that
-                    // the block's part of L is read from memory once.
-                    let rows: [&[f64]; BACK_ROWS] = std::array::from_fn(|r| self.row(end - 1 - r));
-                    for j in (0..top).step_by(BACK_SEGMENT) {
-                        let seg = j..(j + BACK_SEGMENT).min(top);
-                        for col in cols.chunks_exact_mut(n) {
-                            let x = std::array::from_fn(|r| col[end - 1 - r]);
-                            back_segment(&mut col[seg.clone()], rows.map(|r| &r[seg.clone()]), x);
-                        }
-                    }
-                }
-                end = top;
-            }
-        });
+        substitution::back(Rows(&self.l), &mut cols, n, lanes);
         let mut x = vec![0.0; n * m];
         for (a, col) in cols.chunks_exact(n).enumerate() {
             for (i, v) in col.iter().enumerate() {
@@ -435,44 +396,7 @@ impl KrrFactor {
         }
         x
     }
-
-    /// Rows `top..end` of the back substitution of one column among themselves: each row's
-    /// coefficient, and its products taken off the rows of the block above it, the last row
-    /// first.
-    #[inline(always)]
-    fn back_triangle(&self, col: &mut [f64], top: usize, end: usize) {
-        for i in (top..end).rev() {
-            let row = self.row(i);
-            let xi = col[i] / row[i];
-            col[i] = xi;
-            for (v, l) in col[top..i].iter_mut().zip(&row[top..i]) {
-                *v -= l * xi;
-            }
-        }
-    }
 }
-
-/// Values of a column above a block of rows minus the block's products, the last row's first
-/// (`rows[0]`, `x[0]`), held in a register between them.
-#[inline(always)]
-fn back_segment(col: &mut [f64], rows: [&[f64]; BACK_ROWS], x: [f64; BACK_ROWS]) {
-    let [r0, r1, r2, r3] = rows;
-    for ((((v, l0), l1), l2), l3) in col.iter_mut().zip(r0).zip(r1).zip(r2).zip(r3) {
-        let mut c = *v;
-        c -= l0 * x[0];
-        c -= l1 * x[1];
-        c -= l2 * x[2];
-        c -= l3 * x[3];
-        *v = c;
-    }
-}
-
-/// Values per segment of [`back_segment`]: a block's rows of L over it stay in the L1 cache
-/// for every action's column.
-const BACK_SEGMENT: usize = 512;
-
-/// Rows of L per block of [`KrrFactor`]'s back substitution.
-const BACK_ROWS: usize = 4;
 
 /// p(a|s) from the regression outputs, as described at [`KernelRidge::probs`].
 pub fn probs_from_outputs(f: &[f64]) -> Vec<f64> {
@@ -497,7 +421,7 @@ pub fn probs_from_outputs(f: &[f64]) -> Vec<f64> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::lanes::Backwards;
+    use super::super::lanes::{Backwards, Threads};
     use super::*;
 
     #[test]
@@ -629,6 +553,27 @@ mod tests {
     }
 
     #[test]
+    fn a_factor_grown_and_solved_on_lanes_at_once_is_the_fitted_one() {
+        let n = super::super::substitution::SPLIT_FROM + 6;
+        let (states, actions) = scattered(n);
+        let mut grown = KrrFactor::fit(&states[..n - 3], &actions[..n - 3], 3).unwrap();
+        let start = grown.l.as_ptr();
+        for i in n - 3..n {
+            grown
+                .push_on(&states[i], actions[i], &Threads::new(2))
+                .unwrap();
+        }
+        assert_eq!(
+            grown.l.as_ptr(),
+            start,
+            "new rows fill the fit's spare capacity"
+        );
+        let fitted = KrrFactor::fit(&states, &actions, 3).unwrap();
+        assert!(grown == fitted);
+        assert!(grown.model_on(&Threads::new(2)) == fitted.model());
+    }
+
+    #[test]
     fn the_solve_on_the_kept_rows_agrees_with_the_column_solve() {
         let n = BLOCKED_FROM + 9;
         let (states, actions) = scattered(n);
@@ -676,7 +621,7 @@ mod tests {
                     }
                 }
             }
-            let got = f.back_solve();
+            let got = f.back_solve(&Serial);
             let same = got.iter().zip(&x).all(|(g, w)| g.to_bits() == w.to_bits());
             assert!(same, "{m} actions");
         }

@@ -16,6 +16,7 @@ pub mod lanes;
 pub mod nystrom;
 mod pages;
 pub mod smo;
+mod substitution;
 pub mod svm;
 
 pub use krr::KernelRidge;
@@ -160,7 +161,7 @@ impl DemoModel {
     ) -> Result<DemoModel, DemoModelError> {
         match kind {
             DemoModelKind::Krr => KrrFactor::fit_on(states, actions, num_actions, lanes)
-                .map(|f| DemoModel::Krr(f.model())),
+                .map(|f| DemoModel::Krr(f.model_on(lanes))),
             DemoModelKind::Svm => {
                 KernelSvm::fit_on(states, actions, num_actions, lanes).map(DemoModel::Svm)
             }
