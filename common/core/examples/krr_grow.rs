@@ -8,9 +8,32 @@
 //! B + R, and whether every model agrees bit for bit (one lane, two lanes, fitted anew).
 
 use alfd_common::demo_model::krr::KrrFactor;
-use alfd_common::demo_model::lanes::{Lanes, Serial, Threads};
+use alfd_common::demo_model::lanes::{Lanes, Serial};
 use alfd_common::rng::seeded;
 use rand::Rng as _;
+
+/// Two lanes that run at once, each job on a scoped thread (as `alfd_harness::Threads`, which
+/// this crate's examples cannot use).
+struct Two;
+
+impl Lanes for Two {
+    fn width(&self) -> usize {
+        2
+    }
+    fn run<'a>(&self, jobs: Vec<Box<dyn FnOnce() + Send + 'a>>) {
+        std::thread::scope(|scope| {
+            for job in jobs {
+                scope.spawn(job);
+            }
+        });
+    }
+    fn concurrent(&self) -> bool {
+        true
+    }
+    fn pause(&self) {
+        std::thread::yield_now();
+    }
+}
 
 /// Seconds of each push and each solve per lane count (index 0: one lane, 1: two).
 #[derive(Default)]
@@ -50,8 +73,7 @@ fn main() {
         })
         .collect();
     let actions: Vec<usize> = states.iter().map(|s| usize::from(s[2] > 0.0)).collect();
-    let two = Threads::new(2);
-    let lanes: [&dyn Lanes; 2] = [&Serial, &two];
+    let lanes: [&dyn Lanes; 2] = [&Serial, &Two];
 
     let mut grown = KrrFactor::fit(&states[..b], &actions[..b], 2).expect("a factor");
     let mut times = Times::default();

@@ -4,8 +4,8 @@
 //! joining the run and the one `should_stop` (`session`), the Python adapters of Gymnasium
 //! environments and external experts (`python`), start-up (logging, the schema-version
 //! hook: `startup`), durable file writes (`fs`), a run directory's ownership (`run_dir`:
-//! one run per directory, held by a `flock`); and, re-exported, the demonstration model's lanes
-//! on the machine's cores (`Threads`, from `alfd_common::demo_model::lanes`).
+//! one run per directory, held by a `flock`), and the demonstration model's lanes on the
+//! machine's cores (`threads`).
 
 mod bad_input;
 mod fs;
@@ -17,8 +17,8 @@ mod runtime;
 mod sched;
 mod session;
 mod startup;
+mod threads;
 
-pub use alfd_common::demo_model::lanes::Threads;
 pub use bad_input::{chain, describe, exit_code, BadInput, HarnessError, Result, What};
 #[cfg(any(test, feature = "testing"))]
 pub use fs::test_dir;
@@ -37,3 +37,4 @@ pub use session::{Session, SessionError, LAUNCHER_SILENCE, STOP_REQUESTED, TERMI
 pub use startup::{
     init_process_logging, log_filter, portable_kernels_from_env, schema_version_from_env,
 };
+pub use threads::Threads;

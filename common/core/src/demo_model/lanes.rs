@@ -1,7 +1,7 @@
 //! How the demonstration model's independent jobs run: one after another ([`Serial`], what the
-//! core does on its own) or at once on scoped threads ([`Threads`], which the expert process and
-//! `alfd demo-model` pass in: the core starts a thread only on lanes its caller gives it). A
-//! job's arithmetic is its own, so the model's bits never depend on the lanes it ran on.
+//! core does on its own) or at once on threads the caller owns (`alfd_harness::Threads`, which
+//! the expert process and `alfd demo-model` pass in). A job's arithmetic is its own, so the
+//! model's bits never depend on the lanes it ran on.
 
 /// Runs batches of independent jobs.
 pub trait Lanes: Sync {
@@ -16,6 +16,12 @@ pub trait Lanes: Sync {
     /// split that way is given only to lanes that say so.
     fn concurrent(&self) -> bool {
         false
+    }
+
+    /// What a job does while it waits for another's progress, after a while of spinning:
+    /// nothing more here; lanes on threads give the core away.
+    fn pause(&self) {
+        std::hint::spin_loop();
     }
 }
 
@@ -32,49 +38,6 @@ impl Lanes for Serial {
         for job in jobs {
             job();
         }
-    }
-}
-
-/// Runs a batch of jobs at once on scoped threads, one of them on the caller's.
-#[derive(Debug, Clone, Copy)]
-pub struct Threads {
-    width: usize,
-}
-
-impl Threads {
-    /// As many lanes as the process may use cores (1 when that cannot be told).
-    pub fn machine() -> Threads {
-        Threads::new(std::thread::available_parallelism().map_or(1, |n| n.get()))
-    }
-
-    /// `width` lanes (at least 1).
-    pub fn new(width: usize) -> Threads {
-        Threads {
-            width: width.max(1),
-        }
-    }
-}
-
-impl Lanes for Threads {
-    fn width(&self) -> usize {
-        self.width
-    }
-
-    fn run<'a>(&self, jobs: Vec<Box<dyn FnOnce() + Send + 'a>>) {
-        std::thread::scope(|scope| {
-            let mut jobs = jobs.into_iter();
-            let first = jobs.next();
-            for job in jobs {
-                scope.spawn(job);
-            }
-            if let Some(job) = first {
-                job();
-            }
-        });
-    }
-
-    fn concurrent(&self) -> bool {
-        true
     }
 }
 
@@ -144,7 +107,6 @@ impl Lanes for Backwards {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::demo_model::{DemoModel, DemoModelKind};
 
     #[test]
     fn every_item_is_visited_once_in_the_lane_of_its_index() {
@@ -161,54 +123,6 @@ mod tests {
                 items.iter().all(|&(_, visits)| visits == 1),
                 "width {width}"
             );
-        }
-    }
-
-    #[test]
-    fn jobs_run_on_threads_of_their_own_and_all_finish() {
-        let ids = std::sync::Mutex::new(Vec::new());
-        let jobs: Vec<Box<dyn FnOnce() + Send + '_>> = (0..3)
-            .map(|_| {
-                Box::new(|| ids.lock().unwrap().push(std::thread::current().id()))
-                    as Box<dyn FnOnce() + Send + '_>
-            })
-            .collect();
-        Threads::new(3).run(jobs);
-        let mut ids = ids.into_inner().unwrap();
-        assert_eq!(ids.len(), 3);
-        ids.sort_by_key(|id| format!("{id:?}"));
-        ids.dedup();
-        assert_eq!(ids.len(), 3, "three jobs on three threads");
-        assert_eq!(Threads::new(0).width(), 1);
-    }
-
-    #[test]
-    fn models_fitted_on_threads_are_the_ones_fitted_in_turn() {
-        let states: Vec<[f64; 4]> = (0..1300)
-            .map(|i| {
-                let t = i as f64;
-                [
-                    (t * 0.37).sin() * 2.0,
-                    (t * 0.11).cos() * 3.0,
-                    (t * 0.05).sin() * 0.2,
-                    (t * 0.73).cos(),
-                ]
-            })
-            .collect();
-        let actions: Vec<usize> = states
-            .iter()
-            .map(|s| usize::from(s[2] + 0.1 * s[3] > 0.0))
-            .collect();
-        for kind in [DemoModelKind::Krr, DemoModelKind::Svm] {
-            let n = if kind == DemoModelKind::Svm {
-                300
-            } else {
-                states.len()
-            };
-            let serial = DemoModel::fit(kind, &states[..n], &actions[..n], 2).unwrap();
-            let threaded =
-                DemoModel::fit_on(kind, &states[..n], &actions[..n], 2, &Threads::new(2)).unwrap();
-            assert!(threaded == serial, "{kind:?}");
         }
     }
 }

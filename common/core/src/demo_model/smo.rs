@@ -31,6 +31,16 @@ pub struct Dual {
 /// libsvm's floor on the curvature of a working pair.
 const TAU: f64 = 1e-12;
 
+/// The curvature of the objective along a pair, `K_ii + K_jj − 2 K_ij`, floored at [`TAU`].
+fn curvature(kii: f64, kjj: f64, kij: f64) -> f64 {
+    let a = kii + kjj - 2.0 * kij;
+    if a > 0.0 {
+        a
+    } else {
+        TAU
+    }
+}
+
 /// Rows of a symmetric kernel matrix, given on demand.
 pub trait KernelRows: Sync {
     /// Row `r` (its column too).
@@ -92,9 +102,10 @@ pub fn solve_on(
         // The objective's gradient Qα − e, at α = 0.
         grad: vec![-1.0; n],
         grad_bar: vec![0.0; n],
-        active: (0..n).collect(),
+        active: Active::default(),
         unshrunk: false,
     };
+    problem.activate(&mut st, (0..n).collect());
     let (mut iterations, mut shrunk_peak) = (0, 0);
     let mut counter = n.min(SHRINK_EVERY) + 1;
     while iterations < max_iter {
@@ -123,6 +134,7 @@ pub fn solve_on(
         tracing::debug!(max_iter, "SMO: reached the maximal number of iterations");
     }
     problem.reconstruct_gradient(&mut st);
+    st.write_back();
     let rho = problem.rho(&st.alpha, &st.grad);
     let coef = st
         .alpha
@@ -141,15 +153,49 @@ pub fn solve_on(
 /// Iterations between two shrinkings (libsvm's; fewer variables than this: their number).
 pub const SHRINK_EVERY: usize = 1000;
 
-/// The solver's variables: α, the gradient (exact on the active set), `grad_bar` (for each
-/// variable, `Σ_{j: α_j = C} C Q_ij`), and the active set (ascending).
+/// The solver's variables: α, the gradient, `grad_bar` (for each variable,
+/// `Σ_{j: α_j = C} C Q_ij`), and the active set with the gradient of its variables.
 struct SolverState {
     alpha: Vec<f64>,
+    /// The gradient of every variable; an active variable's is [`Active::grad`]'s, written back
+    /// here before the active set changes ([`SolverState::write_back`]).
     grad: Vec<f64>,
     grad_bar: Vec<f64>,
-    active: Vec<usize>,
+    active: Active,
     /// Whether every variable came back once the violation was near the tolerance.
     unshrunk: bool,
+}
+
+/// The active set in ascending order, what the working-pair search and the gradient update
+/// read of each of its variables laid out side by side (position p, not the variable's
+/// index), so that both walk contiguous arrays.
+#[derive(Default)]
+struct Active {
+    /// The variables.
+    t: Vec<usize>,
+    /// Their rows of the kernel.
+    row: Vec<usize>,
+    y: Vec<f64>,
+    diag: Vec<f64>,
+    grad: Vec<f64>,
+    /// Whether each is in I_up, in I_low (kept with α).
+    up: Vec<bool>,
+    low: Vec<bool>,
+}
+
+impl Active {
+    fn len(&self) -> usize {
+        self.t.len()
+    }
+}
+
+impl SolverState {
+    /// The active variables' gradient written back to `grad`.
+    fn write_back(&mut self) {
+        for (&t, &g) in self.active.t.iter().zip(&self.active.grad) {
+            self.grad[t] = g;
+        }
+    }
 }
 
 /// The dual's data: the kernel matrix of its rows, the labels `y = ±1` and the box `[0, C]`.
@@ -175,21 +221,6 @@ impl Problem<'_> {
         self.k.row(self.rows[i])
     }
 
-    /// The curvature of the objective along the pair (i, j), floored at TAU.
-    fn curvature(&self, i: usize, j: usize) -> f64 {
-        self.curvature_with(i, j, self.kij(i, j))
-    }
-
-    /// [`Problem::curvature`] given `K_ij`.
-    fn curvature_with(&self, i: usize, j: usize, kij: f64) -> f64 {
-        let a = self.diag[i] + self.diag[j] - 2.0 * kij;
-        if a > 0.0 {
-            a
-        } else {
-            TAU
-        }
-    }
-
     /// Whether α_t may move up along y_t (the set I_up).
     fn up(&self, t: usize, a: f64) -> bool {
         if self.y[t] > 0.0 {
@@ -208,17 +239,29 @@ impl Problem<'_> {
         }
     }
 
-    /// WSS 2 over the active set: i, the index in I_up with the largest −y_t G_t; j, the index
-    /// in I_low whose pair with i decreases the objective most. None once the maximal violation
-    /// is below `eps`.
+    /// The active set `list` (ascending), its arrays gathered from the state's.
+    fn activate(&self, st: &mut SolverState, list: Vec<usize>) {
+        let a = &mut st.active;
+        a.row = list.iter().map(|&t| self.rows[t]).collect();
+        a.y = list.iter().map(|&t| self.y[t]).collect();
+        a.diag = list.iter().map(|&t| self.diag[t]).collect();
+        a.grad = list.iter().map(|&t| st.grad[t]).collect();
+        a.up = list.iter().map(|&t| self.up(t, st.alpha[t])).collect();
+        a.low = list.iter().map(|&t| self.low(t, st.alpha[t])).collect();
+        a.t = list;
+    }
+
+    /// WSS 2 over the active set: i, the position in it of the variable in I_up with the
+    /// largest −y_t G_t; j, of the variable in I_low whose pair with i decreases the objective
+    /// most. None once the maximal violation is below `eps`.
     fn working_pair(&self, st: &SolverState, eps: f64) -> Option<(usize, usize)> {
-        let (y, alpha, grad) = (&self.y, &st.alpha, &st.grad);
+        let a = &st.active;
         let mut gmax = f64::NEG_INFINITY;
         let mut i = usize::MAX;
-        for &t in &st.active {
-            if self.up(t, alpha[t]) && -y[t] * grad[t] >= gmax {
-                gmax = -y[t] * grad[t];
-                i = t;
+        for (p, ((&up, &y), &g)) in a.up.iter().zip(&a.y).zip(&a.grad).enumerate() {
+            if up && -y * g >= gmax {
+                gmax = -y * g;
+                i = p;
             }
         }
         if i == usize::MAX {
@@ -228,31 +271,44 @@ impl Problem<'_> {
         let mut gmax2 = f64::NEG_INFINITY;
         let mut j = usize::MAX;
         let mut best = f64::INFINITY;
-        let ki = self.row(i);
-        for &t in st.active.iter().filter(|&&t| self.low(t, alpha[t])) {
-            let yg = y[t] * grad[t];
+        let (ki, di) = (self.k.row(a.row[i]), a.diag[i]);
+        for p in 0..a.len() {
+            if !a.low[p] {
+                continue;
+            }
+            let yg = a.y[p] * a.grad[p];
             if yg >= gmax2 {
                 gmax2 = yg;
             }
             let b = gmax + yg;
             if b > 0.0 {
-                let gain = -(b * b) / self.curvature_with(i, t, ki[self.rows[t]]);
+                let gain = -(b * b) / curvature(di, a.diag[p], ki[a.row[p]]);
                 if gain <= best {
                     best = gain;
-                    j = t;
+                    j = p;
                 }
             }
         }
         (gmax + gmax2 >= eps && j != usize::MAX).then_some((i, j))
     }
 
-    /// One iteration on the pair (i, j): α, the active gradient, and `grad_bar` where α_i or
-    /// α_j reached or left C.
-    fn step(&self, st: &mut SolverState, (i, j): (usize, usize)) {
+    /// One iteration on the pair at positions (i, j) of the active set: α, the active gradient,
+    /// and `grad_bar` where α_i or α_j reached or left C.
+    fn step(&self, st: &mut SolverState, (pi, pj): (usize, usize)) {
+        let (i, j) = (st.active.t[pi], st.active.t[pj]);
         let (old_i, old_j) = (st.alpha[i], st.alpha[j]);
-        self.update_pair(&mut st.alpha, &st.grad, i, j);
+        self.update_pair(
+            &mut st.alpha,
+            (st.active.grad[pi], st.active.grad[pj]),
+            i,
+            j,
+        );
         let (di, dj) = (st.alpha[i] - old_i, st.alpha[j] - old_j);
-        self.move_gradient(st, (i, di), (j, dj));
+        self.move_gradient(&mut st.active, (pi, di), (pj, dj));
+        for (p, t) in [(pi, i), (pj, j)] {
+            st.active.up[p] = self.up(t, st.alpha[t]);
+            st.active.low[p] = self.low(t, st.alpha[t]);
+        }
         for (t, old) in [(i, old_i), (j, old_j)] {
             let (was, is) = (old >= self.c, st.alpha[t] >= self.c);
             if was != is {
@@ -269,8 +325,9 @@ impl Problem<'_> {
     /// are within ten times `eps`, every variable back (once); then the variables at a bound
     /// whose gradient says they stay there leave the active set.
     fn shrink(&self, st: &mut SolverState, eps: f64) {
+        st.write_back();
         let (mut gmax1, mut gmax2) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
-        for &t in &st.active {
+        for &t in &st.active.t {
             let (a, yg) = (st.alpha[t], self.y[t] * st.grad[t]);
             if self.up(t, a) {
                 gmax1 = gmax1.max(-yg);
@@ -284,7 +341,8 @@ impl Problem<'_> {
             self.reconstruct_gradient(st);
         }
         let (alpha, grad) = (&st.alpha, &st.grad);
-        st.active.retain(|&t| {
+        let mut list = std::mem::take(&mut st.active.t);
+        list.retain(|&t| {
             // At a bound it is in I_up or I_low alone, and leaves when no member of the other
             // side can make a violating pair with it: in I_up alone when −y G is below −gmax2,
             // in I_low alone when y G is below −gmax1.
@@ -296,6 +354,7 @@ impl Problem<'_> {
             };
             !leaves
         });
+        self.activate(st, list);
     }
 
     /// The gradient of the variables outside the active set, from `grad_bar` and the free
@@ -304,15 +363,16 @@ impl Problem<'_> {
         if st.active.len() == self.n {
             return;
         }
+        st.write_back();
         let mut is_active = vec![false; self.n];
-        for &t in &st.active {
+        for &t in &st.active.t {
             is_active[t] = true;
         }
         let inactive: Vec<usize> = (0..self.n).filter(|&t| !is_active[t]).collect();
         for &t in &inactive {
             st.grad[t] = st.grad_bar[t] - 1.0;
         }
-        for &j in &st.active {
+        for &j in &st.active.t {
             let a = st.alpha[j];
             if a > 0.0 && a < self.c {
                 let (yj, kj) = (self.y[j], self.row(j));
@@ -321,16 +381,16 @@ impl Problem<'_> {
                 }
             }
         }
-        st.active = (0..self.n).collect();
+        self.activate(st, (0..self.n).collect());
     }
 
     /// The two-variable subproblem on (i, j), clipped to the box (libsvm's update, with
     /// C_i = C_j = C).
-    fn update_pair(&self, alpha: &mut [f64], grad: &[f64], i: usize, j: usize) {
+    fn update_pair(&self, alpha: &mut [f64], (gi, gj): (f64, f64), i: usize, j: usize) {
         let c = self.c;
-        let curvature = self.curvature(i, j);
+        let curvature = curvature(self.diag[i], self.diag[j], self.kij(i, j));
         if self.y[i] != self.y[j] {
-            let delta = (-grad[i] - grad[j]) / curvature;
+            let delta = (-gi - gj) / curvature;
             let diff = alpha[i] - alpha[j];
             alpha[i] += delta;
             alpha[j] += delta;
@@ -353,7 +413,7 @@ impl Problem<'_> {
                 alpha[i] = c + diff;
             }
         } else {
-            let delta = (grad[i] - grad[j]) / curvature;
+            let delta = (gi - gj) / curvature;
             let sum = alpha[i] + alpha[j];
             alpha[i] -= delta;
             alpha[j] += delta;
@@ -378,15 +438,13 @@ impl Problem<'_> {
         }
     }
 
-    /// G += Q[:, i] Δα_i + Q[:, j] Δα_j on the active set (columns i and j read as rows: the
-    /// matrix is symmetric).
-    fn move_gradient(&self, st: &mut SolverState, (i, di): (usize, f64), (j, dj): (usize, f64)) {
-        let y = &self.y;
-        let (yi, yj) = (y[i], y[j]);
-        let (ki, kj) = (self.row(i), self.row(j));
-        for &t in &st.active {
-            let r = self.rows[t];
-            st.grad[t] += y[t] * (yi * ki[r] * di + yj * kj[r] * dj);
+    /// G += Q[:, i] Δα_i + Q[:, j] Δα_j on the active set (i, j positions in it; columns i and
+    /// j read as rows: the matrix is symmetric).
+    fn move_gradient(&self, a: &mut Active, (pi, di): (usize, f64), (pj, dj): (usize, f64)) {
+        let (yi, yj) = (a.y[pi], a.y[pj]);
+        let (ki, kj) = (self.k.row(a.row[pi]), self.k.row(a.row[pj]));
+        for ((g, &y), &r) in a.grad.iter_mut().zip(&a.y).zip(&a.row) {
+            *g += y * (yi * ki[r] * di + yj * kj[r] * dj);
         }
     }
 
