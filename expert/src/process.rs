@@ -303,6 +303,7 @@ impl<'w> Shell<'w> {
         let Some(job) = m.take_refit_job() else {
             return;
         };
+        let job = job.in_background();
         let (tx, rx) = mpsc::channel();
         debug!(demos = job.covers(), "refitting the demonstration model");
         std::thread::spawn(move || {

@@ -457,7 +457,8 @@ mod tests {
             );
             let job = deferred.refit_job().expect("the two newcomers are owed");
             assert_eq!(job.covers(), 6);
-            deferred.finish_refit(job.run()).unwrap();
+            // Grown on one lane, as beside the query path: the same model.
+            deferred.finish_refit(job.in_background().run()).unwrap();
             assert!(!deferred.stale() && deferred.refit_job().is_none());
             assert_eq!(deferred.model(), inline.model(), "{choice:?}");
         }

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use super::expert::DemoRecord;
 use crate::config::DemoModelChoice;
 use crate::demo_model::krr::KrrFactor;
-use crate::demo_model::lanes::{Lanes, SharedLanes};
+use crate::demo_model::lanes::{Lanes, Serial, SharedLanes};
 use crate::demo_model::nystrom::NystromFactor;
 use crate::demo_model::{DemoModel, DemoModelError, DemoModelKind};
 
@@ -28,6 +28,8 @@ pub struct RefitJob {
     num_actions: usize,
     factors: Factors,
     lanes: SharedLanes,
+    /// Whether a grown factor's solves run on one lane ([`RefitJob::in_background`]).
+    grow_alone: bool,
 }
 
 /// What a refit gives back to the core.
@@ -76,7 +78,17 @@ impl RefitJob {
             num_actions,
             factors,
             lanes,
+            grow_alone: false,
         }
+    }
+
+    /// The refit runs beside the query path: a grown factor's solves stay on one lane (split
+    /// between two, each of its refits would take both cores from the query path and the
+    /// learner for tens of milliseconds at 10,000 demonstrations); a fit anew still shares its
+    /// work among the lanes.
+    pub fn in_background(mut self) -> RefitJob {
+        self.grow_alone = true;
+        self
     }
 
     /// Demonstrations the refit covers.
@@ -108,10 +120,15 @@ impl RefitJob {
             return Ok(RefitOutcome::Cleared);
         }
         let (set, m, lanes) = (&set[..], self.num_actions, self.lanes.get());
+        let solves: &dyn Lanes = if self.grow_alone { &Serial } else { lanes };
         let (krr, nystrom) = &mut self.factors;
         Ok(RefitOutcome::Fitted(match kind {
-            DemoModelKind::Krr => DemoModel::Krr(grown(krr, set, m, lanes)?.model_on(lanes)),
-            DemoModelKind::Nystrom => DemoModel::Nystrom(grown(nystrom, set, m, lanes)?.model()?),
+            DemoModelKind::Krr => {
+                DemoModel::Krr(grown(krr, set, m, lanes, solves)?.model_on(solves))
+            }
+            DemoModelKind::Nystrom => {
+                DemoModel::Nystrom(grown(nystrom, set, m, lanes, solves)?.model()?)
+            }
             DemoModelKind::Svm => {
                 let states: Vec<&[f64]> = set.iter().map(|d| d.state.as_slice()).collect();
                 let actions: Vec<usize> = set.iter().map(|d| d.action).collect();
@@ -168,14 +185,15 @@ impl Grows for NystromFactor {
 const GROW_AT_MOST_ONE_IN: usize = 8;
 
 /// The state in `slot` over every demonstration of `demos`: the one held, grown by the
-/// demonstrations after its own (KRR: O(n²) each), or made anew (KRR: O(n³)) when it holds none
-/// or too few of them; the same bits either way. The factor's rows are the first of `demos`
+/// demonstrations after its own (KRR: O(n²) each, on `solves`), or made anew (KRR: O(n³), on
+/// `lanes`) when it holds none or too few of them; the same bits either way. The factor's rows are the first of `demos`
 /// (demonstrations are only appended; replacing them empties the slot).
 fn grown<'a, G: Grows>(
     slot: &'a mut Option<G>,
     demos: &[&DemoRecord],
     num_actions: usize,
     lanes: &dyn Lanes,
+    solves: &dyn Lanes,
 ) -> Result<&'a G, DemoModelError> {
     let n = demos.len();
     match slot.as_mut() {
@@ -184,7 +202,7 @@ fn grown<'a, G: Grows>(
                 && (n - f.len() <= 1 || (n - f.len()) * GROW_AT_MOST_ONE_IN <= f.len()) =>
         {
             for d in &demos[f.len()..] {
-                f.push(&d.state, d.action, lanes)?;
+                f.push(&d.state, d.action, solves)?;
             }
         }
         _ => {
