@@ -3,10 +3,18 @@
 //! settings) and the constructors of the ports.
 
 use std::fmt;
+use std::time::{Duration, Instant};
 
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
+use iceoryx2::service::builder::request_response::{
+    RequestResponseOpenError, RequestResponseOpenOrCreateError,
+};
 
 use crate::connection::{Transport, Wire};
 use crate::error::{transport, Result, WireError};
@@ -99,6 +107,60 @@ pub const CONTROL: Channel = Channel {
 /// Every publish-subscribe channel of a run.
 pub const CHANNELS: [Channel; 6] = [TRANSITIONS, CREDITS, WEIGHTS, DEMO_MODEL, PROGRESS, CONTROL];
 
+/// How long a process keeps opening a service that another process is still creating. iceoryx2
+/// gives up after its `creation_timeout` (1 s) with `HangsInCreation`; a creator slowed down, or
+/// stopped (SIGSTOP) in the middle of creating it, can take longer, and the service is whole
+/// once it goes on. A creator that died leaves the error standing after this long.
+pub const CREATION_PATIENCE: Duration = Duration::from_secs(10);
+
+/// An open-or-create failure because another process has not finished creating the service.
+trait StillInCreation {
+    fn still_in_creation(&self) -> bool;
+}
+
+impl StillInCreation for PublishSubscribeOpenOrCreateError {
+    fn still_in_creation(&self) -> bool {
+        matches!(
+            self,
+            Self::PublishSubscribeOpenError(PublishSubscribeOpenError::HangsInCreation)
+        )
+    }
+}
+
+impl StillInCreation for RequestResponseOpenOrCreateError {
+    fn still_in_creation(&self) -> bool {
+        matches!(
+            self,
+            Self::RequestResponseOpenError(RequestResponseOpenError::HangsInCreation)
+        )
+    }
+}
+
+impl StillInCreation for EventOpenOrCreateError {
+    fn still_in_creation(&self) -> bool {
+        matches!(self, Self::EventOpenError(EventOpenError::HangsInCreation))
+    }
+}
+
+/// `open` (an open-or-create of the service `name`) again while it fails because another
+/// process is still creating the service, for at most `patience`.
+fn patiently<T, E: StillInCreation + fmt::Debug>(
+    name: &ServiceName,
+    patience: Duration,
+    mut open: impl FnMut() -> std::result::Result<T, E>,
+) -> Result<T> {
+    let start = Instant::now();
+    loop {
+        match open() {
+            Err(e) if e.still_in_creation() && start.elapsed() < patience => {
+                tracing::debug!(service = %name, "another process is still creating the service");
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            opened => return opened.map_err(transport("open", name.to_string())),
+        }
+    }
+}
+
 type PubSubFactory<P, H> =
     iceoryx2::service::port_factory::publish_subscribe::PortFactory<Transport, P, H>;
 type PubSubBuilder<P, H> = iceoryx2::service::builder::publish_subscribe::Builder<P, H, Transport>;
@@ -106,17 +168,15 @@ type PubSubBuilder<P, H> = iceoryx2::service::builder::publish_subscribe::Builde
 impl Wire {
     // --- one builder per service: every process opens it with these settings ---------------
 
-    /// The service `c` names in this run, and a builder of it with `c`'s limits (the payload
-    /// `P` and user header `H` are the caller's).
-    fn pubsub<P, H>(&self, c: &Channel) -> Result<(ServiceName, PubSubBuilder<P, H>)>
+    /// A builder of the service `name` with `c`'s limits (the payload `P` and user header `H`
+    /// are the caller's).
+    fn pubsub<P, H>(&self, name: &ServiceName, c: &Channel) -> PubSubBuilder<P, H>
     where
         P: fmt::Debug + IceoryxSend + ?Sized,
         H: fmt::Debug + ZeroCopySend,
     {
-        let name = self.service_name(c.name)?;
-        let b = self
-            .node
-            .service_builder(&name)
+        self.node
+            .service_builder(name)
             .publish_subscribe::<P>()
             .user_header::<H>()
             .max_publishers(c.publishers)
@@ -124,32 +184,38 @@ impl Wire {
             .max_nodes(MAX_NODES)
             .history_size(c.history)
             .subscriber_max_buffer_size(c.buffer)
-            .enable_safe_overflow(c.safe_overflow);
-        Ok((name, b))
+            .enable_safe_overflow(c.safe_overflow)
     }
 
     fn transitions_service(&self) -> Result<PubSubFactory<TransitionBatch, ()>> {
-        let (name, b) = self.pubsub::<TransitionBatch, ()>(&TRANSITIONS)?;
-        b.open_or_create()
-            .map_err(transport("open", name.to_string()))
+        let name = self.service_name(TRANSITIONS.name)?;
+        patiently(&name, CREATION_PATIENCE, || {
+            self.pubsub::<TransitionBatch, ()>(&name, &TRANSITIONS)
+                .open_or_create()
+        })
     }
 
     fn credits_service(&self) -> Result<PubSubFactory<Credits, ()>> {
-        let (name, b) = self.pubsub::<Credits, ()>(&CREDITS)?;
-        b.open_or_create()
-            .map_err(transport("open", name.to_string()))
+        let name = self.service_name(CREDITS.name)?;
+        patiently(&name, CREATION_PATIENCE, || {
+            self.pubsub::<Credits, ()>(&name, &CREDITS).open_or_create()
+        })
     }
 
     fn weights_service(&self) -> Result<PubSubFactory<[f32], WeightsHeader>> {
-        let (name, b) = self.pubsub::<[f32], WeightsHeader>(&WEIGHTS)?;
-        b.open_or_create()
-            .map_err(transport("open", name.to_string()))
+        let name = self.service_name(WEIGHTS.name)?;
+        patiently(&name, CREATION_PATIENCE, || {
+            self.pubsub::<[f32], WeightsHeader>(&name, &WEIGHTS)
+                .open_or_create()
+        })
     }
 
     fn demo_model_service(&self) -> Result<PubSubFactory<[u8], DemoModelHeader>> {
-        let (name, b) = self.pubsub::<[u8], DemoModelHeader>(&DEMO_MODEL)?;
-        b.open_or_create()
-            .map_err(transport("open", name.to_string()))
+        let name = self.service_name(DEMO_MODEL.name)?;
+        patiently(&name, CREATION_PATIENCE, || {
+            self.pubsub::<[u8], DemoModelHeader>(&name, &DEMO_MODEL)
+                .open_or_create()
+        })
     }
 
     fn query_service(
@@ -164,30 +230,34 @@ impl Wire {
         >,
     > {
         let name = self.service_name("query")?;
-        self.node
-            .service_builder(&name)
-            .request_response::<QueryRequest, QueryResponse>()
-            .max_servers(4)
-            .max_clients(2 * MAX_ACTORS + 4)
-            .max_nodes(MAX_NODES)
-            .max_active_requests_per_client(2)
-            .max_response_buffer_size(2)
-            .enable_safe_overflow_for_requests(true)
-            .enable_safe_overflow_for_responses(true)
-            .open_or_create()
-            .map_err(transport("open", name.to_string()))
+        patiently(&name, CREATION_PATIENCE, || {
+            self.node
+                .service_builder(&name)
+                .request_response::<QueryRequest, QueryResponse>()
+                .max_servers(4)
+                .max_clients(2 * MAX_ACTORS + 4)
+                .max_nodes(MAX_NODES)
+                .max_active_requests_per_client(2)
+                .max_response_buffer_size(2)
+                .enable_safe_overflow_for_requests(true)
+                .enable_safe_overflow_for_responses(true)
+                .open_or_create()
+        })
     }
 
     fn progress_service(&self) -> Result<PubSubFactory<Progress, ()>> {
-        let (name, b) = self.pubsub::<Progress, ()>(&PROGRESS)?;
-        b.open_or_create()
-            .map_err(transport("open", name.to_string()))
+        let name = self.service_name(PROGRESS.name)?;
+        patiently(&name, CREATION_PATIENCE, || {
+            self.pubsub::<Progress, ()>(&name, &PROGRESS)
+                .open_or_create()
+        })
     }
 
     fn control_service(&self) -> Result<PubSubFactory<Control, ()>> {
-        let (name, b) = self.pubsub::<Control, ()>(&CONTROL)?;
-        b.open_or_create()
-            .map_err(transport("open", name.to_string()))
+        let name = self.service_name(CONTROL.name)?;
+        patiently(&name, CREATION_PATIENCE, || {
+            self.pubsub::<Control, ()>(&name, &CONTROL).open_or_create()
+        })
     }
 
     fn doorbell_service(
@@ -195,15 +265,16 @@ impl Wire {
         bell: Doorbell,
     ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Transport>> {
         let name = self.service_name(&bell.topic())?;
-        self.node
-            .service_builder(&name)
-            .event()
-            .max_listeners(MAX_NODES)
-            .max_notifiers(MAX_NODES)
-            .max_nodes(MAX_NODES)
-            .event_id_max_value(255)
-            .open_or_create()
-            .map_err(transport("open", name.to_string()))
+        patiently(&name, CREATION_PATIENCE, || {
+            self.node
+                .service_builder(&name)
+                .event()
+                .max_listeners(MAX_NODES)
+                .max_notifiers(MAX_NODES)
+                .max_nodes(MAX_NODES)
+                .event_id_max_value(255)
+                .open_or_create()
+        })
     }
 
     // --- ports ------------------------------------------------------------------------------
@@ -457,5 +528,49 @@ mod channel_tests {
         for c in [TRANSITIONS, PROGRESS] {
             assert!(!c.safe_overflow && c.history == 0, "{c:?}");
         }
+    }
+
+    /// An open's failure: a service still in creation (true) or another failure (false).
+    #[derive(Debug)]
+    struct Fake(bool);
+
+    impl StillInCreation for Fake {
+        fn still_in_creation(&self) -> bool {
+            self.0
+        }
+    }
+
+    #[test]
+    fn a_service_still_in_creation_is_opened_again_and_other_failures_are_not() {
+        let name = ServiceName::new("alfd/test/patiently").unwrap();
+        let mut calls = 0;
+        let opened = patiently(&name, Duration::from_secs(5), || {
+            calls += 1;
+            if calls < 3 {
+                Err(Fake(true))
+            } else {
+                Ok(7)
+            }
+        });
+        assert_eq!((opened.unwrap(), calls), (7, 3));
+
+        let mut calls = 0;
+        let refused = patiently(&name, Duration::from_secs(5), || {
+            calls += 1;
+            Err::<u8, _>(Fake(false))
+        });
+        assert_eq!(calls, 1, "another failure is not tried again");
+        assert!(refused
+            .unwrap_err()
+            .to_string()
+            .contains("alfd/test/patiently"));
+
+        // A creator that never finishes: the error stands once the patience is spent.
+        let start = Instant::now();
+        let hangs = patiently(&name, Duration::from_millis(120), || {
+            Err::<u8, _>(Fake(true))
+        });
+        assert!(hangs.is_err());
+        assert!(start.elapsed() >= Duration::from_millis(120));
     }
 }
