@@ -28,6 +28,7 @@ use iceoryx2::prelude::*;
 use crate::connection::{run_config, Transport};
 use crate::error::{transport, Result, WireError};
 use crate::messages::{Header, Process, MAX_OBS_DIM};
+use crate::services::patiently;
 
 /// Values a remote message carries: an observation (at most [`MAX_OBS_DIM`]) or an
 /// environment's internal state.
@@ -257,28 +258,31 @@ impl RemoteClient {
             .create::<Transport>()
             .map_err(transport("create node", node_name))?;
         let rr_name = service_name(run_id, &service)?;
-        let rr = node
-            .service_builder(&rr_name)
-            .request_response::<RemoteRequest, RemoteResponse>()
-            .max_servers(MAX_SERVERS)
-            .max_clients(MAX_CLIENTS)
-            .max_nodes(MAX_NODES)
-            .max_active_requests_per_client(MAX_ACTIVE_REQUESTS_PER_CLIENT)
-            .max_response_buffer_size(MAX_RESPONSE_BUFFER_SIZE)
-            .enable_safe_overflow_for_requests(true)
-            .enable_safe_overflow_for_responses(true)
-            .open_or_create()
-            .map_err(transport("open", service.clone()))?;
+        let rr = patiently(&rr_name, || {
+            node.service_builder(&rr_name)
+                .request_response::<RemoteRequest, RemoteResponse>()
+                .max_servers(MAX_SERVERS)
+                .max_clients(MAX_CLIENTS)
+                .max_nodes(MAX_NODES)
+                .max_active_requests_per_client(MAX_ACTIVE_REQUESTS_PER_CLIENT)
+                .max_response_buffer_size(MAX_RESPONSE_BUFFER_SIZE)
+                .enable_safe_overflow_for_requests(true)
+                .enable_safe_overflow_for_responses(true)
+                .open_or_create()
+        })
+        .map_err(transport("open", service.clone()))?;
         let event = |topic: &str| {
             let name = service_name(run_id, &format!("{service}/{topic}"))?;
-            node.service_builder(&name)
-                .event()
-                .max_listeners(MAX_LISTENERS)
-                .max_notifiers(MAX_NOTIFIERS)
-                .max_nodes(MAX_NODES)
-                .event_id_max_value(EVENT_ID_MAX_VALUE)
-                .open_or_create()
-                .map_err(transport("open", name.to_string()))
+            patiently(&name, || {
+                node.service_builder(&name)
+                    .event()
+                    .max_listeners(MAX_LISTENERS)
+                    .max_notifiers(MAX_NOTIFIERS)
+                    .max_nodes(MAX_NODES)
+                    .event_id_max_value(EVENT_ID_MAX_VALUE)
+                    .open_or_create()
+            })
+            .map_err(transport("open", name.to_string()))
         };
         let request_bell = event("request")?
             .notifier_builder()

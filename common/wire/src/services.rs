@@ -114,7 +114,7 @@ pub const CHANNELS: [Channel; 6] = [TRANSITIONS, CREDITS, WEIGHTS, DEMO_MODEL, P
 pub const CREATION_PATIENCE: Duration = Duration::from_secs(10);
 
 /// An open-or-create failure because another process has not finished creating the service.
-trait StillInCreation {
+pub(crate) trait StillInCreation {
     fn still_in_creation(&self) -> bool;
 }
 
@@ -143,12 +143,20 @@ impl StillInCreation for EventOpenOrCreateError {
 }
 
 /// `open` (an open-or-create of the service `name`) again while it fails because another
-/// process is still creating the service, for at most `patience`.
-fn patiently<T, E: StillInCreation + fmt::Debug>(
-    name: &ServiceName,
+/// process is still creating the service, for at most [`CREATION_PATIENCE`].
+pub(crate) fn patiently<T, E: StillInCreation>(
+    name: &dyn fmt::Display,
+    open: impl FnMut() -> std::result::Result<T, E>,
+) -> std::result::Result<T, E> {
+    patiently_for(name, CREATION_PATIENCE, open)
+}
+
+/// [`patiently`] for at most `patience`.
+fn patiently_for<T, E: StillInCreation>(
+    name: &dyn fmt::Display,
     patience: Duration,
     mut open: impl FnMut() -> std::result::Result<T, E>,
-) -> Result<T> {
+) -> std::result::Result<T, E> {
     let start = Instant::now();
     loop {
         match open() {
@@ -156,7 +164,7 @@ fn patiently<T, E: StillInCreation + fmt::Debug>(
                 tracing::debug!(service = %name, "another process is still creating the service");
                 std::thread::sleep(Duration::from_millis(50));
             }
-            opened => return opened.map_err(transport("open", name.to_string())),
+            opened => return opened,
         }
     }
 }
@@ -189,33 +197,37 @@ impl Wire {
 
     fn transitions_service(&self) -> Result<PubSubFactory<TransitionBatch, ()>> {
         let name = self.service_name(TRANSITIONS.name)?;
-        patiently(&name, CREATION_PATIENCE, || {
+        patiently(&name, || {
             self.pubsub::<TransitionBatch, ()>(&name, &TRANSITIONS)
                 .open_or_create()
         })
+        .map_err(transport("open", name.to_string()))
     }
 
     fn credits_service(&self) -> Result<PubSubFactory<Credits, ()>> {
         let name = self.service_name(CREDITS.name)?;
-        patiently(&name, CREATION_PATIENCE, || {
+        patiently(&name, || {
             self.pubsub::<Credits, ()>(&name, &CREDITS).open_or_create()
         })
+        .map_err(transport("open", name.to_string()))
     }
 
     fn weights_service(&self) -> Result<PubSubFactory<[f32], WeightsHeader>> {
         let name = self.service_name(WEIGHTS.name)?;
-        patiently(&name, CREATION_PATIENCE, || {
+        patiently(&name, || {
             self.pubsub::<[f32], WeightsHeader>(&name, &WEIGHTS)
                 .open_or_create()
         })
+        .map_err(transport("open", name.to_string()))
     }
 
     fn demo_model_service(&self) -> Result<PubSubFactory<[u8], DemoModelHeader>> {
         let name = self.service_name(DEMO_MODEL.name)?;
-        patiently(&name, CREATION_PATIENCE, || {
+        patiently(&name, || {
             self.pubsub::<[u8], DemoModelHeader>(&name, &DEMO_MODEL)
                 .open_or_create()
         })
+        .map_err(transport("open", name.to_string()))
     }
 
     fn query_service(
@@ -230,7 +242,7 @@ impl Wire {
         >,
     > {
         let name = self.service_name("query")?;
-        patiently(&name, CREATION_PATIENCE, || {
+        patiently(&name, || {
             self.node
                 .service_builder(&name)
                 .request_response::<QueryRequest, QueryResponse>()
@@ -243,21 +255,24 @@ impl Wire {
                 .enable_safe_overflow_for_responses(true)
                 .open_or_create()
         })
+        .map_err(transport("open", name.to_string()))
     }
 
     fn progress_service(&self) -> Result<PubSubFactory<Progress, ()>> {
         let name = self.service_name(PROGRESS.name)?;
-        patiently(&name, CREATION_PATIENCE, || {
+        patiently(&name, || {
             self.pubsub::<Progress, ()>(&name, &PROGRESS)
                 .open_or_create()
         })
+        .map_err(transport("open", name.to_string()))
     }
 
     fn control_service(&self) -> Result<PubSubFactory<Control, ()>> {
         let name = self.service_name(CONTROL.name)?;
-        patiently(&name, CREATION_PATIENCE, || {
+        patiently(&name, || {
             self.pubsub::<Control, ()>(&name, &CONTROL).open_or_create()
         })
+        .map_err(transport("open", name.to_string()))
     }
 
     fn doorbell_service(
@@ -265,7 +280,7 @@ impl Wire {
         bell: Doorbell,
     ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Transport>> {
         let name = self.service_name(&bell.topic())?;
-        patiently(&name, CREATION_PATIENCE, || {
+        patiently(&name, || {
             self.node
                 .service_builder(&name)
                 .event()
@@ -275,6 +290,7 @@ impl Wire {
                 .event_id_max_value(255)
                 .open_or_create()
         })
+        .map_err(transport("open", name.to_string()))
     }
 
     // --- ports ------------------------------------------------------------------------------
@@ -544,7 +560,7 @@ mod channel_tests {
     fn a_service_still_in_creation_is_opened_again_and_other_failures_are_not() {
         let name = ServiceName::new("alfd/test/patiently").unwrap();
         let mut calls = 0;
-        let opened = patiently(&name, Duration::from_secs(5), || {
+        let opened = patiently_for(&name, Duration::from_secs(5), || {
             calls += 1;
             if calls < 3 {
                 Err(Fake(true))
@@ -555,22 +571,22 @@ mod channel_tests {
         assert_eq!((opened.unwrap(), calls), (7, 3));
 
         let mut calls = 0;
-        let refused = patiently(&name, Duration::from_secs(5), || {
+        let refused = patiently_for(&name, Duration::from_secs(5), || {
             calls += 1;
             Err::<u8, _>(Fake(false))
         });
         assert_eq!(calls, 1, "another failure is not tried again");
-        assert!(refused
-            .unwrap_err()
-            .to_string()
-            .contains("alfd/test/patiently"));
+        assert!(
+            !refused.unwrap_err().0,
+            "the other failure is the one returned"
+        );
 
         // A creator that never finishes: the error stands once the patience is spent.
         let start = Instant::now();
-        let hangs = patiently(&name, Duration::from_millis(120), || {
+        let hangs = patiently_for(&name, Duration::from_millis(120), || {
             Err::<u8, _>(Fake(true))
         });
-        assert!(hangs.is_err());
+        assert!(hangs.unwrap_err().0, "the creation's failure stands");
         assert!(start.elapsed() >= Duration::from_millis(120));
     }
 }

@@ -267,8 +267,7 @@ impl KrrFactor {
     /// last: `w_n = (y_n − Σ_j l_nj w_j) / l_nn`, the products subtracted in order of j.
     fn forward_row(&mut self, action: usize) {
         let (n, m) = (self.w.len() / self.num_actions, self.num_actions);
-        let start = n * (n + 1) / 2;
-        let row = &self.l[start..start + n + 1];
+        let row = Rows(&self.l).row(n);
         for a in 0..m {
             let mut v = if a == action { 1.0 } else { 0.0 };
             for (l, w) in row[..n].iter().zip(self.w.iter().skip(a).step_by(m)) {
@@ -289,8 +288,7 @@ impl KrrFactor {
 
     /// Row `i` of L up to the diagonal.
     fn row(&self, i: usize) -> &[f64] {
-        let start = i * (i + 1) / 2;
-        &self.l[start..start + i + 1]
+        Rows(&self.l).row(i)
     }
 
     /// Adds a demonstration: one new row of L, by forward substitution against the rows before

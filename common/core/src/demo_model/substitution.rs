@@ -29,7 +29,7 @@ const ROWS: usize = 4;
 pub(crate) struct Rows<'a>(pub &'a [f64]);
 
 impl<'a> Rows<'a> {
-    fn row(self, i: usize) -> &'a [f64] {
+    pub(crate) fn row(self, i: usize) -> &'a [f64] {
         let start = i * (i + 1) / 2;
         &self.0[start..start + i + 1]
     }
@@ -76,8 +76,7 @@ pub(crate) fn forward(l: Rows, k: &[f64], lanes: &dyn Lanes) -> Vec<f64> {
     z
 }
 
-/// Solves the rows of `z` in groups of four, so that no chain of subtractions waits on the
-/// last: each row's sum from `start(i)` (`k_i` minus nothing when that is 0; else the helper's
+/// Solves the rows of `z` in groups of four: each row's sum from `start(i)` (`k_i` minus nothing when that is 0; else the helper's
 /// sum over the columns before it, from `hand.0`), minus its products up to the diagonal; each
 /// solved value handed on to `hand.1`.
 #[inline(always)]
@@ -96,26 +95,18 @@ fn forward_rows(
         if let Some((sums, _)) = hand {
             sums.wait(i + g);
         }
-        let sum = |t: usize| hand.map_or(k[t], |(sums, _)| sums.get(t));
-        if g == ROWS {
-            let rows: [&[f64]; ROWS] = std::array::from_fn(|t| l.row(i + t));
-            let mut s: [f64; ROWS] = std::array::from_fn(|t| sum(i + t));
-            subtract_four(&mut s, rows.map(|r| &r[c..i]), &z[c..i]);
-            for t in 0..ROWS {
-                for u in 0..t {
-                    s[t] -= rows[t][i + u] * z[i + u];
-                }
-                z[i + t] = s[t] / rows[t][i + t];
+        let mut s = [0.0; ROWS];
+        for (t, v) in s[..g].iter_mut().enumerate() {
+            *v = hand.map_or(k[i + t], |(sums, _)| sums.get(i + t));
+        }
+        subtract_columns(l, i, &mut s[..g], c..i, &z[c..i]);
+        // The group's own triangle, in increasing column as well.
+        for t in 0..g {
+            let row = l.row(i + t);
+            for u in 0..t {
+                s[t] -= row[i + u] * z[i + u];
             }
-        } else {
-            for t in i..i + g {
-                let row = l.row(t);
-                let mut s = sum(t);
-                for (lj, zj) in row[c..t].iter().zip(&z[c..t]) {
-                    s -= lj * zj;
-                }
-                z[t] = s / row[t];
-            }
+            z[i + t] = s[t] / row[i + t];
         }
         if let Some((_, solved)) = hand {
             for (t, v) in z.iter().enumerate().skip(i).take(g) {
@@ -124,6 +115,23 @@ fn forward_rows(
             solved.ready(i + g);
         }
         i += g;
+    }
+}
+
+/// The sums of rows `i..i + s.len()` (at most four) minus their products with `z` over the
+/// columns `cols` (`z[0]` the value of column `cols.start`), each in increasing column: four
+/// rows at once, so that no chain of subtractions waits on the last.
+#[inline(always)]
+fn subtract_columns(l: Rows, i: usize, s: &mut [f64], cols: std::ops::Range<usize>, z: &[f64]) {
+    if let Ok(s) = <&mut [f64; ROWS]>::try_from(&mut *s) {
+        let rows: [&[f64]; ROWS] = std::array::from_fn(|t| &l.row(i + t)[cols.clone()]);
+        subtract_four(s, rows, z);
+        return;
+    }
+    for (t, v) in s.iter_mut().enumerate() {
+        for (lj, zj) in l.row(i + t)[cols.clone()].iter().zip(z) {
+            *v -= lj * zj;
+        }
     }
 }
 
@@ -151,21 +159,11 @@ fn forward_helper(l: Rows, k: &[f64], solved: &Handoff, sums: &Handoff) {
             solved.wait(c);
             z.extend((z.len()..c).map(|j| solved.get(j)));
         }
-        if g == ROWS {
-            let rows: [&[f64]; ROWS] = std::array::from_fn(|t| &l.row(i + t)[..c]);
-            let mut s: [f64; ROWS] = std::array::from_fn(|t| k[i + t]);
-            subtract_four(&mut s, rows, &z[..c]);
-            for (t, v) in s.into_iter().enumerate() {
-                sums.put(i + t, v);
-            }
-        } else {
-            for (t, &kt) in k.iter().enumerate().skip(i).take(g) {
-                let mut s = kt;
-                for (lj, zj) in l.row(t)[..c].iter().zip(&z) {
-                    s -= lj * zj;
-                }
-                sums.put(t, s);
-            }
+        let mut s = [0.0; ROWS];
+        s[..g].copy_from_slice(&k[i..i + g]);
+        subtract_columns(l, i, &mut s[..g], 0..c, &z[..c]);
+        for (t, v) in s[..g].iter().enumerate() {
+            sums.put(i + t, *v);
         }
         sums.ready(i + g);
         i += g;
