@@ -171,17 +171,37 @@ impl CreditBook {
         self.actors.iter().any(|a| a.blocked_until.is_some())
     }
 
+    /// How many steps a grant must let a blocked actor take before it is woken: half the
+    /// window (at least one). A woken actor then runs that many steps before it blocks again,
+    /// instead of one step per wake-up when the learner is the slower side (each wake-up is a
+    /// doorbell, a context switch in both processes and, across cores, an interrupt).
+    pub fn wake_after(&self) -> u64 {
+        (self.window / 2).max(1)
+    }
+
+    /// Whether a blocked actor's grant, published now, would wake it ([`CreditBook::grant`]).
+    pub fn any_wake_due(&self) -> bool {
+        let c = self.credits(0);
+        self.actors
+            .iter()
+            .zip(c.granted)
+            .any(|(b, granted)| self.wakes(b, granted))
+    }
+
+    fn wakes(&self, book: &ActorBook, granted: u64) -> bool {
+        book.blocked_until
+            .is_some_and(|until| granted >= until.saturating_add(self.wake_after()))
+    }
+
     /// The grants to publish now, and the actors to wake: those blocked for want of credits
-    /// that the new grants let go on.
+    /// that the new grants let take [`CreditBook::wake_after`] steps.
     pub fn grant(&mut self, updates: u64) -> (Credits, Vec<u16>) {
         let c = self.credits(updates);
         let mut wake = Vec::new();
-        for (i, b) in self.actors.iter_mut().enumerate() {
-            if let Some(until) = b.blocked_until {
-                if c.granted[i] > until {
-                    wake.push(i as u16);
-                    b.blocked_until = None;
-                }
+        for i in 0..MAX_ACTORS {
+            if self.wakes(&self.actors[i], c.granted[i]) {
+                wake.push(i as u16);
+                self.actors[i].blocked_until = None;
             }
         }
         (c, wake)
@@ -275,8 +295,9 @@ mod tests {
     }
 
     #[test]
-    fn a_blocked_actor_is_woken_once_its_grant_lets_it_go_on() {
+    fn a_blocked_actor_is_woken_once_its_grant_lets_it_take_half_the_window() {
         let mut book = CreditBook::new(4, SHAPE);
+        assert_eq!(book.wake_after(), 2);
         let mut q = VecDeque::new();
         let mut b = batch(1, 1, 0, 4);
         b.blocked = 1; // sent steps 0..4 with a grant of 4: blocked
@@ -289,24 +310,35 @@ mod tests {
             (Some(4), vec![]),
             "nothing learned yet"
         );
-        let s = q.pop_front().unwrap();
-        book.learned(s.actor, s.incarnation);
+        let mut learn_one = |book: &mut CreditBook| {
+            let s = q.pop_front().unwrap();
+            book.learned(s.actor, s.incarnation);
+        };
+        learn_one(&mut book);
+        assert!(
+            !book.any_wake_due(),
+            "one step free of a window of 4: not yet"
+        );
         let (c, wake) = book.grant(1);
-        assert_eq!((c.granted_for(1, 1), wake), (Some(5), vec![1]));
-        assert!(!book.any_blocked(), "woken once");
-        let s = q.pop_front().unwrap();
-        book.learned(s.actor, s.incarnation);
-        assert_eq!(book.grant(2).1, Vec::<u16>::new());
+        assert_eq!((c.granted_for(1, 1), wake), (Some(5), vec![]));
+        learn_one(&mut book);
+        assert!(book.any_wake_due());
+        let (c, wake) = book.grant(2);
+        assert_eq!((c.granted_for(1, 1), wake), (Some(6), vec![1]));
+        assert!(!book.any_blocked() && !book.any_wake_due(), "woken once");
+        learn_one(&mut book);
+        assert_eq!(book.grant(3).1, Vec::<u16>::new());
         // Actor 0 uses its grant of 4, then blocks with nothing batched: an empty flagged batch.
         book.accept(&batch(0, 1, 2, 2), &mut q);
         let mut empty = batch(0, 1, 4, 0);
         empty.blocked = 1;
         book.accept(&empty, &mut q);
         assert_eq!(
-            book.grant(2).1,
+            book.grant(3).1,
             Vec::<u16>::new(),
             "granted 4, blocked at 4: not yet"
         );
+        // Everything learned: the whole window is free, whatever `wake_after` says.
         while let Some(s) = q.pop_front() {
             book.learned(s.actor, s.incarnation);
         }
@@ -315,7 +347,22 @@ mod tests {
         let mut stale = batch(0, 1, 4, 1);
         stale.blocked = 1;
         book.accept(&stale, &mut q);
+        assert!(book.any_wake_due());
         assert_eq!(book.grant(8).1, vec![0]);
+    }
+
+    #[test]
+    fn in_lockstep_an_actor_is_woken_by_its_one_step_of_credit() {
+        let mut book = CreditBook::new(1, SHAPE);
+        assert_eq!(book.wake_after(), 1);
+        let mut q = VecDeque::new();
+        let mut b = batch(0, 1, 0, 1);
+        b.blocked = 1;
+        book.accept(&b, &mut q);
+        assert_eq!(book.grant(0).1, Vec::<u16>::new());
+        let s = q.pop_front().unwrap();
+        book.learned(s.actor, s.incarnation);
+        assert_eq!(book.grant(1).1, vec![0]);
     }
 
     #[test]

@@ -286,8 +286,9 @@ impl Shell<'_, '_> {
         let mut since_check = 0u32;
         loop {
             self.receive(m)?;
-            if m.any_blocked() {
-                // Its grant may already be there (it blocked on stale news): wake it at once.
+            if m.any_wake_due() {
+                // A blocked actor's grant is there (the steps just learned, or it blocked on
+                // stale news): wake it at once.
                 self.send_credits(m)?;
             }
             if let Some(todo) = m.step() {

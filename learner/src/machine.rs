@@ -8,7 +8,7 @@
 //! - weights are published every `weights_every` updates and whenever the queue drains, so an
 //!   idle learner never holds back its newest weights;
 //! - credits go back after at most [`CREDITS_EVERY`] learned steps, at the end of every batch, and
-//!   at once when an actor waits for them;
+//!   at once when they let a blocked actor take half its window ([`CreditBook::wake_after`]);
 //! - checkpoints are taken at an actor's episode end, every `every` steps counted from the last
 //!   one (from the restored checkpoint's step after a restart); in lockstep with one actor the
 //!   last of them is the one kept at the end, since it pairs with the actor's.
@@ -127,10 +127,15 @@ impl<L: Learns> LearnerMachine<L> {
         self.book.accept(batch, &mut self.queue);
     }
 
-    /// Whether an actor waits for credits (they go back at once: its grant may already be
-    /// there, since it blocked on stale news).
+    /// Whether an actor waits for credits.
     pub fn any_blocked(&self) -> bool {
         self.book.any_blocked()
+    }
+
+    /// Whether the grants, published now, would wake a blocked actor (they go back at once:
+    /// the actor may have blocked on stale news, or been let go on by the steps just learned).
+    pub fn any_wake_due(&self) -> bool {
+        self.book.any_wake_due()
     }
 
     /// Learns from the oldest queued step; `None` when nothing is queued.
@@ -352,7 +357,8 @@ mod tests {
         let mut b = batch(3, 1, 0, 4, &[]);
         b.blocked = 1;
         m.accept(&b);
-        assert!(m.any_blocked());
+        // Blocked at 4 on stale news: the grant, 4 received - 4 queued + 16, is there.
+        assert!(m.any_blocked() && m.any_wake_due());
         run_all(&mut m);
         let (_, wake) = m.grant();
         assert_eq!(wake, vec![3]);

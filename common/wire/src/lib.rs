@@ -36,7 +36,8 @@
 //! a lost or overwritten message loses nothing. A new actor process (after a crash) has a new
 //! incarnation and starts with an implicit grant of `window`. An actor out of credits flags its
 //! last batch `blocked` (an empty one if need be) and sleeps on its doorbell; the learner rings it
-//! as soon as a grant lets it go on, and never otherwise.
+//! as soon as a grant lets it take half its window (one step with a window of one), and never
+//! otherwise, so that an actor ahead of a slower learner runs several steps a wake-up.
 //!
 //! # Schema version
 //! Every message carries a [`Header`] with the sender's schema version. A receiver meeting another
