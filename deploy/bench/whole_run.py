@@ -98,37 +98,45 @@ def core_peak_flops(train_steps):
     return statistics.median(host.fma_peak(train_steps, PEAK_ROUNDS) for _ in range(3))
 
 
+def run_row(alfd, tmp, name, actors, extra=()):
+    """One `alfd run` of the preset with `actors` actors (and the flags in `extra`)."""
+    s, wall = run_json([alfd, "run", "--config", PRESET, "--actors", str(actors), "--quiet",
+                        "--json", "--out", os.path.join(tmp, name), *extra])
+    return {"updates_per_s": s["updates_per_s"], "env_steps_per_s": s["env_steps_per_s"],
+            "last_50": s["mean_return_last_50"], "wall_s": wall}
+
+
 def actors_sweep(alfd, tmp, counts, repeats):
-    out = {}
-    for n in counts:
-        rows = []
-        for r in range(repeats):
-            s, wall = run_json([alfd, "run", "--config", PRESET, "--actors", str(n), "--quiet",
-                                "--json", "--out", os.path.join(tmp, f"actors-{n}-{r}")])
-            rows.append({"updates_per_s": s["updates_per_s"],
-                         "env_steps_per_s": s["env_steps_per_s"],
-                         "last_50": s["mean_return_last_50"], "wall_s": wall})
-        out[n] = rows
-    return out
+    return {n: [run_row(alfd, tmp, f"actors-{n}-{r}", n) for r in range(repeats)]
+            for n in counts}
 
 
-def local_run(alfd, tmp, repeats):
-    rows = []
+def local_row(alfd, tmp, name):
+    d = os.path.join(tmp, name)
+    t = time.monotonic()
+    sh([alfd, "local", "--config", PRESET, "--quiet", "--out", d])
+    wall = time.monotonic() - t
+    with open(os.path.join(d, "summary.json")) as f:
+        s = json.load(f)
+    with open(os.path.join(d, "episodes.csv")) as f:
+        steps = sum(int(r["length"]) for r in csv.DictReader(f))
+    row = {"env_steps": steps, "wall_s": wall, "run_wall_s": s["wall_clock_s"],
+           "env_steps_per_s": steps / s["wall_clock_s"]}
+    if "updates" in s:
+        row["updates_per_s"] = s["updates"] / s["wall_clock_s"]
+    return row
+
+
+def paired(alfd, tmp, repeats):
+    """`alfd run` (2 actors, the default window and `--window 32`) and `alfd local` in rounds,
+    one after the other, so that each round's ratio compares runs minutes apart (this virtual
+    machine's speed drifts by more than the difference measured over a longer span)."""
+    out = {"run": [], "local": [], "run_window32": []}
     for r in range(repeats):
-        d = os.path.join(tmp, f"local-{r}")
-        t = time.monotonic()
-        sh([alfd, "local", "--config", PRESET, "--quiet", "--out", d])
-        wall = time.monotonic() - t
-        with open(os.path.join(d, "summary.json")) as f:
-            s = json.load(f)
-        with open(os.path.join(d, "episodes.csv")) as f:
-            steps = sum(int(r["length"]) for r in csv.DictReader(f))
-        row = {"env_steps": steps, "wall_s": wall, "run_wall_s": s["wall_clock_s"],
-               "env_steps_per_s": steps / s["wall_clock_s"]}
-        if "updates" in s:
-            row["updates_per_s"] = s["updates"] / s["wall_clock_s"]
-        rows.append(row)
-    return rows
+        out["run"].append(run_row(alfd, tmp, f"paired-run-{r}", 2))
+        out["local"].append(local_row(alfd, tmp, f"paired-local-{r}"))
+        out["run_window32"].append(run_row(alfd, tmp, f"paired-w32-{r}", 2, ["--window", "32"]))
+    return out
 
 
 def replay_bytes(example):
@@ -179,22 +187,26 @@ def write(results, out):
           "measured after the runs). An estimate: the count includes the first layer's "
           f"input gradient, which the backward pass skips.", "",
           "## Multi-process against single-process", "",
-          "Environment steps per second of the training loop (the run's own wall-clock in "
-          "`summary.json`). Both make the preset's updates per environment step, so the ratio "
-          "of steps/s is the ratio of updates/s" + (
-              "; `alfd local` does not count its updates, `alfd run`'s learner does."
-              if any("updates_per_s" not in r for r in results["local"])
-              else " (both count them: `updates` in `summary.json`)."), "",
-          "| runtime | environment steps/s (median) | updates/s (median) | runs |",
+          "Learner updates per second over the training loop (the run's own wall-clock and "
+          "update count in `summary.json`), 2 actors against one process. The runs go in "
+          f"rounds ({len(results['local'])}), each round `alfd run` (the default window of 1: "
+          "each actor in lockstep with the learner), `alfd local`, then `alfd run --window 32`, "
+          "one after the other; \"against local\" divides each round's `alfd run` by that "
+          "round's `alfd local`, median (min-max) over the rounds.", "",
+          "| runtime | updates/s | environment steps/s | against local |",
           "|---|---:|---:|---:|"]
-    run2 = results["actors"]["2"]
-    L.append(f"| `alfd run` (2 actors) | {med([r['env_steps_per_s'] for r in run2]):.0f} | "
-             f"{med([r['updates_per_s'] for r in run2]):.0f} | {len(run2)} |")
     loc = results["local"]
-    loc_updates = [r["updates_per_s"] for r in loc if "updates_per_s" in r]
-    L.append(f"| `alfd local` (one process) | {med([r['env_steps_per_s'] for r in loc]):.0f} | "
-             f"{f'{med(loc_updates):.0f}' if len(loc_updates) == len(loc) else 'not counted'} | "
-             f"{len(loc)} |")
+
+    def ratio(rows):
+        rs = [r["updates_per_s"] / l["updates_per_s"] for r, l in zip(rows, loc)]
+        return f"{med(rs):.2f} ({min(rs):.2f}-{max(rs):.2f})"
+
+    for label, rows in [("`alfd run` (2 actors)", results["actors"]["2"]),
+                        ("`alfd run --window 32` (2 actors)", results["run_window32"])]:
+        L.append(f"| {label} | {med([r['updates_per_s'] for r in rows]):.0f} | "
+                 f"{med([r['env_steps_per_s'] for r in rows]):.0f} | {ratio(rows)} |")
+    L.append(f"| `alfd local` (one process) | {med([r['updates_per_s'] for r in loc]):.0f} | "
+             f"{med([r['env_steps_per_s'] for r in loc]):.0f} | 1 |")
     L += ["", "## Actors", "", "On the 2-core machine; medians over the runs.", "",
           "| actors | updates/s | environment steps/s | last-50 mean return | wall-clock |",
           "|---:|---:|---:|---:|---:|"]
@@ -235,14 +247,17 @@ def main():
     with tempfile.TemporaryDirectory(prefix="alfd-whole-run-") as tmp:
         print("whole_run.py: profiling one run", flush=True)
         prof = profile(a.alfd, tmp)
-        print("whole_run.py: 1, 2, 4, 8 actors", flush=True)
-        actors = actors_sweep(a.alfd, tmp, [1, 2, 4, 8], a.repeats)
-        print("whole_run.py: alfd local", flush=True)
-        local = local_run(a.alfd, tmp, a.repeats)
+        print("whole_run.py: alfd run and alfd local, in rounds", flush=True)
+        pairs = paired(a.alfd, tmp, a.repeats)
+        print("whole_run.py: 1, 4, 8 actors", flush=True)
+        actors = actors_sweep(a.alfd, tmp, [1, 4, 8], a.repeats)
+        actors[2] = pairs["run"]
+        actors = dict(sorted(actors.items()))
     batch = 128
     results = {
         "machine": host.described(m), "date": m["date"], "load_before": load,
-        "profile": prof, "actors": {str(k): v for k, v in actors.items()}, "local": local,
+        "profile": prof, "actors": {str(k): v for k, v in actors.items()},
+        "local": pairs["local"], "run_window32": pairs["run_window32"],
         "batch": batch, "flops_per_update": flops_per_update(prof["weights"], batch),
         "peak": core_peak_flops(a.train_steps), "replay": replay_bytes(a.replay_example),
     }
