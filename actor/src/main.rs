@@ -3,6 +3,10 @@
 
 use clap::Parser as _;
 
+/// Blocks the products read start on a cache line (see `alfd_common::alloc`).
+#[global_allocator]
+static ALLOC: alfd_common::alloc::CacheAligned = alfd_common::alloc::CacheAligned;
+
 fn main() {
     let args = alfd_actor::Args::parse();
     let log = alfd_actor::log_name(&args);

@@ -78,6 +78,10 @@ enum Command {
     Config(cmd_config::ConfigArgs),
 }
 
+/// Blocks the products read start on a cache line (see `alfd_common::alloc`).
+#[global_allocator]
+static ALLOC: alfd_common::alloc::CacheAligned = alfd_common::alloc::CacheAligned;
+
 fn main() {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,

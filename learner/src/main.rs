@@ -3,6 +3,10 @@
 
 use clap::Parser as _;
 
+/// Blocks the products read start on a cache line (see `alfd_common::alloc`).
+#[global_allocator]
+static ALLOC: alfd_common::alloc::CacheAligned = alfd_common::alloc::CacheAligned;
+
 fn main() {
     let args = alfd_learner::Args::parse();
     let log = alfd_learner::log_name(&args);

@@ -12,6 +12,10 @@ use alfd_common::replay::{Batch, ReplayBuffer, Transition};
 use alfd_common::rng::seeded;
 use rand::Rng as _;
 
+/// As the binaries: blocks the products read start on a cache line.
+#[global_allocator]
+static ALLOC: alfd_common::alloc::CacheAligned = alfd_common::alloc::CacheAligned;
+
 fn main() {
     let mut args = std::env::args().skip(1).peekable();
     if args.peek().map(String::as_str) == Some("peak") {

@@ -6,6 +6,7 @@
 //! iceoryx2) and start up through `alfd-harness`.
 
 pub mod agent;
+pub mod alloc;
 pub mod checkpoint;
 pub mod config;
 pub mod demo_model;
