@@ -181,16 +181,22 @@ impl CreditBook {
 
     /// Whether a blocked actor's grant, published now, would wake it ([`CreditBook::grant`]).
     pub fn any_wake_due(&self) -> bool {
-        let c = self.credits(0);
-        self.actors
-            .iter()
-            .zip(c.granted)
-            .any(|(b, granted)| self.wakes(b, granted))
+        self.actors.iter().any(|b| self.wakes(b))
     }
 
-    fn wakes(&self, book: &ActorBook, granted: u64) -> bool {
+    /// Whether `book`'s actor is blocked and its grant lets it take [`CreditBook::wake_after`]
+    /// steps.
+    fn wakes(&self, book: &ActorBook) -> bool {
         book.blocked_until
-            .is_some_and(|until| granted >= until.saturating_add(self.wake_after()))
+            .is_some_and(|until| self.granted(book) >= until.saturating_add(self.wake_after()))
+    }
+
+    /// An actor's grant: `window` steps beyond those learned from. Saturating: a batch sent
+    /// twice (sequence numbers going back) queues steps that `received` does not count again.
+    fn granted(&self, book: &ActorBook) -> u64 {
+        book.received
+            .saturating_sub(book.queued)
+            .saturating_add(self.window)
     }
 
     /// The grants to publish now, and the actors to wake: those blocked for want of credits
@@ -199,7 +205,7 @@ impl CreditBook {
         let c = self.credits(updates);
         let mut wake = Vec::new();
         for i in 0..MAX_ACTORS {
-            if self.wakes(&self.actors[i], c.granted[i]) {
+            if self.wakes(&self.actors[i]) {
                 wake.push(i as u16);
                 self.actors[i].blocked_until = None;
             }
@@ -217,12 +223,7 @@ impl CreditBook {
         for (i, b) in self.actors.iter().enumerate() {
             c.incarnation[i] = b.incarnation;
             c.received[i] = b.received;
-            // Saturating: a batch sent twice (sequence numbers going back) queues steps that
-            // `received` does not count again.
-            c.granted[i] = b
-                .received
-                .saturating_sub(b.queued)
-                .saturating_add(self.window);
+            c.granted[i] = self.granted(b);
         }
         c
     }

@@ -127,11 +127,6 @@ impl<L: Learns> LearnerMachine<L> {
         self.book.accept(batch, &mut self.queue);
     }
 
-    /// Whether an actor waits for credits.
-    pub fn any_blocked(&self) -> bool {
-        self.book.any_blocked()
-    }
-
     /// Whether the grants, published now, would wake a blocked actor (they go back at once:
     /// the actor may have blocked on stale news, or been let go on by the steps just learned).
     pub fn any_wake_due(&self) -> bool {
@@ -296,7 +291,7 @@ mod tests {
     fn every_step_is_learned_once_in_order_with_credits_at_most_every_eight() {
         let mut m = machine(1000, 0, 0);
         m.accept(&batch(0, 1, 0, 20, &[]));
-        assert!(!m.any_blocked());
+        assert!(!m.book().any_blocked());
         let todos = run_all(&mut m);
         assert_eq!(
             m.learner().seen,
@@ -358,7 +353,7 @@ mod tests {
         b.blocked = 1;
         m.accept(&b);
         // Blocked at 4 on stale news: the grant, 4 received - 4 queued + 16, is there.
-        assert!(m.any_blocked() && m.any_wake_due());
+        assert!(m.book().any_blocked() && m.any_wake_due());
         run_all(&mut m);
         let (_, wake) = m.grant();
         assert_eq!(wake, vec![3]);

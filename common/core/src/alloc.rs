@@ -5,8 +5,8 @@
 //! matrices over `Vec<f32>`), and the products load them a register at a time. glibc's `malloc`
 //! aligns to 16 bytes, so where a block starts within its cache line depends on what the
 //! process allocated before: with a block off the boundary every 64-byte load straddles two
-//! cache lines, and the same train step runs a few percent slower in one process than in
-//! another (the binaries differ in what they allocate first). Aligned, every process runs it
+//! cache lines, and the same train step runs slower in one process than in another (the
+//! binaries differ in what they allocate first). Aligned, every process runs it
 //! at the same speed. The numbers do not change: only where the blocks are.
 //!
 //! Smaller blocks are left as they are (most are strings and small vectors), and so are larger

@@ -76,9 +76,9 @@ pub(crate) fn forward(l: Rows, k: &[f64], lanes: &dyn Lanes) -> Vec<f64> {
     z
 }
 
-/// Solves the rows of `z` in groups of four: each row's sum from `start(i)` (`k_i` minus nothing when that is 0; else the helper's
-/// sum over the columns before it, from `hand.0`), minus its products up to the diagonal; each
-/// solved value handed on to `hand.1`.
+/// Solves the rows of `z` in groups of four: each row's sum from `start(i)` (`k_i` minus
+/// nothing when that is 0; else the helper's sum over the columns before it, from `hand.0`),
+/// minus its products up to the diagonal; each solved value handed on to `hand.1`.
 #[inline(always)]
 fn forward_rows(
     l: Rows,
