@@ -24,7 +24,7 @@ use alfd_wire::{Doorbell, Process, Progress, Role, MAX_ACTORS};
 use tracing::info;
 
 use crate::links::{WireAdder, WireExpert, WireVariables};
-use crate::machine::Identity;
+use crate::machine::{CreditPoll, Identity};
 
 /// `alfd-actor`: one actor process of a run (started by `alfd run`).
 #[derive(Debug, Clone, clap::Parser)]
@@ -96,7 +96,19 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     );
     core.continue_exploration(args.explored_steps);
     let mut variables = WireVariables::new(&session)?;
-    let mut adder = WireAdder::new(&session, me, runtime.window, obs_dim, cfg.agent.heads())?;
+    let poll = machine::credit_poll(std::env::var(machine::CREDIT_POLL_VAR).ok().as_deref());
+    if !poll.is_zero() {
+        // Polls of the doorbell sleep 30 µs, not the default slack's up to 80 µs.
+        alfd_harness::set_timer_slack(Duration::from_micros(1));
+    }
+    let mut adder = WireAdder::new(
+        &session,
+        me,
+        runtime.window,
+        CreditPoll::new(poll),
+        obs_dim,
+        cfg.agent.heads(),
+    )?;
     let mut expert = wire_expert(&session, me, &setup, &args.process.run_dir)?;
     // A restored actor continues where its checkpoint stands.
     let run_dir = &args.process.run_dir;

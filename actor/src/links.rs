@@ -19,7 +19,9 @@ use alfd_wire::{
 };
 use tracing::{debug, warn};
 
-use crate::machine::{Answer, Blocked, CreditGate, Gate, Identity, Poll, QueryWait};
+use crate::machine::{
+    Answer, Blocked, CreditGate, CreditPoll, Gate, Identity, Poll, QueryWait, CREDIT_POLL_EVERY,
+};
 
 /// The learner as the actor's adder: transitions go out in batches, never beyond the credits the
 /// learner granted (see `alfd_wire`'s crate doc on credits).
@@ -27,6 +29,7 @@ pub struct WireAdder<'s, 'w> {
     session: &'s Session<'w>,
     me: Identity,
     gate: CreditGate,
+    poll: CreditPoll,
     tx: Sender<'w, TransitionBatch>,
     learner: Bell,
     credits_rx: Receiver<'w, Credits>,
@@ -46,6 +49,7 @@ impl<'s, 'w> WireAdder<'s, 'w> {
         session: &'s Session<'w>,
         me: Identity,
         window: u64,
+        poll: CreditPoll,
         obs_dim: usize,
         heads: usize,
     ) -> alfd_harness::Result<Self> {
@@ -54,6 +58,7 @@ impl<'s, 'w> WireAdder<'s, 'w> {
             session,
             me,
             gate: CreditGate::new(me, window),
+            poll,
             tx: wire.transitions_sender()?,
             learner: wire.bell(alfd_wire::Doorbell::Learner)?,
             credits_rx: wire.credits_receiver()?,
@@ -109,11 +114,13 @@ impl<'s, 'w> WireAdder<'s, 'w> {
 
 impl WireAdder<'_, '_> {
     /// Out of credits: sends what is batched, flagged so that the learner rings when new credits
-    /// are there, and waits for them (flagging again as the gate says).
+    /// are there, and waits for them (flagging again as the gate says), polling the doorbell
+    /// first as the [`CreditPoll`] says.
     fn wait_for_credits(&mut self) -> Result<ControlFlow<Stop>> {
         self.flush(true)?;
         let blocked = Instant::now();
         self.credit_waits += 1;
+        let mut poll = self.poll.poll_for();
         loop {
             self.take_credits()?;
             match self.gate.after_wait(self.now()) {
@@ -121,9 +128,10 @@ impl WireAdder<'_, '_> {
                 Blocked::Reflag => self.flush(true)?,
                 Blocked::Wait => {}
             }
+            let timeout = Duration::from_millis(100);
             if let Some(stop) = self
                 .session
-                .wait(Duration::from_millis(100))
+                .poll_then_wait(std::mem::take(&mut poll), CREDIT_POLL_EVERY, timeout)
                 .map_err(LoopError::link)?
             {
                 return Ok(ControlFlow::Break(stop));
@@ -133,6 +141,7 @@ impl WireAdder<'_, '_> {
             }
         }
         self.credit_wait += blocked.elapsed();
+        self.poll.waited(blocked.elapsed());
         if blocked.elapsed() > Duration::from_millis(5) {
             debug!(
                 waited_ms = blocked.elapsed().as_millis() as u64,

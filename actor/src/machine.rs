@@ -165,6 +165,72 @@ impl CreditGate {
     }
 }
 
+/// How long a blocked actor polls its doorbell before it sleeps on it (unless
+/// [`CREDIT_POLL_VAR`] says otherwise).
+pub const CREDIT_POLL: Duration = Duration::from_millis(2);
+
+/// How often a polling actor looks at its doorbell.
+pub const CREDIT_POLL_EVERY: Duration = Duration::from_micros(30);
+
+/// The environment variable that sets [`CREDIT_POLL`] in microseconds (`0`: sleep on the
+/// doorbell at once).
+pub const CREDIT_POLL_VAR: &str = "ALFD_CREDIT_POLL_US";
+
+/// How long a blocked actor polls its doorbell (every [`CREDIT_POLL_EVERY`]) before it sleeps
+/// on it. The learner rings a blocked actor when its credits come; ringing an actor asleep
+/// costs the learner the wake-up of the actor's core (an interrupt between cores), ringing one
+/// that polls only the message. An actor polls while its waits end within the poll: after a
+/// longer wait (many actors taking turns at the learner, a window that lets it run far ahead,
+/// a learner busy elsewhere) it sleeps at once, since its polls would find nothing and take
+/// the core from the other processes; the next wait that ends within the poll turns polling
+/// back on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CreditPoll {
+    poll: Duration,
+    last_wait: Option<Duration>,
+}
+
+impl CreditPoll {
+    /// Polls for up to `poll` (zero: never).
+    pub fn new(poll: Duration) -> Self {
+        Self {
+            poll,
+            last_wait: None,
+        }
+    }
+
+    /// How long to poll in the next wait.
+    pub fn poll_for(&self) -> Duration {
+        match self.last_wait {
+            Some(w) if w > self.poll => Duration::ZERO,
+            _ => self.poll,
+        }
+    }
+
+    /// A wait for credits took `waited`.
+    pub fn waited(&mut self, waited: Duration) {
+        self.last_wait = Some(waited);
+    }
+}
+
+/// The poll given [`CREDIT_POLL_VAR`]'s value: microseconds, `0` none; anything else (logged)
+/// or nothing is [`CREDIT_POLL`].
+pub fn credit_poll(var: Option<&str>) -> Duration {
+    let Some(v) = var else {
+        return CREDIT_POLL;
+    };
+    match v.trim().parse::<u64>() {
+        Ok(us) => Duration::from_micros(us),
+        Err(_) => {
+            tracing::warn!(
+                value = v,
+                "{CREDIT_POLL_VAR} is not a number of microseconds: a blocked actor polls for {CREDIT_POLL:?}"
+            );
+            CREDIT_POLL
+        }
+    }
+}
+
 /// What came of a query.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Answer {
@@ -280,6 +346,41 @@ mod tests {
             assert_ne!(gate.reserve(ms(0)), Gate::Block);
             gate.added();
         }
+    }
+
+    #[test]
+    fn an_actor_polls_while_its_waits_end_within_the_poll() {
+        let mut p = CreditPoll::new(ms(2));
+        assert_eq!(p.poll_for(), ms(2), "the first wait polls");
+        p.waited(Duration::from_micros(900));
+        assert_eq!(p.poll_for(), ms(2));
+        p.waited(ms(2));
+        assert_eq!(
+            p.poll_for(),
+            ms(2),
+            "a wait of exactly the poll was caught by it"
+        );
+        p.waited(ms(9));
+        assert_eq!(
+            p.poll_for(),
+            Duration::ZERO,
+            "after a longer wait it sleeps at once"
+        );
+        p.waited(ms(1));
+        assert_eq!(p.poll_for(), ms(2), "a short wait turns polling back on");
+        let mut never = CreditPoll::new(Duration::ZERO);
+        assert_eq!(never.poll_for(), Duration::ZERO);
+        never.waited(Duration::ZERO);
+        assert_eq!(never.poll_for(), Duration::ZERO);
+    }
+
+    #[test]
+    fn the_variable_sets_the_poll_in_microseconds_and_zero_turns_it_off() {
+        assert_eq!(credit_poll(None), CREDIT_POLL);
+        assert_eq!(credit_poll(Some("500")), Duration::from_micros(500));
+        assert_eq!(credit_poll(Some(" 0 ")), Duration::ZERO);
+        assert_eq!(credit_poll(Some("fast")), CREDIT_POLL);
+        assert_eq!(credit_poll(Some("-1")), CREDIT_POLL);
     }
 
     #[test]

@@ -233,6 +233,10 @@ struct Stats {
     idle: Duration,
     idle_running: Duration,
     publish: Duration,
+    /// Actors woken, and the time their doorbells took (a sleeping actor's costs the wake-up
+    /// of its core).
+    rings: u64,
+    ring: Duration,
     first_step: Option<Instant>,
     checkpoints: u64,
     checkpoint_time: Duration,
@@ -250,6 +254,8 @@ impl Stats {
             idle_s = self.idle.as_secs_f64(),
             idle_running_s = self.idle_running.as_secs_f64(),
             publish_s = self.publish.as_secs_f64(),
+            rings = self.rings,
+            ring_s = self.ring.as_secs_f64(),
             updates_per_s = updates as f64
                 / self
                     .first_step
@@ -395,9 +401,15 @@ impl Shell<'_, '_> {
     fn send_credits(&mut self, m: &mut Machine) -> alfd_harness::Result<()> {
         let (credits, wake) = m.grant();
         self.credits_tx.send(credits)?;
-        for id in wake {
-            self.actors.ring(id)?;
+        if wake.is_empty() {
+            return Ok(());
         }
+        let t = Instant::now();
+        for id in &wake {
+            self.actors.ring(*id)?;
+        }
+        self.stats.rings += wake.len() as u64;
+        self.stats.ring += t.elapsed();
         Ok(())
     }
 

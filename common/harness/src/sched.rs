@@ -142,6 +142,39 @@ fn set_thread(s: Sched) -> std::io::Result<()> {
     Err(e)
 }
 
+/// Asks that the calling thread's timed sleeps end within `slack` of their deadline (Linux's
+/// timer slack, `PR_SET_TIMERSLACK`, 50 µs unless set): a thread that polls in sleeps of tens
+/// of microseconds would otherwise sleep up to twice as long as it asks. Where the system
+/// refuses, or is not Linux, the thread keeps its slack (logged at debug level).
+pub fn set_timer_slack(slack: Duration) {
+    if let Err(e) = set_slack(slack) {
+        debug!(?slack, error = %e, "the system refused the thread's timer slack");
+    }
+}
+
+#[cfg(target_os = "linux")]
+#[allow(unsafe_code)]
+fn set_slack(slack: Duration) -> std::io::Result<()> {
+    // PR_SET_TIMERSLACK takes nanoseconds; 0 would mean "the thread's default" again.
+    let ns = slack.as_nanos().clamp(1, u128::from(u32::MAX)) as libc::c_ulong;
+    // SAFETY: prctl with PR_SET_TIMERSLACK reads its second argument as a number and touches no
+    // memory of ours; it applies to the calling thread.
+    let r = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, ns, 0, 0, 0) };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn set_slack(_: Duration) -> std::io::Result<()> {
+    Err(std::io::Error::new(
+        std::io::ErrorKind::Unsupported,
+        "the timer slack is set on Linux only",
+    ))
+}
+
 #[cfg(not(target_os = "linux"))]
 fn set_thread(_: Sched) -> std::io::Result<()> {
     Err(std::io::Error::new(
@@ -153,6 +186,25 @@ fn set_thread(_: Sched) -> std::io::Result<()> {
 #[cfg(test)]
 mod slice_tests {
     use super::*;
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    #[allow(unsafe_code)]
+    fn the_timer_slack_is_the_calling_threads() {
+        let read = || {
+            // SAFETY: PR_GET_TIMERSLACK reads nothing of ours and returns the slack in ns.
+            unsafe { libc::prctl(libc::PR_GET_TIMERSLACK, 0, 0, 0, 0) }
+        };
+        let before = read();
+        let after = std::thread::spawn(move || {
+            set_timer_slack(Duration::from_micros(1));
+            read()
+        })
+        .join()
+        .unwrap();
+        assert_eq!(after, 1_000);
+        assert_eq!(read(), before, "another thread's slack is left alone");
+    }
 
     #[test]
     fn the_variable_sets_the_slice_in_microseconds_and_zero_leaves_the_default() {

@@ -110,6 +110,20 @@ impl<'w> Session<'w> {
         })
     }
 
+    /// Like [`Session::wait`], after looking at the doorbell every `every` for up to `poll`
+    /// ([`alfd_wire::Waiter::poll_then_wait`]).
+    pub fn poll_then_wait(
+        &self,
+        poll: Duration,
+        every: Duration,
+        timeout: Duration,
+    ) -> Result<Option<Stop>, SessionError> {
+        Ok(match self.waiter.poll_then_wait(poll, every, timeout)? {
+            Wake::Signal => Some(TERMINATION_SIGNAL),
+            _ => None,
+        })
+    }
+
     /// Like [`Session::wait`], and also says which wake-up it was.
     pub fn wait_for(&self, timeout: Duration) -> Result<Wake, SessionError> {
         Ok(self.waiter.wait(timeout)?)

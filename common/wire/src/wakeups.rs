@@ -179,6 +179,31 @@ impl Waiter {
         })
     }
 
+    /// Like [`Waiter::wait`], after first looking at the doorbell every `every` for up to `poll`
+    /// (sleeping in between, without the WaitSet): a ring that comes while this process polls
+    /// finds it awake, so the ringer's system call wakes no sleeping core. `poll` zero is
+    /// [`Waiter::wait`]. A termination signal that arrives while polling is taken by the
+    /// caller's next look at it ([`Wire::termination_requested`]) or by the wait after the poll.
+    pub fn poll_then_wait(
+        &self,
+        poll: Duration,
+        every: Duration,
+        timeout: Duration,
+    ) -> Result<Wake> {
+        let start = Instant::now();
+        let poll = poll.min(timeout);
+        while start.elapsed() < poll {
+            if TERMINATION_REQUESTED.load(Ordering::Relaxed) {
+                return Ok(Wake::Signal);
+            }
+            if self.drain()? > 0 {
+                return Ok(Wake::Rang);
+            }
+            std::thread::sleep(every);
+        }
+        self.wait(timeout.saturating_sub(start.elapsed()))
+    }
+
     /// Consumes pending rings without blocking; returns how many there were.
     fn drain(&self) -> Result<u64> {
         let mut n = 0;
@@ -235,6 +260,59 @@ mod tests {
             });
             assert_eq!(waiter.wait(Duration::from_secs(10)).unwrap(), Wake::Rang);
             t.join().unwrap();
+        });
+    }
+
+    #[test]
+    fn a_polling_waiter_takes_a_ring_while_it_polls_and_sleeps_on_the_bell_after() {
+        with_run("doorbell-poll", |run| {
+            let learner = wire(run, Role::Learner, 0);
+            let actor = wire(run, Role::Actor, 0);
+            let waiter = actor.waiter(Doorbell::Actor(0)).unwrap();
+            let bell = learner.bell(Doorbell::Actor(0)).unwrap();
+            let every = Duration::from_micros(30);
+            // Nothing rings: the poll ends and the wait times out, having waited the timeout.
+            let t = std::time::Instant::now();
+            assert_eq!(
+                waiter
+                    .poll_then_wait(Duration::from_millis(5), every, Duration::from_millis(30))
+                    .unwrap(),
+                Wake::Timeout
+            );
+            assert!(t.elapsed() >= Duration::from_millis(30));
+            // A ring before the call is taken by the first look.
+            bell.ring().unwrap();
+            assert_eq!(
+                waiter
+                    .poll_then_wait(Duration::from_secs(5), every, Duration::from_secs(10))
+                    .unwrap(),
+                Wake::Rang
+            );
+            // Rings during the poll (from another process's thread) and after it, asleep.
+            for delay_ms in [20, 150] {
+                let run2 = run.to_owned();
+                let t = std::thread::spawn(move || {
+                    let w = wire(&run2, Role::Tool, 1);
+                    let b = w.bell(Doorbell::Actor(0)).unwrap();
+                    std::thread::sleep(Duration::from_millis(delay_ms));
+                    b.ring().unwrap();
+                });
+                assert_eq!(
+                    waiter
+                        .poll_then_wait(Duration::from_millis(100), every, Duration::from_secs(10))
+                        .unwrap(),
+                    Wake::Rang,
+                    "rung after {delay_ms} ms"
+                );
+                t.join().unwrap();
+            }
+            // Every ring was consumed.
+            assert_eq!(
+                waiter
+                    .poll_then_wait(Duration::from_millis(5), every, Duration::from_millis(20))
+                    .unwrap(),
+                Wake::Timeout
+            );
         });
     }
 
