@@ -98,7 +98,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let mut variables = WireVariables::new(&session)?;
     let poll = machine::credit_poll(std::env::var(machine::CREDIT_POLL_VAR).ok().as_deref());
     if !poll.is_zero() {
-        // Polls of the doorbell sleep 30 µs, not the default slack's up to 80 µs.
+        // Polls of the doorbell sleep 200 µs, not up to 250 µs as with the default slack.
         alfd_harness::set_timer_slack(Duration::from_micros(1));
     }
     let mut adder = WireAdder::new(

@@ -23,6 +23,9 @@ use crate::machine::{
     Answer, Blocked, CreditGate, CreditPoll, Gate, Identity, Poll, QueryWait, CREDIT_POLL_EVERY,
 };
 
+/// How long a blocked actor sleeps on its doorbell at most before it looks at control.
+const WAIT_AT_MOST: Duration = Duration::from_millis(100);
+
 /// The learner as the actor's adder: transitions go out in batches, never beyond the credits the
 /// learner granted (see `alfd_wire`'s crate doc on credits).
 pub struct WireAdder<'s, 'w> {
@@ -120,7 +123,10 @@ impl WireAdder<'_, '_> {
         self.flush(true)?;
         let blocked = Instant::now();
         self.credit_waits += 1;
-        let mut poll = self.poll.poll_for();
+        // A ring that was waiting already (rung before this wait) ends a poll early: the rest
+        // of the poll goes on in the next round.
+        let actors = self.gate.latest().map_or(0, Credits::actors);
+        let poll_until = blocked + self.poll.poll_for(actors);
         loop {
             self.take_credits()?;
             match self.gate.after_wait(self.now()) {
@@ -128,10 +134,10 @@ impl WireAdder<'_, '_> {
                 Blocked::Reflag => self.flush(true)?,
                 Blocked::Wait => {}
             }
-            let timeout = Duration::from_millis(100);
+            let poll = poll_until.saturating_duration_since(Instant::now());
             if let Some(stop) = self
                 .session
-                .poll_then_wait(std::mem::take(&mut poll), CREDIT_POLL_EVERY, timeout)
+                .poll_then_wait(poll, CREDIT_POLL_EVERY, WAIT_AT_MOST)
                 .map_err(LoopError::link)?
             {
                 return Ok(ControlFlow::Break(stop));

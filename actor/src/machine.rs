@@ -170,7 +170,7 @@ impl CreditGate {
 pub const CREDIT_POLL: Duration = Duration::from_millis(2);
 
 /// How often a polling actor looks at its doorbell.
-pub const CREDIT_POLL_EVERY: Duration = Duration::from_micros(30);
+pub const CREDIT_POLL_EVERY: Duration = Duration::from_micros(200);
 
 /// The environment variable that sets [`CREDIT_POLL`] in microseconds (`0`: sleep on the
 /// doorbell at once).
@@ -179,11 +179,14 @@ pub const CREDIT_POLL_VAR: &str = "ALFD_CREDIT_POLL_US";
 /// How long a blocked actor polls its doorbell (every [`CREDIT_POLL_EVERY`]) before it sleeps
 /// on it. The learner rings a blocked actor when its credits come; ringing an actor asleep
 /// costs the learner the wake-up of the actor's core (an interrupt between cores), ringing one
-/// that polls only the message. An actor polls while its waits end within the poll: after a
-/// longer wait (many actors taking turns at the learner, a window that lets it run far ahead,
-/// a learner busy elsewhere) it sleeps at once, since its polls would find nothing and take
-/// the core from the other processes; the next wait that ends within the poll turns polling
-/// back on.
+/// that polls only the message, which the actor's next look takes. That pays where the learner
+/// has another actor's steps to learn from while this one waits, so an actor polls only when
+/// the learner's credits name other actors too: alone, its poll's delay (up to a look's
+/// interval) would be the learner's idle time. It polls while its waits end within the poll:
+/// after a longer wait (many actors taking turns at the learner, a window that lets it run far
+/// ahead, a learner busy elsewhere) it sleeps at once, since its looks would find nothing and
+/// take the core from the other processes; the next wait that ends within the poll turns
+/// polling back on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CreditPoll {
     poll: Duration,
@@ -199,9 +202,11 @@ impl CreditPoll {
         }
     }
 
-    /// How long to poll in the next wait.
-    pub fn poll_for(&self) -> Duration {
+    /// How long to poll in the next wait, in a run whose learner grants steps to `actors`
+    /// actors (this one among them).
+    pub fn poll_for(&self, actors: usize) -> Duration {
         match self.last_wait {
+            _ if actors < 2 => Duration::ZERO,
             Some(w) if w > self.poll => Duration::ZERO,
             _ => self.poll,
         }
@@ -351,27 +356,47 @@ mod tests {
     #[test]
     fn an_actor_polls_while_its_waits_end_within_the_poll() {
         let mut p = CreditPoll::new(ms(2));
-        assert_eq!(p.poll_for(), ms(2), "the first wait polls");
+        assert_eq!(p.poll_for(2), ms(2), "the first wait polls");
         p.waited(Duration::from_micros(900));
-        assert_eq!(p.poll_for(), ms(2));
+        assert_eq!(p.poll_for(2), ms(2));
         p.waited(ms(2));
         assert_eq!(
-            p.poll_for(),
+            p.poll_for(2),
             ms(2),
             "a wait of exactly the poll was caught by it"
         );
         p.waited(ms(9));
         assert_eq!(
-            p.poll_for(),
+            p.poll_for(2),
             Duration::ZERO,
             "after a longer wait it sleeps at once"
         );
         p.waited(ms(1));
-        assert_eq!(p.poll_for(), ms(2), "a short wait turns polling back on");
+        assert_eq!(p.poll_for(8), ms(2), "a short wait turns polling back on");
         let mut never = CreditPoll::new(Duration::ZERO);
-        assert_eq!(never.poll_for(), Duration::ZERO);
+        assert_eq!(never.poll_for(2), Duration::ZERO);
         never.waited(Duration::ZERO);
-        assert_eq!(never.poll_for(), Duration::ZERO);
+        assert_eq!(never.poll_for(2), Duration::ZERO);
+    }
+
+    #[test]
+    fn an_actor_the_learner_serves_alone_sleeps_at_once() {
+        let mut p = CreditPoll::new(ms(2));
+        assert_eq!(p.poll_for(1), Duration::ZERO);
+        assert_eq!(p.poll_for(0), Duration::ZERO, "before any credits");
+        p.waited(Duration::from_micros(500));
+        assert_eq!(p.poll_for(1), Duration::ZERO);
+        assert_eq!(p.poll_for(2), ms(2), "a second actor turns polling on");
+    }
+
+    #[test]
+    fn the_learners_credits_count_the_actors_it_grants_to() {
+        let mut c = credits(ME.incarnation, 6);
+        assert_eq!(c.actors(), 1);
+        c.incarnation[0] = 1;
+        c.incarnation[alfd_wire::MAX_ACTORS - 1] = 1_000_001;
+        assert_eq!(c.actors(), 3);
+        assert_eq!(Credits::default().actors(), 0);
     }
 
     #[test]

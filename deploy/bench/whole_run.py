@@ -33,9 +33,9 @@ def sh(cmd, **kw):
     return subprocess.run(cmd, check=True, capture_output=True, text=True, **kw)
 
 
-def run_json(cmd):
+def run_json(cmd, env=None):
     t = time.monotonic()
-    out = sh(cmd).stdout
+    out = sh(cmd, env=env).stdout
     return json.loads(out.strip().splitlines()[-1]), time.monotonic() - t
 
 
@@ -98,12 +98,16 @@ def core_peak_flops(train_steps):
     return statistics.median(host.fma_peak(train_steps, PEAK_ROUNDS) for _ in range(3))
 
 
-def run_row(alfd, tmp, name, actors, extra=()):
-    """One `alfd run` of the preset with `actors` actors (and the flags in `extra`)."""
+def run_row(alfd, tmp, name, actors, extra=(), env=None):
+    """One `alfd run` of the preset with `actors` actors (the flags in `extra`, the environment
+    variables in `env`), with the learner's count of its doorbell rings and their time."""
+    run_dir = os.path.join(tmp, name)
     s, wall = run_json([alfd, "run", "--config", PRESET, "--actors", str(actors), "--quiet",
-                        "--json", "--out", os.path.join(tmp, name), *extra])
+                        "--json", "--out", run_dir, *extra], env={**os.environ, **(env or {})})
+    log = learner_log_fields(run_dir)
     return {"updates_per_s": s["updates_per_s"], "env_steps_per_s": s["env_steps_per_s"],
-            "last_50": s["mean_return_last_50"], "wall_s": wall}
+            "last_50": s["mean_return_last_50"], "wall_s": wall,
+            "rings": log.get("rings"), "ring_s": log.get("ring_s")}
 
 
 def actors_sweep(alfd, tmp, counts, repeats):
@@ -128,13 +132,16 @@ def local_row(alfd, tmp, name):
 
 
 def paired(alfd, tmp, repeats):
-    """`alfd run` (2 actors, the default window and `--window 32`) and `alfd local` in rounds,
-    one after the other, so that each round's ratio compares runs minutes apart (this virtual
-    machine's speed drifts by more than the difference measured over a longer span)."""
-    out = {"run": [], "local": [], "run_window32": []}
+    """`alfd run` (2 actors: the default window, the same with actors that sleep on their
+    doorbell at once, `--window 32`) and `alfd local` in rounds, one after the other, so that
+    each round's ratio compares runs minutes apart (this virtual machine's speed drifts by more
+    than the difference measured over a longer span)."""
+    out = {"run": [], "local": [], "run_no_poll": [], "run_window32": []}
     for r in range(repeats):
         out["run"].append(run_row(alfd, tmp, f"paired-run-{r}", 2))
         out["local"].append(local_row(alfd, tmp, f"paired-local-{r}"))
+        out["run_no_poll"].append(run_row(alfd, tmp, f"paired-sleep-{r}", 2,
+                                          env={"ALFD_CREDIT_POLL_US": "0"}))
         out["run_window32"].append(run_row(alfd, tmp, f"paired-w32-{r}", 2, ["--window", "32"]))
     return out
 
@@ -190,23 +197,38 @@ def write(results, out):
           "Learner updates per second over the training loop (the run's own wall-clock and "
           "update count in `summary.json`), 2 actors against one process. The runs go in "
           f"rounds ({len(results['local'])}), each round `alfd run` (the default window of 1: "
-          "each actor in lockstep with the learner), `alfd local`, then `alfd run --window 32`, "
-          "one after the other; \"against local\" divides each round's `alfd run` by that "
-          "round's `alfd local`, median (min-max) over the rounds.", "",
-          "| runtime | updates/s | environment steps/s | against local |",
-          "|---|---:|---:|---:|"]
+          "each actor in lockstep with the learner), `alfd local`, the first again with "
+          "`ALFD_CREDIT_POLL_US=0` (a blocked actor sleeps on its doorbell at once instead of "
+          "polling it first), then `alfd run --window 32`, one after the other; \"against "
+          "local\" divides each round's `alfd run` by that round's `alfd local`, median "
+          "(min-max) over the rounds. \"Doorbells\": the time the learner's rings took over "
+          "the run (its `ring_s`; a ring that finds the actor asleep wakes the actor's core), "
+          "and how many it rang.", "",
+          "| runtime | updates/s | environment steps/s | against local | doorbells |",
+          "|---|---:|---:|---:|---:|"]
     loc = results["local"]
 
     def ratio(rows):
         rs = [r["updates_per_s"] / l["updates_per_s"] for r, l in zip(rows, loc)]
         return f"{med(rs):.2f} ({min(rs):.2f}-{max(rs):.2f})"
 
-    for label, rows in [("`alfd run` (2 actors)", results["actors"]["2"]),
-                        ("`alfd run --window 32` (2 actors)", results["run_window32"])]:
+    def bells(rows):
+        if any(r.get("ring_s") is None for r in rows):
+            return ""
+        return (f"{med([r['ring_s'] for r in rows]):.2f} s, "
+                f"{med([r['rings'] for r in rows]):,.0f} rings")
+
+    runs = [("`alfd run` (2 actors)", results["actors"]["2"]),
+            ("`alfd run`, actors sleep at once", results.get("run_no_poll", [])),
+            ("`alfd run --window 32` (2 actors)", results["run_window32"])]
+    for label, rows in runs:
+        if not rows:
+            continue
         L.append(f"| {label} | {med([r['updates_per_s'] for r in rows]):.0f} | "
-                 f"{med([r['env_steps_per_s'] for r in rows]):.0f} | {ratio(rows)} |")
+                 f"{med([r['env_steps_per_s'] for r in rows]):.0f} | {ratio(rows)} | "
+                 f"{bells(rows)} |")
     L.append(f"| `alfd local` (one process) | {med([r['updates_per_s'] for r in loc]):.0f} | "
-             f"{med([r['env_steps_per_s'] for r in loc]):.0f} | 1 |")
+             f"{med([r['env_steps_per_s'] for r in loc]):.0f} | 1 | |")
     L += ["", "## Actors", "", "On the 2-core machine; medians over the runs.", "",
           "| actors | updates/s | environment steps/s | last-50 mean return | wall-clock |",
           "|---:|---:|---:|---:|---:|"]
@@ -258,6 +280,7 @@ def main():
         "machine": host.described(m), "date": m["date"], "load_before": load,
         "profile": prof, "actors": {str(k): v for k, v in actors.items()},
         "local": pairs["local"], "run_window32": pairs["run_window32"],
+        "run_no_poll": pairs["run_no_poll"],
         "batch": batch, "flops_per_update": flops_per_update(prof["weights"], batch),
         "peak": core_peak_flops(a.train_steps), "replay": replay_bytes(a.replay_example),
     }

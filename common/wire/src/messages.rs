@@ -436,6 +436,11 @@ impl Credits {
         (a < MAX_ACTORS && self.incarnation[a] == incarnation).then(|| self.granted[a])
     }
 
+    /// How many actors the learner has granted steps to (ids with an incarnation).
+    pub fn actors(&self) -> usize {
+        self.incarnation.iter().filter(|&&i| i != 0).count()
+    }
+
     /// The global step as `actor` (incarnation `incarnation`) sees it after producing `produced`
     /// steps: the learner's count plus the actor's own steps it has not received yet.
     pub fn global_step_for(&self, actor: u16, incarnation: u64, produced: u64) -> u64 {

@@ -181,7 +181,8 @@ impl Waiter {
 
     /// Like [`Waiter::wait`], after first looking at the doorbell every `every` for up to `poll`
     /// (sleeping in between, without the WaitSet): a ring that comes while this process polls
-    /// finds it awake, so the ringer's system call wakes no sleeping core. `poll` zero is
+    /// finds no one waiting on the doorbell, so the ringer's system call wakes no core; the
+    /// next look sees it. `poll` zero is
     /// [`Waiter::wait`]. A termination signal that arrives while polling is taken by the
     /// caller's next look at it ([`Wire::termination_requested`]) or by the wait after the poll.
     pub fn poll_then_wait(
