@@ -1,6 +1,7 @@
 //! The actor process's decisions on the wire as pure state machines: the [`CreditGate`] (may the
-//! next step be taken, under the learner's credits?) and the [`QueryWait`] (what came of a
-//! query to the expert?). Events in (credits received, a step sent, the expert's answer or its
+//! next step be taken, under the learner's credits?), the [`CreditPoll`] (how long to poll the
+//! doorbell before sleeping on it?) and the [`QueryWait`] (what came of a query to the
+//! expert?). Events in (credits received, a step sent, the expert's answer or its
 //! absence, the time), decisions out; no I/O, clock or socket inside: `links.rs` is the shell
 //! that sends the batches, waits on the doorbell and polls the query.
 //!
