@@ -123,9 +123,9 @@ impl WireAdder<'_, '_> {
         self.flush(true)?;
         let blocked = Instant::now();
         self.credit_waits += 1;
-        // A ring that was waiting already (rung before this wait) ends a poll early: the rest
-        // of the poll goes on in the next round.
         let actors = self.gate.latest().map_or(0, Credits::actors);
+        // The poll's end, not its length: a ring that was waiting already (rung before this
+        // wait) ends a poll early, and the rest of the poll goes on in the next round.
         let poll_until = blocked + self.poll.poll_for(actors);
         loop {
             self.take_credits()?;

@@ -206,10 +206,10 @@ impl CreditPoll {
     /// How long to poll in the next wait, in a run whose learner grants steps to `actors`
     /// actors (this one among them).
     pub fn poll_for(&self, actors: usize) -> Duration {
-        match self.last_wait {
-            _ if actors < 2 => Duration::ZERO,
-            Some(w) if w > self.poll => Duration::ZERO,
-            _ => self.poll,
+        if actors < 2 || self.last_wait.is_some_and(|w| w > self.poll) {
+            Duration::ZERO
+        } else {
+            self.poll
         }
     }
 
@@ -222,19 +222,7 @@ impl CreditPoll {
 /// The poll given [`CREDIT_POLL_VAR`]'s value: microseconds, `0` none; anything else (logged)
 /// or nothing is [`CREDIT_POLL`].
 pub fn credit_poll(var: Option<&str>) -> Duration {
-    let Some(v) = var else {
-        return CREDIT_POLL;
-    };
-    match v.trim().parse::<u64>() {
-        Ok(us) => Duration::from_micros(us),
-        Err(_) => {
-            tracing::warn!(
-                value = v,
-                "{CREDIT_POLL_VAR} is not a number of microseconds: a blocked actor polls for {CREDIT_POLL:?}"
-            );
-            CREDIT_POLL
-        }
-    }
+    alfd_harness::micros_var(CREDIT_POLL_VAR, var, CREDIT_POLL)
 }
 
 /// What came of a query.

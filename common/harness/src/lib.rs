@@ -32,7 +32,7 @@ pub use runtime::{
     Refit, RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY,
     DEFAULT_HUMAN_QUERY_TIMEOUT_MS, HUMAN_EXPERT, RUNTIME_FILE,
 };
-pub use sched::{set_timer_slack, Sched, QUERY_SLICE};
+pub use sched::{micros_var, set_timer_slack, Sched, QUERY_SLICE};
 pub use session::{Session, SessionError, LAUNCHER_SILENCE, STOP_REQUESTED, TERMINATION_SIGNAL};
 pub use startup::{
     init_process_logging, log_filter, portable_kernels_from_env, schema_version_from_env,

@@ -58,15 +58,24 @@ impl Sched {
 /// The query path's slice given [`QUERY_SLICE_VAR`]'s value: a number of microseconds, `0` the
 /// default slice; anything else (logged) or nothing is [`QUERY_SLICE`].
 fn query_slice(var: Option<&str>) -> Option<Duration> {
+    let slice = micros_var(QUERY_SLICE_VAR, var, QUERY_SLICE);
+    (!slice.is_zero()).then_some(slice)
+}
+
+/// The duration an environment variable `name` gives in microseconds, from its value `var`:
+/// `default` when it is unset, or (logged) when it is not a whole number of microseconds.
+pub fn micros_var(name: &str, var: Option<&str>, default: Duration) -> Duration {
     let Some(v) = var else {
-        return Some(QUERY_SLICE);
+        return default;
     };
     match v.trim().parse::<u64>() {
-        Ok(0) => None,
-        Ok(us) => Some(Duration::from_micros(us)),
+        Ok(us) => Duration::from_micros(us),
         Err(_) => {
-            tracing::warn!(value = v, "{QUERY_SLICE_VAR} is not a number of microseconds: the query path keeps {QUERY_SLICE:?}");
-            Some(QUERY_SLICE)
+            tracing::warn!(
+                value = v,
+                "{name} is not a number of microseconds: {default:?} is kept"
+            );
+            default
         }
     }
 }

@@ -104,10 +104,7 @@ impl<'w> Session<'w> {
 
     /// Sleeps on the doorbell for at most `timeout`; `Some` if a termination signal woke it.
     pub fn wait(&self, timeout: Duration) -> Result<Option<Stop>, SessionError> {
-        Ok(match self.waiter.wait(timeout)? {
-            Wake::Signal => Some(TERMINATION_SIGNAL),
-            _ => None,
-        })
+        self.poll_then_wait(Duration::ZERO, Duration::ZERO, timeout)
     }
 
     /// Like [`Session::wait`], after looking at the doorbell every `every` for up to `poll`

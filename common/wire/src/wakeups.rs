@@ -271,24 +271,18 @@ mod tests {
             let actor = wire(run, Role::Actor, 0);
             let waiter = actor.waiter(Doorbell::Actor(0)).unwrap();
             let bell = learner.bell(Doorbell::Actor(0)).unwrap();
-            let every = Duration::from_micros(30);
+            let ms = Duration::from_millis;
+            let poll_then_wait = |poll, timeout| {
+                let every = Duration::from_micros(30);
+                waiter.poll_then_wait(poll, every, timeout).unwrap()
+            };
             // Nothing rings: the poll ends and the wait times out, having waited the timeout.
             let t = std::time::Instant::now();
-            assert_eq!(
-                waiter
-                    .poll_then_wait(Duration::from_millis(5), every, Duration::from_millis(30))
-                    .unwrap(),
-                Wake::Timeout
-            );
-            assert!(t.elapsed() >= Duration::from_millis(30));
+            assert_eq!(poll_then_wait(ms(5), ms(30)), Wake::Timeout);
+            assert!(t.elapsed() >= ms(30));
             // A ring before the call is taken by the first look.
             bell.ring().unwrap();
-            assert_eq!(
-                waiter
-                    .poll_then_wait(Duration::from_secs(5), every, Duration::from_secs(10))
-                    .unwrap(),
-                Wake::Rang
-            );
+            assert_eq!(poll_then_wait(ms(5_000), ms(10_000)), Wake::Rang);
             // Rings during the poll (from another process's thread) and after it, asleep.
             for delay_ms in [20, 150] {
                 let run2 = run.to_owned();
@@ -298,22 +292,12 @@ mod tests {
                     std::thread::sleep(Duration::from_millis(delay_ms));
                     b.ring().unwrap();
                 });
-                assert_eq!(
-                    waiter
-                        .poll_then_wait(Duration::from_millis(100), every, Duration::from_secs(10))
-                        .unwrap(),
-                    Wake::Rang,
-                    "rung after {delay_ms} ms"
-                );
+                let wake = poll_then_wait(ms(100), ms(10_000));
+                assert_eq!(wake, Wake::Rang, "rung after {delay_ms} ms");
                 t.join().unwrap();
             }
             // Every ring was consumed.
-            assert_eq!(
-                waiter
-                    .poll_then_wait(Duration::from_millis(5), every, Duration::from_millis(20))
-                    .unwrap(),
-                Wake::Timeout
-            );
+            assert_eq!(poll_then_wait(ms(5), ms(20)), Wake::Timeout);
         });
     }
 
