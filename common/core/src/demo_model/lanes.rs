@@ -87,6 +87,32 @@ pub fn share<T: Send>(items: &mut [T], lanes: &dyn Lanes, f: impl Fn(&mut [&mut 
     lanes.run(jobs);
 }
 
+/// Calls `f` once on every item of `items`, the lanes taking the next item in order as each
+/// finishes its last (for jobs of unequal and unknown length; put the longest first).
+pub fn queue<T: Send>(items: &mut [T], lanes: &dyn Lanes, f: impl Fn(&mut T) + Sync) {
+    let width = lanes.width().clamp(1, items.len().max(1));
+    if width == 1 {
+        items.iter_mut().for_each(f);
+        return;
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let items: Vec<std::sync::Mutex<&mut T>> =
+        items.iter_mut().map(std::sync::Mutex::new).collect();
+    let take = || {
+        while let Some(item) = items.get(next.fetch_add(1, std::sync::atomic::Ordering::Relaxed)) {
+            // Each item is taken once: its lock is never contended.
+            f(&mut item
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner));
+        }
+    };
+    let take = &take;
+    let jobs = (0..width)
+        .map(|_| Box::new(take) as Box<dyn FnOnce() + Send + '_>)
+        .collect();
+    lanes.run(jobs);
+}
+
 /// Lanes that run their jobs last to first: for tests of code whose results must not depend on
 /// the lanes.
 #[cfg(test)]
@@ -107,6 +133,15 @@ impl Lanes for Backwards {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_queue_visits_every_item_once() {
+        for width in [1, 2, 3, 7] {
+            let mut items: Vec<usize> = vec![0; 10];
+            queue(&mut items, &Backwards(width), |visits| *visits += 1);
+            assert_eq!(items, vec![1; 10], "width {width}");
+        }
+    }
 
     #[test]
     fn every_item_is_visited_once_in_the_lane_of_its_index() {

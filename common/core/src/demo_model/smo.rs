@@ -41,6 +41,121 @@ fn curvature(kii: f64, kjj: f64, kij: f64) -> f64 {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_code)]
+mod x86;
+
+/// The best candidate of a search kept in lanes (position p in lane `p % W`), each lane's the
+/// last position that attained it; [`LaneBest::finish`] gives what one pass over the positions
+/// in order, keeping the last of equals, would have ended with.
+struct LaneBest<const W: usize> {
+    value: [f64; W],
+    at: [usize; W],
+}
+
+impl<const W: usize> LaneBest<W> {
+    fn new(worst: f64) -> LaneBest<W> {
+        LaneBest {
+            value: [worst; W],
+            at: [usize::MAX; W],
+        }
+    }
+
+    fn offer(&mut self, lane: usize, p: usize, take: bool, v: f64) {
+        if take {
+            self.value[lane] = v;
+            self.at[lane] = p;
+        }
+    }
+
+    /// The best over the lanes by `better` (strict), the latest position among equals; None
+    /// when no lane has a candidate.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    fn finish(&self, better: impl Fn(f64, f64) -> bool) -> Option<(f64, usize)> {
+        let mut best: Option<(f64, usize)> = None;
+        for (&v, &at) in self.value.iter().zip(&self.at) {
+            if at == usize::MAX {
+                continue;
+            }
+            best = match best {
+                Some((b, bat)) if better(b, v) || (!better(v, b) && bat > at) => Some((b, bat)),
+                _ => Some((v, at)),
+            };
+        }
+        best
+    }
+}
+
+/// The variable in I_up with the largest −y_t G_t (the last position on ties) and that value;
+/// None when I_up is empty.
+fn max_violation(a: &Active) -> Option<(f64, usize)> {
+    #[cfg(target_arch = "x86_64")]
+    if x86::available() {
+        return x86::max_violation(a).finish(|x, y| x > y);
+    }
+    max_violation_portable(a)
+}
+
+fn max_violation_portable(a: &Active) -> Option<(f64, usize)> {
+    let mut best = LaneBest::<1>::new(f64::NEG_INFINITY);
+    for (p, ((&up, &y), &g)) in a.up.iter().zip(&a.y).zip(&a.grad).enumerate() {
+        best.offer(0, p, up && -y * g >= best.value[0], -y * g);
+    }
+    (best.at[0] != usize::MAX).then_some((best.value[0], best.at[0]))
+}
+
+/// For the first variable of a pair (its violation `gmax`, `K_ii` and kernel row), over I_low:
+/// the largest y_t G_t, and the position whose pair decreases the objective most, `−b² /
+/// curvature` with `b = gmax + y_t G_t > 0` (the last on ties; `usize::MAX` when none does).
+fn best_partner(a: &Active, gmax: f64, di: f64, ki: &[f64]) -> (f64, usize) {
+    #[cfg(target_arch = "x86_64")]
+    if x86::available() {
+        let (gmax2, best) = x86::best_partner(a, gmax, di, ki);
+        return (
+            gmax2,
+            best.finish(|x, y| x < y).map_or(usize::MAX, |(_, j)| j),
+        );
+    }
+    best_partner_portable(a, gmax, di, ki)
+}
+
+fn best_partner_portable(a: &Active, gmax: f64, di: f64, ki: &[f64]) -> (f64, usize) {
+    let mut gmax2 = f64::NEG_INFINITY;
+    let mut best = LaneBest::<1>::new(f64::INFINITY);
+    for p in 0..a.len() {
+        if !a.low[p] {
+            continue;
+        }
+        let yg = a.y[p] * a.grad[p];
+        if yg >= gmax2 {
+            gmax2 = yg;
+        }
+        let b = gmax + yg;
+        if b > 0.0 {
+            let gain = -(b * b) / curvature(di, a.diag[p], ki[a.row[p]]);
+            best.offer(0, p, gain <= best.value[0], gain);
+        }
+    }
+    (gmax2, best.at[0])
+}
+
+/// G += y (y_i K_i Δα_i + y_j K_j Δα_j) on the active set, for the pair's two variables given
+/// as (y, kernel row, Δα).
+fn move_gradient(a: &mut Active, i: (f64, &[f64], f64), j: (f64, &[f64], f64)) {
+    #[cfg(target_arch = "x86_64")]
+    if x86::available() {
+        return x86::move_gradient(a, i, j);
+    }
+    move_gradient_portable(a, i, j)
+}
+
+fn move_gradient_portable(a: &mut Active, i: (f64, &[f64], f64), j: (f64, &[f64], f64)) {
+    let ((yi, ki, di), (yj, kj, dj)) = (i, j);
+    for ((g, &y), &r) in a.grad.iter_mut().zip(&a.y).zip(&a.row) {
+        *g += y * (yi * ki[r] * di + yj * kj[r] * dj);
+    }
+}
+
 /// Rows of a symmetric kernel matrix, given on demand.
 pub trait KernelRows: Sync {
     /// Row `r` (its column too).
@@ -181,6 +296,9 @@ struct Active {
     /// Whether each is in I_up, in I_low (kept with α).
     up: Vec<bool>,
     low: Vec<bool>,
+    /// One more than the largest of `row` (0 when empty): kernel rows at least this long can
+    /// be read at every active row.
+    row_bound: usize,
 }
 
 impl Active {
@@ -248,6 +366,7 @@ impl Problem<'_> {
         a.grad = list.iter().map(|&t| st.grad[t]).collect();
         a.up = list.iter().map(|&t| self.up(t, st.alpha[t])).collect();
         a.low = list.iter().map(|&t| self.low(t, st.alpha[t])).collect();
+        a.row_bound = a.row.iter().max().map_or(0, |&r| r + 1);
         a.t = list;
     }
 
@@ -256,39 +375,8 @@ impl Problem<'_> {
     /// most. None once the maximal violation is below `eps`.
     fn working_pair(&self, st: &SolverState, eps: f64) -> Option<(usize, usize)> {
         let a = &st.active;
-        let mut gmax = f64::NEG_INFINITY;
-        let mut i = usize::MAX;
-        for (p, ((&up, &y), &g)) in a.up.iter().zip(&a.y).zip(&a.grad).enumerate() {
-            if up && -y * g >= gmax {
-                gmax = -y * g;
-                i = p;
-            }
-        }
-        if i == usize::MAX {
-            return None;
-        }
-        // gmax2: the largest y_t G_t over I_low.
-        let mut gmax2 = f64::NEG_INFINITY;
-        let mut j = usize::MAX;
-        let mut best = f64::INFINITY;
-        let (ki, di) = (self.k.row(a.row[i]), a.diag[i]);
-        for p in 0..a.len() {
-            if !a.low[p] {
-                continue;
-            }
-            let yg = a.y[p] * a.grad[p];
-            if yg >= gmax2 {
-                gmax2 = yg;
-            }
-            let b = gmax + yg;
-            if b > 0.0 {
-                let gain = -(b * b) / curvature(di, a.diag[p], ki[a.row[p]]);
-                if gain <= best {
-                    best = gain;
-                    j = p;
-                }
-            }
-        }
+        let (gmax, i) = max_violation(a)?;
+        let (gmax2, j) = best_partner(a, gmax, a.diag[i], self.k.row(a.row[i]));
         (gmax + gmax2 >= eps && j != usize::MAX).then_some((i, j))
     }
 
@@ -304,7 +392,10 @@ impl Problem<'_> {
             j,
         );
         let (di, dj) = (st.alpha[i] - old_i, st.alpha[j] - old_j);
-        self.move_gradient(&mut st.active, (pi, di), (pj, dj));
+        let a = &mut st.active;
+        let (yi, ki) = (a.y[pi], self.k.row(a.row[pi]));
+        let (yj, kj) = (a.y[pj], self.k.row(a.row[pj]));
+        move_gradient(a, (yi, ki, di), (yj, kj, dj));
         for (p, t) in [(pi, i), (pj, j)] {
             st.active.up[p] = self.up(t, st.alpha[t]);
             st.active.low[p] = self.low(t, st.alpha[t]);
@@ -438,16 +529,6 @@ impl Problem<'_> {
         }
     }
 
-    /// G += Q[:, i] Δα_i + Q[:, j] Δα_j on the active set (i, j positions in it; columns i and
-    /// j read as rows: the matrix is symmetric).
-    fn move_gradient(&self, a: &mut Active, (pi, di): (usize, f64), (pj, dj): (usize, f64)) {
-        let (yi, yj) = (a.y[pi], a.y[pj]);
-        let (ki, kj) = (self.k.row(a.row[pi]), self.k.row(a.row[pj]));
-        for ((g, &y), &r) in a.grad.iter_mut().zip(&a.y).zip(&a.row) {
-            *g += y * (yi * ki[r] * di + yj * kj[r] * dj);
-        }
-    }
-
     /// rho: the mean of y_t G_t over the free α; without any, the middle of its feasible range.
     fn rho(&self, alpha: &[f64], grad: &[f64]) -> f64 {
         let (mut upper, mut lower) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -486,6 +567,68 @@ mod tests {
             }
         }
         k
+    }
+
+    /// An active set of `n` variables over a kernel of `rows` rows, with few distinct values
+    /// (so that ties are common), and two kernel rows.
+    fn random_active(n: usize, rows: usize, seed: u64) -> (Active, Vec<f64>, Vec<f64>) {
+        let mut rng = crate::rng::seeded(seed);
+        let mut pick = |k: u64| rand::Rng::random_range(&mut rng, 0..k);
+        let mut a = Active::default();
+        for t in 0..n {
+            a.t.push(t);
+            a.row.push(pick(rows as u64) as usize);
+            a.y.push(if pick(2) == 0 { 1.0 } else { -1.0 });
+            a.diag.push(1.0);
+            a.grad
+                .push([-1.0, -0.5, 0.0, -0.0, 0.25, 0.5][pick(6) as usize]);
+            a.up.push(pick(3) > 0);
+            a.low.push(pick(3) > 0);
+        }
+        a.row_bound = a.row.iter().max().map_or(0, |&r| r + 1);
+        let mut row = || {
+            (0..rows)
+                .map(|_| [0.0, 0.5, 1.0, 0.25][pick(4) as usize])
+                .collect()
+        };
+        let (ki, kj) = (row(), row());
+        (a, ki, kj)
+    }
+
+    #[test]
+    fn the_wide_loops_choose_the_pair_and_move_the_gradient_as_the_portable_ones() {
+        if !cfg!(target_arch = "x86_64") || !crate::nn::wide_available() {
+            eprintln!("skipped: the CPU has no AVX2");
+            return;
+        }
+        for (case, n) in (0..40).chain([100, 333, 1000]).enumerate() {
+            let (mut a, ki, kj) = random_active(n, 50, case as u64);
+            let wide = max_violation(&a);
+            assert_eq!(
+                wide.map(|(v, i)| (v.to_bits(), i)),
+                max_violation_portable(&a).map(|(v, i)| (v.to_bits(), i)),
+                "case {case}"
+            );
+            for gmax in [0.0, 0.3, 1.0] {
+                let (g2, j) = best_partner(&a, gmax, 1.0, &ki);
+                let (pg2, pj) = best_partner_portable(&a, gmax, 1.0, &ki);
+                assert_eq!((g2, j), (pg2, pj), "case {case}, gmax {gmax}");
+            }
+            let mut b = Active {
+                t: a.t.clone(),
+                row: a.row.clone(),
+                y: a.y.clone(),
+                diag: a.diag.clone(),
+                grad: a.grad.clone(),
+                up: a.up.clone(),
+                low: a.low.clone(),
+                row_bound: a.row_bound,
+            };
+            move_gradient(&mut a, (1.0, &ki, 0.3), (-1.0, &kj, 0.7));
+            move_gradient_portable(&mut b, (1.0, &ki, 0.3), (-1.0, &kj, 0.7));
+            let bits = |g: &[f64]| g.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&a.grad), bits(&b.grad), "case {case}");
+        }
     }
 
     #[test]

@@ -24,7 +24,7 @@ use std::sync::OnceLock;
 use rand::seq::SliceRandom;
 use serde::{Deserialize, Serialize};
 
-use super::lanes::{share, Lanes, Serial};
+use super::lanes::{queue, Lanes, Serial};
 use super::smo::KernelRows;
 use super::{rbf, rbf_row, smo, validate, DemoModelError};
 use crate::{math, rng};
@@ -453,7 +453,8 @@ pub fn stratified_folds(positive: &[bool]) -> Vec<usize> {
 }
 
 /// The SVM on every demonstration, and the out-of-fold decision values (for each fold, an SVM
-/// fitted on the other folds evaluates it): six independent solves, dealt to the lanes.
+/// fitted on the other folds evaluates it): six independent solves of unequal length, which the
+/// lanes take in turn as they finish.
 fn fit_with_folds(
     gram: &Gram,
     flat: &[f64],
@@ -471,10 +472,9 @@ fn fit_with_folds(
             (train, None)
         })
         .collect();
-    share(&mut jobs, lanes, |lane| {
-        for (train, out) in lane.iter_mut() {
-            *out = Some(Svc::fit(gram, flat, state_dim, train, positive));
-        }
+    // The final SVM's job, the longest, first; the lanes then take the folds as they finish.
+    queue(&mut jobs, lanes, |(train, out)| {
+        *out = Some(Svc::fit(gram, flat, state_dim, train, positive));
     });
     let mut fits = jobs.into_iter().map(|(_, out)| out.expect("every job ran"));
     let fitted = fits.next().expect("the final SVM's job")?;
