@@ -139,10 +139,18 @@ impl Adam {
         let bias_correction2 = 1.0 - math::powf(c.beta2, t);
         let step_size = (c.lr / bias_correction1) as f32;
         let bias_correction2_sqrt = bias_correction2.sqrt() as f32;
-        let w1 = (1.0 - c.beta1) as f32;
-        let beta2 = c.beta2 as f32;
-        let w2 = (1.0 - c.beta2) as f32;
-        let eps = c.eps as f32;
+        let update = Update {
+            w1: (1.0 - c.beta1) as f32,
+            beta2: c.beta2 as f32,
+            w2: (1.0 - c.beta2) as f32,
+            eps: c.eps as f32,
+            step_size,
+            bias_correction2_sqrt,
+        };
+        // From about 16,600 steps on (beta2 = 0.999) the correction rounds to 1 in f32, and a
+        // division by 1 is the identity: skipping it leaves the same bits and one division per
+        // parameter instead of two (the divider bounds this loop).
+        let unit_correction = bias_correction2_sqrt == 1.0;
         let tensors = net
             .params
             .tensors_mut()
@@ -155,16 +163,42 @@ impl Adam {
             #[inline(always)]
             || {
                 for (((p, g), m), v) in tensors {
-                    for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut())
-                    {
-                        *m = normal_or_zero(*m + w1 * (g - *m));
-                        *v = normal_or_zero(*v * beta2 + w2 * (g * g));
-                        let denom = v.sqrt() / bias_correction2_sqrt + eps;
-                        *p -= step_size * (*m / denom);
+                    if unit_correction {
+                        update.tensor::<true>(p, g, m, v);
+                    } else {
+                        update.tensor::<false>(p, g, m, v);
                     }
                 }
             },
         );
+    }
+}
+
+/// The constants of one Adam step.
+struct Update {
+    w1: f32,
+    beta2: f32,
+    w2: f32,
+    eps: f32,
+    step_size: f32,
+    bias_correction2_sqrt: f32,
+}
+
+impl Update {
+    /// One tensor's parameters `p`, gradients `g` and moments `m`, `v`; `UNIT` when the second
+    /// moment's correction is 1 (not divided by).
+    #[inline(always)]
+    fn tensor<const UNIT: bool>(&self, p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32]) {
+        for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
+            *m = normal_or_zero(*m + self.w1 * (g - *m));
+            *v = normal_or_zero(*v * self.beta2 + self.w2 * (g * g));
+            let root = if UNIT {
+                v.sqrt()
+            } else {
+                v.sqrt() / self.bias_correction2_sqrt
+            };
+            *p -= self.step_size * (*m / (root + self.eps));
+        }
     }
 }
 
@@ -201,6 +235,41 @@ mod tests {
         for (j, (a, b)) in net.params_flat().iter().zip(&before).enumerate() {
             let expected = if j % 2 == 0 { -1e-3 } else { 1e-3 };
             assert!((a - b - expected).abs() < 1e-6, "param {j}: {}", a - b);
+        }
+    }
+
+    #[test]
+    fn a_step_whose_correction_rounds_to_one_moves_each_parameter_as_the_formula() {
+        for step in [16_000, 16_700, 40_000] {
+            let mut net = Mlp::new(3, 5, 1, 2, &mut crate::rng::seeded(2));
+            let mut adam = Adam::new(&net);
+            let mut grads = net.params().zeros_like();
+            for (i, g) in grads.tensors_mut().into_iter().flatten().enumerate() {
+                *g = 0.01 * i as f32 - 0.2;
+            }
+            adam.step(&mut net, &grads);
+            let mut state = adam.state();
+            state.step = step;
+            assert!(adam.restore(&state));
+            let (before, s) = (net.params_flat(), adam.state());
+            adam.step(&mut net, &grads);
+            let c = AdamConfig::default();
+            let t = (step + 1) as f64;
+            let step_size = (c.lr / (1.0 - math::powf(c.beta1, t))) as f32;
+            let correction = (1.0 - math::powf(c.beta2, t)).sqrt() as f32;
+            // Below about 16,600 steps the correction is not 1 and is divided by.
+            assert_eq!(correction == 1.0, step > 16_000, "step {step}");
+            let flat_grads = grads.tensors().concat();
+            for (j, g) in flat_grads.into_iter().enumerate() {
+                let m = s.m[j] + (1.0 - c.beta1) as f32 * (g - s.m[j]);
+                let v = s.v[j] * c.beta2 as f32 + (1.0 - c.beta2) as f32 * (g * g);
+                let p = before[j] - step_size * (m / (v.sqrt() / correction + c.eps as f32));
+                assert_eq!(
+                    net.params_flat()[j].to_bits(),
+                    p.to_bits(),
+                    "step {step}, param {j}"
+                );
+            }
         }
     }
 
