@@ -221,18 +221,24 @@ mod x86 {
             }
         }
         for (q, acc) in acc.iter().enumerate() {
-            let b_col = &b[(c + q) * m..(c + q + 1) * m];
-            // The tails as `dot4` adds them.
-            let t: [f32; 4] = std::array::from_fn(|o| {
-                let w = &a[(r + o) * m..(r + o + 1) * m];
-                w[full..m]
-                    .iter()
-                    .zip(&b_col[full..])
-                    .map(|(w, x)| w * x)
-                    .sum()
-            });
             let folded = fold4(*acc);
-            let sums = _mm_add_ps(folded, _mm_loadu_ps(t.as_ptr()));
+            // The tails as `dot4` adds them; an empty one is the sum of nothing, −0, which
+            // adds nothing: then the addition is left out.
+            let sums = if full < m {
+                let b_col = &b[(c + q) * m..(c + q + 1) * m];
+                let t: [f32; 4] = std::array::from_fn(|o| {
+                    let w = &a[(r + o) * m..(r + o + 1) * m];
+                    w[full..m]
+                        .iter()
+                        .zip(&b_col[full..])
+                        .map(|(w, x)| w * x)
+                        .sum()
+                });
+                // SAFETY: `t` holds 4 floats.
+                _mm_add_ps(folded, unsafe { _mm_loadu_ps(t.as_ptr()) })
+            } else {
+                folded
+            };
             let at = r + (c + q) * k;
             out[at..at + 4].copy_from_slice(&to_array(sums));
         }
@@ -291,9 +297,14 @@ mod x86 {
                     *s = _mm256_add_ps(*s, unsafe { _mm256_loadu_ps(x.as_ptr()) });
                 }
             }
-            let t: [f32; 4] = std::array::from_fn(|q| col(q)[full..].iter().sum());
-            // SAFETY: `t` holds 4 floats.
-            let sums = _mm_add_ps(fold4(acc), unsafe { _mm_loadu_ps(t.as_ptr()) });
+            // As in `dot4x`, an empty tail adds nothing.
+            let sums = if full < rows {
+                let t: [f32; 4] = std::array::from_fn(|q| col(q)[full..].iter().sum());
+                // SAFETY: `t` holds 4 floats.
+                _mm_add_ps(fold4(acc), unsafe { _mm_loadu_ps(t.as_ptr()) })
+            } else {
+                fold4(acc)
+            };
             out[j..j + 4].copy_from_slice(&to_array(sums));
             j += 4;
         }
