@@ -222,8 +222,8 @@ mod x86 {
         }
         for (q, acc) in acc.iter().enumerate() {
             let folded = fold4(*acc);
-            // The tails as `dot4` adds them; an empty one is the sum of nothing, −0, which
-            // adds nothing: then the addition is left out.
+            // The tails as `dot4` adds them. An empty one is left out: the lanes start at +0,
+            // so `folded` is never −0, and adding a zero of either sign to it changes nothing.
             let sums = if full < m {
                 let b_col = &b[(c + q) * m..(c + q + 1) * m];
                 let t: [f32; 4] = std::array::from_fn(|o| {
@@ -321,6 +321,25 @@ mod x86 {
 mod tests {
     use super::*;
     use rand::Rng as _;
+
+    #[test]
+    fn columns_of_negative_zeros_sum_as_element_by_element() {
+        // The wide loops leave out an empty tail; the lanes start at +0, so a folded sum is
+        // never −0 and adding the tail's zero (either sign) would change nothing.
+        let (m, k, n) = (64, 4, 4);
+        let zeros = vec![-0.0f32; m * k.max(n)];
+        let mut sums = vec![1.0f32; n];
+        column_sums(m, &zeros[..m * n], &mut sums);
+        let mut dots = vec![1.0f32; k * n];
+        let ones = vec![1.0f32; m * n];
+        tr_dots((m, k, n), &zeros[..m * k], &ones, &mut dots);
+        let expected = sum(&zeros[..m]);
+        assert_eq!(expected.to_bits(), 0.0f32.to_bits());
+        assert!(sums
+            .iter()
+            .chain(&dots)
+            .all(|v| v.to_bits() == expected.to_bits()));
+    }
 
     #[test]
     fn tr_dots_and_column_sums_give_the_element_by_element_order_to_the_bit() {
