@@ -204,12 +204,15 @@ fn a_small_run_with_two_actors_fills_its_run_directory() {
 fn refits_in_the_background_answer_every_query_and_the_models_still_shape() {
     let _time = timed!();
     let out = tmp("background-refits");
+    // The budget is spent in the first episode, and a background refit (at nice 10) may wait
+    // for a core while other tests run: the run goes on long enough after it (300 episodes, a
+    // few thousand steps) for its model to be published and read.
     let o = run(
         &out,
         1,
         &[
             "--refit=background",
-            "episodes=40",
+            "episodes=300",
             "budget.total=20",
             "query.rule=first",
         ],
