@@ -90,9 +90,40 @@ pub(crate) fn tmp(name: &str) -> TestDir {
 }
 
 /// A test's temporary directory: used as a [`Path`], removed when dropped, also while a failed
-/// test unwinds; kept (and named on stderr) when `ALFD_KEEP_TEST_DIRS=1`.
+/// test unwinds (after the tail of every log in it is written to stderr, which the test harness
+/// shows with the failure); kept (and named on stderr) when `ALFD_KEEP_TEST_DIRS=1`.
 #[derive(Debug)]
 pub(crate) struct TestDir(tempfile::TempDir);
+
+impl Drop for TestDir {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            log_tails(self.0.path(), 3);
+        }
+    }
+}
+
+/// The last 20 lines of every `*.log` file under `dir` (down to `depth` levels), on stderr.
+fn log_tails(dir: &Path, depth: usize) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    let mut paths: Vec<_> = entries.flatten().map(|e| e.path()).collect();
+    paths.sort();
+    for path in paths {
+        if path.is_dir() && depth > 0 {
+            log_tails(&path, depth - 1);
+        } else if path.extension().is_some_and(|e| e == "log") {
+            let text = std::fs::read_to_string(&path).unwrap_or_default();
+            let lines: Vec<&str> = text.lines().collect();
+            let tail = &lines[lines.len().saturating_sub(20)..];
+            eprintln!("--- the last {} lines of {}", tail.len(), path.display());
+            for line in tail {
+                eprintln!("{line}");
+            }
+        }
+    }
+}
 
 impl std::ops::Deref for TestDir {
     type Target = Path;
