@@ -98,10 +98,17 @@ fn max_violation(a: &Active) -> Option<(f64, usize)> {
 
 fn max_violation_portable(a: &Active) -> Option<(f64, usize)> {
     let mut best = LaneBest::<1>::new(f64::NEG_INFINITY);
-    for (p, ((&up, &y), &g)) in a.up.iter().zip(&a.y).zip(&a.grad).enumerate() {
-        best.offer(0, p, up && -y * g >= best.value[0], -y * g);
-    }
+    max_violation_from(a, 0, &mut best);
     (best.at[0] != usize::MAX).then_some((best.value[0], best.at[0]))
+}
+
+/// The search of [`max_violation`] over the positions from `from` on, position p in lane
+/// `p % W` of `best` (the portable loop, and the wide loops' tail).
+fn max_violation_from<const W: usize>(a: &Active, from: usize, best: &mut LaneBest<W>) {
+    for p in from..a.len() {
+        let (l, v) = (p % W, -a.y[p] * a.grad[p]);
+        best.offer(l, p, a.up[p] && v >= best.value[l], v);
+    }
 }
 
 /// For the first variable of a pair (its violation `gmax`, `K_ii` and kernel row), over I_low:
@@ -122,21 +129,34 @@ fn best_partner(a: &Active, gmax: f64, di: f64, ki: &[f64]) -> (f64, usize) {
 fn best_partner_portable(a: &Active, gmax: f64, di: f64, ki: &[f64]) -> (f64, usize) {
     let mut gmax2 = f64::NEG_INFINITY;
     let mut best = LaneBest::<1>::new(f64::INFINITY);
-    for p in 0..a.len() {
+    best_partner_from(a, 0, (gmax, di, ki), &mut best, &mut gmax2);
+    (gmax2, best.at[0])
+}
+
+/// The search of [`best_partner`] over the positions from `from` on, for the first variable
+/// `(gmax, K_ii, its kernel row)`, position p in lane `p % W` of `best`, the largest y G into
+/// `gmax2` (the portable loop, and the wide loops' tail).
+fn best_partner_from<const W: usize>(
+    a: &Active,
+    from: usize,
+    (gmax, di, ki): (f64, f64, &[f64]),
+    best: &mut LaneBest<W>,
+    gmax2: &mut f64,
+) {
+    for p in from..a.len() {
         if !a.low[p] {
             continue;
         }
         let yg = a.y[p] * a.grad[p];
-        if yg >= gmax2 {
-            gmax2 = yg;
+        if yg >= *gmax2 {
+            *gmax2 = yg;
         }
         let b = gmax + yg;
         if b > 0.0 {
-            let gain = -(b * b) / curvature(di, a.diag[p], ki[a.row[p]]);
-            best.offer(0, p, gain <= best.value[0], gain);
+            let (l, gain) = (p % W, -(b * b) / curvature(di, a.diag[p], ki[a.row[p]]));
+            best.offer(l, p, gain <= best.value[l], gain);
         }
     }
-    (gmax2, best.at[0])
 }
 
 /// G += y (y_i K_i Δα_i + y_j K_j Δα_j) on the active set, for the pair's two variables given

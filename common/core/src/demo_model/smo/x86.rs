@@ -6,7 +6,7 @@
 
 use std::arch::x86_64::*;
 
-use super::{curvature, Active, LaneBest, TAU};
+use super::{Active, LaneBest, TAU};
 
 /// Lanes of an AVX2 register of `f64`.
 const V: usize = 4;
@@ -145,10 +145,7 @@ unsafe fn max_violation_avx2(a: &Active) -> LaneBest<UP_LANES> {
     }
     let mut best = LaneBest::new(f64::NEG_INFINITY);
     bests.store(&mut best);
-    for p in body..n {
-        let (l, v) = (p % UP_LANES, -a.y[p] * a.grad[p]);
-        best.offer(l, p, a.up[p] && v >= best.value[l], v);
-    }
+    super::max_violation_from(a, body, &mut best);
     best
 }
 
@@ -209,20 +206,7 @@ unsafe fn best_partner_avx2(
     // SAFETY: four values into an array of four.
     unsafe { _mm256_storeu_pd(gmax2.as_mut_ptr(), g2) };
     let mut gmax2 = gmax2.into_iter().fold(f64::NEG_INFINITY, f64::max);
-    for p in body..n {
-        let (low, yg) = (a.low[p], a.y[p] * a.grad[p]);
-        if low && yg >= gmax2 {
-            gmax2 = yg;
-        }
-        let b = gmax + yg;
-        if low && b > 0.0 {
-            let (l, gain) = (
-                p % LOW_LANES,
-                -(b * b) / curvature(di, a.diag[p], ki[a.row[p]]),
-            );
-            best.offer(l, p, gain <= best.value[l], gain);
-        }
-    }
+    super::best_partner_from(a, body, (gmax, di, ki), &mut best, &mut gmax2);
     (gmax2, best)
 }
 
