@@ -36,6 +36,11 @@ SVM_SIZES = [500, 1000, 3000, 10000]
 # KRR grown by one from B: B + GROWN demonstrations at most (the exact model's limit, 10,000).
 GROW_SIZES = [500, 1000, 2000, 3000, 9990]
 QUERIES = 100
+# Below this many demonstrations a fit and its queries take tens of milliseconds, where this
+# virtual machine's speed varies by as much from one command to the next: each round's figure is
+# then the median of SMALL_REPEATS runs, for ours and scikit-learn's alike.
+SMALL_BELOW = 2000
+SMALL_REPEATS = 5
 # The train steps timed: name -> (arguments after N, steps per run, hidden, heads, batch, double).
 TRAIN_SHAPES = {
     "hidden 64": (["64"], 20000, 64, 2, 64, False),
@@ -61,6 +66,34 @@ def step_flops(hidden, heads, batch, double, obs=4, actions=2):
     forward = obs * hidden + hidden * hidden + hidden * out
     backward = forward + hidden * hidden + hidden * out
     return 2 * batch * ((3 if double else 2) * forward + backward)
+
+
+def product(m, k, n):
+    """The flops of an `(m, k) x (k, n)` product and whether it is fused (`nn::mlp`: every
+    dimension above 5 goes to the FMA kernels, the others multiply and add apart)."""
+    return 2 * m * k * n, m > 5 and k > 5 and n > 5
+
+
+def part_flops(hidden, heads, batch, double, obs=4, actions=2):
+    """The fused and the thin flops of one forward pass and of the backward pass."""
+    out = heads * actions
+    forward = [product(batch, obs, hidden), product(batch, hidden, hidden),
+               product(batch, hidden, out)]
+    backward = [product(hidden, batch, out), product(batch, out, hidden),
+                product(hidden, batch, hidden), product(batch, hidden, hidden),
+                product(obs, batch, hidden)]
+
+    def split(products):
+        return {"fused": sum(f for f, fused in products if fused),
+                "thin": sum(f for f, fused in products if not fused)}
+
+    return {"forward": split(forward), "backward": split(backward)}
+
+
+def at_peak_us(flops, peak):
+    """Microseconds of `flops` at the peak: fused multiply-adds at it, a rounded multiply and an
+    add (two instructions for the two flops) at half of it."""
+    return (flops["fused"] + 2 * flops["thin"]) / peak * 1e6
 
 
 def peak_flops():
@@ -117,8 +150,69 @@ def ours(kind, demos, queries, threads=None):
     return took, [json.loads(line)["raw"] for line in out.splitlines() if line.startswith("{")]
 
 
+def repeated(n, run):
+    """`run()` (a time and an output) once, or SMALL_REPEATS times below SMALL_BELOW
+    demonstrations: the median time and the last output."""
+    runs = [run() for _ in range(SMALL_REPEATS if n < SMALL_BELOW else 1)]
+    return statistics.median(t for t, _ in runs), runs[-1][1]
+
+
 def span(xs, fmt):
     return f"{fmt(statistics.median(xs))} ({fmt(min(xs))}-{fmt(max(xs))})"
+
+
+def parts_rows(runs, split, peak):
+    """The parts of one shape's step: (part, calls per step, µs per step, flops per step, µs at
+    the peak or None), each the median over the rounds."""
+    med = lambda key: statistics.median(r[key] for r in runs)  # noqa: E731
+    passes = runs[0]["forwards_per_step"]
+    fwd, bwd = split["forward"], split["backward"]
+    fwd_flops = {k: passes * v for k, v in fwd.items()}
+    rows = [
+        ("forward pass", passes, passes * med("forward_us"), sum(fwd_flops.values()),
+         at_peak_us(fwd_flops, peak)),
+        ("backward pass", 1, med("backward_us"), sum(bwd.values()), at_peak_us(bwd, peak)),
+        ("Adam", 1, med("adam_us"), 0, None),
+    ]
+    if med("clip_us") > 0:
+        rows.append(("gradient clipping", 1, med("clip_us"), 0, None))
+    measured = sum(r[2] for r in rows)
+    rows.append(("the rest: the loss, the batch's layout", 1, med("step_us") - measured, 0, None))
+    rows.append(("the whole step", 1, med("step_us"), sum(r[3] for r in rows), None))
+    return rows
+
+
+def parts_section(parts, split, flops, peak):
+    """The table of where each shape's step goes, and what 75% of the peak leaves."""
+    lines = [
+        "Each part of the step alone and the whole step, in one process (`train_steps parts "
+        "N SHAPE`, with N of the table above: N calls of each, in turns of 100 calls of each "
+        "part, wall-clock per call, the median over the rounds); \"the rest\" is the whole "
+        "step less the parts. \"At the peak\" is "
+        "the time of a part's products at the FMA peak of the table above: fused multiply-adds "
+        "at it, and the thin products (a dimension of 5 or less: a rounded multiply and an add, "
+        "PyTorch's order) at half of it.",
+        "",
+        "| step | part | calls per step | time per step | flops per step | of peak | at the peak |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
+    sentences = []
+    for name in TRAIN_SHAPES:
+        rows = parts_rows(parts[name], split[name], peak)
+        for part, calls, us_, fl, best in rows:
+            share = f"{100 * fl / (us_ * 1e-6) / peak:.1f}%" if fl and us_ > 0 else ""
+            lines.append(
+                f"| {name} | {part} | {calls} | {us_:.2f} µs | "
+                f"{f'{fl / 1e6:.3f} M' if fl else ''} | {share} | "
+                f"{f'{best:.2f} µs' if best is not None else ''} |")
+        products = sum(r[4] for r in rows if r[4] is not None)
+        others = rows[-1][2] - rows[0][2] - rows[1][2]
+        sentences.append(
+            f"{name}: 75% of the peak is {flops[name] / (0.75 * peak) * 1e6:.1f} µs a step; "
+            f"the products of its forward and backward passes at the peak take "
+            f"{products:.1f} µs, and the rest of the step (the whole step less those passes: "
+            f"Adam, the loss, the layout) takes {others:.1f} µs as measured.")
+    return lines + ["", " ".join(sentences)]
 
 
 def main():
@@ -140,6 +234,7 @@ def main():
         write_jsonl(demos[n], [{"state": s, "action": a} for s, a in zip(xs, acts)])
 
     train = {name: [] for name in TRAIN_SHAPES}
+    parts = {name: [] for name in TRAIN_SHAPES}
     peak = []
     krr = {n: {"ours": [], "ours_1": [], "sklearn": [], "max_diff": 0.0} for n in SIZES}
     svm = {n: {"ours": [], "ours_1": [], "sklearn": []} for n in SVM_SIZES}
@@ -152,15 +247,19 @@ def main():
         for name, (shape, steps, *_) in TRAIN_SHAPES.items():
             cpu, _ = cpu_seconds([TRAIN_STEPS, str(steps)] + shape)
             train[name].append(cpu / steps * 1e6)
+            parts[name].append(json.loads(subprocess.run(
+                [TRAIN_STEPS, "parts", str(steps)] + shape,
+                check=True, capture_output=True, text=True).stdout))
         for n in SIZES:
             # Alternate which goes first, so neither always meets a warmer cache.
             pair = [("ours", None), ("sklearn", None)]
             for who, _ in pair if r % 2 == 0 else reversed(pair):
                 if who == "ours":
-                    t, raw_ours = ours("krr", demos[n], queries)
-                    krr[n]["ours_1"].append(ours("krr", demos[n], queries, threads=1)[0])
+                    t, raw_ours = repeated(n, lambda: ours("krr", demos[n], queries))
+                    krr[n]["ours_1"].append(
+                        repeated(n, lambda: ours("krr", demos[n], queries, threads=1))[0])
                 else:
-                    t, raw_sk = sklearn_krr(demos[n], queries)
+                    t, raw_sk = repeated(n, lambda: sklearn_krr(demos[n], queries))
                 krr[n][who].append(t)
             diff = float(np.max(np.abs(np.array(raw_ours) - raw_sk)))
             krr[n]["max_diff"] = max(krr[n]["max_diff"], diff)
@@ -173,9 +272,11 @@ def main():
             grow[n]["fit"].append(out["fit_s"])
             grow[n]["same_bits"] = grow[n]["same_bits"] and out["same_bits"]
         for n in SVM_SIZES:
-            svm[n]["ours"].append(ours("svm", demos[n], queries)[0])
-            svm[n]["ours_1"].append(ours("svm", demos[n], queries, threads=1)[0])
-            svm[n]["sklearn"].append(sklearn_svc(demos[n], queries))
+            svm[n]["ours"].append(repeated(n, lambda: ours("svm", demos[n], queries))[0])
+            svm[n]["ours_1"].append(
+                repeated(n, lambda: ours("svm", demos[n], queries, threads=1))[0])
+            svm[n]["sklearn"].append(
+                repeated(n, lambda: (sklearn_svc(demos[n], queries), None))[0])
     # Once: the approximate model against the exact one (deterministic apart from its times).
     print("core.py: the Nyström model against the exact KRR", flush=True)
     nystrom = [json.loads(line) for line in subprocess.run(
@@ -188,7 +289,9 @@ def main():
     m["load_average_after"] = round(load_after, 2)
     m["rounds"] = args.rounds
     flops = {name: step_flops(*shape[2:]) for name, shape in TRAIN_SHAPES.items()}
+    split = {name: part_flops(*shape[2:]) for name, shape in TRAIN_SHAPES.items()}
     results = {"machine": m, "train_step_us": train, "train_step_flops": flops,
+               "train_parts_us": parts, "train_parts_flops": split,
                "peak_flops": peak, "krr_s": krr, "svm_s": svm,
                "krr_grow_s": grow, "nystrom": nystrom}
     with open(os.path.join(args.out, "results.json"), "w") as f:
@@ -232,6 +335,8 @@ def main():
         lines.append(
             f"| {name} | {span(train[name], us)} | {flops[name] / 1e6:.2f} M | "
             f"{rate / 1e9:.1f} | {100 * rate / peak_median:.1f}% | {steps:,} |")
+    lines += ["", "## Where the train step goes", ""]
+    lines += parts_section(parts, split, flops, peak_median)
     lines += [
         "",
         "## Demonstration model",
@@ -243,7 +348,9 @@ def main():
         "fit's independent work among the machine's cores (the default), \"1 thread\" is "
         "`--threads 1` (the same numbers); scikit-learn's KRR runs on NumPy's BLAS threads, its "
         "SVC (libsvm) on one core. \"ours / theirs\" compares \"ours\". \"max |Δ|\": the "
-        "largest difference between the two KRR's outputs on the queries.",
+        "largest difference between the two KRR's outputs on the queries. Below "
+        f"{SMALL_BELOW:,} demonstrations (tens of milliseconds a fit) each round's figure is the "
+        f"median of {SMALL_REPEATS} runs, for both.",
         "",
         "| demonstrations | KRR ours | KRR ours, 1 thread | KRR scikit-learn | ours / theirs | max \\|Δ\\| | SVM ours | SVM ours, 1 thread | SVC scikit-learn | ours / theirs |",
         "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",

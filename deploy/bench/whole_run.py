@@ -135,14 +135,19 @@ def paired(alfd, tmp, repeats):
     """`alfd run` (2 actors: the default window, the same with actors that sleep on their
     doorbell at once, `--window 32`) and `alfd local` in rounds, one after the other, so that
     each round's ratio compares runs minutes apart (this virtual machine's speed drifts by more
-    than the difference measured over a longer span)."""
-    out = {"run": [], "local": [], "run_no_poll": [], "run_window32": []}
+    than the difference measured over a longer span); every other round in the reverse order,
+    so that neither runtime always runs first."""
+    runs = {
+        "run": lambda r: run_row(alfd, tmp, f"paired-run-{r}", 2),
+        "local": lambda r: local_row(alfd, tmp, f"paired-local-{r}"),
+        "run_no_poll": lambda r: run_row(alfd, tmp, f"paired-sleep-{r}", 2,
+                                         env={"ALFD_CREDIT_POLL_US": "0"}),
+        "run_window32": lambda r: run_row(alfd, tmp, f"paired-w32-{r}", 2, ["--window", "32"]),
+    }
+    out = {name: [] for name in runs}
     for r in range(repeats):
-        out["run"].append(run_row(alfd, tmp, f"paired-run-{r}", 2))
-        out["local"].append(local_row(alfd, tmp, f"paired-local-{r}"))
-        out["run_no_poll"].append(run_row(alfd, tmp, f"paired-sleep-{r}", 2,
-                                          env={"ALFD_CREDIT_POLL_US": "0"}))
-        out["run_window32"].append(run_row(alfd, tmp, f"paired-w32-{r}", 2, ["--window", "32"]))
+        for name in runs if r % 2 == 0 else reversed(list(runs)):
+            out[name].append(runs[name](r))
     return out
 
 
@@ -199,7 +204,8 @@ def write(results, out):
           f"rounds ({len(results['local'])}), each round `alfd run` (the default window of 1: "
           "each actor in lockstep with the learner), `alfd local`, the first again with "
           "`ALFD_CREDIT_POLL_US=0` (a blocked actor sleeps on its doorbell at once instead of "
-          "polling it first), then `alfd run --window 32`, one after the other; \"against "
+          "polling it first), then `alfd run --window 32`, one after the other, every other "
+          "round in the reverse order; \"against "
           "local\" divides each round's `alfd run` by that round's `alfd local`, median "
           "(min-max) over the rounds. \"Doorbells\": the time the learner's rings took over "
           "the run (its `ring_s`; a ring that finds the actor asleep wakes the actor's core), "
