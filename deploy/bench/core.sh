@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Benchmarks of the core's hot paths, written to results/bench/ (summary.md, results.json) for
 # BENCHMARKS.md (`alfd docs` copies the tables): the train step (CPU time per step, and each
-# part's time: `train_steps parts`), the demonstration model against scikit-learn, and KRR's cost of one more demonstration, measured
-# interleaved in one sitting.
+# part's time: `train_steps parts`), the demonstration model against scikit-learn, and KRR's
+# cost of one more demonstration, measured interleaved in one sitting.
 #
 #   bash deploy/bench/core.sh            # 3 rounds, about 5 minutes after the first install
 #   bash deploy/bench/core.sh --rounds 5
