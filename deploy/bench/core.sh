@@ -4,7 +4,7 @@
 # part's time: `train_steps parts`), the demonstration model against scikit-learn, and KRR's
 # cost of one more demonstration, measured interleaved in one sitting.
 #
-#   bash deploy/bench/core.sh            # 3 rounds, about 5 minutes after the first install
+#   bash deploy/bench/core.sh            # 3 rounds, several minutes after the first install
 #   bash deploy/bench/core.sh --rounds 5
 #
 # Run it on an idle machine: the table records the load average it ran under. On first use it

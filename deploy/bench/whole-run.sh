@@ -4,8 +4,8 @@
 # (perf's samples of the learner by part of the code, and the time it waits), its share of one
 # core's FMA peak, `alfd run` against `alfd local` in updates per second, 1, 2, 4 and 8 actors,
 # and the replay buffer's memory per million transitions. Needs `perf` (Debian's linux-perf,
-# installed here when absent and run as root). About 17 minutes with 4 repeats on the 2-core machine; run it
-# on an idle machine.
+# installed here when absent and run as root). Its summary gives the minutes its runs took; run
+# it on an idle machine.
 #
 #   bash deploy/bench/whole-run.sh [REPEATS]      # each configuration REPEATS times (default 2)
 #   bash deploy/bench/whole-run.sh 2 --summary-only   # rewrite summary.md from results.json

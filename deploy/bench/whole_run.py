@@ -159,6 +159,15 @@ def med(xs):
     return statistics.median(xs)
 
 
+def runs_minutes(results):
+    """The wall-clock of every run of the benchmark, summed, in minutes (the paired `alfd run`s
+    are the 2-actor rows of `actors`)."""
+    rows = [results["profile"]] + [row for key in ("local", "run_no_poll", "run_window32")
+                                   for row in results.get(key, [])]
+    rows += [row for runs in results["actors"].values() for row in runs]
+    return sum(row["wall_s"] for row in rows) / 60
+
+
 def write(results, out):
     with open(os.path.join(out, "results.json"), "w") as f:
         json.dump(results, f, indent=1)
@@ -177,7 +186,8 @@ def write(results, out):
          "Written by `bash deploy/bench/whole-run.sh`; every number is in `results.json`.", "",
          "## Machine", "", f"{results['machine']}; {results['date']}; load average "
          f"{results['load_before']:.2f} before. Runs one at a time, the recommended CartPole-1000 "
-         "preset (50,000 environment steps), release build.", "",
+         "preset (50,000 environment steps), release build; the runs took "
+         f"{runs_minutes(results):.0f} minutes of wall-clock together.", "",
          "## Where the learner's time goes", "",
          f"`alfd run` (2 actors) under `perf record -F 499`: {p['summary']['updates_per_s']:.0f} "
          f"updates/s over {wall:.1f} s. The learner waited {idle:.1f} s of it for transitions "

@@ -98,6 +98,18 @@ impl Shape {
         }
     }
 
+    /// One train step of this shape's loss.
+    fn step(
+        &self,
+        online: &mut Mlp,
+        target: &Mlp,
+        adam: &mut Adam,
+        batch: &Batch,
+        scratch: &mut TrainScratch,
+    ) -> f32 {
+        train_step_with(online, target, adam, batch, &self.cfg, scratch)
+    }
+
     /// A fresh network and a batch of the replay buffer.
     fn setup(&self) -> (Mlp, Batch) {
         if std::env::var_os("ALFD_PORTABLE_KERNELS").is_some_and(|v| v == "1") {
@@ -141,14 +153,7 @@ fn steps_timed(steps: u64, shape: &Shape) {
     let t = std::time::Instant::now();
     let mut loss = 0.0;
     for _ in 0..steps {
-        loss = train_step_with(
-            &mut online,
-            &target,
-            &mut adam,
-            &batch,
-            &shape.cfg,
-            &mut scratch,
-        );
+        loss = shape.step(&mut online, &target, &mut adam, &batch, &mut scratch);
     }
     let secs = t.elapsed().as_secs_f64();
     // FNV-1a over the weights' bits: a kernel change that keeps the numbers keeps this.
@@ -207,14 +212,7 @@ fn parts(n: u64, shape: &Shape) {
             });
         }
         secs[4] += timed(CHUNK, || {
-            train_step_with(
-                &mut online,
-                &target,
-                &mut adam,
-                &batch,
-                &shape.cfg,
-                &mut scratch,
-            );
+            shape.step(&mut online, &target, &mut adam, &batch, &mut scratch);
         });
         // The step moved the weights: the next backward pass reads the activations of these.
         online.forward_batch(&batch.states, &mut cache);
