@@ -100,14 +100,16 @@ def core_peak_flops(train_steps):
 
 def run_row(alfd, tmp, name, actors, extra=(), env=None):
     """One `alfd run` of the preset with `actors` actors (the flags in `extra`, the environment
-    variables in `env`), with the learner's count of its doorbell rings and their time."""
+    variables in `env`), with the learner's own counts: its doorbell rings and their time, the
+    time it spent publishing weights and waiting for transitions."""
     run_dir = os.path.join(tmp, name)
     s, wall = run_json([alfd, "run", "--config", PRESET, "--actors", str(actors), "--quiet",
                         "--json", "--out", run_dir, *extra], env={**os.environ, **(env or {})})
     log = learner_log_fields(run_dir)
     return {"updates_per_s": s["updates_per_s"], "env_steps_per_s": s["env_steps_per_s"],
             "last_50": s["mean_return_last_50"], "wall_s": wall,
-            "rings": log.get("rings"), "ring_s": log.get("ring_s")}
+            "rings": log.get("rings"), "ring_s": log.get("ring_s"),
+            "publish_s": log.get("publish_s"), "waiting_s": log.get("idle_running_s")}
 
 
 def actors_sweep(alfd, tmp, counts, repeats):
@@ -219,9 +221,14 @@ def write(results, out):
           "local\" divides each round's `alfd run` by that round's `alfd local`, median "
           "(min-max) over the rounds. \"Doorbells\": the time the learner's rings took over "
           "the run (its `ring_s`; a ring that finds the actor asleep wakes the actor's core), "
-          "and how many it rang.", "",
-          "| runtime | updates/s | environment steps/s | against local | doorbells |",
-          "|---|---:|---:|---:|---:|"]
+          "and how many it rang; \"publishing\": the time it took to copy its weights into "
+          "shared memory for the actors, after every queue of transitions it drained "
+          "(`publish_s`); \"waiting\": the time it waited for transitions "
+          "(`idle_running_s`); medians over the rounds. These are what `alfd local` does "
+          "not do.", "",
+          "| runtime | updates/s | environment steps/s | against local | doorbells | publishing "
+          "| waiting |",
+          "|---|---:|---:|---:|---:|---:|---:|"]
     loc = results["local"]
 
     def ratio(rows):
@@ -234,6 +241,11 @@ def write(results, out):
         return (f"{med([r['ring_s'] for r in rows]):.2f} s, "
                 f"{med([r['rings'] for r in rows]):,.0f} rings")
 
+    def seconds(rows, key):
+        if any(r.get(key) is None for r in rows):
+            return ""
+        return f"{med([r[key] for r in rows]):.2f} s"
+
     runs = [("`alfd run` (2 actors)", results["actors"]["2"]),
             ("`alfd run`, actors sleep at once", results.get("run_no_poll", [])),
             ("`alfd run --window 32` (2 actors)", results["run_window32"])]
@@ -242,9 +254,9 @@ def write(results, out):
             continue
         L.append(f"| {label} | {med([r['updates_per_s'] for r in rows]):.0f} | "
                  f"{med([r['env_steps_per_s'] for r in rows]):.0f} | {ratio(rows)} | "
-                 f"{bells(rows)} |")
+                 f"{bells(rows)} | {seconds(rows, 'publish_s')} | {seconds(rows, 'waiting_s')} |")
     L.append(f"| `alfd local` (one process) | {med([r['updates_per_s'] for r in loc]):.0f} | "
-             f"{med([r['env_steps_per_s'] for r in loc]):.0f} | 1 | |")
+             f"{med([r['env_steps_per_s'] for r in loc]):.0f} | 1 | | | |")
     L += ["", "## Actors", "", "On the 2-core machine; medians over the runs.", "",
           "| actors | updates/s | environment steps/s | last-50 mean return | wall-clock |",
           "|---:|---:|---:|---:|---:|"]

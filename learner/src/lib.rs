@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use alfd_common::agent::NeuralLearner;
 use alfd_common::checkpoint::Cadence;
 use alfd_common::rng::{derive_seed, seeded};
-use alfd_harness::{write_atomically_patiently, BadInput, ProcessArgs, Session, Setup, What as _};
+use alfd_harness::{write_atomically_patiently, BadInput, ProcessArgs, Session, Setup};
 use alfd_wire::{
     self as wire, process_state, progress_kind, ActorBells, Credits, Doorbell, Process, Progress,
     Role, Wake, WireError, MAX_ACTORS,
@@ -106,14 +106,13 @@ fn serve(
     let run_dir = &args.process.run_dir;
     let session = Session::join(wire, Doorbell::Learner, runtime.handshake_timeout())?;
     let mut m = machine(setup, restored.as_ref(), run_dir)?;
-    let params = vec![0.0f32; m.learner().network().num_params()];
+    let params = m.learner().network().num_params();
     let mut shell = Shell {
         rx: wire.transitions_receiver()?,
         credits_tx: wire.credits_sender()?,
         actors: ActorBells::new(wire),
         progress: wire.progress_sender()?,
-        weights_tx: wire.weights_sender(params.len())?,
-        params,
+        weights_tx: wire.weights_sender(params)?,
         run_dir,
         config_toml,
         clock: Instant::now(),
@@ -121,11 +120,7 @@ fn serve(
     };
     shell.publish(&m)?;
     shell.credits_tx.send(m.book().credits(0))?;
-    info!(
-        params = shell.params.len(),
-        window = runtime.window,
-        "learner running"
-    );
+    info!(params, window = runtime.window, "learner running");
     shell.status(&mut m, process_state::RUNNING)?;
     let (stop_reason, end) = shell.serve(&mut m, &session)?;
     shell.stats.log(stop_reason, &m);
@@ -272,7 +267,6 @@ struct Shell<'w, 'a> {
     actors: ActorBells<'w>,
     progress: wire::Sender<'w, Progress>,
     weights_tx: wire::WeightsSender<'w>,
-    params: Vec<f32>,
     run_dir: &'a std::path::Path,
     config_toml: &'a str,
     clock: Instant,
@@ -387,13 +381,13 @@ impl Shell<'_, '_> {
 
     fn publish(&mut self, m: &Machine) -> alfd_harness::Result<()> {
         let learner = m.learner();
-        learner
-            .network()
-            .copy_params_into(&mut self.params)
-            .what(|| "the weights to publish".into())?;
         let v = learner.updates();
-        self.weights_tx
-            .publish(v, v, m.book().env_steps(), &self.params)?;
+        self.weights_tx.publish(
+            v,
+            v,
+            m.book().env_steps(),
+            &learner.network().params().tensors(),
+        )?;
         Ok(())
     }
 

@@ -50,6 +50,7 @@
 //! - `services`: the channel table [`CHANNELS`], one builder per service, the port constructors.
 //! - `ports`: [`Sender`], [`Receiver`], the weights and demonstration-model slices, and both
 //!   sides of a query.
+//! - `stream`: the weights' copy into shared memory, with stores that bypass the cache.
 //! - `remote`: services to Python adapters: [`RemoteEnv`] (an environment in another process)
 //!   and [`RemoteDemonstrator`] (an external expert).
 //! - `wakeups`: doorbells ([`Doorbell`], [`Bell`], [`ActorBells`]) and the [`Waiter`].
@@ -67,6 +68,7 @@ mod messages;
 mod ports;
 mod remote;
 mod services;
+mod stream;
 mod wakeups;
 
 #[cfg(test)]

@@ -15,6 +15,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use crate::connection::{Transport, Wire};
 use crate::error::{transport, Result};
 use crate::messages::{DemoModelHeader, Message, QueryRequest, QueryResponse, WeightsHeader};
+use crate::stream;
 
 /// Sends messages of type `T`, stamping each with the schema version, the sender and a sequence
 /// number.
@@ -118,42 +119,45 @@ impl WeightsSender<'_> {
     /// Publishes weights another process published, under their header as it is (a bridge).
     pub fn forward(&mut self, header: WeightsHeader, weights: &[f32]) -> Result<()> {
         self.wire.check("weights", &header.header)?;
-        let mut sample = self
-            .port
-            .loan_slice_uninit(weights.len())
-            .map_err(transport("loan on", "weights"))?;
-        *sample.user_header_mut() = header;
-        sample
-            .write_from_slice(weights)
-            .send()
-            .map_err(transport("send on", "weights"))?;
-        Ok(())
+        self.send(header, &[weights])
     }
 
-    /// Publishes `weights` as version `version`.
+    /// Publishes the weights in `parts` (the network's tensors, one after another) as version
+    /// `version`.
     pub fn publish(
         &mut self,
         version: u64,
         updates: u64,
         env_steps: u64,
-        weights: &[f32],
+        parts: &[&[f32]],
     ) -> Result<()> {
-        let mut sample = self
-            .port
-            .loan_slice_uninit(weights.len())
-            .map_err(transport("loan on", "weights"))?;
-        *sample.user_header_mut() = WeightsHeader {
+        let header = WeightsHeader {
             header: self.wire.header(self.seq),
             version,
             updates,
             env_steps,
-            len: weights.len() as u64,
+            len: parts.iter().map(|p| p.len() as u64).sum(),
         };
-        sample
-            .write_from_slice(weights)
-            .send()
-            .map_err(transport("send on", "weights"))?;
+        self.send(header, parts)?;
         self.seq += 1;
+        Ok(())
+    }
+
+    /// Loans a sample as long as `parts` together, streams them into it (see [`crate::stream`])
+    /// and sends it under `header`.
+    fn send(&mut self, header: WeightsHeader, parts: &[&[f32]]) -> Result<()> {
+        let len = parts.iter().map(|p| p.len()).sum();
+        let mut sample = self
+            .port
+            .loan_slice_uninit(len)
+            .map_err(transport("loan on", "weights"))?;
+        *sample.user_header_mut() = header;
+        stream::copy_parts(sample.payload_mut(), parts);
+        // SAFETY: `copy_parts` wrote every element of the payload (it panics unless the parts
+        // fill it exactly, and the payload is `len` long).
+        #[allow(unsafe_code)]
+        let sample = unsafe { sample.assume_init() };
+        sample.send().map_err(transport("send on", "weights"))?;
         Ok(())
     }
 
@@ -567,7 +571,7 @@ mod tests {
             // The same on a slice service.
             let mut weights = stranger.weights_sender(3).unwrap();
             let learner_rx = launcher.weights_receiver().unwrap();
-            weights.publish(1, 0, 0, &[1.0, 2.0, 3.0]).unwrap();
+            weights.publish(1, 0, 0, &[&[1.0, 2.0], &[3.0]]).unwrap();
             let mut out = Vec::new();
             assert!(matches!(
                 learner_rx.latest_into(&mut out),
@@ -587,7 +591,7 @@ mod tests {
             let actor = wire(run, Role::Actor, 0);
             let mut tx = learner.weights_sender(4500).unwrap();
             let w1: Vec<f32> = (0..4500).map(|i| i as f32 * 0.5).collect();
-            tx.publish(1, 10, 20, &w1).unwrap();
+            tx.publish(1, 10, 20, &[&w1]).unwrap();
 
             // Subscribes after the publication: gets it from the history once the publisher updates.
             let rx = actor.weights_receiver().unwrap();
@@ -602,7 +606,7 @@ mod tests {
 
             for v in 2..=4 {
                 let w: Vec<f32> = vec![v as f32; 4500];
-                tx.publish(v, 0, 0, &w).unwrap();
+                tx.publish(v, 0, 0, &[&w]).unwrap();
             }
             let h = rx.latest_into(&mut out).unwrap().unwrap();
             assert_eq!(h.version, 4);

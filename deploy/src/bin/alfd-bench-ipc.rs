@@ -484,7 +484,7 @@ fn broadcast_weights(me: &Wire, side: &mut PeerSide<'_>) -> anyhow::Result<()> {
     let mut version = 0u64;
     while !side.control.shutdown_requested() {
         version += 1;
-        tx.publish(version, unix_ns(), 0, &w)?;
+        tx.publish(version, unix_ns(), 0, &[&w])?;
         // One broadcast every 100 µs, about the learner's pace.
         let t = Instant::now();
         while t.elapsed() < Duration::from_micros(100) {
