@@ -7,9 +7,9 @@
 //! an add.
 //!
 //! With AVX2 and FMA (detected at run time) a block of 16 rows by 6 columns of `C` stays in
-//! registers over the whole `k` loop (with AVX-512, 32 rows: `gemm/avx512.rs`); the rows are
-//! contiguous (column-major `A`, packed first when it is a transposed view), the elements of `B`
-//! are broadcast. Vectorising over rows leaves each
+//! registers over the whole `k` loop (with AVX-512, 32 rows by 4 or 6 columns:
+//! `gemm/avx512.rs`); the rows are contiguous (column-major `A`, packed first when it is a
+//! transposed view), the elements of `B` are broadcast. Vectorising over rows leaves each
 //! element's order of operations as the scalar loop's, so the tails and the fallback give the
 //! same bits. The layers' bias, ReLU and ReLU's backward mask are applied as a block is stored
 //! ([`Epi`]), with the operations and order of the separate passes they replace. The thin
@@ -727,6 +727,17 @@ mod tests {
         #[cfg(target_arch = "x86_64")]
         if avx512::available() {
             kernels.push(("AVX-512", avx512::gemm::<true>, avx512::gemm::<false>));
+            // The block widths of AMD's and Intel's cores, whichever this one is.
+            kernels.push((
+                "AVX-512, blocks of 4 columns",
+                |mkn, a, b, epi, c| avx512::gemm_in_blocks_of::<true>(4, mkn, a, b, epi, c),
+                |mkn, a, b, epi, c| avx512::gemm_in_blocks_of::<false>(4, mkn, a, b, epi, c),
+            ));
+            kernels.push((
+                "AVX-512, blocks of 6 columns",
+                |mkn, a, b, epi, c| avx512::gemm_in_blocks_of::<true>(6, mkn, a, b, epi, c),
+                |mkn, a, b, epi, c| avx512::gemm_in_blocks_of::<false>(6, mkn, a, b, epi, c),
+            ));
         }
         kernels
     }

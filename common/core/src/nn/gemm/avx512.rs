@@ -1,7 +1,8 @@
 //! The AVX-512 kernels of [`super::gemm`] and [`super::thin`]: the AVX2 kernels' blocks with 16
-//! rows to a register instead of 8 (blocks of 32 rows by 6 columns in registers over the whole
-//! `k` loop, then 16, the last 1-15 rows under a mask). Each element gets the operations of the
-//! AVX2 kernel in the same order, so the same bits; only more elements go at once.
+//! rows to a register instead of 8 (blocks of 32 rows by [`block_width`] columns in registers
+//! over the whole `k` loop, then 16, the last 1-15 rows under a mask). Each element gets the
+//! operations of the AVX2 kernel in the same order, so the same bits; only more elements go at
+//! once, and how many does not change any element's result.
 
 use std::arch::x86_64::*;
 use std::sync::OnceLock;
@@ -25,9 +26,42 @@ pub(super) fn gemm<const FMA: bool>(
     epi: Epi<'_>,
     c: &mut [f32],
 ) {
+    gemm_in_blocks_of::<FMA>(block_width(), mkn, a, b, epi, c);
+}
+
+/// [`gemm`] with blocks of `width` columns (1-6) whatever the CPU.
+pub(super) fn gemm_in_blocks_of<const FMA: bool>(
+    width: usize,
+    mkn: (usize, usize, usize),
+    a: &[f32],
+    b: MatRef<'_>,
+    epi: Epi<'_>,
+    c: &mut [f32],
+) {
     assert!(available());
+    assert!((1..=6).contains(&width), "blocks of 1-6 columns");
     // SAFETY: the CPU has AVX-512F, AVX2 and FMA (asserted); the caller checked the shapes.
-    unsafe { gemm_avx512::<FMA>(mkn, a, b, epi, c) }
+    unsafe { gemm_avx512::<FMA>(width, mkn, a, b, epi, c) }
+}
+
+/// How many columns a block holds in registers: 4 on AMD's cores, 6 on others. Zen 4 runs a
+/// 16-lane fused multiply-add as two 8-lane halves, one 16-lane operation a cycle, so 8
+/// accumulators (32 rows by 4 columns) keep it busy; Intel's cores start two 16-lane fused
+/// multiply-adds a cycle and take four cycles to finish one, so 8 would only just keep up and
+/// 12 (32 by 6) leave room. Each width was chosen by timing the train step with several on
+/// each (`train_steps`).
+fn block_width() -> usize {
+    static WIDTH: OnceLock<usize> = OnceLock::new();
+    *WIDTH.get_or_init(|| if amd() { 4 } else { 6 })
+}
+
+/// Whether the CPU's vendor is AMD (`cpuid` leaf 0: "AuthenticAMD").
+fn amd() -> bool {
+    let id = std::arch::x86_64::__cpuid(0);
+    [id.ebx, id.edx, id.ecx]
+        .iter()
+        .flat_map(|r| r.to_le_bytes())
+        .eq(*b"AuthenticAMD")
 }
 
 /// The flops of a round of [`probe`]: 12 chains of 16-lane fused multiply-adds.
@@ -63,15 +97,16 @@ unsafe fn probe_avx512(rounds: u64) -> f32 {
     out.iter().sum()
 }
 
-/// `C` with AVX-512: blocks of 6 columns (then fewer), and in each, blocks of 32 rows (then 16),
-/// accumulated in registers over the whole `k` loop, the elements of `B` broadcast; the last
-/// 1-15 rows under a mask, in the same order.
+/// `C` with AVX-512: blocks of `widest` columns (then fewer), and in each, blocks of 32 rows
+/// (then 16), accumulated in registers over the whole `k` loop, the elements of `B` broadcast;
+/// the last 1-15 rows under a mask, in the same order.
 ///
 /// # Safety
 /// The CPU has AVX-512F, AVX2 and FMA, and `a`, `b` and `c` hold `m × k`, `k × n` and `m × n`
 /// values (the caller, [`gemm`], asserts the features; its callers check the shapes).
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn gemm_avx512<const FMA: bool>(
+    widest: usize,
     (m, k, n): (usize, usize, usize),
     a: &[f32],
     b: MatRef<'_>,
@@ -92,7 +127,7 @@ unsafe fn gemm_avx512<const FMA: bool>(
     }
     let mut j = 0;
     while j < n {
-        let width = (n - j).min(6);
+        let width = (n - j).min(widest);
         let mut i = 0;
         // SAFETY: every block reads rows i..i + 16 V (<= m, or fewer under the mask) of the k
         // columns of `a` (m * k values), elements (p, j..j + width) of `b` (p < k,
