@@ -325,6 +325,17 @@ pub(crate) fn wide<R>(f: impl FnOnce() -> R) -> R {
     f()
 }
 
+/// [`wide`], with AVX-512 where the CPU has it: for loops bound by the divider or the square
+/// root, whose 16-lane forms finish more lanes a cycle than two 8-lane ones.
+#[inline(always)]
+pub(crate) fn widest<R>(f: impl FnOnce() -> R) -> R {
+    #[cfg(target_arch = "x86_64")]
+    if avx512::available() {
+        return avx512::wide(f);
+    }
+    wide(f)
+}
+
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
 mod avx512;

@@ -17,6 +17,21 @@ pub(super) fn available() -> bool {
         && *DETECTED.get_or_init(|| std::arch::is_x86_feature_detected!("avx512f"))
 }
 
+/// [`super::widest`] once [`available`] said yes.
+#[inline(always)]
+pub(super) fn wide<R>(f: impl FnOnce() -> R) -> R {
+    assert!(available());
+    // SAFETY: the CPU has AVX-512F and AVX2 (asserted).
+    unsafe { wide_inner(f) }
+}
+
+/// # Safety
+/// The CPU has AVX-512F and AVX2 (the only caller, [`wide`], asserts it).
+#[target_feature(enable = "avx512f,avx2")]
+unsafe fn wide_inner<R>(f: impl FnOnce() -> R) -> R {
+    f()
+}
+
 /// [`gemm_avx512`] once [`available`] said yes: [`super::gemm`]'s order when `FMA`,
 /// [`super::thin`]'s when not.
 pub(super) fn gemm<const FMA: bool>(
