@@ -27,6 +27,27 @@ pub(crate) fn tr_dots((m, k, n): (usize, usize, usize), a: &[f32], b: &[f32], ou
     }
 }
 
+/// [`tr_dots`] and the [`column_sums`] of `b` (into `sums`, `n` values) together: with the wide
+/// kernels, one pass over `b` gives both, each with the bits it has alone.
+///
+/// Panics if a slice is too short for its shape.
+pub(crate) fn tr_dots_and_sums(
+    (m, k, n): (usize, usize, usize),
+    a: &[f32],
+    b: &[f32],
+    out: &mut [f32],
+    sums: &mut [f32],
+) {
+    assert!(sums.len() >= n && b.len() >= m * n);
+    #[cfg(target_arch = "x86_64")]
+    if super::gemm::simd() && m > 0 {
+        x86::tr_dots_and_sums((m, k, n), a, b, out, &mut sums[..n]);
+        return;
+    }
+    tr_dots((m, k, n), a, b, out);
+    column_sums(m, &b[..m * n], &mut sums[..n]);
+}
+
 /// One column of [`tr_dots`], element by element.
 #[inline(always)]
 fn tr_dots_column((m, k): (usize, usize), a: &[f32], b_col: &[f32], out_col: &mut [f32]) {
@@ -146,31 +167,57 @@ mod x86 {
         assert!(super::super::gemm::simd() && m > 0);
         assert!(a.len() >= m * k && b.len() >= m * n && out.len() >= k * n);
         // SAFETY: the CPU has AVX2 (asserted); the lengths are checked above.
-        unsafe { tr_dots_avx2((m, k, n), a, b, out) }
+        unsafe { tr_dots_avx2((m, k, n), a, b, out, None) }
     }
 
+    /// [`super::tr_dots_and_sums`] once the CPU was found to have AVX2 and FMA, `m > 0`.
+    pub(super) fn tr_dots_and_sums(
+        (m, k, n): (usize, usize, usize),
+        a: &[f32],
+        b: &[f32],
+        out: &mut [f32],
+        sums: &mut [f32],
+    ) {
+        assert!(super::super::gemm::simd() && m > 0);
+        assert!(a.len() >= m * k && b.len() >= m * n && out.len() >= k * n && sums.len() >= n);
+        // SAFETY: the CPU has AVX2 (asserted); the lengths are checked above.
+        unsafe { tr_dots_avx2((m, k, n), a, b, out, Some(sums)) }
+    }
+
+    /// [`super::tr_dots`], and the column sums of `b` into `sums` when given: while the
+    /// first four columns of `a` meet each pair of columns of `b` (or alone when `k < 4`).
+    ///
     /// # Safety
-    /// The CPU has AVX2; `a`, `b` and `out` hold `m k`, `m n` and `k n` values, `m > 0`.
+    /// The CPU has AVX2; `a`, `b` and `out` hold `m k`, `m n` and `k n` values, `sums` `n`,
+    /// `m > 0`.
     #[target_feature(enable = "avx2")]
     unsafe fn tr_dots_avx2(
         (m, k, n): (usize, usize, usize),
         a: &[f32],
         b: &[f32],
         out: &mut [f32],
+        mut sums: Option<&mut [f32]>,
     ) {
         let k4 = k - k % 4;
+        if k4 == 0 {
+            if let Some(sums) = sums.take() {
+                column_sums_avx2(m, &b[..m * n], &mut sums[..n]);
+            }
+        }
         let mut c = 0;
         while c < n {
             // Two columns of `b` at a time share the loads of `a`.
             let two = c + 1 < n;
             for r in (0..k4).step_by(4) {
+                let sums = sums.as_deref_mut().filter(|_| r == 0);
                 // SAFETY: columns r..r + 4 <= k of `a`, c (and c + 1 if `two`) < n of `b`, and
-                // the same elements of `out`.
+                // the same elements of `out` (and of `sums`).
                 unsafe {
-                    if two {
-                        dot4x::<2>(m, k, a, b, out, r, c);
-                    } else {
-                        dot4x::<1>(m, k, a, b, out, r, c);
+                    match (two, sums) {
+                        (true, Some(s)) => dot4x::<2, true>(m, k, a, b, out, r, c, s),
+                        (true, None) => dot4x::<2, false>(m, k, a, b, out, r, c, &mut []),
+                        (false, Some(s)) => dot4x::<1, true>(m, k, a, b, out, r, c, s),
+                        (false, None) => dot4x::<1, false>(m, k, a, b, out, r, c, &mut []),
                     }
                 }
             }
@@ -185,12 +232,16 @@ mod x86 {
     }
 
     /// [`super::dot4`] of columns `r..r + 4` of `a` with columns `c..c + C` of `b`, into
-    /// `out[r..r + 4 + (c + q) k]`.
+    /// `out[r..r + 4 + (c + q) k]`; with `SUM`, also [`super::sum`] of those columns of `b`
+    /// into `sums[c..c + C]` (as [`column_sums_avx2`] adds them: the same loads, another
+    /// accumulator).
     ///
     /// # Safety
-    /// The CPU has AVX2; `r + 4 <= k`, `c + C <= n`, and the slices hold their shapes.
+    /// The CPU has AVX2; `r + 4 <= k`, `c + C <= n`, and the slices hold their shapes (`sums`
+    /// `n` values when `SUM`).
     #[target_feature(enable = "avx2")]
-    unsafe fn dot4x<const C: usize>(
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn dot4x<const C: usize, const SUM: bool>(
         m: usize,
         k: usize,
         a: &[f32],
@@ -198,6 +249,7 @@ mod x86 {
         out: &mut [f32],
         r: usize,
         c: usize,
+        sums: &mut [f32],
     ) {
         let full = m - m % 8;
         // SAFETY: columns r..r + 4 of `a` and c..c + C of `b` start inside their slices
@@ -208,17 +260,35 @@ mod x86 {
         let b_cols: [*const f32; C] =
             std::array::from_fn(|q| unsafe { b.as_ptr().add((c + q) * m) });
         let mut acc = [[_mm256_setzero_ps(); 4]; C];
+        let mut col_sums = [_mm256_setzero_ps(); C];
         for i in (0..full).step_by(8) {
             // SAFETY: i + 8 <= m within each column.
             unsafe {
                 let w: [__m256; 4] = std::array::from_fn(|o| _mm256_loadu_ps(a_cols[o].add(i)));
-                for (acc, b_col) in acc.iter_mut().zip(b_cols) {
+                for ((acc, b_col), col_sum) in acc.iter_mut().zip(b_cols).zip(&mut col_sums) {
                     let x = _mm256_loadu_ps(b_col.add(i));
+                    if SUM {
+                        *col_sum = _mm256_add_ps(*col_sum, x);
+                    }
                     for (s, w) in acc.iter_mut().zip(w) {
                         *s = _mm256_add_ps(*s, _mm256_mul_ps(w, x));
                     }
                 }
             }
+        }
+        if SUM {
+            // Folded four at a time as `column_sums_avx2` folds them (each lane on its own).
+            let folded = fold4(std::array::from_fn(|q| col_sums[q % C]));
+            let totals = if full < m {
+                let t: [f32; 4] = std::array::from_fn(|q| {
+                    b[(c + q % C) * m + full..(c + q % C + 1) * m].iter().sum()
+                });
+                // SAFETY: `t` holds 4 floats.
+                _mm_add_ps(folded, unsafe { _mm_loadu_ps(t.as_ptr()) })
+            } else {
+                folded
+            };
+            sums[c..c + C].copy_from_slice(&to_array(totals)[..C]);
         }
         for (q, acc) in acc.iter().enumerate() {
             let folded = fold4(*acc);
@@ -356,6 +426,8 @@ mod tests {
         for (m, k, n) in [
             (64, 64, 4),
             (64, 4, 64),
+            (64, 128, 4),
+            (60, 4, 64),
             (64, 3, 5),
             (13, 7, 3),
             (67, 5, 2),
@@ -377,11 +449,20 @@ mod tests {
             tr_dots((m, k, n), &a, &b, &mut out);
             let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(&out), bits(&expected), "tr_dots {m}x{k}x{n}");
+            let mut sums = vec![f32::NAN; n];
+            let mut both = vec![f32::NAN; k * n];
+            tr_dots_and_sums((m, k, n), &a, &b, &mut both, &mut sums);
+            assert_eq!(bits(&both), bits(&expected), "tr_dots_and_sums {m}x{k}x{n}");
             if m > 0 {
                 let expected: Vec<f32> = b.chunks_exact(m).map(sum).collect();
                 let mut out = vec![f32::NAN; n];
                 column_sums(m, &b, &mut out);
                 assert_eq!(bits(&out), bits(&expected), "column_sums {m}x{n}");
+                assert_eq!(
+                    bits(&sums),
+                    bits(&expected),
+                    "tr_dots_and_sums' sums {m}x{n}"
+                );
             }
         }
     }

@@ -334,10 +334,10 @@ impl Mlp {
         );
         let batch = states.len() / d;
         cache.ensure(batch, d, self.hidden(), self.outputs());
-        let x = cache.x.as_mut_slice();
-        for (j, row) in states.chunks_exact(d).enumerate() {
-            for (i, &v) in row.iter().enumerate() {
-                x[j + i * batch] = v;
+        // Column by column: contiguous stores, the loads a row apart.
+        for (i, x_col) in cache.x.as_mut_slice().chunks_exact_mut(batch).enumerate() {
+            for (x, row) in x_col.iter_mut().zip(states.chunks_exact(d)) {
+                *x = row[i];
             }
         }
         let p = &self.params;
@@ -394,8 +394,7 @@ impl Mlp {
             #[inline(always)]
             || {
                 // Output layer: Q = h1 * wh + bh.
-                tr_matmul(&mut grads.wh, &c.h1, dq, &mut c.pack);
-                column_sums(dq, &mut grads.bh);
+                layer_grads((&mut grads.wh, &mut grads.bh), &c.h1, dq, &mut c.pack);
                 // ReLU's backward (PyTorch's `threshold_backward`) as the product ends.
                 matmul(
                     &mut c.dz1,
@@ -404,8 +403,7 @@ impl Mlp {
                     Epi::Mask(c.h1.as_slice()),
                 );
                 // torso.1: h1 = relu(h0 * w1 + b1).
-                tr_matmul(&mut grads.w1, &c.h0, &c.dz1, &mut c.pack);
-                column_sums(&c.dz1, &mut grads.b1);
+                layer_grads((&mut grads.w1, &mut grads.b1), &c.h0, &c.dz1, &mut c.pack);
                 matmul(
                     &mut c.dz0,
                     &c.dz1,
@@ -413,8 +411,7 @@ impl Mlp {
                     Epi::Mask(c.h0.as_slice()),
                 );
                 // torso.0: h0 = relu(x * w0 + b0).
-                tr_matmul(&mut grads.w0, &c.x, &c.dz0, &mut c.pack);
-                column_sums(&c.dz0, &mut grads.b0);
+                layer_grads((&mut grads.w0, &mut grads.b0), &c.x, &c.dz0, &mut c.pack);
             },
         );
     }
@@ -503,10 +500,32 @@ fn tr_matmul(out: &mut DMatrix<f32>, a: &DMatrix<f32>, b: &DMatrix<f32>, pack: &
     dots::tr_dots((m, k, n), a.as_slice(), b.as_slice(), out.as_mut_slice());
 }
 
-/// `out[j] = sum_i m[(i, j)]`.
+/// A layer's weight and bias gradients from its input `a` and the gradient `dz` of its output:
+/// `w = a^T dz` ([`tr_matmul`]) and `bias[j] = sum_i dz[(i, j)]`. A thin product reads `dz`
+/// once for both ([`dots::tr_dots_and_sums`]).
 #[inline(always)]
-fn column_sums(m: &DMatrix<f32>, out: &mut DVector<f32>) {
-    dots::column_sums(m.nrows(), m.as_slice(), out.as_mut_slice());
+fn layer_grads(
+    (w, bias): (&mut DMatrix<f32>, &mut DVector<f32>),
+    a: &DMatrix<f32>,
+    dz: &DMatrix<f32>,
+    pack: &mut Vec<f32>,
+) {
+    let (m, k) = a.shape();
+    let n = dz.ncols();
+    if m > THIN && k > THIN && n > THIN {
+        tr_matmul(w, a, dz, pack);
+        dots::column_sums(m, dz.as_slice(), bias.as_mut_slice());
+    } else {
+        debug_assert_eq!((dz.nrows(), w.shape()), (m, (k, n)));
+        let sums = bias.as_mut_slice();
+        dots::tr_dots_and_sums(
+            (m, k, n),
+            a.as_slice(),
+            dz.as_slice(),
+            w.as_mut_slice(),
+            sums,
+        );
+    }
 }
 
 /// One dense layer for one input: `out[o] = b[o] + w[:, o] . x`, with ReLU if asked; `w` is
