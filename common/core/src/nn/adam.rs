@@ -37,6 +37,9 @@ pub struct Adam {
     step: u64,
     m: Params,
     v: Params,
+    /// The steps after which `beta1^t` and `beta2^t` no longer change their bias corrections:
+    /// see [`one_minus_power`].
+    negligible_after: [f64; 2],
 }
 
 /// Adam's state in a checkpoint: the step count and the moments, flattened in the order of
@@ -96,6 +99,7 @@ impl Adam {
             step: 0,
             m: net.params().zeros_like(),
             v: net.params().zeros_like(),
+            negligible_after: [config.beta1, config.beta2].map(negligible_after),
         }
     }
 
@@ -135,8 +139,8 @@ impl Adam {
         self.step += 1;
         let c = &self.config;
         let t = self.step as f64;
-        let bias_correction1 = 1.0 - math::powf(c.beta1, t);
-        let bias_correction2 = 1.0 - math::powf(c.beta2, t);
+        let bias_correction1 = one_minus_power(c.beta1, t, self.negligible_after[0]);
+        let bias_correction2 = one_minus_power(c.beta2, t, self.negligible_after[1]);
         let step_size = (c.lr / bias_correction1) as f32;
         let bias_correction2_sqrt = bias_correction2.sqrt() as f32;
         let update = Update {
@@ -172,6 +176,29 @@ impl Adam {
                 }
             },
         );
+    }
+}
+
+/// `1 - beta^t` in f64, without computing the power once it is too small to change the
+/// difference: for `t` beyond [`negligible_after`], `|beta|^t < e^-40 < 2^-55`, and `1 - p` with
+/// `|p| < 2^-54` rounds to 1 (half the gap between 1 and the float below it), whatever `powf`
+/// gives within an ulp of the power.
+fn one_minus_power(beta: f64, t: f64, negligible_after: f64) -> f64 {
+    if t > negligible_after {
+        1.0
+    } else {
+        1.0 - math::powf(beta, t)
+    }
+}
+
+/// The step count from which `|beta|^t < e^-40` (`t ln|beta| < -40`; never for `|beta| >= 1`
+/// or a NaN). The margin to `2^-55` (about `e^-38.1`) covers the logarithm's rounding.
+fn negligible_after(beta: f64) -> f64 {
+    let log = beta.abs().ln();
+    if log < 0.0 {
+        -40.0 / log
+    } else {
+        f64::INFINITY
     }
 }
 
@@ -274,6 +301,21 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn bias_corrections_skip_the_power_only_where_it_rounds_away() {
+        for beta in [0.0, 0.5, 0.9, 0.99, 0.999, 0.9999, -0.9] {
+            let after = negligible_after(beta);
+            for t in [1.0, 10.0, 300.0, 381.0, 5_000.0, 39_000.0, 40_000.0, 1e6] {
+                let exact = 1.0 - math::powf(beta, t);
+                let skipped = one_minus_power(beta, t, after);
+                assert_eq!(skipped.to_bits(), exact.to_bits(), "beta {beta}, t {t}");
+            }
+        }
+        assert_eq!(negligible_after(1.0), f64::INFINITY);
+        assert_eq!(negligible_after(f64::NAN), f64::INFINITY);
+        assert!(negligible_after(0.9) < 400.0 && negligible_after(0.999) < 40_000.0);
     }
 
     #[test]

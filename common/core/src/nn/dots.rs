@@ -185,13 +185,87 @@ mod x86 {
     }
 
     /// [`super::tr_dots`], and the column sums of `b` into `sums` when given: while the
-    /// first four columns of `a` meet each pair of columns of `b` (or alone when `k < 4`).
+    /// first four columns of `a` meet each group of columns of `b` (or alone when `k < 4`).
+    /// Groups of four columns where the CPU has AVX-512VL (its 32 registers hold their 16
+    /// sums), of two elsewhere.
     ///
     /// # Safety
     /// The CPU has AVX2; `a`, `b` and `out` hold `m k`, `m n` and `k n` values, `sums` `n`,
     /// `m > 0`.
-    #[target_feature(enable = "avx2")]
     unsafe fn tr_dots_avx2(
+        mkn: (usize, usize, usize),
+        a: &[f32],
+        b: &[f32],
+        out: &mut [f32],
+        sums: Option<&mut [f32]>,
+    ) {
+        // SAFETY: as this function's, and AVX-512VL where it is called.
+        unsafe {
+            if thirty_two_registers() {
+                tr_dots_groups_of_4(mkn, a, b, out, sums);
+            } else {
+                tr_dots_groups_of_2(mkn, a, b, out, sums);
+            }
+        }
+    }
+
+    /// [`super::tr_dots_and_sums`] in groups of 2 columns whatever the CPU (for the tests: a
+    /// CPU with AVX-512VL runs groups of 4).
+    #[cfg(test)]
+    pub(super) fn tr_dots_and_sums_in_pairs(
+        (m, k, n): (usize, usize, usize),
+        a: &[f32],
+        b: &[f32],
+        out: &mut [f32],
+        sums: &mut [f32],
+    ) {
+        assert!(super::super::gemm::simd() && m > 0);
+        assert!(a.len() >= m * k && b.len() >= m * n && out.len() >= k * n && sums.len() >= n);
+        // SAFETY: the CPU has AVX2 (asserted); the lengths are checked above.
+        unsafe { tr_dots_groups_of_2((m, k, n), a, b, out, Some(sums)) }
+    }
+
+    /// Whether the CPU has AVX-512F and AVX-512VL (and the products use AVX-512).
+    fn thirty_two_registers() -> bool {
+        static DETECTED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        super::super::gemm::avx512_available()
+            && *DETECTED.get_or_init(|| std::arch::is_x86_feature_detected!("avx512vl"))
+    }
+
+    /// # Safety
+    /// As [`tr_dots_avx2`]'s, and the CPU has AVX-512F and AVX-512VL.
+    #[target_feature(enable = "avx2,avx512f,avx512vl")]
+    unsafe fn tr_dots_groups_of_4(
+        mkn: (usize, usize, usize),
+        a: &[f32],
+        b: &[f32],
+        out: &mut [f32],
+        sums: Option<&mut [f32]>,
+    ) {
+        // SAFETY: as this function's.
+        unsafe { tr_dots_groups::<4>(mkn, a, b, out, sums) }
+    }
+
+    /// # Safety
+    /// As [`tr_dots_avx2`]'s.
+    #[target_feature(enable = "avx2")]
+    unsafe fn tr_dots_groups_of_2(
+        mkn: (usize, usize, usize),
+        a: &[f32],
+        b: &[f32],
+        out: &mut [f32],
+        sums: Option<&mut [f32]>,
+    ) {
+        // SAFETY: as this function's.
+        unsafe { tr_dots_groups::<2>(mkn, a, b, out, sums) }
+    }
+
+    /// [`tr_dots_avx2`] with groups of up to `G` (2 or 4) columns of `b`.
+    ///
+    /// # Safety
+    /// As [`tr_dots_avx2`]'s; inlined into a function compiled for AVX2.
+    #[inline(always)]
+    unsafe fn tr_dots_groups<const G: usize>(
         (m, k, n): (usize, usize, usize),
         a: &[f32],
         b: &[f32],
@@ -206,28 +280,30 @@ mod x86 {
         }
         let mut c = 0;
         while c < n {
-            // Two columns of `b` at a time share the loads of `a`.
-            let two = c + 1 < n;
+            let group = [G, 2, 1].into_iter().find(|&g| c + g <= n).unwrap_or(1);
             for r in (0..k4).step_by(4) {
                 let sums = sums.as_deref_mut().filter(|_| r == 0);
-                // SAFETY: columns r..r + 4 <= k of `a`, c (and c + 1 if `two`) < n of `b`, and
-                // the same elements of `out` (and of `sums`).
+                // SAFETY: columns r..r + 4 <= k of `a`, c..c + group <= n of `b`, and the
+                // same elements of `out` (and of `sums`).
                 unsafe {
-                    match (two, sums) {
-                        (true, Some(s)) => dot4x::<2, true>(m, k, a, b, out, r, c, s),
-                        (true, None) => dot4x::<2, false>(m, k, a, b, out, r, c, &mut []),
-                        (false, Some(s)) => dot4x::<1, true>(m, k, a, b, out, r, c, s),
-                        (false, None) => dot4x::<1, false>(m, k, a, b, out, r, c, &mut []),
+                    let none: &mut [f32] = &mut [];
+                    match (group, sums) {
+                        (4, Some(s)) => dot4x::<4, true>(m, k, a, b, out, r, c, s),
+                        (4, None) => dot4x::<4, false>(m, k, a, b, out, r, c, none),
+                        (2, Some(s)) => dot4x::<2, true>(m, k, a, b, out, r, c, s),
+                        (2, None) => dot4x::<2, false>(m, k, a, b, out, r, c, none),
+                        (_, Some(s)) => dot4x::<1, true>(m, k, a, b, out, r, c, s),
+                        (_, None) => dot4x::<1, false>(m, k, a, b, out, r, c, none),
                     }
                 }
             }
-            for c in c..c + if two { 2 } else { 1 } {
+            for c in c..c + group {
                 let b_col = &b[c * m..(c + 1) * m];
                 for r in k4..k {
                     out[r + c * k] = dot(&a[r * m..(r + 1) * m], b_col);
                 }
             }
-            c += if two { 2 } else { 1 };
+            c += group;
         }
     }
 
@@ -238,8 +314,8 @@ mod x86 {
     ///
     /// # Safety
     /// The CPU has AVX2; `r + 4 <= k`, `c + C <= n`, and the slices hold their shapes (`sums`
-    /// `n` values when `SUM`).
-    #[target_feature(enable = "avx2")]
+    /// `n` values when `SUM`); inlined into a function compiled for AVX2.
+    #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     unsafe fn dot4x<const C: usize, const SUM: bool>(
         m: usize,
@@ -428,6 +504,7 @@ mod tests {
             (64, 4, 64),
             (64, 128, 4),
             (60, 4, 64),
+            (64, 8, 6),
             (64, 3, 5),
             (13, 7, 3),
             (67, 5, 2),
@@ -453,6 +530,13 @@ mod tests {
             let mut both = vec![f32::NAN; k * n];
             tr_dots_and_sums((m, k, n), &a, &b, &mut both, &mut sums);
             assert_eq!(bits(&both), bits(&expected), "tr_dots_and_sums {m}x{k}x{n}");
+            #[cfg(target_arch = "x86_64")]
+            if super::super::gemm::simd() && m > 0 {
+                let (mut pairs, mut pair_sums) = (vec![f32::NAN; k * n], vec![f32::NAN; n]);
+                x86::tr_dots_and_sums_in_pairs((m, k, n), &a, &b, &mut pairs, &mut pair_sums);
+                assert_eq!(bits(&pairs), bits(&expected), "in pairs {m}x{k}x{n}");
+                assert_eq!(bits(&pair_sums), bits(&sums), "in pairs' sums {m}x{n}");
+            }
             if m > 0 {
                 let expected: Vec<f32> = b.chunks_exact(m).map(sum).collect();
                 let mut out = vec![f32::NAN; n];
