@@ -299,9 +299,15 @@ fn td_loss(
             scratch.dq.as_mut_slice().fill(0.0);
         }
     }
-    let q = scratch.online.q();
-    let q_next = scratch.target.q();
-    let q_online_next = cfg.double.then(|| scratch.online_next.q());
+    // Column-major `(n, K·A)`: sample i's value of output column c at `i + c n`.
+    let q = scratch.online.q().as_slice();
+    let q_next = scratch.target.q().as_slice();
+    let q_online_next = cfg.double.then(|| scratch.online_next.q().as_slice());
+    let dq: &mut [f32] = if with_grad {
+        scratch.dq.as_mut_slice()
+    } else {
+        &mut []
+    };
     let margin_on = cfg.margin_weight > 0.0 && batch.demos.len() == n;
     let inv_n = 1.0 / n as f32;
     let mut loss = 0.0f64;
@@ -312,32 +318,28 @@ fn td_loss(
             _ => gamma_bootstrap(cfg.gamma, batch.terminated[i]),
         };
         let demo = margin_on && batch.demos[i] != 0.0;
-        for k in 0..heads {
-            let mask = batch.masks[i * heads + k];
+        let masks = &batch.masks[i * heads..(i + 1) * heads];
+        for (k, &mask) in masks.iter().enumerate() {
             if mask == 0.0 {
                 continue;
             }
-            let col = |b: usize| k * actions + b;
+            // Sample i's entries of head k's columns.
+            let at = |b: usize| i + (k * actions + b) * n;
             let next = match q_online_next {
                 // Double DQN: the online head picks, the target head evaluates.
                 Some(qo) => {
-                    let best = (0..actions).fold(0, |m, b| {
-                        if qo[(i, col(b))] > qo[(i, col(m))] {
-                            b
-                        } else {
-                            m
-                        }
-                    });
-                    q_next[(i, col(best))]
+                    let best =
+                        (0..actions).fold(0, |m, b| if qo[at(b)] > qo[at(m)] { b } else { m });
+                    q_next[at(best)]
                 }
-                None => (0..actions).fold(f32::NEG_INFINITY, |m, b| m.max(q_next[(i, col(b))])),
+                None => (0..actions).fold(f32::NEG_INFINITY, |m, b| m.max(q_next[at(b)])),
             };
             let y = batch.rewards[i] + bootstrap * next;
             let y = match cfg.target_bounds {
                 Some((lo, hi)) => y.clamp(lo, hi),
                 None => y,
             };
-            let td = q[(i, col(a))] - y;
+            let td = q[at(a)] - y;
             let (l, g) = match cfg.loss {
                 TdLoss::Huber => (
                     huber_with(td, cfg.huber_delta),
@@ -347,19 +349,19 @@ fn td_loss(
             };
             loss += f64::from(mask * l);
             if with_grad {
-                scratch.dq[(i, col(a))] += mask * g * inv_n;
+                dq[at(a)] += mask * g * inv_n;
             }
             if demo {
                 // Large margin: the demonstrated action must beat every other by `margin`.
                 let (best, value) = (0..actions)
-                    .map(|b| (b, q[(i, col(b))] + if b == a { 0.0 } else { cfg.margin }))
+                    .map(|b| (b, q[at(b)] + if b == a { 0.0 } else { cfg.margin }))
                     .fold((a, f32::NEG_INFINITY), |m, c| if c.1 > m.1 { c } else { m });
-                let j = value - q[(i, col(a))];
+                let j = value - q[at(a)];
                 loss += f64::from(mask * cfg.margin_weight * j);
                 if with_grad && best != a {
                     let w = mask * cfg.margin_weight * inv_n;
-                    scratch.dq[(i, col(best))] += w;
-                    scratch.dq[(i, col(a))] -= w;
+                    dq[at(best)] += w;
+                    dq[at(a)] -= w;
                 }
             }
         }
