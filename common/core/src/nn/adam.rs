@@ -192,9 +192,10 @@ fn one_minus_power(beta: f64, t: f64, negligible_after: f64) -> f64 {
 }
 
 /// The step count from which `|beta|^t < e^-40` (`t ln|beta| < -40`; never for `|beta| >= 1`
-/// or a NaN). The margin to `2^-55` (about `e^-38.1`) covers the logarithm's rounding.
+/// or a NaN). The margin to `2^-55` (about `e^-38.1`) covers the logarithm's rounding, so
+/// where the threshold falls does not change any result.
 fn negligible_after(beta: f64) -> f64 {
-    let log = beta.abs().ln();
+    let log = math::ln(beta.abs());
     if log < 0.0 {
         -40.0 / log
     } else {
