@@ -335,7 +335,12 @@ impl Mlp {
         let batch = states.len() / d;
         cache.ensure(batch, d, self.hidden(), self.outputs());
         // Column by column: contiguous stores, the loads a row apart.
-        for (i, x_col) in cache.x.as_mut_slice().chunks_exact_mut(batch).enumerate() {
+        for (i, x_col) in cache
+            .x
+            .as_mut_slice()
+            .chunks_exact_mut(batch.max(1))
+            .enumerate()
+        {
             for (x, row) in x_col.iter_mut().zip(states.chunks_exact(d)) {
                 *x = row[i];
             }
@@ -600,6 +605,13 @@ mod tests {
     fn forward_one_matches_forward_batch() {
         let states: Vec<f32> = (0..20).map(|i| (i as f32 * 0.7).sin() * 2.0).collect();
         assert_batch_matches_one(&net(), &states);
+    }
+
+    #[test]
+    fn a_batch_of_no_states_gives_no_q_values() {
+        let mut cache = ForwardCache::default();
+        net().forward_batch(&[], &mut cache);
+        assert_eq!(cache.q().nrows(), 0);
     }
 
     #[test]
