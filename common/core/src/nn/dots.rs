@@ -16,7 +16,7 @@ pub(crate) fn tr_dots((m, k, n): (usize, usize, usize), a: &[f32], b: &[f32], ou
     }
     #[cfg(target_arch = "x86_64")]
     if super::gemm::simd() {
-        x86::tr_dots((m, k, n), a, b, out);
+        x86::tr_dots((m, k, n), a, b, out, None);
         return;
     }
     for (out_col, b_col) in out[..k * n]
@@ -41,7 +41,7 @@ pub(crate) fn tr_dots_and_sums(
     assert!(sums.len() >= n && b.len() >= m * n);
     #[cfg(target_arch = "x86_64")]
     if super::gemm::simd() && m > 0 {
-        x86::tr_dots_and_sums((m, k, n), a, b, out, &mut sums[..n]);
+        x86::tr_dots((m, k, n), a, b, out, Some(&mut sums[..n]));
         return;
     }
     tr_dots((m, k, n), a, b, out);
@@ -162,26 +162,32 @@ mod x86 {
 
     use super::{dot, sum};
 
-    /// [`super::tr_dots`] once the CPU was found to have AVX2 and FMA, `m > 0`.
-    pub(super) fn tr_dots((m, k, n): (usize, usize, usize), a: &[f32], b: &[f32], out: &mut [f32]) {
-        assert!(super::super::gemm::simd() && m > 0);
-        assert!(a.len() >= m * k && b.len() >= m * n && out.len() >= k * n);
-        // SAFETY: the CPU has AVX2 (asserted); the lengths are checked above.
-        unsafe { tr_dots_avx2((m, k, n), a, b, out, None) }
-    }
-
-    /// [`super::tr_dots_and_sums`] once the CPU was found to have AVX2 and FMA, `m > 0`.
-    pub(super) fn tr_dots_and_sums(
-        (m, k, n): (usize, usize, usize),
+    /// [`super::tr_dots`], and [`super::tr_dots_and_sums`] when `sums` is given, once the CPU
+    /// was found to have AVX2 and FMA, `m > 0`.
+    pub(super) fn tr_dots(
+        mkn: (usize, usize, usize),
         a: &[f32],
         b: &[f32],
         out: &mut [f32],
-        sums: &mut [f32],
+        sums: Option<&mut [f32]>,
+    ) {
+        check(mkn, a, b, out, sums.as_deref());
+        // SAFETY: the CPU has AVX2 and the slices hold their shapes (checked).
+        unsafe { tr_dots_avx2(mkn, a, b, out, sums) }
+    }
+
+    /// Asserts what [`tr_dots_avx2`] needs: AVX2 and FMA, `m > 0`, and slices that hold
+    /// their shapes.
+    fn check(
+        (m, k, n): (usize, usize, usize),
+        a: &[f32],
+        b: &[f32],
+        out: &[f32],
+        sums: Option<&[f32]>,
     ) {
         assert!(super::super::gemm::simd() && m > 0);
-        assert!(a.len() >= m * k && b.len() >= m * n && out.len() >= k * n && sums.len() >= n);
-        // SAFETY: the CPU has AVX2 (asserted); the lengths are checked above.
-        unsafe { tr_dots_avx2((m, k, n), a, b, out, Some(sums)) }
+        assert!(a.len() >= m * k && b.len() >= m * n && out.len() >= k * n);
+        assert!(sums.is_none_or(|s| s.len() >= n));
     }
 
     /// [`super::tr_dots`], and the column sums of `b` into `sums` when given: while the
@@ -213,16 +219,15 @@ mod x86 {
     /// CPU with AVX-512VL runs groups of 4).
     #[cfg(test)]
     pub(super) fn tr_dots_and_sums_in_pairs(
-        (m, k, n): (usize, usize, usize),
+        mkn: (usize, usize, usize),
         a: &[f32],
         b: &[f32],
         out: &mut [f32],
         sums: &mut [f32],
     ) {
-        assert!(super::super::gemm::simd() && m > 0);
-        assert!(a.len() >= m * k && b.len() >= m * n && out.len() >= k * n && sums.len() >= n);
-        // SAFETY: the CPU has AVX2 (asserted); the lengths are checked above.
-        unsafe { tr_dots_groups_of_2((m, k, n), a, b, out, Some(sums)) }
+        check(mkn, a, b, out, Some(sums));
+        // SAFETY: the CPU has AVX2 and the slices hold their shapes (checked).
+        unsafe { tr_dots_groups_of_2(mkn, a, b, out, Some(sums)) }
     }
 
     /// Whether the CPU has AVX-512F and AVX-512VL (and the products use AVX-512).
@@ -288,8 +293,8 @@ mod x86 {
                 unsafe {
                     let none: &mut [f32] = &mut [];
                     match (group, sums) {
-                        (4, Some(s)) => dot4x::<4, true>(m, k, a, b, out, r, c, s),
-                        (4, None) => dot4x::<4, false>(m, k, a, b, out, r, c, none),
+                        (4, Some(s)) if G == 4 => dot4x::<4, true>(m, k, a, b, out, r, c, s),
+                        (4, None) if G == 4 => dot4x::<4, false>(m, k, a, b, out, r, c, none),
                         (2, Some(s)) => dot4x::<2, true>(m, k, a, b, out, r, c, s),
                         (2, None) => dot4x::<2, false>(m, k, a, b, out, r, c, none),
                         (_, Some(s)) => dot4x::<1, true>(m, k, a, b, out, r, c, s),

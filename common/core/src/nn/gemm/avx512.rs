@@ -2,7 +2,8 @@
 //! rows to a register instead of 8 (blocks of 32 rows by [`block_width`] columns in registers
 //! over the whole `k` loop, then 16, the last 1-15 rows under a mask). Each element gets the
 //! operations of the AVX2 kernel in the same order, so the same bits; only more elements go at
-//! once, and how many does not change any element's result.
+//! once, and how many does not change any element's result. Also [`wide`]: Adam's
+//! element-wise step compiled for AVX-512 ([`super::widest`]).
 
 use std::arch::x86_64::*;
 use std::sync::OnceLock;
@@ -168,10 +169,10 @@ unsafe fn gemm_avx512<const FMA: bool>(
 }
 
 /// `a * *b` in every lane (a rounded multiplication), the broadcast folded into the multiply's
-/// operand (`{1to16}`): on Zen 4 a broadcast into a register takes a slot of the pipes the
-/// multiplications and additions of the thin products need, so a block's step is faster this
-/// way (the forward pass in `train_steps parts`). The compiler folds a broadcast into its use
-/// only where it has one use, and a block uses each twice.
+/// operand (`{1to16}`): on Zen 4 a thin block's step is faster so than with the element first
+/// broadcast into a register, which competes with the block's multiplications and additions
+/// (timed with `train_steps parts`: its forward pass). The compiler folds a broadcast into its
+/// use only where it has one use, and a block uses each twice.
 ///
 /// # Safety
 /// The CPU has AVX-512F; `b` points to a readable `f32`.
