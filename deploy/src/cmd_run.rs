@@ -259,6 +259,17 @@ pub fn finish(plan: &Plan, output: Output) -> anyhow::Result<()> {
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
     report::finish_run(&plan.cfg, run_dir, &summary, output)?;
+    if let Some(r) = &summary.runtime {
+        anyhow::ensure!(
+            r.demos as u64 >= r.demos_experts_wrote,
+            "demonstrations lost: {} holds {} where the run's experts wrote {} ({} refused); \
+             see the expert logs and the run's log",
+            run_dir.join("demos.jsonl").display(),
+            r.demos,
+            r.demos_experts_wrote,
+            r.demos_refused
+        );
+    }
     if summary.runtime.as_ref().is_some_and(|r| r.interrupted) {
         eprintln!(
             "interrupted: the run was stopped cleanly; its directory is {}",

@@ -858,6 +858,9 @@ fn the_readme_documents_every_output_column_and_summary_field() {
             expert_restarts: 0,
             learner_restarts: 0,
             interrupted: false,
+            demos_refused: 0,
+            answers_late: 0,
+            demos_experts_wrote: 0,
         }),
     };
     let json = serde_json::to_value(&summary).unwrap();

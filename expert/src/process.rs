@@ -21,8 +21,8 @@ use alfd_harness::python::Adapter;
 use alfd_harness::{BadInput, ProcessArgs, Refit, Session};
 use alfd_harness::{HarnessError, What as _};
 use alfd_wire::{
-    name_to_bytes, progress_kind, ActorBells, DemoModelHeader, Doorbell, IncomingQuery, Process,
-    Progress, QueryServer, RemoteDemonstrator, Role, WireError,
+    name_to_bytes, outcome, progress_kind, ActorBells, DemoModelHeader, Doorbell, IncomingQuery,
+    Process, Progress, QueryServer, RemoteDemonstrator, Role, WireError,
 };
 use tracing::{debug, info};
 
@@ -132,6 +132,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         clock: Instant::now(),
         disk_full_until: None,
         refused: 0,
+        late: 0,
         refit: None,
         wire_model: None,
     };
@@ -278,6 +279,9 @@ struct Shell<'w> {
     disk_full_until: Option<Duration>,
     /// Demonstrations a full disk refused since the last one recorded.
     refused: u32,
+    /// Answers with a demonstration sent after their actor stopped waiting (the demonstration
+    /// is kept; the actor acted alone).
+    late: u32,
     /// Where the refit running on its own thread sends its result.
     refit: Option<mpsc::Receiver<RefitResult>>,
     /// The model a refit just gave the core, serialised for the wire on the refit's thread, with
@@ -460,6 +464,14 @@ impl<'w> Shell<'w> {
                     actor,
                     response,
                 } => {
+                    if !query.is_connected() && response.outcome == outcome::ANSWERED {
+                        self.late += 1;
+                        debug!(
+                            actor,
+                            index = response.demo_index,
+                            "the actor stopped waiting; demonstration kept, answer late"
+                        );
+                    }
                     query.answer(response)?;
                     ring_actor(&mut self.actors, actor)?;
                 }
@@ -555,6 +567,7 @@ impl<'w> Shell<'w> {
             pid: std::process::id(),
             demos: u64::from(core.budget().used()),
             budget_left: u64::from(core.budget().remaining()),
+            answers_late: self.late,
             ..Progress::default()
         })?;
         Ok(())

@@ -1,7 +1,7 @@
 //! `demos.jsonl` as the bridges handle it: the hub appends a remote expert's demonstrations to
 //! the run's file (flushed and fsync'd before the answer goes on, as the expert process does on
-//! one host), and a remote expert's host gets the run's file whole before its expert becomes
-//! active.
+//! one host), a remote expert's host reads what its expert appended, and gets the run's file
+//! whole before its expert becomes active.
 
 use std::fs::OpenOptions;
 use std::io::Write as _;
@@ -21,25 +21,52 @@ pub(crate) fn read(path: &Path) -> Result<String> {
     }
 }
 
-/// Appends `line`, demonstration `index`, to the file at `path` and waits until it is on disk.
-/// `index` must be the file's line count (the run's next demonstration): anything else would
-/// break the file (a demonstration repeated or missing), and is refused.
-pub(crate) fn append(path: &Path, index: u32, line: &str) -> Result<()> {
-    let have = read(path)?.lines().count();
-    if index as usize != have || line.contains('\n') {
+/// Appends `lines` to the file at `path` and waits until they are on disk. The caller decides
+/// that they are the file's next lines ([`ExpertDesk::demos`](crate::desk::ExpertDesk::demos));
+/// a line that is not one line is refused, and nothing is written.
+pub(crate) fn append_lines(path: &Path, lines: &[String]) -> Result<()> {
+    if let Some(bad) = lines.iter().position(|l| l.contains('\n')) {
         return Err(BridgeError::Demos(format!(
-            "demonstration {index} where {} holds {have}",
+            "a demonstration of {} lines for {}",
+            lines[bad].lines().count(),
             path.display()
         )));
+    }
+    let mut text = String::with_capacity(lines.iter().map(|l| l.len() + 1).sum());
+    for l in lines {
+        text.push_str(l);
+        text.push('\n');
     }
     let mut file = OpenOptions::new()
         .create(true)
         .append(true)
         .open(path)
         .map_err(|e| BridgeError::Demos(format!("cannot open {}: {e}", path.display())))?;
-    file.write_all(format!("{line}\n").as_bytes())
+    file.write_all(text.as_bytes())
         .and_then(|()| file.sync_data())
         .map_err(|e| BridgeError::Demos(format!("cannot append to {}: {e}", path.display())))
+}
+
+/// The file at `path` from byte `offset` on ("" when it does not exist or is shorter).
+pub(crate) fn read_from(path: &Path, offset: u64) -> Result<String> {
+    use std::io::{Read as _, Seek as _, SeekFrom};
+    let fail =
+        |e: std::io::Error| BridgeError::Demos(format!("cannot read {}: {e}", path.display()));
+    let mut file = match std::fs::File::open(path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(String::new()),
+        Err(e) => return Err(fail(e)),
+    };
+    if file.metadata().map_err(fail)?.len() <= offset {
+        return Ok(String::new());
+    }
+    file.seek(SeekFrom::Start(offset)).map_err(fail)?;
+    let mut bytes = Vec::new();
+    file.read_to_end(&mut bytes).map_err(fail)?;
+    // A line being written may end inside a character: only whole lines are used.
+    let whole = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+    bytes.truncate(whole);
+    String::from_utf8(bytes).map_err(|e| BridgeError::Demos(format!("{}: {e}", path.display())))
 }
 
 /// Replaces the file at `path` with `text`, whole (a temporary file, fsync'd, renamed).
@@ -65,14 +92,19 @@ mod tests {
         let path = dir.join("demos.jsonl");
         let _ = std::fs::remove_file(&path);
         assert_eq!(read(&path).unwrap(), "");
-        append(&path, 0, r#"{"index":0}"#).unwrap();
-        append(&path, 1, r#"{"index":1}"#).unwrap();
-        // Repeated, skipped, or not one line: refused, and the file is unchanged.
-        for (i, l) in [(1, r#"{"index":1}"#), (3, r#"{"index":3}"#), (2, "a\nb")] {
-            let e = append(&path, i, l).unwrap_err();
-            assert!(matches!(e, BridgeError::Demos(_)), "{e}");
-        }
-        assert_eq!(read(&path).unwrap().lines().count(), 2);
+        assert_eq!(read_from(&path, 0).unwrap(), "");
+        append_lines(&path, &[r#"{"index":0}"#.to_owned()]).unwrap();
+        append_lines(&path, &["b".to_owned(), "c".to_owned()]).unwrap();
+        // Not one line: refused, and nothing of the call is written.
+        let e = append_lines(&path, &["d".to_owned(), "a\nb".to_owned()]).unwrap_err();
+        assert!(matches!(e, BridgeError::Demos(_)), "{e}");
+        assert_eq!(read(&path).unwrap(), "{\"index\":0}\nb\nc\n");
+        // From an offset: whole lines only.
+        assert_eq!(read_from(&path, 12).unwrap(), "b\nc\n");
+        std::fs::write(&path, "a\nhalf").unwrap();
+        assert_eq!(read_from(&path, 0).unwrap(), "a\n");
+        assert_eq!(read_from(&path, 2).unwrap(), "");
+        assert_eq!(read_from(&path, 99).unwrap(), "");
         replace(&path, "x\n").unwrap();
         assert_eq!(read(&path).unwrap(), "x\n");
         std::fs::remove_dir_all(&dir).unwrap();

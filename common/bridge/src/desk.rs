@@ -4,17 +4,21 @@
 //! inside: the hub's thread (`hub.rs`) appends, publishes, answers and sends what it says.
 //!
 //! The rules a fault must not break:
-//! - a demonstration is on disk here before its answer reaches an actor, and a model that counts
-//!   demonstrations not yet written here waits until they are;
-//! - nothing more is taken from a generation whose host left or whose expert exited (its answers
-//!   are neither written nor answered);
-//! - a demonstration is written only as the file's next line (a repeated or skipped index is
-//!   refused, and its answer not sent);
-//! - an answer goes only to the query it answers (an actor's newer query replaces its older one).
+//! - every line a remote expert appends to its host's `demos.jsonl` is appended here, in order,
+//!   whether or not its answer is still awaited: lines come up on their own
+//!   ([`ExpertDesk::demos`]), a line the file already holds is skipped, and lines that start past
+//!   the file's end are asked for again from its end (never taken out of order);
+//! - a demonstration is on disk here before its answer reaches an actor (an answer whose line is
+//!   not here is dropped), and a model that counts demonstrations not yet written here waits
+//!   until they are;
+//! - nothing more is taken from a generation whose host left or whose expert exited (its lines
+//!   are refused and counted, its answers neither written nor answered);
+//! - an answer goes only to the query it answers (an actor's newer query replaces its older one;
+//!   an answer with a demonstration that comes too late for its query is counted late).
 
 use std::collections::HashMap;
 
-use alfd_wire::{DemoModelHeader, QueryResponse, Role};
+use alfd_wire::{outcome, DemoModelHeader, QueryResponse, Role};
 
 use crate::frame::Frame;
 use crate::link::{HasSeq, HeldQueries};
@@ -26,6 +30,22 @@ pub(crate) enum Answer<Q> {
     Dropped(String),
     /// Answer `query` with the response (its demonstration, if any, is written).
     Deliver { query: Q, response: QueryResponse },
+}
+
+/// What the hub's thread does with lines of a remote expert's `demos.jsonl`.
+#[derive(Debug, PartialEq)]
+pub(crate) enum Intake {
+    /// Append these lines, the file's next, then call [`ExpertDesk::appended`].
+    Append(Vec<String>),
+    /// Nothing to do: the file holds these lines already.
+    Nothing,
+    /// The lines start past the file's end: ask the host of `generation` for its lines again
+    /// from line `from` (the file's end).
+    Resend { generation: u16, from: u32 },
+    /// A gap already asked about: wait for the lines sent again.
+    Wait,
+    /// Not taken (counted in [`ExpertDesk::refused`]), and why.
+    Refused(String),
 }
 
 /// The remote expert's side of a run on the hub.
@@ -41,6 +61,12 @@ pub(crate) struct ExpertDesk<Q> {
     early_model: Option<(DemoModelHeader, Vec<u8>)>,
     /// Queries held for the remote expert.
     held: HeldQueries<Q>,
+    /// The file's length when the last [`Intake::Resend`] was asked (asked once per length).
+    resend_asked: Option<usize>,
+    /// Lines a remote expert wrote that the run's file did not take.
+    refused: u64,
+    /// Answers with a demonstration that came after their query stopped waiting.
+    late: u64,
 }
 
 impl<Q> Default for ExpertDesk<Q> {
@@ -51,6 +77,9 @@ impl<Q> Default for ExpertDesk<Q> {
             written: 0,
             early_model: None,
             held: HeldQueries::default(),
+            resend_asked: None,
+            refused: 0,
+            late: 0,
         }
     }
 }
@@ -117,6 +146,7 @@ impl<Q> ExpertDesk<Q> {
     pub(crate) fn log_sent(&mut self, lines: usize) {
         self.written = lines;
         self.early_model = None;
+        self.resend_asked = None;
     }
 
     /// A remote expert's model. Returns it when it may be published now; one that counts a
@@ -141,8 +171,10 @@ impl<Q> ExpertDesk<Q> {
     /// `from` is refused, if it is: its generation is not one `from` was told to start.
     pub(crate) fn refusal(&self, f: &Frame, from: &str) -> Option<String> {
         let generation = match f {
-            Frame::ExpertAnswer(r, _) => r.expert,
-            Frame::ExpertExited { generation, .. } => u32::from(*generation),
+            Frame::ExpertAnswer(r) => r.expert,
+            Frame::ExpertExited { generation, .. }
+            | Frame::ExpertDemos { generation, .. }
+            | Frame::DemosLost { generation, .. } => u32::from(*generation),
             Frame::Progress(p) if p.header.role == Role::Expert as u16 => u32::from(p.header.id),
             _ => return None,
         };
@@ -162,46 +194,97 @@ impl<Q> ExpertDesk<Q> {
         }
     }
 
-    /// Checks a remote expert's answer before its demonstration (if any) is written: `Err` with
-    /// why it is dropped (its generation gone, or not the file's next line).
-    pub(crate) fn check_answer(&self, r: &QueryResponse, demo: Option<&str>) -> Result<(), String> {
+    /// Lines of a remote expert's `demos.jsonl`, the first of them line `first`: what to append.
+    pub(crate) fn demos(&mut self, generation: u16, first: u32, mut lines: Vec<String>) -> Intake {
+        if !self.serves(u32::from(generation)) {
+            self.refused += lines.len() as u64;
+            return Intake::Refused(format!(
+                "{} demonstrations of generation {generation}, which no joined host serves",
+                lines.len()
+            ));
+        }
+        let first = first as usize;
+        if first > self.written {
+            if self.resend_asked == Some(self.written) {
+                return Intake::Wait;
+            }
+            self.resend_asked = Some(self.written);
+            return Intake::Resend {
+                generation,
+                from: self.written as u32,
+            };
+        }
+        lines.drain(..(self.written - first).min(lines.len()));
+        if lines.is_empty() {
+            Intake::Nothing
+        } else {
+            Intake::Append(lines)
+        }
+    }
+
+    /// `n` lines are on disk: returns the model that waited for them, if any, to publish now.
+    pub(crate) fn appended(&mut self, n: usize) -> Option<(DemoModelHeader, Vec<u8>)> {
+        self.written += n;
+        self.early_model
+            .take_if(|(h, _)| h.demos as usize <= self.written)
+    }
+
+    /// `n` lines could not be appended (the hub's disk): they are asked for again with the next
+    /// lines that come.
+    pub(crate) fn append_failed(&mut self, n: usize) {
+        self.refused += n as u64;
+        self.resend_asked = None;
+    }
+
+    /// A remote expert's lines this run's file did not take, and those lost with a host
+    /// (reported at its next activation).
+    pub(crate) fn lost(&mut self, n: u32) {
+        self.refused += u64::from(n);
+    }
+
+    /// Lines of remote experts the run's file did not take.
+    pub(crate) fn refused(&self) -> u64 {
+        self.refused
+    }
+
+    /// Answers with a demonstration that came after their query stopped waiting.
+    pub(crate) fn late(&self) -> u64 {
+        self.late
+    }
+
+    /// Checks a remote expert's answer: `Err` with why it is dropped (its generation gone, or
+    /// its demonstration's line not in the run's file).
+    pub(crate) fn check_answer(&self, r: &QueryResponse) -> Result<(), String> {
         if !self.serves(r.expert) {
             return Err(format!(
                 "an answer (demonstration {}) of generation {}, which no joined host serves",
                 r.demo_index, r.expert
             ));
         }
-        if demo.is_some() && r.demo_index as usize != self.written {
+        if r.outcome == outcome::ANSWERED && r.demo_index as usize >= self.written {
             return Err(format!(
-                "demonstration {} where demos.jsonl holds {}",
+                "an answer with demonstration {} where demos.jsonl holds {}",
                 r.demo_index, self.written
             ));
         }
         Ok(())
     }
 
-    /// The answer's demonstration is on disk (or it had none): returns the model that waited
-    /// for it, if any, to publish first, and what to do with the answer.
-    pub(crate) fn answered(
-        &mut self,
-        r: QueryResponse,
-        wrote: bool,
-    ) -> (Option<(DemoModelHeader, Vec<u8>)>, Answer<Q>)
+    /// What to do with a checked answer: deliver it to the query it answers, or drop it (an
+    /// answer with a demonstration dropped so is counted late).
+    pub(crate) fn answered(&mut self, r: QueryResponse) -> Answer<Q>
     where
         Q: HasSeq,
     {
-        let mut model = None;
-        if wrote {
-            self.written = r.demo_index as usize + 1;
-            model = self
-                .early_model
-                .take_if(|(h, _)| h.demos as usize <= self.written);
-        }
-        let answer = match self.held.take(&r) {
+        match self.held.take(&r) {
             Ok(query) => Answer::Deliver { query, response: r },
-            Err(why) => Answer::Dropped(why),
-        };
-        (model, answer)
+            Err(why) => {
+                if r.outcome == outcome::ANSWERED {
+                    self.late += 1;
+                }
+                Answer::Dropped(why)
+            }
+        }
     }
 }
 
@@ -214,13 +297,10 @@ mod tests {
         let mut d = ExpertDesk::<u8>::default();
         d.started(3, "a");
         let answer = |g: u32| {
-            Frame::ExpertAnswer(
-                QueryResponse {
-                    expert: g,
-                    ..Default::default()
-                },
-                None,
-            )
+            Frame::ExpertAnswer(QueryResponse {
+                expert: g,
+                ..Default::default()
+            })
         };
         let exited = |g: u16| Frame::ExpertExited {
             generation: g,
@@ -229,6 +309,18 @@ mod tests {
         };
         assert_eq!(d.refusal(&answer(3), "a"), None);
         assert_eq!(d.refusal(&exited(3), "a"), None);
+        let demos = |g: u16| Frame::ExpertDemos {
+            generation: g,
+            first: 0,
+            lines: vec![],
+        };
+        assert_eq!(d.refusal(&demos(3), "a"), None);
+        assert!(d.refusal(&demos(3), "b").is_some());
+        let lost = Frame::DemosLost {
+            generation: 3,
+            lines: 1,
+        };
+        assert!(d.refusal(&lost, "b").is_some());
         let other = d.refusal(&answer(3), "b").unwrap();
         assert!(other.contains("which host a serves"), "{other}");
         assert!(d.refusal(&exited(3), "b").is_some());
@@ -260,12 +352,17 @@ mod tests {
 
     fn answer(generation: u32, actor: u32, seq: u64, index: u32) -> QueryResponse {
         QueryResponse {
+            outcome: outcome::ANSWERED,
             expert: generation,
             actor,
             request_seq: seq,
             demo_index: index,
             ..QueryResponse::default()
         }
+    }
+
+    fn lines(n: usize) -> Vec<String> {
+        (0..n).map(|i| format!("l{i}")).collect()
     }
 
     fn model(generation: u32, demos: u32) -> DemoModelHeader {
@@ -299,70 +396,103 @@ mod tests {
     }
 
     #[test]
-    fn an_answer_is_delivered_to_the_query_it_answers() {
+    fn an_answer_is_delivered_once_its_line_is_written() {
         let mut d = active_desk(3);
         d.hold(5, Held(10));
         let r = answer(2, 5, 10, 3);
-        assert_eq!(d.check_answer(&r, Some("{}")), Ok(()));
-        let (m, a) = d.answered(r, true);
-        assert_eq!(m, None);
+        // Its line (demonstration 3) has not come: dropped.
+        let e = d.check_answer(&r).unwrap_err();
+        assert!(
+            e.contains("demonstration 3 where demos.jsonl holds 3"),
+            "{e}"
+        );
+        assert_eq!(d.demos(2, 3, lines(1)), Intake::Append(lines(1)));
+        assert_eq!(d.appended(1), None);
+        assert_eq!(d.check_answer(&r), Ok(()));
         assert_eq!(
-            a,
+            d.answered(r),
             Answer::Deliver {
                 query: Held(10),
                 response: r
             }
         );
-        // The next demonstration must be line 4.
-        assert!(d.check_answer(&answer(2, 5, 11, 3), Some("{}")).is_err());
-        assert_eq!(d.check_answer(&answer(2, 5, 11, 4), Some("{}")), Ok(()));
+        // An answer without a demonstration (budget spent) needs no line.
+        let mut spent = answer(2, 5, 11, 0);
+        spent.outcome = outcome::BUDGET_EXHAUSTED;
+        assert_eq!(d.check_answer(&spent), Ok(()));
+        assert_eq!(d.late(), 0);
     }
 
     #[test]
-    fn a_repeated_or_skipped_demonstration_is_refused() {
-        let d = active_desk(3);
-        let repeated = d.check_answer(&answer(2, 0, 1, 2), Some("{}")).unwrap_err();
-        assert!(
-            repeated.contains("demonstration 2 where demos.jsonl holds 3"),
-            "{repeated}"
+    fn lines_are_taken_in_order_once_and_a_gap_is_asked_for_again_once() {
+        let mut d = active_desk(3);
+        // Lines 1-4: the file holds 0-2, so only 3 and 4 are appended.
+        let l = |v: &[&str]| v.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>();
+        assert_eq!(
+            d.demos(2, 1, l(&["a", "b", "c", "d"])),
+            Intake::Append(l(&["c", "d"]))
         );
-        assert!(d.check_answer(&answer(2, 0, 1, 4), Some("{}")).is_err());
-        // An answer without a demonstration (budget spent) writes nothing: any index passes.
-        assert_eq!(d.check_answer(&answer(2, 0, 1, 0), None), Ok(()));
+        d.appended(2);
+        assert_eq!(d.demos(2, 0, lines(5)), Intake::Nothing, "all held already");
+        // Lines from 7 on while the file holds 5: asked again from 5, once.
+        assert_eq!(
+            d.demos(2, 7, lines(1)),
+            Intake::Resend {
+                generation: 2,
+                from: 5
+            }
+        );
+        assert_eq!(d.demos(2, 8, lines(1)), Intake::Wait);
+        // The host sends again from 5: taken, and a later gap is asked about again.
+        assert_eq!(d.demos(2, 5, lines(4)), Intake::Append(lines(4)));
+        d.appended(4);
+        assert!(matches!(
+            d.demos(2, 10, lines(1)),
+            Intake::Resend { from: 9, .. }
+        ));
+        // Lines the disk refused are counted, and the next gap is asked about at once.
+        d.append_failed(1);
+        assert!(matches!(
+            d.demos(2, 10, lines(1)),
+            Intake::Resend { from: 9, .. }
+        ));
+        assert_eq!(d.refused(), 1);
     }
 
     #[test]
-    fn an_answer_to_an_older_query_keeps_the_newer_one_held() {
+    fn an_answer_to_an_older_query_keeps_the_newer_one_held_and_is_counted_late() {
         let mut d = active_desk(0);
+        d.demos(2, 0, lines(3));
+        d.appended(3);
         d.hold(1, Held(7));
-        // The actor gave up on query 6 and asked again (7): the late answer to 6 is dropped.
-        let (_, a) = d.answered(answer(2, 1, 6, 0), true);
+        // The actor gave up on query 6 and asked again (7): the late answer to 6 is dropped,
+        // its demonstration kept.
+        let a = d.answered(answer(2, 1, 6, 0));
         assert!(matches!(a, Answer::Dropped(why) if why.contains("older")));
-        let (_, a) = d.answered(answer(2, 1, 7, 1), true);
+        let a = d.answered(answer(2, 1, 7, 1));
         assert!(matches!(a, Answer::Deliver { query: Held(7), .. }));
         // Nothing held any more.
-        let (_, a) = d.answered(answer(2, 1, 7, 2), true);
+        let a = d.answered(answer(2, 1, 7, 2));
         assert!(matches!(a, Answer::Dropped(why) if why.contains("no longer waits")));
+        assert_eq!(d.late(), 2);
     }
 
     #[test]
     fn a_model_waits_for_the_demonstrations_it_counts() {
         let mut d = active_desk(3);
         assert_eq!(d.model(model(2, 3), vec![1]), Some((model(2, 3), vec![1])));
-        // It counts demonstration 3 (the 4th), whose answer is on its way: held.
+        // It counts demonstration 3 (the 4th), whose line is on its way: held.
         assert_eq!(d.model(model(2, 4), vec![2]), None);
-        d.hold(0, Held(1));
-        let (m, a) = d.answered(answer(2, 0, 1, 3), true);
+        assert_eq!(d.demos(2, 3, lines(1)), Intake::Append(lines(1)));
         assert_eq!(
-            m,
+            d.appended(1),
             Some((model(2, 4), vec![2])),
-            "published before the answer"
+            "published first"
         );
-        assert!(matches!(a, Answer::Deliver { .. }));
-        // An answer that wrote nothing frees no model.
-        assert_eq!(d.model(model(2, 5), vec![3]), None);
-        let (m, _) = d.answered(answer(2, 0, 2, 0), false);
-        assert_eq!(m, None);
+        // Lines that bring it no nearer free no model.
+        assert_eq!(d.model(model(2, 6), vec![3]), None);
+        assert_eq!(d.appended(1), None);
+        assert_eq!(d.appended(1), Some((model(2, 6), vec![3])));
     }
 
     #[test]
@@ -371,8 +501,11 @@ mod tests {
         d.started(3, "other");
         assert_eq!(d.host_left("h"), vec![2]);
         assert!(!d.holds_queries());
-        let e = d.check_answer(&answer(2, 0, 1, 0), Some("{}")).unwrap_err();
+        let e = d.check_answer(&answer(2, 0, 1, 0)).unwrap_err();
         assert!(e.contains("no joined host serves"), "{e}");
+        // Its lines are refused and counted.
+        assert!(matches!(d.demos(2, 0, lines(2)), Intake::Refused(_)));
+        assert_eq!(d.refused(), 2);
         assert_eq!(d.model(model(2, 0), vec![]), None);
         // Generation 3 exits: its late model is dropped, and the waiting one forgotten.
         assert_eq!(d.control(3), Some(3));
@@ -380,7 +513,7 @@ mod tests {
         assert_eq!(d.model(model(3, 1), vec![9]), None);
         d.exited(3);
         assert_eq!(d.model(model(3, 1), vec![9]), None);
-        assert!(d.check_answer(&answer(3, 0, 1, 0), Some("{}")).is_err());
+        assert!(d.check_answer(&answer(3, 0, 1, 0)).is_err());
     }
 
     #[test]
@@ -389,9 +522,10 @@ mod tests {
         d.hold(1, Held(1));
         d.hold(2, Held(2));
         d.prune(|q| q.0 != 1);
-        let (_, a) = d.answered(answer(2, 1, 1, 0), true);
-        assert!(matches!(a, Answer::Dropped(_)));
-        let (_, a) = d.answered(answer(2, 2, 2, 1), true);
-        assert!(matches!(a, Answer::Deliver { .. }));
+        assert!(matches!(d.answered(answer(2, 1, 1, 0)), Answer::Dropped(_)));
+        assert!(matches!(
+            d.answered(answer(2, 2, 2, 1)),
+            Answer::Deliver { .. }
+        ));
     }
 }

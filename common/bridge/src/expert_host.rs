@@ -2,9 +2,10 @@
 //! run's services under an id of its own, in which `alfd-expert` runs unchanged. Its bridge
 //! plays the launcher and the actors for the expert: the run's control comes down (and, before
 //! the control message that makes this expert active, the run's `demos.jsonl`, which the
-//! expert reads back as on one host), queries come down; the expert's status, model and
-//! answers go up, each answer with its demonstration, which the learner's host writes to the
-//! run's `demos.jsonl` before any actor sees it.
+//! expert reads back as on one host), queries come down; the expert's status, model, answers
+//! and every line it appends to this host's `demos.jsonl` go up (the lines in order, before the
+//! answers they carry, whether or not an answer is still awaited: [`DemoShipper`]), and the
+//! learner's host writes them to the run's `demos.jsonl` before any actor sees an answer.
 
 use std::collections::hash_map::Entry;
 use std::collections::{HashMap, HashSet};
@@ -14,8 +15,8 @@ use std::sync::mpsc;
 use std::time::Duration;
 
 use alfd_wire::{
-    outcome, Doorbell, PendingQuery, Process, QueryClient, QueryResponse, Role, Wake, Wire,
-    MAX_ACTORS, SCHEMA_VERSION,
+    Doorbell, PendingQuery, Process, QueryClient, QueryResponse, Role, Wake, Wire, MAX_ACTORS,
+    SCHEMA_VERSION,
 };
 use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
@@ -26,6 +27,7 @@ use crate::frame::{ExpertOrder, Frame};
 use crate::inbox::{inbox, Mail, Post};
 use crate::link::{self, drain};
 use crate::mirror::Remote;
+use crate::shipper::DemoShipper;
 use crate::worker::{ForwardingThread, Heartbeat};
 use crate::{keys, TICK};
 
@@ -164,6 +166,8 @@ enum Route {
     DemoLog { generation: u16, text: String },
     /// An actor's query, for this host's expert.
     Query(alfd_wire::QueryRequest),
+    /// The run asks for this host's demonstrations of `generation` again from line `from`.
+    Resend { generation: u16, from: u32 },
     /// Not for this host (another host's order, a generation not its own, a query while it
     /// serves none, a frame that only goes up).
     Ignore,
@@ -190,6 +194,9 @@ fn route(join_id: &str, mine: &mut HashSet<u16>, f: Frame) -> Route {
         Frame::Order(ExpertOrder::Refuse { join_id: j, why }) if j == join_id => {
             Route::Order(ExpertHostOrder::Refused(why))
         }
+        Frame::Order(ExpertOrder::Resend { generation, from }) if mine.contains(&generation) => {
+            Route::Resend { generation, from }
+        }
         Frame::DemoLog { generation, text } if mine.contains(&generation) => {
             Route::DemoLog { generation, text }
         }
@@ -198,34 +205,30 @@ fn route(join_id: &str, mine: &mut HashSet<u16>, f: Frame) -> Route {
     }
 }
 
-/// The expert's answers in the order it wrote them (the pending map has no order): the
-/// learner's host appends a demonstration only as its file's next line, so one sent ahead of its
-/// predecessor would be refused, and every one after it. Answers without a demonstration first.
-fn in_written_order(answers: &mut [QueryResponse]) {
-    answers.sort_by_key(|r| (r.outcome == outcome::ANSWERED, r.demo_index));
-}
-
 /// What the expert host's services held at one look: the expert's status reports, its answers,
-/// its newest model, and the exits of its processes that the host saw.
+/// its newest model, the lines it appended to `demos.jsonl`, and the exits of its processes that
+/// the host saw.
 struct Look {
     reports: Vec<alfd_wire::Progress>,
     answers: Vec<QueryResponse>,
     model: Option<(alfd_wire::DemoModelHeader, Vec<u8>)>,
+    demos: Option<Frame>,
     exits: Vec<Frame>,
 }
 
 /// The frames that go up for one look, in the order the expert did things, given the
-/// generations the run gave this host (`mine`, which loses an exited one) and the expert's
-/// `demos.jsonl` (`demos`): the model first, if it is one of this host's generations (the actor
-/// shapes the step it asked about with it, as on one host); then the answers in the order their
-/// demonstrations were written, each with its line (one whose line is not in the file is
-/// dropped: the learner's host could not write it); then the status reports, so that an
-/// `exiting` never overtakes an answer sent before it; the exits at the very end.
-fn plan_up(mine: &mut HashSet<u16>, look: Look, demos: &str) -> Vec<Frame> {
+/// generations the run gave this host (`mine`, which loses an exited one): the model first, if
+/// it is one of this host's generations (the actor shapes the step it asked about with it, as on
+/// one host); then the new lines of `demos.jsonl`, so that the learner's host has written every
+/// demonstration before it hears the answer that gives it; then the answers; then the status
+/// reports, so that an `exiting` never overtakes an answer sent before it; the exits at the very
+/// end.
+fn plan_up(mine: &mut HashSet<u16>, look: Look) -> Vec<Frame> {
     let Look {
         reports,
-        mut answers,
+        answers,
         model,
+        demos,
         exits,
     } = look;
     let mut up = Vec::new();
@@ -234,22 +237,8 @@ fn plan_up(mine: &mut HashSet<u16>, look: Look, demos: &str) -> Vec<Frame> {
             up.push(Frame::DemoModel(h, bytes));
         }
     }
-    in_written_order(&mut answers);
-    for r in answers {
-        let demo = if r.outcome == outcome::ANSWERED {
-            let Some(line) = demos.lines().nth(r.demo_index as usize) else {
-                warn!(
-                    index = r.demo_index,
-                    "an answer without its demonstration; dropped"
-                );
-                continue;
-            };
-            Some(line.to_owned())
-        } else {
-            None
-        };
-        up.push(Frame::ExpertAnswer(r, demo));
-    }
+    up.extend(demos);
+    up.extend(answers.into_iter().map(Frame::ExpertAnswer));
     up.extend(reports.into_iter().map(Frame::Progress));
     for f in exits {
         if let Frame::ExpertExited { generation, .. } = &f {
@@ -287,6 +276,8 @@ fn forward(
         expert: wire.bell(Doorbell::Expert)?,
         clients: HashMap::new(),
         pending: HashMap::new(),
+        replaced: Vec::new(),
+        shipper: DemoShipper::default(),
         mine: HashSet::new(),
         bytes: Vec::new(),
         refused: 0,
@@ -335,6 +326,11 @@ struct HostForwarder<'w, 'a> {
     expert: alfd_wire::Bell,
     clients: HashMap<u32, QueryClient<'w>>,
     pending: HashMap<u32, (PendingQuery<'w>, u64)>,
+    /// Answers to queries that a newer query of the same actor replaced: they go up (the hub
+    /// counts them late).
+    replaced: Vec<QueryResponse>,
+    /// This host's `demos.jsonl` against the run's.
+    shipper: DemoShipper,
     /// The generations the run gave this host's expert.
     mine: HashSet<u16>,
     bytes: Vec<u8>,
@@ -361,10 +357,11 @@ impl HostForwarder<'_, '_> {
                 let _ = self.orders.send(order);
                 return Ok(());
             }
-            Route::DemoLog { generation, text } => {
-                // Before the control message that makes it active (one publisher, in order).
-                crate::demos::replace(&self.me.demos, &text)?;
-                debug!(generation, bytes = text.len(), "the run's demos.jsonl");
+            Route::DemoLog { generation, text } => return self.activated(generation, &text),
+            Route::Resend { generation, from } => {
+                let host = crate::demos::read(&self.me.demos)?;
+                self.shipper.rewind(generation, from as usize, &host);
+                info!(generation, from, "the run asks for demonstrations again");
                 return Ok(());
             }
             Route::Query(q) => {
@@ -372,14 +369,45 @@ impl HostForwarder<'_, '_> {
                     Entry::Occupied(o) => o.into_mut(),
                     Entry::Vacant(v) => v.insert(self.wire.query_client()?),
                 };
-                // A newer query of the same actor replaces the older one (it gave up).
-                self.pending.insert(q.actor, (client.ask(q)?, q.header.seq));
+                // A newer query of the same actor replaces the older one (it gave up): an answer
+                // to that one already here still goes up.
+                let (seq, actor) = (q.header.seq, q.actor);
+                if let Some((mut old, old_seq)) = self.pending.insert(actor, (client.ask(q)?, seq))
+                {
+                    if let Ok(Some(r)) = old.poll() {
+                        self.replaced.push(QueryResponse {
+                            request_seq: old_seq,
+                            actor,
+                            ..r
+                        });
+                    }
+                }
                 Ok(())
             }
             Route::Ignore => return Ok(()),
         };
         if link::forwarded(done)?.is_some() {
             self.expert.ring()?;
+        }
+        Ok(())
+    }
+
+    /// The run's `demos.jsonl` for `generation`, before the control message that makes it
+    /// active (one publisher, in order): it replaces this host's, and what this host held that
+    /// the run never got is reported.
+    fn activated(&mut self, generation: u16, text: &str) -> Result<()> {
+        let host = crate::demos::read(&self.me.demos)?;
+        let lost = self.shipper.activated(generation, text, &host);
+        crate::demos::replace(&self.me.demos, text)?;
+        debug!(generation, bytes = text.len(), "the run's demos.jsonl");
+        if lost > 0 {
+            warn!(
+                generation,
+                lost,
+                "this host's demos.jsonl held demonstrations the run never got; replaced by the run's"
+            );
+            let lines = u32::try_from(lost).unwrap_or(u32::MAX);
+            self.put(&Frame::DemosLost { generation, lines })?;
         }
         Ok(())
     }
@@ -399,19 +427,27 @@ impl HostForwarder<'_, '_> {
             .model
             .latest_into(&mut self.bytes)?
             .map(|h| (h, self.bytes.clone()));
-        // The expert's demonstrations, read once for all the answers that carry one.
-        let demos = if answers.iter().any(|r| r.outcome == outcome::ANSWERED) {
-            crate::demos::read(&self.me.demos)?
+        // Read after the answers: every demonstration answered is on disk (the expert writes it
+        // before it answers), so its line goes up before its answer.
+        let demos = if self.shipper.shipping() {
+            let tail = crate::demos::read_from(&self.me.demos, self.shipper.offset())?;
+            self.shipper.ship(&tail)
         } else {
-            String::new()
+            None
         };
+        for f in &exits {
+            if let Frame::ExpertExited { generation, .. } = f {
+                self.shipper.exited(*generation);
+            }
+        }
         let look = Look {
             reports,
             answers,
             model,
+            demos,
             exits,
         };
-        for f in plan_up(&mut self.mine, look, &demos) {
+        for f in plan_up(&mut self.mine, look) {
             self.put(&f)?;
         }
         Ok(())
@@ -419,7 +455,7 @@ impl HostForwarder<'_, '_> {
 
     /// The answers the expert gave since the last look.
     fn answers(&mut self) -> Vec<QueryResponse> {
-        let mut answers = Vec::new();
+        let mut answers = std::mem::take(&mut self.replaced);
         self.pending.retain(|&actor, (p, seq)| match p.poll() {
             Ok(Some(mut r)) => {
                 r.request_seq = *seq;
@@ -440,6 +476,7 @@ impl HostForwarder<'_, '_> {
 #[cfg(test)]
 mod route_tests {
     use super::*;
+    use alfd_wire::outcome;
 
     fn start(join_id: &str, generation: u16) -> Frame {
         Frame::Order(ExpertOrder::Start {
@@ -488,33 +525,7 @@ mod route_tests {
     }
 
     #[test]
-    fn answers_go_up_in_the_order_their_demonstrations_were_written() {
-        let answer = |outcome, demo_index| QueryResponse {
-            outcome,
-            demo_index,
-            ..QueryResponse::default()
-        };
-        let mut a = vec![
-            answer(outcome::ANSWERED, 7),
-            answer(outcome::BUDGET_EXHAUSTED, 0),
-            answer(outcome::ANSWERED, 5),
-            answer(outcome::ANSWERED, 6),
-        ];
-        in_written_order(&mut a);
-        let order: Vec<(u32, u32)> = a.iter().map(|r| (r.outcome, r.demo_index)).collect();
-        assert_eq!(
-            order,
-            vec![
-                (outcome::BUDGET_EXHAUSTED, 0),
-                (outcome::ANSWERED, 5),
-                (outcome::ANSWERED, 6),
-                (outcome::ANSWERED, 7)
-            ]
-        );
-    }
-
-    #[test]
-    fn what_goes_up_keeps_the_experts_order_and_drops_what_the_learner_could_not_write() {
+    fn what_goes_up_keeps_the_experts_order_with_the_lines_before_the_answers() {
         let answer = |outcome, demo_index| QueryResponse {
             outcome,
             demo_index,
@@ -533,22 +544,26 @@ mod route_tests {
         let mut mine = HashSet::from([2u16]);
         let look = Look {
             reports: vec![status],
-            // Demonstration 2 is not in the file (an answer that raced its line): dropped.
             answers: vec![
-                answer(outcome::ANSWERED, 2),
                 answer(outcome::ANSWERED, 1),
                 answer(outcome::DECLINED, 0),
                 answer(outcome::ANSWERED, 0),
             ],
             model: Some((header(2), vec![7])),
+            demos: Some(Frame::ExpertDemos {
+                generation: 2,
+                first: 0,
+                lines: vec!["d0".into(), "d1".into()],
+            }),
             exits: vec![exit(2)],
         };
-        let up = plan_up(&mut mine, look, "d0\nd1\n");
+        let up = plan_up(&mut mine, look);
         let kinds: Vec<String> = up
             .iter()
             .map(|f| match f {
                 Frame::DemoModel(h, _) => format!("model {}", h.expert),
-                Frame::ExpertAnswer(r, d) => format!("answer {} {d:?}", r.outcome),
+                Frame::ExpertDemos { first, lines, .. } => format!("lines {first} {lines:?}"),
+                Frame::ExpertAnswer(r) => format!("answer {} {}", r.outcome, r.demo_index),
                 Frame::Progress(_) => "status".into(),
                 Frame::ExpertExited { generation, .. } => format!("exit {generation}"),
                 _ => "other".into(),
@@ -559,9 +574,10 @@ mod route_tests {
             kinds,
             vec![
                 "model 2".to_owned(),
-                format!("answer {} None", outcome::DECLINED),
-                format!("answer {answered} Some(\"d0\")"),
-                format!("answer {answered} Some(\"d1\")"),
+                r#"lines 0 ["d0", "d1"]"#.to_owned(),
+                format!("answer {answered} 1"),
+                format!("answer {} 0", outcome::DECLINED),
+                format!("answer {answered} 0"),
                 "status".into(),
                 "exit 2".into(),
             ]
@@ -572,8 +588,28 @@ mod route_tests {
             reports: vec![],
             answers: vec![],
             model: Some((header(2), vec![7])),
+            demos: None,
             exits: vec![],
         };
-        assert!(plan_up(&mut mine, look, "").is_empty());
+        assert!(plan_up(&mut mine, look).is_empty());
+    }
+
+    #[test]
+    fn a_resend_is_taken_only_for_this_hosts_generations() {
+        let mut mine = HashSet::from([2u16]);
+        let resend = |generation| {
+            Frame::Order(ExpertOrder::Resend {
+                generation,
+                from: 4,
+            })
+        };
+        assert_eq!(
+            route("me", &mut mine, resend(2)),
+            Route::Resend {
+                generation: 2,
+                from: 4
+            }
+        );
+        assert_eq!(route("me", &mut mine, resend(3)), Route::Ignore);
     }
 }

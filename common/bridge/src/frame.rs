@@ -41,9 +41,22 @@ pub enum Frame {
         generation: u16,
         text: String,
     },
-    /// Up: a remote expert's answer (`request_seq` and `actor` as the hub asked), with its
-    /// demonstration as the line the expert appended to its `demos.jsonl` when it is one.
-    ExpertAnswer(QueryResponse, Option<String>),
+    /// Up: a remote expert's answer (`request_seq` and `actor` as the hub asked); a
+    /// demonstration's line goes up before it in [`Frame::ExpertDemos`].
+    ExpertAnswer(QueryResponse),
+    /// Up: lines the remote expert of `generation` appended to its host's `demos.jsonl`, the
+    /// first of them line `first`, every one in order whether or not its answer is still awaited.
+    ExpertDemos {
+        generation: u16,
+        first: u32,
+        lines: Vec<String>,
+    },
+    /// Up: when `generation` became active, its host's `demos.jsonl` held `lines` demonstrations
+    /// the run's did not (its host died before they went up); the run's file replaced them.
+    DemosLost {
+        generation: u16,
+        lines: u32,
+    },
     /// Up: the remote expert of `generation` ended (after every answer it sent).
     ExpertExited {
         generation: u16,
@@ -65,6 +78,9 @@ pub enum ExpertOrder {
     Kill { generation: u16 },
     /// The run does not take the expert of `join_id` now: `why`.
     Refuse { join_id: String, why: String },
+    /// Send the demonstrations of `generation` again from line `from`: the run's file stops
+    /// there (a line it could not take).
+    Resend { generation: u16, from: u32 },
 }
 
 impl Frame {
@@ -79,7 +95,7 @@ impl Frame {
             Frame::DemoModel(..) => "demo-model",
             Frame::Control(_) => "control",
             Frame::Order(_) | Frame::ExpertExited { .. } => "expert-order",
-            Frame::DemoLog { .. } => "demos",
+            Frame::DemoLog { .. } | Frame::ExpertDemos { .. } | Frame::DemosLost { .. } => "demos",
             Frame::ExpertAnswer(..) => "query",
         }
     }

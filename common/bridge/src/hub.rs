@@ -8,21 +8,22 @@
 use std::collections::hash_map::Entry;
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{mpsc, Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use alfd_wire::{
-    DemoModelHeader, Doorbell, IncomingQuery, PendingQuery, Process, QueryClient, QueryResponse,
-    Role, Sender, TransitionBatch, Wake, Wire, WireError, MAX_ACTORS, SCHEMA_VERSION,
+    outcome, DemoModelHeader, Doorbell, IncomingQuery, PendingQuery, Process, QueryClient,
+    QueryResponse, Role, Sender, TransitionBatch, Wake, Wire, WireError, MAX_ACTORS,
+    SCHEMA_VERSION,
 };
 use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
 use zenoh::sample::SampleKind;
 use zenoh::Wait as _;
 
-use crate::desk::{Answer, ExpertDesk};
+use crate::desk::{Answer, ExpertDesk, Intake};
 use crate::endpoint::Endpoint;
 use crate::error::{zenoh_error, BridgeError, Result};
 use crate::frame::{self, ExpertOrder, Frame};
@@ -82,9 +83,19 @@ pub enum HubEvent {
     },
 }
 
+/// What the hub counts of the run's demonstrations, read by the launcher for its summary.
+#[derive(Debug, Default)]
+struct Counters {
+    /// Lines of remote experts the run's `demos.jsonl` did not take.
+    demos_refused: AtomicU64,
+    /// Answers with a demonstration that came after their query stopped waiting.
+    answers_late: AtomicU64,
+}
+
 /// A running hub; stop it with [`Hub::stop`] (or drop it).
 pub struct Hub {
     roster: Arc<Mutex<Roster>>,
+    counters: Arc<Counters>,
     events: mpsc::Receiver<HubEvent>,
     stop: Arc<AtomicBool>,
     post: Post,
@@ -115,6 +126,7 @@ impl Hub {
             opts.max_restarts,
         )));
         let (events_tx, events) = mpsc::channel();
+        let counters = Arc::new(Counters::default());
         let (post, inbox) = inbox(&opts.run_id, 1);
         let stop = Arc::new(AtomicBool::new(false));
 
@@ -155,10 +167,11 @@ impl Hub {
             let opts = opts.clone();
             let events_tx = events_tx.clone();
             let held = Arc::clone(&roster);
+            let counters = Arc::clone(&counters);
             std::thread::Builder::new()
                 .name("hub".to_owned())
                 .spawn(move || {
-                    let r = forward(&opts, &inbox, &down, &stop, &events_tx, held);
+                    let r = forward(&opts, &inbox, &down, &stop, &events_tx, (held, counters));
                     if let Err(e) = &r {
                         warn!("the hub stopped: {e}");
                     }
@@ -169,6 +182,7 @@ impl Hub {
         info!(endpoint = %opts.endpoint, "listening for remote hosts");
         Ok(Self {
             roster,
+            counters,
             events,
             stop,
             post,
@@ -190,6 +204,18 @@ impl Hub {
     /// given before the host's mirror listened still reaches it).
     pub fn order(&self, order: ExpertOrder) {
         self.post.send(Mail::Order(order));
+    }
+
+    /// Lines remote experts wrote that the run's `demos.jsonl` did not take (refused, or lost
+    /// with a host that stopped before they went up).
+    pub fn demos_refused(&self) -> u64 {
+        self.counters.demos_refused.load(Ordering::Relaxed)
+    }
+
+    /// Answers with a demonstration that came to the hub after their query stopped waiting
+    /// (the demonstration is kept; the actor acted alone).
+    pub fn answers_late(&self) -> u64 {
+        self.counters.answers_late.load(Ordering::Relaxed)
     }
 
     /// Actor ids held by remote hosts now.
@@ -396,13 +422,14 @@ fn forward(
     down: &zenoh::pubsub::Publisher<'static>,
     stop: &AtomicBool,
     events: &mpsc::Sender<HubEvent>,
-    roster: Arc<Mutex<Roster>>,
+    (roster, counters): (Arc<Mutex<Roster>>, Arc<Counters>),
 ) -> Result<()> {
     let wire = Wire::connect(&opts.run_id, Process::new(Role::Bridge, 0), SCHEMA_VERSION)?;
     let mut bells = vec![Doorbell::Bridge];
     bells.extend((0..MAX_ACTORS as u16).map(Doorbell::Actor));
     let waiter = wire.waiter_on(&bells)?;
     let mut hub = Forwarder::new(&wire, opts, down, events, roster)?;
+    hub.counters = counters;
     while !stop.load(Ordering::Relaxed) {
         if waiter.wait(TICK)? == Wake::Signal {
             // The launcher handles the signal; this thread goes on until told to stop.
@@ -454,6 +481,9 @@ struct Forwarder<'w, 'a> {
     roster: Arc<Mutex<Roster>>,
     /// Frames refused for what they said (see [`refusal`]).
     impostors: u64,
+    /// Answers of this host's expert to a remote actor's query that the actor replaced.
+    late: u64,
+    counters: Arc<Counters>,
 }
 
 impl<'w, 'a> Forwarder<'w, 'a> {
@@ -467,6 +497,8 @@ impl<'w, 'a> Forwarder<'w, 'a> {
         Ok(Self {
             roster,
             impostors: 0,
+            late: 0,
+            counters: Arc::default(),
             wire,
             opts,
             down,
@@ -498,6 +530,15 @@ impl<'w, 'a> Forwarder<'w, 'a> {
         let b = frame::encode(SCHEMA_VERSION, f)?;
         link::put_bytes(self.down, b.clone())?;
         Ok(b)
+    }
+
+    /// Publishes the counts the launcher reads.
+    fn count(&self) {
+        let c = &self.counters;
+        c.demos_refused
+            .store(self.desk.refused(), Ordering::Relaxed);
+        c.answers_late
+            .store(self.desk.late() + self.late, Ordering::Relaxed);
     }
 
     /// Up: what zenoh delivered, into this host's services.
@@ -573,16 +614,40 @@ impl<'w, 'a> Forwarder<'w, 'a> {
                     Entry::Vacant(v) => v.insert(self.wire.query_client()?),
                 };
                 let ask = client.ask(q)?;
-                // A newer query of the same actor replaces the older one (it gave up).
-                self.pending
-                    .insert(q.actor, (ask, q.header.seq, Instant::now()));
+                // A newer query of the same actor replaces the older one (it gave up): an answer
+                // to that one already here is late.
+                if let Some((mut old, ..)) = self
+                    .pending
+                    .insert(q.actor, (ask, q.header.seq, Instant::now()))
+                {
+                    if old.poll()?.is_some_and(|r| r.outcome == outcome::ANSWERED) {
+                        self.late += 1;
+                        self.count();
+                    }
+                }
                 Ok(self.expert.ring())
             }
             Frame::DemoModel(h, b) => match self.desk.model(h, b) {
                 Some((h, b)) => self.publish_model(h, &b).map(|()| Ok(0)),
                 None => return Ok(()),
             },
-            Frame::ExpertAnswer(r, demo) => return self.expert_answer(r, demo),
+            Frame::ExpertAnswer(r) => return self.expert_answer(r),
+            Frame::ExpertDemos {
+                generation,
+                first,
+                lines,
+            } => return self.expert_demos(generation, first, lines),
+            Frame::DemosLost { generation, lines } => {
+                warn!(
+                    generation,
+                    lines,
+                    "the remote expert's host held demonstrations the run never got (it stopped \
+                     before they went up); the run's demos.jsonl replaced them there"
+                );
+                self.desk.lost(lines);
+                self.count();
+                return Ok(());
+            }
             Frame::ExpertExited {
                 generation,
                 how,
@@ -619,25 +684,49 @@ impl<'w, 'a> Forwarder<'w, 'a> {
         tx.forward(h, b)
     }
 
-    /// A remote expert's answer: its demonstration on disk here before any actor sees it (no
-    /// link loss can lose it), then the model that counts it, then the answer.
-    fn expert_answer(&mut self, r: QueryResponse, demo: Option<String>) -> Result<()> {
-        if let Err(why) = self.desk.check_answer(&r, demo.as_deref()) {
-            warn!("{why}; not written, not answered");
+    /// Lines of a remote expert's `demos.jsonl`: appended to the run's in order (the file's
+    /// next lines only; a gap is asked for again), then the model that waited for them.
+    fn expert_demos(&mut self, generation: u16, first: u32, lines: Vec<String>) -> Result<()> {
+        match self.desk.demos(generation, first, lines) {
+            Intake::Append(lines) => {
+                let n = lines.len();
+                match crate::demos::append_lines(&self.opts.demos_path, &lines) {
+                    Ok(()) => {
+                        if let Some((h, b)) = self.desk.appended(n) {
+                            if let Err(e) = self.publish_model(h, &b) {
+                                warn!("{e}; a remote expert's model dropped");
+                            }
+                        }
+                    }
+                    Err(e) => {
+                        warn!("{n} demonstrations of the remote expert not written: {e}");
+                        self.desk.append_failed(n);
+                    }
+                }
+            }
+            Intake::Resend { generation, from } => {
+                warn!(
+                    generation,
+                    from, "demonstrations of the remote expert came out of order; asked again"
+                );
+                self.put_frame(&Frame::Order(ExpertOrder::Resend { generation, from }))?;
+            }
+            Intake::Nothing | Intake::Wait => {}
+            Intake::Refused(why) => warn!("{why}; not written"),
+        }
+        self.count();
+        Ok(())
+    }
+
+    /// A remote expert's answer: delivered once its demonstration is on disk here (its line came
+    /// up before it), to the query it answers.
+    fn expert_answer(&mut self, r: QueryResponse) -> Result<()> {
+        if let Err(why) = self.desk.check_answer(&r) {
+            warn!("{why}; not answered");
             return Ok(());
         }
-        if let Some(line) = &demo {
-            if let Err(e) = crate::demos::append(&self.opts.demos_path, r.demo_index, line) {
-                warn!("a remote expert's demonstration refused: {e}; not answered");
-                return Ok(());
-            }
-        }
-        let (model, answer) = self.desk.answered(r, demo.is_some());
-        if let Some((h, b)) = model {
-            if let Err(e) = self.publish_model(h, &b) {
-                warn!("{e}; a remote expert's model dropped");
-            }
-        }
+        let answer = self.desk.answered(r);
+        self.count();
         match answer {
             Answer::Dropped(why) => debug!("{why}; answer not sent"),
             Answer::Deliver { query, response } => {

@@ -18,8 +18,10 @@
 //! | `alfd/<run>/member/<join>`   | liveliness: a joined host (gone = its actors crashed) |
 //!
 //! A remote host may also serve the run's expert (`alfd join --expert NAME`, an [`ExpertHost`]):
-//! its answers come up with their demonstrations, which the hub writes to the run's
-//! `demos.jsonl` before any actor sees them.
+//! every line its expert appends to that host's `demos.jsonl` comes up in order, and the hub
+//! appends it to the run's before any actor hears the answer that gives it, so the two files
+//! hold the same demonstrations whatever the answers' fate (an answer that comes after its
+//! actor stopped waiting is counted late, its demonstration kept).
 //!
 //! One run id is one key prefix, so two runs never see each other's messages. Peers prove who
 //! they are with certificates of the run's CA (mutual TLS, see [`TlsFiles`]); plain TCP only
@@ -40,6 +42,7 @@ mod mirror;
 #[doc(hidden)]
 pub mod peer_bytes;
 mod roster;
+mod shipper;
 mod tls;
 mod worker;
 

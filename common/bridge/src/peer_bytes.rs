@@ -39,11 +39,24 @@ pub fn valid_frames() -> Vec<Vec<u8>> {
             generation: 2,
             text: "{\"index\":0}\n".to_owned(),
         },
-        Frame::ExpertAnswer(QueryResponse::default(), Some("{}".to_owned())),
+        Frame::ExpertAnswer(QueryResponse::default()),
+        Frame::ExpertDemos {
+            generation: 2,
+            first: 0,
+            lines: vec!["{}".to_owned()],
+        },
+        Frame::DemosLost {
+            generation: 2,
+            lines: 1,
+        },
         Frame::Order(ExpertOrder::Start {
             join_id: "h-1".to_owned(),
             generation: 3,
             name: "cartpole-1000".to_owned(),
+        }),
+        Frame::Order(ExpertOrder::Resend {
+            generation: 3,
+            from: 7,
         }),
     ];
     let mut out: Vec<Vec<u8>> = frames

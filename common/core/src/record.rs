@@ -216,6 +216,18 @@ pub struct RuntimeSummary {
     pub learner_restarts: u32,
     /// The run was stopped by Ctrl-C (or SIGTERM) before its last episode.
     pub interrupted: bool,
+    /// Demonstrations an expert on another host wrote that `demos.jsonl` did not take (refused,
+    /// or lost with a host that stopped before they reached this one). 0 in a sound run.
+    #[serde(default)]
+    pub demos_refused: u64,
+    /// Answers with a demonstration that came after their actor stopped waiting (its query
+    /// timeout): the demonstration is in `demos.jsonl` and the model, the actor acted alone.
+    #[serde(default)]
+    pub answers_late: u64,
+    /// The most demonstrations any of the run's experts counted (what it read back and what it
+    /// wrote): `demos` is at least this in a sound run, else the run fails.
+    #[serde(default)]
+    pub demos_experts_wrote: u64,
 }
 
 impl RunSummary {
@@ -370,6 +382,9 @@ mod tests {
             expert_restarts: 2,
             learner_restarts: 1,
             interrupted: false,
+            demos_refused: 0,
+            answers_late: 2,
+            demos_experts_wrote: 3,
         });
         let json = serde_json::to_string(&s).unwrap();
         let v: serde_json::Value = serde_json::from_str(&json).unwrap();

@@ -12,7 +12,7 @@ use crate::error::{Result, WireError};
 /// The version of the messages below. Bump it whenever a message changes, or the zenoh keys the
 /// bridges send them on (`alfd_bridge`), so that a process or host of another build is refused
 /// by name.
-pub const SCHEMA_VERSION: u32 = 5;
+pub const SCHEMA_VERSION: u32 = 6;
 /// Actors per run (the credit table has one slot per actor id).
 pub const MAX_ACTORS: usize = 16;
 /// Largest observation a transition or a query can carry.
@@ -654,7 +654,9 @@ pub struct Progress {
     /// See [`process_state`] (status messages).
     pub state: u32,
     pub pid: u32,
-    pub _pad: u32,
+    /// Answers with a demonstration sent after their actor stopped waiting (expert, status
+    /// messages): the demonstration is kept, the actor acted alone.
+    pub answers_late: u32,
     pub incarnation: u64,
     /// An episode (kind EPISODE), numbered by its actor.
     pub episode: Episode,

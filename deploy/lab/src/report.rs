@@ -400,6 +400,23 @@ impl RunReport<'_> {
                 r.demos
             );
         }
+        if let Some(r) = &s.runtime {
+            if r.answers_late > 0 {
+                let _ = write!(
+                    text,
+                    "; {} answered after their actor stopped waiting (kept, the actor acted alone: \
+                     a longer --query-timeout-ms may help)",
+                    r.answers_late
+                );
+            }
+            if r.demos_refused > 0 {
+                let _ = write!(
+                    text,
+                    "; {} written by a remote expert and NOT taken into demos.jsonl",
+                    r.demos_refused
+                );
+            }
+        }
         text
     }
 

@@ -38,7 +38,7 @@ mod error;
 pub mod expert_lifecycle;
 mod remote;
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, VecDeque};
 use std::os::unix::process::CommandExt as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -298,6 +298,14 @@ struct Launcher<'a, 'w> {
     /// Demonstrations answered, as the active expert reports them (for the progress bar only:
     /// its reports arrive in no fixed order with the actors' episodes).
     demos_answered: u64,
+    /// The most demonstrations any expert counted in the run (each counts what it read back
+    /// and what it wrote): `demos.jsonl` must hold at least these at the end.
+    demos_experts_wrote: u64,
+    /// Per expert generation, its answers with a demonstration that came after their actor
+    /// stopped waiting (the newest count it reported).
+    answers_late: HashMap<u16, u32>,
+    /// What the hub counted (lines of remote experts not taken, late answers), last read.
+    hub_counts: (u64, u64),
     /// The newest incarnation of each actor id that recorded an episode (0: none yet).
     incarnations: [u64; alfd_wire::MAX_ACTORS],
     /// Actor restarts.
@@ -386,6 +394,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
             all_returns,
             demos_used: demos_before,
             demos_answered: 0,
+            demos_experts_wrote: 0,
+            answers_late: HashMap::new(),
+            hub_counts: (0, 0),
             incarnations: [0; alfd_wire::MAX_ACTORS],
             restarts: 0,
             quota,
@@ -511,6 +522,8 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     if p.header.id == self.control.active_expert as u16 {
                         self.demos_answered = self.demos_answered.max(p.demos);
                     }
+                    self.demos_experts_wrote = self.demos_experts_wrote.max(p.demos);
+                    self.answers_late.insert(p.header.id, p.answers_late);
                     let now = Instant::now();
                     if p.state == process_state::STANDBY {
                         self.show_human_page(p.header.id);
@@ -647,10 +660,21 @@ impl<'a, 'w> Launcher<'a, 'w> {
             .map(|h| format!("  remote actors {}", h.remote_actors()))
             .unwrap_or_default();
         self.bar.set_message(format!(
-            "return {mean:.1} (last 20)  demos {}/{}  {sps:.0} steps/s  {ups:.0} updates/s{remote}",
+            "return {mean:.1} (last 20)  demos {}/{}{}  {sps:.0} steps/s  {ups:.0} updates/s{remote}",
             u64::from(self.demos_used).max(self.demos_answered),
-            self.plan.cfg.budget()
+            self.plan.cfg.budget(),
+            demo_troubles(self.answers_late(), self.hub_counts.0),
         ));
+    }
+
+    /// Answers with a demonstration that came after their actor stopped waiting: every
+    /// expert's own count and the hub's.
+    fn answers_late(&self) -> u64 {
+        self.answers_late
+            .values()
+            .map(|&n| u64::from(n))
+            .sum::<u64>()
+            + self.hub_counts.1
     }
 
     fn spawn(&mut self, kind: Kind) -> Result<()> {
@@ -951,7 +975,9 @@ impl<'a, 'w> Launcher<'a, 'w> {
         let deadline = Instant::now() + Duration::from_secs(30);
         let mut failures = Vec::new();
         // Remote actors hear the shutdown through the hub; their hosts leave when they stopped.
-        let remote = |l: &Self| l.hub.as_ref().map_or(0, |h| h.remote_actors());
+        // A remote expert's last demonstrations come up before its exit: it is waited for too.
+        let remote =
+            |l: &Self| l.hub.as_ref().map_or(0, |h| h.remote_actors()) + l.remote_experts.serving();
         while (!self.procs.is_empty() || remote(self) > 0) && Instant::now() < deadline {
             let wake = self.waiter.wait(Duration::from_millis(50))?;
             self.drain_progress()?;
@@ -985,9 +1011,10 @@ impl<'a, 'w> Launcher<'a, 'w> {
             ));
         }
         if remote(self) > 0 {
-            warn!("remote actors did not leave within 30 s; the run ends without them");
+            warn!("remote actors or experts did not leave within 30 s; the run ends without them");
         }
         if let Some(hub) = self.hub.take() {
+            self.hub_counts = (hub.demos_refused(), hub.answers_late());
             if let Err(e) = hub.stop() {
                 warn!("the hub: {e}");
             }
@@ -1046,9 +1073,24 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 expert_restarts: self.experts.restarts(),
                 learner_restarts: self.learner_restarts,
                 interrupted,
+                demos_refused: self.hub_counts.0,
+                answers_late: self.answers_late(),
+                demos_experts_wrote: self.demos_experts_wrote,
             }),
         }
     }
+}
+
+/// What the progress line says of demonstrations refused or answered late (nothing when none).
+fn demo_troubles(late: u64, refused: u64) -> String {
+    let mut s = String::new();
+    if late > 0 {
+        s.push_str(&format!(" ({late} late)"));
+    }
+    if refused > 0 {
+        s.push_str(&format!(" ({refused} REFUSED)"));
+    }
+    s
 }
 
 /// Writes `bytes` to `dir/name`, replacing the file whole (a reader never sees half of it).

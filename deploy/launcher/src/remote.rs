@@ -28,6 +28,13 @@ pub(super) struct RemoteExperts {
     hosts: HashMap<u16, String>,
 }
 
+impl RemoteExperts {
+    /// Remote expert generations that have not exited.
+    pub(super) fn serving(&self) -> usize {
+        self.hosts.len()
+    }
+}
+
 impl Launcher<'_, '_> {
     pub(super) fn start_hub(&self, endpoint: &alfd_bridge::Endpoint) -> Result<alfd_bridge::Hub> {
         let read = |name: &str| {
@@ -55,6 +62,7 @@ impl Launcher<'_, '_> {
     /// incarnation as a new actor.
     pub(super) fn check_hub(&mut self) -> Result<()> {
         let Some(hub) = &self.hub else { return Ok(()) };
+        self.hub_counts = (hub.demos_refused(), hub.answers_late());
         let running = self.control.command != command::SHUTDOWN;
         for event in hub.events() {
             match event {
