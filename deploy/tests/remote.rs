@@ -12,7 +12,7 @@ use crate::runtime::{rows, run_id, spawn_run, summary};
 use crate::support::{alfd, text, timed, tmp, Background};
 
 /// A free TCP port on 127.0.0.1 (the OS's choice, released at once).
-fn free_port() -> u16 {
+pub(crate) fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -39,7 +39,7 @@ fn spawn_host(link: &[String], role: &str, dir: &Path) -> Background {
 }
 
 /// The link of a host joining the run on `port` of 127.0.0.1 over plain TCP.
-fn insecure(port: u16) -> Vec<String> {
+pub(crate) fn insecure(port: u16) -> Vec<String> {
     vec![
         "--insecure".to_owned(),
         format!("--connect=tcp/127.0.0.1:{port}"),
@@ -47,7 +47,7 @@ fn insecure(port: u16) -> Vec<String> {
 }
 
 /// `alfd join` with `actors` actors, as another host.
-fn spawn_join(port: u16, actors: usize, dir: &Path) -> Background {
+pub(crate) fn spawn_join(port: u16, actors: usize, dir: &Path) -> Background {
     spawn_host(&insecure(port), &format!("--actors={actors}"), dir)
 }
 
@@ -57,7 +57,7 @@ fn spawn_expert_join(port: u16, name: &str, dir: &Path) -> Background {
 }
 
 /// Waits (at most `secs`) for a background process to end, and returns its output.
-fn finish(mut p: Background, secs: u64) -> Output {
+pub(crate) fn finish(mut p: Background, secs: u64) -> Output {
     let start = Instant::now();
     while p.child().try_wait().unwrap().is_none() {
         assert!(
@@ -71,7 +71,7 @@ fn finish(mut p: Background, secs: u64) -> Output {
 }
 
 /// The mirror's run id recorded by `alfd join` in `join.json`.
-fn mirror_id(join_dir: &Path) -> String {
+pub(crate) fn mirror_id(join_dir: &Path) -> String {
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(join_dir.join("join.json")).unwrap())
             .unwrap();
@@ -421,7 +421,7 @@ fn bad_endpoints_and_actor_counts_are_refused_with_exit_code_2() {
 
 /// The iceoryx2 run id of the expert's copy of the run, as `alfd join --expert` recorded it in
 /// its `join.json`.
-fn expert_host_id(join_dir: &Path) -> String {
+pub(crate) fn expert_host_id(join_dir: &Path) -> String {
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(join_dir.join("join.json")).unwrap())
             .unwrap();
@@ -437,7 +437,7 @@ fn lines(path: &Path) -> usize {
 }
 
 /// Waits until `expert-<generation>.log` in `dir` says the expert answers.
-fn wait_answering(dir: &Path, generation: u16) {
+pub(crate) fn wait_answering(dir: &Path, generation: u16) {
     let log = dir.join(format!("expert-{generation}.log"));
     let start = Instant::now();
     while !std::fs::read_to_string(&log).is_ok_and(|t| t.contains("answering queries")) {

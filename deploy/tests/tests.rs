@@ -7,6 +7,7 @@ mod faults;
 mod golden;
 mod gymnasium;
 mod human;
+mod late;
 mod minari;
 mod query_rules;
 mod remote;

@@ -9,4 +9,4 @@ mod process;
 pub mod registry;
 pub mod scripted;
 
-pub use process::{log_name, run, Args};
+pub use process::{log_name, run, Args, ANSWER_DELAY_VAR};

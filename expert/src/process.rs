@@ -133,6 +133,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         disk_full_until: None,
         refused: 0,
         late: 0,
+        delay: answer_delay(),
         refit: None,
         wire_model: None,
     };
@@ -173,6 +174,22 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         "expert stopping"
     );
     Ok(())
+}
+
+/// A fault drill's knob: the expert takes this many milliseconds more for each demonstration
+/// (the tests and `alfd chaos` make answers slower than the query timeout with it).
+pub const ANSWER_DELAY_VAR: &str = "ALFD_EXPERT_ANSWER_DELAY_MS";
+
+/// The delay [`ANSWER_DELAY_VAR`] asks for (none when unset or not a number of milliseconds).
+fn answer_delay() -> Duration {
+    let ms = std::env::var(ANSWER_DELAY_VAR)
+        .ok()
+        .and_then(|v| v.trim().parse::<u64>().ok())
+        .unwrap_or(0);
+    if ms > 0 {
+        tracing::warn!("{ANSWER_DELAY_VAR}={ms}: every demonstration is {ms} ms slower");
+    }
+    Duration::from_millis(ms)
 }
 
 /// `demos.jsonl`, checked against the environment (a bad file is bad input: exit code 2).
@@ -282,6 +299,8 @@ struct Shell<'w> {
     /// Answers with a demonstration sent after their actor stopped waiting (the demonstration
     /// is kept; the actor acted alone).
     late: u32,
+    /// How long each demonstration is held back before it is asked for ([`ANSWER_DELAY_VAR`]).
+    delay: Duration,
     /// Where the refit running on its own thread sends its result.
     refit: Option<mpsc::Receiver<RefitResult>>,
     /// The model a refit just gave the core, serialised for the wire on the refit's thread, with
@@ -487,6 +506,9 @@ impl<'w> Shell<'w> {
                             "the disk was full a moment ago; query left unanswered"
                         );
                         continue;
+                    }
+                    if !self.delay.is_zero() {
+                        std::thread::sleep(self.delay);
                     }
                     let Some(action) = self.ask(actor, &state)? else {
                         continue;

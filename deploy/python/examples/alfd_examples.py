@@ -14,6 +14,16 @@ def cartpole_balance(obs):
     return 1 if obs[2] + 0.5 * obs[3] > 0.0 else 0
 
 
+def cartpole_slow(obs):
+    """cartpole_balance taking 15 ms an answer, as a slow policy or a remote service would: with
+    `--query-timeout-ms` near or below that, some answers come after their actor stopped
+    waiting (the run counts them in `answers_late` and keeps their demonstrations)."""
+    import time
+
+    time.sleep(0.015)
+    return cartpole_balance(obs)
+
+
 # --- Bring your own environment: a Gymnasium environment of your own, registered in a module.
 # A config names it as "MODULE:ID" (gymnasium.make imports MODULE first):
 #     [env]
