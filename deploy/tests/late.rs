@@ -317,7 +317,7 @@ fn a_python_demonstrator_slower_than_the_expert_waits_gives_no_answer_to_another
     // adapter is never taken for the next state).
     for d in &records {
         let balance = usize::from(d.state[2] + 0.5 * d.state[3] > 0.0);
-        assert_eq!(d.action as usize, balance, "{d:?}");
+        assert_eq!(d.action, balance, "{d:?}");
     }
     let (n, wrote, late, refused) = counts(&out);
     assert_eq!((n, wrote, refused), (records.len() as u64, n, 0));
