@@ -1,5 +1,6 @@
 //! The conformance suite of the `Env` trait, written once: seeding determinism, `reset(None)`
-//! continuing the generator, the action space, truncation at the step limit, termination (always
+//! continuing the generator (or, for an environment that draws nothing, the same trajectory
+//! whatever the seed), the action space, truncation at the step limit, termination (always
 //! exercised, by a policy that reaches a terminal state), no step after the end and no step
 //! before the first reset. Run on every built-in environment (`env_conformance.rs`) and on a
 //! Gymnasium environment through the Python adapter (`deploy/tests/gymnasium.rs`, which includes
@@ -45,7 +46,32 @@ pub fn conformance<E: Env>(
 ) where
     E::Observation: PartialEq,
 {
+    conformance_with(name, make, num_actions, action_at, reach, true);
+}
+
+/// [`conformance`], for an environment whose episodes depend on the seed of `reset`
+/// (`seed_matters`: another seed gives another trajectory, `reset(None)` continues the
+/// generator into another episode) or do not (a deterministic one, such as DeepSea: every seed
+/// and every `reset(None)` give the same trajectory for the same actions).
+pub fn conformance_with<E: Env>(
+    name: &str,
+    make: impl Fn(usize) -> E,
+    num_actions: usize,
+    action_at: impl Fn(usize) -> usize,
+    reach: impl Fn(&E::Observation) -> usize,
+    seed_matters: bool,
+) where
+    E::Observation: PartialEq,
+{
     let long = 200;
+    // What a change of seed must do to a trajectory.
+    let another_seed = |x: &Trajectory<E::Observation>, y: &Trajectory<E::Observation>, what| {
+        if seed_matters {
+            assert_ne!(x, y, "{name}: {what}");
+        } else {
+            assert_eq!(x, y, "{name}: deterministic, whatever the seed: {what}");
+        }
+    };
 
     // Seeding determinism: same seed and actions => same trajectory; another seed differs.
     let a = run_episode(&mut make(long), Some(7), &action_at, long);
@@ -56,7 +82,7 @@ pub fn conformance<E: Env>(
         "{name}: the seeded episode is long enough to compare"
     );
     assert_eq!(a, b, "{name}: same seed, same actions, same trajectory");
-    assert_ne!(a, c, "{name}: another seed gives another trajectory");
+    another_seed(&a, &c, "another seed gives another trajectory");
 
     // A fresh environment behaves as if seeded with 0.
     let unseeded = run_episode(&mut make(long), None, &action_at, long);
@@ -79,13 +105,14 @@ pub fn conformance<E: Env>(
         run_episode(&mut again, None, &action_at, long),
         "{name}"
     );
-    assert_ne!(second, first, "{name}: reset(None) does not reseed");
+    another_seed(&second, &first, "reset(None) does not reseed");
     let mut other = make(long);
     run_episode(&mut other, Some(8), &action_at, long);
     let other_second = run_episode(&mut other, None, &action_at, long);
-    assert_ne!(
-        second, other_second,
-        "{name}: after reset(None) the episode still depends on the earlier seed"
+    another_seed(
+        &second,
+        &other_second,
+        "after reset(None) the episode still depends on the earlier seed",
     );
 
     // Action space: out-of-range actions are errors and change nothing.

@@ -2,9 +2,9 @@
 //! environment.
 
 use alfd_common::env::cliffwalk::{value_iteration, CliffMap, CliffWalk};
-use alfd_common::env::{Acrobot, CartPole, MountainCar};
+use alfd_common::env::{Acrobot, CartPole, DeepSea, MountainCar};
 
-use crate::conformance_suite::conformance;
+use crate::conformance_suite::{conformance, conformance_with};
 
 #[test]
 fn cartpole_conforms() {
@@ -70,4 +70,15 @@ fn cliffwalk_conforms_on_the_default_map() {
         |i| if i < 2 { 0 } else { 1 },
         optimal(&CliffMap::default_map()),
     );
+}
+
+#[test]
+fn deepsea_conforms_as_a_deterministic_environment() {
+    // Every episode of DeepSea(10) ends at its 10th step, after more than 5; the limit of 200
+    // never cuts one. Nothing is drawn, so every seed gives the same trajectory.
+    let make = |limit| DeepSea::with_max_episode_steps(10, 42, limit).expect("valid size");
+    let map = make(10);
+    let reach = move |obs: &Vec<f32>| map.optimal_action_for(obs).expect("a cell");
+    let seed_matters = false;
+    conformance_with("deepsea", make, 2, |i| i % 2, reach, seed_matters);
 }

@@ -1,6 +1,7 @@
 //! Integration tests of the core against the reference fixtures (one test binary).
 
 mod conformance_suite;
+mod deepsea_reference;
 mod dqn_loss;
 mod env_conformance;
 mod fuzz;

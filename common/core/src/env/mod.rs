@@ -4,12 +4,14 @@
 pub mod acrobot;
 pub mod cartpole;
 pub mod cliffwalk;
+pub mod deepsea;
 mod episode;
 pub mod mountaincar;
 
 pub use acrobot::Acrobot;
 pub use cartpole::CartPole;
 pub use cliffwalk::CliffWalk;
+pub use deepsea::DeepSea;
 pub use mountaincar::MountainCar;
 
 /// What one call to [`Env::step`] returns, as Gymnasium's `step` does.
@@ -52,7 +54,7 @@ pub enum EnvError {
 /// The whole state of an environment, for a checkpoint: its generator, where it is in its
 /// episode life cycle (0 not reset, 1 running, 2 over), the steps of the episode, and its
 /// physical state (CartPole's four values, MountainCar's two, Acrobot's four, CliffWalk's
-/// position).
+/// position, DeepSea's row and column).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EnvState {
     pub rng: crate::rng::RngState,
