@@ -7,13 +7,13 @@
 //! holding every demonstration an expert counted, each late answer counted, nothing refused.
 
 use std::path::Path;
-use std::process::{Output, Stdio};
+use std::process::Output;
 use std::time::Duration;
 
 use crate::remote::{expert_host_id, finish, free_port, insecure, mirror_id, spawn_join};
 use crate::runtime::{
-    check_run_dir, find_process, finished, interrupt, rows, run_id, signal, summary, wait_until,
-    EXPERT,
+    check_run_dir, find_process, finished, interrupt, rows, run_command, run_id, signal, spawn,
+    summary, wait_until, EXPERT,
 };
 use crate::support::{alfd, text, timed, tmp, Background};
 
@@ -24,33 +24,16 @@ const TIMEOUT: &str = "--query-timeout-ms=2";
 /// `alfd run` of the shipped BDQN + KRR config with `actors` actors, its expert answering
 /// `DELAY_MS` late, every step asking while the budget lasts (no model to refit).
 fn slow_run(out: &Path, actors: usize, sets: &[&str]) -> Background {
-    let mut c = alfd();
-    c.args([
-        "run",
-        "--config",
-        "deploy/configs/cartpole-bdqn-krr.toml",
-        "--quiet",
+    let mut all = vec![
         TIMEOUT,
-    ])
-    .arg(format!("--actors={actors}"))
-    .arg(format!("--out={}", out.display()))
-    .args(["--set", &format!("expert.name={EXPERT}")])
-    .args(["--set", "expert.model=none", "--set", "query.rule=first"])
-    .args(["--set", "env.max_episode_steps=100"])
-    .env(alfd_expert::ANSWER_DELAY_VAR, DELAY_MS);
-    for s in sets {
-        if s.starts_with("--") {
-            c.arg(s);
-        } else {
-            c.args(["--set", s]);
-        }
-    }
-    Background(Some(
-        c.stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("alfd runs"),
-    ))
+        "expert.model=none",
+        "query.rule=first",
+        "env.max_episode_steps=100",
+    ];
+    all.extend_from_slice(sets);
+    let mut c = run_command(out, actors, &all);
+    c.env(alfd_expert::ANSWER_DELAY_VAR, DELAY_MS);
+    spawn(c)
 }
 
 /// Lines of a `demos.jsonl` (0 while it does not exist).
@@ -185,12 +168,7 @@ fn spawn_host(port: u16, role: &str, dir: &Path, env: &[(&str, &str)]) -> Backgr
     for (k, v) in env {
         c.env(k, v);
     }
-    Background(Some(
-        c.stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("alfd join runs"),
-    ))
+    spawn(c)
 }
 
 fn ok(o: &Output) {
@@ -207,30 +185,21 @@ fn late_answers_of_an_expert_on_another_host_reach_the_runs_file_in_order() {
     );
     let port = free_port();
     let budget = 20;
-    let mut c = alfd();
-    c.args([
-        "run",
-        "--config",
-        "deploy/configs/cartpole-bdqn-krr.toml",
-        "--quiet",
-    ])
-    .args(["--actors=0", TIMEOUT, "--insecure"])
-    .arg(format!("--listen=tcp/127.0.0.1:{port}"))
-    .arg(format!("--out={}", out.display()));
-    for s in [
-        "episodes=40".to_owned(),
-        format!("budget.total={budget}"),
-        "query.rule=first".into(),
-        "expert.model=none".into(),
-        "env.max_episode_steps=100".into(),
-    ] {
-        c.args(["--set", &s]);
-    }
-    let run = Background(Some(
-        c.stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap(),
+    let listen = format!("--listen=tcp/127.0.0.1:{port}");
+    let budget_set = format!("budget.total={budget}");
+    let run = spawn(run_command(
+        &out,
+        0,
+        &[
+            TIMEOUT,
+            "--insecure",
+            &listen,
+            "episodes=40",
+            &budget_set,
+            "query.rule=first",
+            "expert.model=none",
+            "env.max_episode_steps=100",
+        ],
     ));
     // Only the remote expert is slow: the run's own expert-1 answers at once until the swap.
     let delay = [(alfd_expert::ANSWER_DELAY_VAR, DELAY_MS)];
@@ -286,24 +255,18 @@ fn a_python_demonstrator_slower_than_the_expert_waits_gives_no_answer_to_another
     let out = tmp("late-python");
     // The demonstrator takes 15 ms; the expert waits 20 ms for it and the actors 20 ms for the
     // expert: some answers come in time, some late, some not at all.
-    let run = Background(Some(
-        alfd()
-            .args([
-                "run",
-                "--config",
-                "deploy/configs/cartpole-bdqn-krr.toml",
-                "--quiet",
-            ])
-            .args(["--actors=2", "--query-timeout-ms=20"])
-            .arg(format!("--out={}", out.display()))
-            .args(["--set", "expert.name=python:alfd_examples:cartpole_slow"])
-            .args(["--set", "expert.model=none", "--set", "query.rule=first"])
-            .args(["--set", "env.max_episode_steps=60", "--set", "episodes=20"])
-            .args(["--set", "budget.total=40"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap(),
+    let run = spawn(run_command(
+        &out,
+        2,
+        &[
+            "--query-timeout-ms=20",
+            "expert.name=python:alfd_examples:cartpole_slow",
+            "expert.model=none",
+            "query.rule=first",
+            "env.max_episode_steps=60",
+            "episodes=20",
+            "budget.total=40",
+        ],
     ));
     let o = crate::runtime::wait_output(run, Duration::from_secs(240));
     ok(&o);

@@ -49,6 +49,12 @@ pub(crate) fn run(out: &Path, actors: usize, sets: &[&str]) -> Output {
 
 /// The same, in the background (the caller stops it with [`interrupt`]).
 pub(crate) fn spawn_run(out: &Path, actors: usize, sets: &[&str]) -> Background {
+    spawn(run_command(out, actors, sets))
+}
+
+/// The command [`spawn_run`] starts: `alfd run` of the shipped BDQN + KRR config with the
+/// perfect expert, `sets` a flag of `alfd run` when it starts with `--`, else a config override.
+pub(crate) fn run_command(out: &Path, actors: usize, sets: &[&str]) -> Command {
     let mut c = alfd();
     c.args([
         "run",
@@ -60,13 +66,17 @@ pub(crate) fn spawn_run(out: &Path, actors: usize, sets: &[&str]) -> Background 
     .arg(format!("--out={}", out.display()))
     .args(["--set", &format!("expert.name={EXPERT}")]);
     for s in sets {
-        // A flag of `alfd run` as it is, anything else a config override.
         if s.starts_with("--") {
             c.arg(s);
         } else {
             c.args(["--set", s]);
         }
     }
+    c
+}
+
+/// Starts `c` in the background with its output piped.
+pub(crate) fn spawn(mut c: Command) -> Background {
     Background(Some(
         c.stdout(Stdio::piped())
             .stderr(Stdio::piped())

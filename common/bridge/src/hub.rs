@@ -428,8 +428,7 @@ fn forward(
     let mut bells = vec![Doorbell::Bridge];
     bells.extend((0..MAX_ACTORS as u16).map(Doorbell::Actor));
     let waiter = wire.waiter_on(&bells)?;
-    let mut hub = Forwarder::new(&wire, opts, down, events, roster)?;
-    hub.counters = counters;
+    let mut hub = Forwarder::new(&wire, opts, down, events, (roster, counters))?;
     while !stop.load(Ordering::Relaxed) {
         if waiter.wait(TICK)? == Wake::Signal {
             // The launcher handles the signal; this thread goes on until told to stop.
@@ -492,13 +491,13 @@ impl<'w, 'a> Forwarder<'w, 'a> {
         opts: &'a HubOptions,
         down: &'a zenoh::pubsub::Publisher<'static>,
         events: &'a mpsc::Sender<HubEvent>,
-        roster: Arc<Mutex<Roster>>,
+        (roster, counters): (Arc<Mutex<Roster>>, Arc<Counters>),
     ) -> Result<Self> {
         Ok(Self {
             roster,
             impostors: 0,
             late: 0,
-            counters: Arc::default(),
+            counters,
             wire,
             opts,
             down,
