@@ -3,8 +3,9 @@
 //! resumed, and, as root, the run directory's file system filled and freed) keeps every
 //! invariant: it finishes, every episode is in `episodes.csv` once, `demos.jsonl` is gap-free
 //! within the budget and as counted, every checkpoint loads, nothing is left running. Two more
-//! variants: Python environment adapters among the targets, and a joined host (`alfd join` on
-//! 127.0.0.1) among them.
+//! variants: Python environment adapters among the targets, a joined host (`alfd join` on
+//! 127.0.0.1) among them, and the expert on a joined host behind a link slowed below what the
+//! actors wait (its `demos.jsonl` must end as the start of the run's).
 
 use std::path::{Path, PathBuf};
 use std::process::Output;
@@ -167,4 +168,53 @@ fn a_seeded_chaos_run_with_a_joined_host_keeps_every_invariant() {
         .filter(|l| l.split(',').nth(8) == Some("1"))
         .count();
     assert!(remote >= 1, "no episode of the joined host's actor");
+}
+
+#[test]
+fn a_seeded_chaos_run_with_its_expert_behind_a_slow_link_loses_no_demonstration() {
+    let _time = timed!();
+    let dir = tmp("chaos-slow-link");
+    let args = [
+        "--join-expert",
+        "cartpole-200",
+        "--duration",
+        "40",
+        "--every",
+        "1.5",
+        "--faults",
+        "delay=3,swap=1,kill=1",
+        "--set",
+        "budget.total=2000",
+        "--set",
+        "query.rule=js-spread",
+    ];
+    let (out, o) = chaos(&dir, "3", 300, &args);
+    let report = held(&out, &o);
+    let host_file = report["invariants"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|v| v["name"] == "expert host's file");
+    assert!(host_file.is_some_and(|v| v["ok"] == true), "{report:#}");
+    let delays = report["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| kind(e) == "delay-link" && e["carried_out"] == true)
+        .count();
+    assert!(delays >= 5, "{delays} delays: {report:#}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    // The link was slower than the actors wait: answers came late, and none was refused.
+    assert!(
+        summary["answers_late"].as_u64().unwrap() >= 1,
+        "{summary:#}"
+    );
+    assert_eq!(summary["demos_refused"], 0);
+    let records = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let remote = records
+        .iter()
+        .filter(|d| d.expert == "cartpole-200")
+        .count();
+    assert!(remote >= 50, "{remote} demonstrations of the remote expert");
 }

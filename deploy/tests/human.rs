@@ -31,9 +31,20 @@ fn cartpole_config(dir: &Path, budget: u32, episodes: u32) -> PathBuf {
 /// Starts `alfd run --expert human` on a free port; returns the run and the page's address
 /// (`127.0.0.1:PORT`), as the expert wrote it in the run directory.
 fn start_run(config: &Path, run_dir: &Path, actors: usize) -> (Background, String) {
+    start_run_with(config, run_dir, actors, &[])
+}
+
+/// [`start_run`] with more arguments of `alfd run`.
+fn start_run_with(
+    config: &Path,
+    run_dir: &Path,
+    actors: usize,
+    args: &[&str],
+) -> (Background, String) {
     let mut run = Background(Some(
         alfd()
             .args(["run", "--quiet", "--expert=human", "--human-port=0"])
+            .args(args)
             .arg(format!("--actors={actors}"))
             .arg(format!("--config={}", config.display()))
             .arg(format!("--out={}", run_dir.display()))
@@ -464,6 +475,48 @@ fn in_chromium_the_cliffwalk_page_shows_the_grid_and_takes_an_arrow_key() {
     assert_eq!(s["waiting"], "2");
     assert_eq!(s["buttons"][0], "up (0)");
     assert!(shot.is_file());
+}
+
+/// A person far slower than the actor waits (300 ms): the page stops showing a query its actor
+/// gave up, a click on it afterwards is refused with 409 and records nothing, and the run ends
+/// with no demonstration and nothing refused.
+#[test]
+fn a_persons_click_after_the_actor_stopped_waiting_is_refused_and_records_nothing() {
+    let _time = timed!();
+    let out = tmp("human-late");
+    let config = cartpole_config(&out, 2, 3);
+    let run_dir = out.join("run");
+    let (mut run, addr) = start_run_with(&config, &run_dir, 1, &["--human-query-timeout-ms=300"]);
+    let s = until(&addr, "a query", |s| s["waiting"] == 1);
+    let old = s["query"]["id"].as_u64().unwrap();
+    // The actor gives up after 300 ms and asks again on a later step: another query is shown.
+    until(&addr, "the first query given up", |s| {
+        s["query"]["id"].as_u64().is_some_and(|id| id != old)
+    });
+    let (code, body) = http(
+        &addr,
+        "POST",
+        "/answer",
+        Some(&format!("{{\"id\":{old},\"action\":1}}")),
+    );
+    assert_eq!(code, 409, "{body}");
+    assert!(body.contains("given up"), "{body}");
+    let s = state(&addr);
+    assert_eq!(
+        (s["answered"].as_u64(), s["budget_left"].as_u64()),
+        (Some(0), Some(2))
+    );
+    let o = run.0.take().unwrap().wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let summary = crate::runtime::summary(&run_dir);
+    assert_eq!(summary["demos"], 0, "{summary}");
+    assert_eq!(summary["demos_refused"], 0, "{summary}");
+    assert_eq!(summary["demos_experts_wrote"], 0, "{summary}");
+    assert_eq!(
+        std::fs::read_to_string(run_dir.join("demos.jsonl")).unwrap_or_default(),
+        ""
+    );
+    crate::runtime::check_run_dir(&run_dir, 1);
 }
 
 #[test]

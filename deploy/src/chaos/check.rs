@@ -14,7 +14,7 @@ pub struct Verdict {
     pub detail: String,
 }
 
-fn verdict(name: &'static str, result: Result<String, String>) -> Verdict {
+pub fn verdict(name: &'static str, result: Result<String, String>) -> Verdict {
     match result {
         Ok(detail) => Verdict {
             name,
@@ -175,6 +175,37 @@ fn demos_agree(
     ))
 }
 
+/// The expert host's `demos.jsonl` (`host`) is the start of the run's (`run`), line for line:
+/// every demonstration its expert wrote reached the run's file, in its place.
+pub fn host_file_agrees(run: &Path, host: &Path) -> Result<String, String> {
+    let read = |p: &Path| std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()));
+    let (run, host) = (read(run)?, read(host)?);
+    let run_lines: Vec<&str> = run.lines().collect();
+    let host_lines: Vec<&str> = host.lines().collect();
+    if let Some(i) = host_lines.iter().zip(&run_lines).position(|(h, r)| h != r) {
+        return Err(format!(
+            "line {} differs: the host's {:?}, the run's {:?}",
+            i + 1,
+            host_lines[i],
+            run_lines[i]
+        ));
+    }
+    if host_lines.len() > run_lines.len() {
+        return Err(format!(
+            "the host's demos.jsonl holds {} lines, the run's {}: lines {}.. never reached the run",
+            host_lines.len(),
+            run_lines.len(),
+            run_lines.len() + 1
+        ));
+    }
+    Ok(format!(
+        "the host's {} lines are the run's first {} (the run holds {})",
+        host_lines.len(),
+        host_lines.len(),
+        run_lines.len()
+    ))
+}
+
 /// `learner.ckpt` and every `actor-<id>.ckpt` on disk load.
 fn checkpoints_load(dir: &Path, config_toml: &str, actors: usize) -> Result<String, String> {
     let mut loaded = Vec::new();
@@ -283,6 +314,26 @@ mod tests {
         assert!(demos_agree(&gap, &summary(5, 2, false), 3)
             .unwrap_err()
             .contains("line 2: index 2 where 1 was due"));
+    }
+
+    #[test]
+    fn the_expert_hosts_file_must_be_the_start_of_the_runs() {
+        let dir = std::env::temp_dir().join(format!("alfd-chaos-host-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (run, host) = (dir.join("run.jsonl"), dir.join("host.jsonl"));
+        std::fs::write(&run, "a\nb\nc\n").unwrap();
+        for (text, ok) in [
+            ("a\nb\n", true),
+            ("a\nb\nc\n", true),
+            ("", true),
+            ("a\nx\n", false),
+            ("a\nb\nc\nd\n", false),
+        ] {
+            std::fs::write(&host, text).unwrap();
+            let got = host_file_agrees(&run, &host);
+            assert_eq!(got.is_ok(), ok, "{text:?}: {got:?}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

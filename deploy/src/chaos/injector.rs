@@ -47,6 +47,12 @@ pub enum Fault {
     KillLauncher,
     /// The run directory's file system filled up for the duration, then freed.
     FillDisk(#[serde(with = "millis")] Duration),
+    /// The link to the joined expert host holds every byte for the first duration (longer than
+    /// the actors wait for an answer), for the second.
+    DelayLink(
+        #[serde(with = "millis")] Duration,
+        #[serde(with = "millis")] Duration,
+    ),
 }
 
 impl Fault {
@@ -58,6 +64,7 @@ impl Fault {
             Fault::SwapExpert(_) => "swap",
             Fault::KillLauncher => "launcher",
             Fault::FillDisk(_) => "disk",
+            Fault::DelayLink(..) => "delay",
         }
     }
 }
@@ -79,11 +86,13 @@ pub struct Mix {
     pub swap: u32,
     pub launcher: u32,
     pub disk: u32,
+    /// The link to a joined expert host slowed down (only with one).
+    pub delay: u32,
 }
 
 impl Mix {
     fn total(&self) -> u32 {
-        self.kill + self.pause + self.swap + self.launcher + self.disk
+        self.kill + self.pause + self.swap + self.launcher + self.disk + self.delay
     }
 }
 
@@ -130,6 +139,15 @@ impl Injector {
         self
     }
 
+    /// Slows the link to a joined expert host down too (with `false`, no delay faults whatever
+    /// their weight).
+    pub fn with_expert_host(mut self, expert_host: bool) -> Self {
+        if !expert_host {
+            self.mix.delay = 0;
+        }
+        self
+    }
+
     /// Aims kills and pauses at a joined host too, as likely as the learner (with `false`, a
     /// seed gives the schedule of a run without one).
     pub fn with_host(mut self, host: bool) -> Self {
@@ -159,6 +177,7 @@ impl Injector {
             (m.swap, 2),
             (m.launcher, 3),
             (m.disk, 4),
+            (m.delay, 5),
         ] {
             if pick >= weight {
                 pick -= weight;
@@ -175,7 +194,11 @@ impl Injector {
                     Fault::SwapExpert(self.experts[i].clone())
                 }
                 3 => Fault::KillLauncher,
-                _ => Fault::FillDisk(self.pause_length()),
+                4 => Fault::FillDisk(self.pause_length()),
+                _ => {
+                    let hold = Duration::from_millis(self.rng.random_range(1200..3000));
+                    Fault::DelayLink(hold, self.pause_length() * 2)
+                }
             };
         }
         unreachable!("the pick is below the total of the weights")
@@ -212,6 +235,7 @@ mod tests {
         swap: 1,
         launcher: 1,
         disk: 1,
+        delay: 0,
     };
 
     fn faults(seed: u64, mix: Mix, experts: &[&str], secs: u64) -> Vec<(u64, Fault)> {
@@ -274,6 +298,38 @@ mod tests {
         let (without, with) = (schedule(false), schedule(true));
         assert_eq!(at_host(&without), 0);
         assert!(at_host(&with) > 0, "{with:?}");
+    }
+
+    #[test]
+    fn the_link_is_delayed_only_with_an_expert_host_and_longer_than_an_answer_is_awaited() {
+        let mix = Mix { delay: 1, ..ALL };
+        let schedule = |expert_host: bool| {
+            let mut inj = Injector::new(9, Duration::from_secs(1), 2, vec![], mix)
+                .with_expert_host(expert_host);
+            (0..400)
+                .filter_map(|t| inj.due(Duration::from_millis(t * 100)))
+                .collect::<Vec<_>>()
+        };
+        assert!(schedule(false).iter().all(|f| f.kind() != "delay"));
+        let delays: Vec<(Duration, Duration)> = schedule(true)
+            .into_iter()
+            .filter_map(|f| match f {
+                Fault::DelayLink(hold, lasting) => Some((hold, lasting)),
+                _ => None,
+            })
+            .collect();
+        assert!(!delays.is_empty());
+        for (hold, lasting) in delays {
+            // The actors wait 1 s for an answer by default (`--query-timeout-ms`).
+            assert!(
+                (1200..3000).contains(&(hold.as_millis() as u64)),
+                "{hold:?}"
+            );
+            assert!(
+                (600..6000).contains(&(lasting.as_millis() as u64)),
+                "{lasting:?}"
+            );
+        }
     }
 
     #[test]
@@ -348,6 +404,7 @@ mod tests {
             swap: 0,
             launcher: 0,
             disk: 0,
+            delay: 0,
         };
         assert!(faults(5, none, &["x"], 300).is_empty());
     }

@@ -1,11 +1,12 @@
 //! `alfd chaos`: a multi-process run (`alfd run`) under faults drawn from a seed ([`injector`]):
 //! processes killed with SIGKILL or paused with SIGSTOP/SIGCONT, the expert swapped, the
 //! launcher itself killed (then `alfd resume` continues the run), the run directory's file system
-//! filled up and freed. When the faults end the run goes on to its end, and the invariants of
+//! filled up and freed, the link to an expert on a joined host slowed below what the actors wait. When the faults end the run goes on to its end, and the invariants of
 //! [`check`] are checked; everything is written to `RUN_DIR/chaos.json` and `RUN_DIR/chaos.md`.
 
 mod check;
 mod injector;
+mod relay;
 mod report;
 
 use std::path::{Path, PathBuf};
@@ -42,8 +43,8 @@ pub struct ChaosArgs {
     /// Mean seconds between two faults.
     #[arg(long, default_value_t = 4.0)]
     pub every: f64,
-    /// The kinds of fault, with their weights: `kill`, `pause`, `swap`, `launcher`, `disk`
-    /// (`KIND` or `KIND=WEIGHT`, comma-separated).
+    /// The kinds of fault, with their weights: `kill`, `pause`, `swap`, `launcher`, `disk`,
+    /// `delay` (with `--join-expert`) (`KIND` or `KIND=WEIGHT`, comma-separated).
     #[arg(
         long,
         value_delimiter = ',',
@@ -71,6 +72,13 @@ pub struct ChaosArgs {
     /// kills then (a resumed run listens on no port).
     #[arg(long, default_value_t = 0)]
     pub join_actors: usize,
+    /// Also serve the run's expert from a joined host: `alfd join --expert NAME` in
+    /// `RUN_DIR/expert-host`, connected through a relay that `delay` faults slow down (every
+    /// byte held 1.2 to 3 s, longer than the actors wait for an answer). A host whose expert
+    /// was swapped away is started again (its expert then becomes the run's again); its
+    /// `demos.jsonl` must end as the start of the run's, line for line.
+    #[arg(long, value_name = "NAME")]
+    pub join_expert: Option<String>,
     /// Run nothing: re-make `RUN_DIR/chaos.md` from the `chaos.json` of an earlier chaos run.
     #[arg(long)]
     pub summarize: bool,
@@ -105,14 +113,21 @@ struct Chaos<'a> {
     /// would (a process of a killed launch can die after the last launch's own cleaning).
     swept: usize,
     launches: u32,
-    /// The joined host, if the run has one.
+    /// The joined host of actors, if the run has one.
     joined: Option<Joined>,
+    /// The joined host of the expert, if the run has one.
+    expert_host: Option<Joined>,
+    /// The slow link to the expert host, and when its delay ends.
+    relay: Option<(relay::Relay, Option<Duration>)>,
 }
 
 /// The `alfd join` of a chaos run's joined host, started again whenever it is gone.
 struct Joined {
     connect: String,
+    /// Its actors (0 for the expert's host).
     actors: usize,
+    /// The expert it serves, if it is the expert's host.
+    expert: Option<String>,
     child: Option<Child>,
     /// Hosts started so far (each in a directory of its own).
     starts: u32,
@@ -134,10 +149,24 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
         )));
     }
     let alfd = std::env::current_exe().context("cannot locate the running alfd binary")?;
-    let listen = (args.join_actors > 0)
+    let listen = (args.join_actors > 0 || args.join_expert.is_some())
         .then(free_loopback_port)
         .transpose()?;
     let launcher = spawn_run(&alfd, &args, listen)?;
+    let relay = match (listen, &args.join_expert) {
+        (Some(port), Some(_)) => {
+            Some(relay::Relay::start(port).context("cannot start the expert host's relay")?)
+        }
+        _ => None,
+    };
+    let joined = |port: u16, actors: usize, expert: Option<String>| Joined {
+        connect: format!("tcp/127.0.0.1:{port}"),
+        actors,
+        expert,
+        child: None,
+        starts: 0,
+        pids: Vec::new(),
+    };
     let mut chaos = Chaos {
         args: &args,
         alfd,
@@ -150,13 +179,13 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
         run_ids: Vec::new(),
         swept: 0,
         launches: 1,
-        joined: listen.map(|port| Joined {
-            connect: format!("tcp/127.0.0.1:{port}"),
-            actors: args.join_actors,
-            child: None,
-            starts: 0,
-            pids: Vec::new(),
-        }),
+        joined: listen
+            .filter(|_| args.join_actors > 0)
+            .map(|port| joined(port, args.join_actors, None)),
+        expert_host: relay
+            .as_ref()
+            .map(|r| joined(r.port(), 0, args.join_expert.clone())),
+        relay: relay.map(|r| (r, None)),
     };
     let cfg = run_config(&args.out);
     let experts = if args.experts.is_empty() {
@@ -173,13 +202,14 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
         eprintln!("chaos: a Gymnasium run cannot be resumed: no launcher kills");
         mix.launcher = 0;
     }
-    if chaos.joined.is_some() && mix.launcher > 0 {
+    if listen.is_some() && mix.launcher > 0 {
         eprintln!("chaos: a resumed run listens on no port: no launcher kills with a joined host");
         mix.launcher = 0;
     }
     let mut injector = Injector::new(args.seed, gap, actors, experts, mix)
         .with_adapters(adapters)
-        .with_host(chaos.joined.is_some());
+        .with_host(chaos.joined.is_some())
+        .with_expert_host(chaos.expert_host.is_some());
     let ended = chaos.drive(&mut injector);
     chaos.settle();
     report::report(&chaos, ended)
@@ -193,6 +223,7 @@ fn parse_mix(faults: &[String]) -> anyhow::Result<Mix> {
         swap: 0,
         launcher: 0,
         disk: 0,
+        delay: 0,
     };
     for f in faults.iter().filter(|f| !f.is_empty()) {
         let (kind, weight) = f.split_once('=').unwrap_or((f, "1"));
@@ -205,9 +236,10 @@ fn parse_mix(faults: &[String]) -> anyhow::Result<Mix> {
             "swap" => &mut mix.swap,
             "launcher" => &mut mix.launcher,
             "disk" => &mut mix.disk,
+            "delay" => &mut mix.delay,
             other => {
                 return Err(usage(format!(
-                    "--faults: unknown fault {other:?} (kill, pause, swap, launcher, disk)"
+                    "--faults: unknown fault {other:?} (kill, pause, swap, launcher, disk, delay)"
                 )))
             }
         };
@@ -354,6 +386,32 @@ impl Chaos<'_> {
                 self.filler = None;
             }
         }
+        if let Some((relay, until)) = &mut self.relay {
+            if until.is_some_and(|u| all || now >= u) {
+                relay.set_delay(Duration::ZERO);
+                *until = None;
+            }
+        }
+    }
+
+    /// Every byte on the expert host's link held for `hold`, during `lasting` from now.
+    fn delay_link(&mut self, hold: Duration, lasting: Duration) -> (String, bool) {
+        let now = self.now();
+        match &mut self.relay {
+            Some((_, Some(_))) => ("skipped: the link is slow already".to_owned(), false),
+            Some((relay, until)) => {
+                relay.set_delay(hold);
+                *until = Some(now + lasting);
+                (
+                    format!(
+                        "the expert host's link holds every byte {} ms",
+                        hold.as_millis()
+                    ),
+                    true,
+                )
+            }
+            None => ("no expert host to slow down".to_owned(), false),
+        }
     }
 
     /// The current run id (it changes with every launch).
@@ -405,6 +463,7 @@ impl Chaos<'_> {
             Fault::SwapExpert(name) => self.swap(name),
             Fault::KillLauncher => self.kill_launcher()?,
             Fault::FillDisk(d) => self.fill_disk(*d),
+            Fault::DelayLink(hold, lasting) => self.delay_link(*hold, *lasting),
         };
         self.log(fault, outcome);
         Ok(())
@@ -475,45 +534,37 @@ impl Chaos<'_> {
         outcome
     }
 
-    /// Starts the joined host when it is not running (at first, and after a kill); it
-    /// connects once the run has written its `run.json`.
+    /// Starts the joined hosts when they are not running (at first, after a kill, and the
+    /// expert's after its expert was swapped away); they connect once the run has written its
+    /// `run.json`. The expert's host keeps one directory, so that what it held is compared with
+    /// the run's file whenever its expert becomes the run's again.
     fn keep_host(&mut self) {
         let out = self.args.out.clone();
-        let Some(j) = &mut self.joined else { return };
-        if let Some(child) = &mut j.child {
-            if matches!(child.try_wait(), Ok(None)) {
-                return;
-            }
-        }
-        if !out.join("run.json").is_file() {
+        if self.finished() || !out.join("run.json").is_file() {
             return;
         }
-        j.starts += 1;
-        let dir = out.join(format!("joined-{}", j.starts));
-        let spawned = silent(
-            Command::new(&self.alfd)
-                .args(["join", "--connect", &j.connect, "--insecure"])
-                .args(["--actors", &j.actors.to_string()])
-                .args(["--dir", &dir.to_string_lossy()]),
-        );
-        match spawned {
-            Ok(child) => {
-                j.pids.push(child.id());
-                j.child = Some(child);
-            }
-            Err(e) => tracing::warn!("cannot start alfd join: {e}"),
+        for j in [&mut self.joined, &mut self.expert_host]
+            .into_iter()
+            .flatten()
+        {
+            keep(&self.alfd, &out, j);
         }
     }
 
-    /// Nothing left paused, filled or swapping; the joined host told to go.
+    /// Nothing left paused, filled or swapping; the joined hosts told to go.
     fn settle(&mut self) {
         self.release(true);
         if let Some(mut child) = self.swap.take() {
             let _ = child.wait();
         }
-        if let Some(mut child) = self.joined.as_mut().and_then(|j| j.child.take()) {
-            signal("TERM", child.id());
-            let _ = child.wait();
+        for j in [&mut self.joined, &mut self.expert_host]
+            .into_iter()
+            .flatten()
+        {
+            if let Some(mut child) = j.child.take() {
+                signal("TERM", child.id());
+                let _ = child.wait();
+            }
         }
         self.clean_hosts();
         self.sweep_launches();
@@ -544,11 +595,15 @@ impl Chaos<'_> {
     /// once their orphaned actors have seen their host gone and exited (up to 30 s); their
     /// copies' ids join the run's, for the "nothing left" invariant.
     fn clean_hosts(&mut self) {
-        let Some(j) = &self.joined else { return };
+        let pids: Vec<u32> = [&self.joined, &self.expert_host]
+            .into_iter()
+            .flatten()
+            .flat_map(|j| j.pids.iter().copied())
+            .collect();
         let ours = |id: &str| {
             alfd_wire::is_alfd_run_id(id)
                 && !id.starts_with('r')
-                && j.pids.iter().any(|pid| id.ends_with(&format!("-{pid}")))
+                && pids.iter().any(|pid| id.ends_with(&format!("-{pid}")))
         };
         let copies: Vec<String> = alfd_wire::runs_with_files()
             .into_iter()
@@ -563,6 +618,36 @@ impl Chaos<'_> {
             }
         }
         self.run_ids.extend(copies);
+    }
+}
+
+/// Starts the joined host `j` (`alfd join`) unless it is running; an expert's host in
+/// `out/expert-host`, a host of actors in a directory per start.
+fn keep(alfd: &Path, out: &Path, j: &mut Joined) {
+    if let Some(child) = &mut j.child {
+        if matches!(child.try_wait(), Ok(None)) {
+            return;
+        }
+    }
+    j.starts += 1;
+    let mut cmd = Command::new(alfd);
+    cmd.args(["join", "--connect", &j.connect, "--insecure"]);
+    let dir = match &j.expert {
+        Some(name) => {
+            cmd.args(["--expert", name]);
+            out.join("expert-host")
+        }
+        None => {
+            cmd.args(["--actors", &j.actors.to_string()]);
+            out.join(format!("joined-{}", j.starts))
+        }
+    };
+    match silent(cmd.args(["--dir", &dir.to_string_lossy()])) {
+        Ok(child) => {
+            j.pids.push(child.id());
+            j.child = Some(child);
+        }
+        Err(e) => tracing::warn!("cannot start alfd join: {e}"),
     }
 }
 

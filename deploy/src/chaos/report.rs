@@ -32,6 +32,11 @@ pub(super) fn report(chaos: &Chaos<'_>, ended: Result<(), String>) -> anyhow::Re
             .unwrap_or_else(|| "the launcher finished the run".to_owned()),
     }];
     verdicts.extend(check::check(dir, &config_toml, want));
+    if chaos.expert_host.is_some() {
+        let host = dir.join("expert-host").join("demos.jsonl");
+        let agrees = check::host_file_agrees(&dir.join("demos.jsonl"), &host);
+        verdicts.push(check::verdict("expert host's file", agrees));
+    }
     verdicts.push(nothing_left(&chaos.run_ids, chaos.swept));
     let mut counts = BTreeMap::<&str, usize>::new();
     for e in &chaos.events {
@@ -48,6 +53,10 @@ pub(super) fn report(chaos: &Chaos<'_>, ended: Result<(), String>) -> anyhow::Re
         "launches": chaos.launches,
         "joined_host": chaos.joined.as_ref().map(|j| serde_json::json!({
             "actors": j.actors,
+            "starts": j.starts,
+        })),
+        "expert_host": chaos.expert_host.as_ref().map(|j| serde_json::json!({
+            "expert": j.expert,
             "starts": j.starts,
         })),
         "faults": counts,
@@ -154,7 +163,8 @@ fn markdown(report: &Value, summary: &Value) -> String {
             summary["mean_return_last_50"]
                 .as_f64()
                 .map_or("?".to_owned(), |x| format!("{x:.1}")),
-        ) + &joined_host(&report["joined_host"]),
+        ) + &joined_host(&report["joined_host"])
+            + &expert_host(&report["expert_host"], summary),
         String::new(),
         "## Faults".to_owned(),
         String::new(),
@@ -192,6 +202,19 @@ fn joined_host(host: &Value) -> String {
         (Some(actors), Some(starts)) => format!(
             " A joined host (`alfd join` on 127.0.0.1) with {actors} actor(s), started {starts} \
              time(s)."
+        ),
+        _ => String::new(),
+    }
+}
+
+/// The joined expert host's sentence of the report (empty without one).
+fn expert_host(host: &Value, summary: &Value) -> String {
+    match (host["expert"].as_str(), host["starts"].as_u64()) {
+        (Some(expert), Some(starts)) => format!(
+            " The expert `{expert}` on a joined host behind a relay that delay faults slow              down, started {starts} time(s); {} answers came after their actor stopped waiting.",
+            summary["answers_late"]
+                .as_u64()
+                .map_or("?".to_owned(), |x| x.to_string())
         ),
         _ => String::new(),
     }
