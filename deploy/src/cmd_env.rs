@@ -42,13 +42,20 @@ pub enum EnvCommand {
 /// Arguments of `alfd env rollout`.
 #[derive(Debug, clap::Args)]
 pub struct RolloutArgs {
-    /// Environment name: `cartpole`, `mountaincar` or `acrobot`.
+    /// Environment name: `cartpole`, `mountaincar`, `acrobot` or `deepsea`.
     #[arg(long)]
     pub env: String,
     /// The float64 state the episode begins from, comma-separated: X,XDOT,THETA,THETADOT
-    /// (cartpole), POSITION,VELOCITY (mountaincar) or THETA1,THETA2,DTHETA1,DTHETA2 (acrobot).
+    /// (cartpole), POSITION,VELOCITY (mountaincar) or THETA1,THETA2,DTHETA1,DTHETA2 (acrobot);
+    /// not for deepsea, which starts at the top-left cell.
     #[arg(long, value_name = "V,V,...", allow_hyphen_values = true)]
-    pub initial_state: String,
+    pub initial_state: Option<String>,
+    /// DeepSea: N, the grid's side (1 to 100).
+    #[arg(long)]
+    pub size: Option<usize>,
+    /// DeepSea: the seed of the action mapping (bsuite's `mapping_seed`).
+    #[arg(long)]
+    pub mapping_seed: Option<u32>,
     /// Comma-separated actions: 0 (push left) or 1 (push right) for cartpole; 0 (left), 1 (none)
     /// or 2 (right) for mountaincar; 0, 1 or 2 (torque -1, 0, +1) for acrobot. Actions left over
     /// when the episode ends are ignored, with a warning.
@@ -178,9 +185,20 @@ struct Rollable<E, const N: usize> {
 fn rollout(args: &RolloutArgs, out: &mut impl Write, err: &mut impl Write) -> anyhow::Result<()> {
     let name = check_env(
         &args.env,
-        &[EnvName::Cartpole, EnvName::Mountaincar, EnvName::Acrobot],
+        &[
+            EnvName::Cartpole,
+            EnvName::Mountaincar,
+            EnvName::Acrobot,
+            EnvName::Deepsea,
+        ],
         "rollout",
     )?;
+    if name == EnvName::Deepsea {
+        return roll_deepsea(args, out, err);
+    }
+    if args.size.is_some() || args.mapping_seed.is_some() {
+        return Err(usage("--size and --mapping-seed apply to deepsea only"));
+    }
     let limit = args.max_steps.unwrap_or(name.default_max_episode_steps());
     match name {
         EnvName::Cartpole => roll(
@@ -216,7 +234,9 @@ fn rollout(args: &RolloutArgs, out: &mut impl Write, err: &mut impl Write) -> an
             out,
             err,
         ),
-        EnvName::Cliffwalk | EnvName::Gymnasium => unreachable!("refused by check_env"),
+        EnvName::Cliffwalk | EnvName::Gymnasium | EnvName::Deepsea => {
+            unreachable!("refused by check_env, or rolled by roll_deepsea")
+        }
     }
 }
 
@@ -230,7 +250,13 @@ fn roll<E: Env, const N: usize>(
     out: &mut impl Write,
     err: &mut impl Write,
 ) -> anyhow::Result<()> {
-    let state = parse_state::<N>(&args.initial_state, r.names)?;
+    let given = args.initial_state.as_deref().ok_or_else(|| {
+        usage(format!(
+            "--initial-state is needed: the state to start from ({})",
+            r.names
+        ))
+    })?;
+    let state = parse_state::<N>(given, r.names)?;
     let actions = parse_actions(&args.actions, r.env.num_actions())?;
     (r.set_state)(&mut r.env, state);
     let mut lines = Vec::new();
@@ -246,7 +272,7 @@ fn roll<E: Env, const N: usize>(
                 "--initial-state {}: the state stopped being finite at step {} (action {action}): \
                  {} became {}; the dynamics overflow f64 from an initial state this large, so \
                  nothing was printed (give one of smaller magnitude)",
-                args.initial_state,
+                given,
                 i + 1,
                 r.names.split(',').nth(c).unwrap_or("a value"),
                 state[c]
@@ -275,6 +301,65 @@ fn roll<E: Env, const N: usize>(
         writeln!(err, "{w}").context("writing to stderr")?;
     }
     Ok(())
+}
+
+/// One step of a DeepSea rollout: the agent's `[row, column]` after it (`null` after the last
+/// row) and what the step gave.
+#[derive(serde::Serialize)]
+struct DeepSeaLine {
+    position: Option<[usize; 2]>,
+    reward: f64,
+    terminated: bool,
+    truncated: bool,
+}
+
+/// `alfd env rollout --env deepsea --size N --mapping-seed S --actions ...`: one line per step.
+fn roll_deepsea(
+    args: &RolloutArgs,
+    out: &mut impl Write,
+    err: &mut impl Write,
+) -> anyhow::Result<()> {
+    if args.initial_state.is_some() {
+        return Err(usage(
+            "--initial-state: deepsea starts at the top-left cell; give --size and --mapping-seed",
+        ));
+    }
+    let size = args
+        .size
+        .ok_or_else(|| usage("--size is needed for deepsea (N, the grid's side)"))?;
+    let seed = args
+        .mapping_seed
+        .ok_or_else(|| usage("--mapping-seed is needed for deepsea"))?;
+    let limit = args.max_steps.unwrap_or(size);
+    let mut env = alfd_common::env::DeepSea::with_max_episode_steps(size, seed, limit)
+        .map_err(|e| usage(format!("--size: {e}")))?;
+    let actions = parse_actions(&args.actions, env.num_actions())?;
+    env.reset(Some(0));
+    let mut lines = Vec::new();
+    for (i, &action) in actions.iter().enumerate() {
+        let step = env
+            .step(action)
+            .with_context(|| format!("step {} (action {action})", i + 1))?;
+        let line = DeepSeaLine {
+            position: env.position().map(|(r, c)| [r, c]),
+            reward: step.reward,
+            terminated: step.terminated,
+            truncated: step.truncated,
+        };
+        serde_json::to_writer(&mut lines, &line).context("writing a step")?;
+        lines.push(b'\n');
+        if step.done() && i + 1 < actions.len() {
+            out.write_all(&lines).context("writing the steps")?;
+            return writeln!(
+                err,
+                "warning: the episode ended after step {}; the {} remaining action(s) were ignored",
+                i + 1,
+                actions.len() - i - 1
+            )
+            .context("writing to stderr");
+        }
+    }
+    out.write_all(&lines).context("writing the steps")
 }
 
 /// Reads and parses a map file; both failures are usage errors naming the file.
@@ -320,9 +405,11 @@ mod tests {
     fn rollout_args(env: &str, state: &str, actions: &str, max_steps: usize) -> RolloutArgs {
         RolloutArgs {
             env: env.to_string(),
-            initial_state: state.to_string(),
+            initial_state: Some(state.to_string()),
             actions: actions.to_string(),
             max_steps: Some(max_steps),
+            size: None,
+            mapping_seed: None,
         }
     }
 
@@ -446,7 +533,10 @@ mod tests {
             panic!("rollout expected")
         };
         assert_eq!(
-            parse_state::<4>(&args.initial_state, "X,XDOT,THETA,THETADOT"),
+            parse_state::<4>(
+                args.initial_state.as_deref().unwrap(),
+                "X,XDOT,THETA,THETADOT"
+            ),
             Ok([-0.02, 0.01, -0.03, 0.04])
         );
         assert_eq!(args.max_steps, None);
@@ -525,7 +615,7 @@ mod tests {
             ),
             (
                 rollout_args("pendulum", "0,0,0,0", "1", 10),
-                "unknown environment `pendulum` (known: cartpole, cliffwalk, mountaincar, acrobot, gymnasium)",
+                "unknown environment `pendulum` (known: cartpole, cliffwalk, mountaincar, acrobot, gymnasium, deepsea)",
             ),
             (
                 rollout_args("cliffwalk", "0,0,0,0", "1", 10),

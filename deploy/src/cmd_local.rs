@@ -12,6 +12,7 @@ use std::time::Instant;
 use alfd_common::agent::{DemoRecord, Demonstrator};
 use alfd_common::config::{DemoModelChoice, EnvName, ExperimentConfig};
 use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration, CliffWalk};
+use alfd_common::query::Oracle;
 use alfd_common::record::{episodes_csv, EpisodeRecord, RunSummary};
 use alfd_common::runner::{
     run_neural_on, run_tabular_checkpointed, Checkpoints, NeuralEnvs, NeuralRun, PriorDemo,
@@ -189,8 +190,9 @@ fn demos_jsonl(demos: &[DemoRecord]) -> anyhow::Result<Vec<u8>> {
 /// What a run is built from, beyond its config: everything that reads the user's files or names.
 pub(crate) enum Pieces {
     Tabular {
-        env: Box<alfd_common::env::cliffwalk::CliffWalk>,
+        env: TabularEnvs,
         demonstrator: Box<dyn alfd_common::agent::Demonstrator<usize> + Send>,
+        oracle: Option<Oracle<usize>>,
     },
     Neural {
         demonstrator: Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>,
@@ -206,14 +208,14 @@ impl Pieces {
     pub(crate) fn of(cfg: &ExperimentConfig) -> anyhow::Result<Self> {
         let prior = read_prior(cfg)?;
         Ok(match cfg.env.name {
-            EnvName::Cliffwalk => {
-                let env = setup::cliffwalk(cfg)?;
-                let demonstrator = alfd_expert::registry::cliffwalk(&cfg.expert.name, &env)?;
-                Self::Tabular {
-                    env: Box::new(env),
-                    demonstrator,
-                }
-            }
+            EnvName::Cliffwalk | EnvName::Deepsea => Self::Tabular {
+                env: match cfg.env.name {
+                    EnvName::Deepsea => TabularEnvs::DeepSea(Box::new(setup::deepsea(cfg)?)),
+                    _ => TabularEnvs::CliffWalk(Box::new(setup::cliffwalk(cfg)?)),
+                },
+                demonstrator: setup::tabular_demonstrator(cfg)?,
+                oracle: setup::oracle(cfg, || setup::tabular_demonstrator(cfg))?,
+            },
             // Python pieces start with the run (their logs go to its directory).
             _ if crate::local_remote::needed(cfg) => {
                 setup::check_demonstrator(cfg)?;
@@ -275,9 +277,15 @@ pub(crate) fn run_pieces(
     let start = Instant::now();
     let produced = match pieces {
         Pieces::Tabular {
-            env,
+            env: TabularEnvs::CliffWalk(env),
             mut demonstrator,
-        } => run_tabular(&watch, &env, demonstrator.as_mut())?,
+            oracle,
+        } => run_tabular(&watch, &env, demonstrator.as_mut(), oracle)?,
+        Pieces::Tabular {
+            env: TabularEnvs::DeepSea(env),
+            mut demonstrator,
+            oracle,
+        } => run_deepsea(&watch, *env, demonstrator.as_mut(), oracle)?,
         Pieces::Remote { prior } => run_remote(&watch, prior.as_ref())?,
         Pieces::Neural {
             mut demonstrator,
@@ -372,6 +380,7 @@ impl Watch<'_> {
         Ok(NeuralEnvs {
             env: Box::new(env),
             eval_env: envs.eval_env,
+            oracle: envs.oracle,
         })
     }
 
@@ -381,11 +390,57 @@ impl Watch<'_> {
     }
 }
 
+/// The environment of a tabular run.
+pub(crate) enum TabularEnvs {
+    CliffWalk(Box<CliffWalk>),
+    DeepSea(Box<alfd_common::env::DeepSeaCells>),
+}
+
+/// Runs a DeepSea run and writes its `policy.json`; `None` when it stopped before its end. Its
+/// greedy value is the return of one greedy episode (DeepSea is deterministic).
+fn run_deepsea(
+    watch: &Watch<'_>,
+    env: alfd_common::env::DeepSeaCells,
+    demonstrator: &mut dyn Demonstrator<usize>,
+    oracle: Option<Oracle<usize>>,
+) -> anyhow::Result<Option<Produced>> {
+    let cfg = watch.cfg;
+    let checkpoints = watch.resumable.checkpoints(RunState::tabular, "tabular")?;
+    let mut eval_env = env.clone();
+    let optimal = env.0.optimal_return();
+    let run = run_tabular_checkpointed(
+        cfg,
+        env,
+        demonstrator,
+        oracle,
+        checkpoints,
+        |s| watch.save(RunState::Tabular(Box::new(s.clone()))),
+        |r, _| watch.show(r),
+    )
+    .map_err(|e| usage(format!("cannot resume from the checkpoint: {e}")))?;
+    if watch.interrupted()? {
+        return Ok(None);
+    }
+    let policy = &run.greedy_policy;
+    let greedy = alfd_common::evaluate::evaluate(&mut eval_env, 1, 0, |&s| policy[s])?;
+    let table = serde_json::json!({ "actions": run.greedy_policy });
+    write(watch.out, "policy.json", table.to_string().as_bytes())?;
+    Ok(Some(Produced {
+        env_steps: run.records.last().map_or(0, |r| r.total_steps),
+        updates: None,
+        records: run.records,
+        demos: run.demos,
+        greedy: Some(greedy[0]),
+        optimal: Some(optimal),
+    }))
+}
+
 /// Runs a CliffWalk run and writes its `policy.json`; `None` when it stopped before its end.
 fn run_tabular(
     watch: &Watch<'_>,
     env: &CliffWalk,
     demonstrator: &mut dyn Demonstrator<usize>,
+    oracle: Option<Oracle<usize>>,
 ) -> anyhow::Result<Option<Produced>> {
     let cfg = watch.cfg;
     let checkpoints = watch.resumable.checkpoints(RunState::tabular, "tabular")?;
@@ -393,6 +448,7 @@ fn run_tabular(
         cfg,
         env.clone(),
         demonstrator,
+        oracle,
         checkpoints,
         |s| watch.save(RunState::Tabular(Box::new(s.clone()))),
         |r, _| watch.show(r),
@@ -440,6 +496,7 @@ fn run_remote(watch: &Watch<'_>, prior: Option<&Dataset>) -> anyhow::Result<Opti
         RunError::Mismatch(e) => usage(format!("cannot resume from the checkpoint: {e}")),
         RunError::Loop(e) => anyhow::Error::new(e).context("the run failed"),
         RunError::Prior(e) => usage(e.to_string()),
+        RunError::NoOracle => usage(RunError::NoOracle.to_string()),
     })?;
     if watch.interrupted()? {
         return Ok(None);
@@ -468,6 +525,7 @@ fn run_neural(
     .map_err(|e| match e {
         RunError::Mismatch(e) => usage(format!("cannot resume from the checkpoint: {e}")),
         RunError::Prior(e) => usage(e.to_string()),
+        RunError::NoOracle => usage(RunError::NoOracle.to_string()),
         RunError::Loop(e) => unreachable!("an in-process neural run cannot fail: {e}"),
     })?;
     if watch.interrupted()? {
@@ -482,6 +540,7 @@ fn builtin_envs(cfg: &ExperimentConfig) -> anyhow::Result<NeuralEnvs> {
     Ok(NeuralEnvs {
         env: env()?,
         eval_env: env()?,
+        oracle: setup::oracle(cfg, || setup::neural_demonstrator(cfg))?,
     })
 }
 

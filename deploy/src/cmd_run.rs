@@ -106,6 +106,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             "`alfd run` runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
         ));
     }
+    if cfg.query.gate == Some(alfd_common::query::GateKind::Oracle) {
+        return Err(usage(
+            "query.gate: gate `oracle` consults the expert at every step, in the actor's \
+             process: run it with `alfd local` or `alfd sweep`",
+        ));
+    }
     let env_spec = env_spec(&cfg)?;
     let prior = prior_demos(&cfg, env_spec.as_ref())?;
     let listen = args

@@ -95,6 +95,7 @@ pub(crate) fn start(cfg: &ExperimentConfig, out: &std::path::Path) -> anyhow::Re
         Some(NeuralEnvs {
             env: Box::new(env),
             eval_env: Box::new(eval_env),
+            oracle: None,
         })
     } else {
         None

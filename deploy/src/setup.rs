@@ -145,6 +145,43 @@ pub fn cliffwalk(cfg: &ExperimentConfig) -> anyhow::Result<CliffWalk> {
     )?)
 }
 
+/// The DeepSea of a config, as state ids: N = `env.size`, the mapping seed `env.mapping_seed`
+/// or else the run's seed (its low 32 bits).
+pub fn deepsea(cfg: &ExperimentConfig) -> anyhow::Result<alfd_common::env::DeepSeaCells> {
+    anyhow::ensure!(cfg.env.name == EnvName::Deepsea, "not a deepsea config");
+    let mapping_seed = cfg.env.mapping_seed.unwrap_or(cfg.seed as u32);
+    let sea = alfd_common::env::DeepSea::with_max_episode_steps(
+        cfg.env.deepsea_size(),
+        mapping_seed,
+        cfg.env.max_episode_steps(),
+    )
+    .map_err(|e| usage(e.to_string()))?;
+    Ok(alfd_common::env::DeepSeaCells(sea))
+}
+
+/// The demonstrator of a tabular config (CliffWalk's for its map, DeepSea's for its instance).
+pub fn tabular_demonstrator(
+    cfg: &ExperimentConfig,
+) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<usize> + Send>> {
+    Ok(match cfg.env.name {
+        EnvName::Deepsea => alfd_expert::registry::deepsea(&cfg.expert.name, &deepsea(cfg)?)?,
+        _ => alfd_expert::registry::cliffwalk(&cfg.expert.name, &cliffwalk(cfg)?)?,
+    })
+}
+
+/// The expert gate `oracle` consults, for a config whose gate is `oracle` (none otherwise): a
+/// second copy of the config's built-in demonstrator, consulted for the gate alone.
+pub fn oracle<S: ?Sized + 'static>(
+    cfg: &ExperimentConfig,
+    make: impl FnOnce() -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<S> + Send>>,
+) -> anyhow::Result<Option<alfd_common::query::Oracle<S>>> {
+    if cfg.query.gate != Some(alfd_common::query::GateKind::Oracle) {
+        return Ok(None);
+    }
+    let mut d = make().map_err(|e| usage(format!("gate `oracle` consults the expert: {e:#}")))?;
+    Ok(Some(alfd_common::query::Oracle::new(move |s: &S| d.act(s))))
+}
+
 /// The config's demonstrator exists: a built-in one for its environment (CliffWalk's for its
 /// map), or a well-formed external one (`python:MODULE:FUNCTION`, `sb3:ALGO:PATH`), which the
 /// expert process starts.
@@ -157,9 +194,7 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
         return Ok(alfd_expert::registry::check_external(&cfg.expert.name)?);
     }
     if cfg.env.name.is_tabular() {
-        return Ok(
-            alfd_expert::registry::cliffwalk(&cfg.expert.name, &cliffwalk(cfg)?).map(|_| ())?,
-        );
+        return tabular_demonstrator(cfg).map(|_| ());
     }
     neural_demonstrator(cfg).map(|_| ())
 }

@@ -27,6 +27,8 @@ fn gym(id: &str, max_episode_steps: Option<usize>) -> EnvConfig {
         map: None,
         id: Some(id.to_owned()),
         kwargs: None,
+        size: None,
+        mapping_seed: None,
     }
 }
 

@@ -2,6 +2,7 @@
 
 mod chaos;
 mod cli;
+mod deepsea;
 mod demo_model;
 mod faults;
 mod golden;

@@ -5,6 +5,7 @@
 use alfd_common::agent::{BalancingController, Demonstrator, NetworkDemonstrator, TablePolicy};
 use alfd_common::config::EnvName;
 use alfd_common::env::cliffwalk::{value_iteration, CliffWalk};
+use alfd_common::env::{DeepSeaCells, TabularEnv as _};
 use alfd_common::nn::Mlp;
 use alfd_harness::BadInput;
 use serde::{Deserialize, Serialize};
@@ -237,6 +238,29 @@ fn vector_demonstrator(
             name: name.to_owned(),
             reason: format!("kind `{other}` is not a {env} kind"),
         }),
+    }
+}
+
+/// A DeepSea demonstrator by name, for the instance `env` (its action mapping):
+/// `deepsea-optimal` moves right at every cell, `deepsea-good` does so but answers uniformly at
+/// random one time in ten (a generator seeded from its name).
+pub fn deepsea(
+    name: &str,
+    env: &DeepSeaCells,
+) -> Result<Box<dyn Demonstrator<usize> + Send>, BadInput> {
+    let e = entry(name, "deepsea").map_err(BadInput::from)?;
+    let table = TablePolicy {
+        actions: (0..env.num_states())
+            .map(|s| env.optimal_action_at(s))
+            .collect(),
+    };
+    match e.kind.as_str() {
+        "deepsea-optimal" => Ok(Box::new(table)),
+        "deepsea-noisy" => Ok(Box::new(crate::scripted::Noisy::new(table, 0.1, 2, name))),
+        other => Err(BadInput::from(RegistryError::Corrupt {
+            name: name.to_owned(),
+            reason: format!("kind `{other}` is not a deepsea kind"),
+        })),
     }
 }
 

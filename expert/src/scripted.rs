@@ -74,8 +74,8 @@ impl<D> Noisy<D> {
     }
 }
 
-impl<D: Demonstrator<[f32]>> Demonstrator<[f32]> for Noisy<D> {
-    fn act(&mut self, s: &[f32]) -> usize {
+impl<S: ?Sized, D: Demonstrator<S>> Demonstrator<S> for Noisy<D> {
+    fn act(&mut self, s: &S) -> usize {
         let own = self.inner.act(s);
         if self.rng.random::<f64>() < self.epsilon {
             self.rng.random_range(0..self.num_actions)
@@ -160,7 +160,7 @@ impl Scripted {
         match self.env {
             EnvName::Mountaincar => noisy(EnergyPumping, self),
             EnvName::Acrobot => noisy(SwingUp, self),
-            EnvName::Cartpole | EnvName::Cliffwalk | EnvName::Gymnasium => {
+            EnvName::Cartpole | EnvName::Cliffwalk | EnvName::Gymnasium | EnvName::Deepsea => {
                 unreachable!("no scripted expert for {}", self.env)
             }
         }

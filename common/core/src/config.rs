@@ -290,12 +290,14 @@ pub struct AgentConfig {
     #[serde(default = "default_n_step", skip_serializing_if = "is_one_u32")]
     #[schemars(extend("default" = 1))]
     pub n_step: u32,
-    /// Neural: β of randomized prior functions (Osband et al. 2018): each head's Q-values add β
-    /// times the output of a fixed random network of the same shape that is never trained, so
-    /// that the heads disagree where no data has pulled them together (0: none, the paper's).
+    /// β of randomized prior functions (Osband et al. 2018), so that the heads disagree where no
+    /// data has pulled them together (0: none, the paper's). Neural: each head's Q-values add β
+    /// times the output of a fixed random network of the same shape that is never trained.
+    /// Tabular: each head's Q-table starts from β times standard normal draws (the tabular
+    /// prior of Osband et al.: a random start that learning washes out where data comes).
     #[serde(default, skip_serializing_if = "is_zero_f64")]
     pub prior_scale: f64,
-    /// Neural: the seed the prior network is drawn from (absent: the run's `seed`).
+    /// The seed the prior (network or Q-tables) is drawn from (absent: the run's `seed`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prior_seed: Option<u64>,
 }
@@ -595,6 +597,13 @@ impl ExperimentConfig {
                 "the multi-process runtime runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
             ));
         }
+        if cfg.query.gate == Some(crate::query::GateKind::Oracle) {
+            return Err(invalid(
+                "query.gate",
+                "gate `oracle` consults the expert at every step, in the actor's process: run it \
+                 with `alfd local` or `alfd sweep`",
+            ));
+        }
         Ok(cfg)
     }
 
@@ -888,7 +897,7 @@ model = "krr"
         let e = "pendulum".parse::<EnvName>().unwrap_err();
         assert_eq!(
             e,
-            "unknown environment `pendulum` (known: cartpole, cliffwalk, mountaincar, acrobot, gymnasium)"
+            "unknown environment `pendulum` (known: cartpole, cliffwalk, mountaincar, acrobot, gymnasium, deepsea)"
         );
     }
 
@@ -926,7 +935,7 @@ model = "krr"
     }
 
     #[test]
-    fn a_prior_is_drawn_from_the_run_s_seed_unless_given_and_only_for_neural_agents() {
+    fn a_prior_is_drawn_from_the_run_s_seed_unless_given() {
         let cfg = |set: &[&str]| {
             let set: Vec<String> = set.iter().map(|s| (*s).to_owned()).collect();
             ExperimentConfig::from_toml_with_overrides(BASE, &set)
@@ -951,13 +960,18 @@ model = "krr"
             let e = cfg(&[&format!("agent.prior_scale={bad}")]).unwrap_err();
             assert!(e.to_string().contains("agent.prior_scale"), "{e}");
         }
-        let e = cfg(&[
+        // The Q-tables take a prior too: their start (see `agent::tabular`).
+        let t = cfg(&[
             "agent.kind=qlearning",
             "env.name=cliffwalk",
             "agent.prior_scale=1.0",
+            "expert.model=none",
         ])
-        .unwrap_err();
-        assert!(e.to_string().contains("neural agents"), "{e}");
+        .unwrap();
+        assert_eq!(
+            (t.agent.prior_scale, t.agent.prior_seed),
+            (1.0, Some(t.seed))
+        );
     }
 
     #[test]

@@ -13,7 +13,7 @@ use crate::agent::{
 };
 use crate::checkpoint::StateMismatch;
 use crate::config::ExperimentConfig;
-use crate::env::{vector_env, CliffWalk, Env, EnvState, VectorEnv};
+use crate::env::{vector_env, EnvState, TabularEnv, VectorEnv};
 use crate::environment_loop::in_process::{LearnerHandle, LocalExpert};
 use crate::environment_loop::{self, GenericActor, Progress, Schedule};
 use crate::evaluate::evaluate_greedy;
@@ -165,12 +165,15 @@ fn schedule(cfg: &ExperimentConfig) -> Schedule {
     }
 }
 
-/// Runs a tabular experiment (CliffWalk) on `env` with `demonstrator` as the expert.
-/// `on_episode` sees each record and the agent as each episode completes (progress, evaluation)
-/// and may stop the run early with `ControlFlow::Break`.
-pub fn run_tabular(
+/// Runs a tabular experiment (CliffWalk, DeepSea's cells) on `env` with `demonstrator` as the
+/// expert. `on_episode` sees each record and the agent as each episode completes (progress,
+/// evaluation) and may stop the run early with `ControlFlow::Break`.
+///
+/// # Panics
+/// If the config's gate is `oracle` ([`run_tabular_checkpointed`] takes the oracle).
+pub fn run_tabular<E: TabularEnv>(
     cfg: &ExperimentConfig,
-    env: CliffWalk,
+    env: E,
     demonstrator: &mut dyn Demonstrator<usize>,
     on_episode: impl FnMut(&EpisodeRecord, &TabularAgent) -> ControlFlow<()>,
 ) -> TabularRun {
@@ -178,6 +181,7 @@ pub fn run_tabular(
         cfg,
         env,
         demonstrator,
+        None,
         Checkpoints::none(),
         |_| ControlFlow::Continue(()),
         on_episode,
@@ -185,11 +189,17 @@ pub fn run_tabular(
     .expect("a run from scratch restores nothing")
 }
 
-/// [`run_tabular`] with checkpoints (see [`Checkpoints`]).
-pub fn run_tabular_checkpointed(
+/// [`run_tabular`] with checkpoints (see [`Checkpoints`]) and the expert gate `oracle` consults
+/// (needed by that gate only). With `evaluation.every`, each evaluation plays the greedy policy
+/// of the heads' mean on a copy of `env`.
+///
+/// # Panics
+/// If the config's gate is `oracle` and `oracle` is `None`.
+pub fn run_tabular_checkpointed<E: TabularEnv>(
     cfg: &ExperimentConfig,
-    mut env: CliffWalk,
+    mut env: E,
     demonstrator: &mut dyn Demonstrator<usize>,
+    oracle: Option<crate::query::Oracle<usize>>,
     checkpoints: Checkpoints<'_, TabularRunState>,
     mut save: impl FnMut(&TabularRunState) -> ControlFlow<()>,
     mut on_episode: impl FnMut(&EpisodeRecord, &TabularAgent) -> ControlFlow<()>,
@@ -201,6 +211,11 @@ pub fn run_tabular_checkpointed(
         env.num_actions(),
         seeded(derive_seed(cfg.seed, "agent")),
     );
+    if agent.needs_oracle() {
+        agent.set_oracle(oracle.expect("gate `oracle` is given its oracle"));
+    }
+    let mut eval_env = env.clone();
+    let eval_seed = derive_seed(cfg.seed, "eval");
     let core = ExpertCore::for_config(cfg, env.num_actions());
     let mut expert = LocalExpert::new(core, demonstrator, &cfg.expert.name, false);
     let mut records = Vec::new();
@@ -221,6 +236,16 @@ pub fn run_tabular_checkpointed(
         schedule(cfg),
         progress,
         |e| {
+            if cfg.evaluation.due(e.record.episode) {
+                let policy = e.actor.greedy_policy();
+                let returns = crate::evaluate::evaluate(
+                    &mut eval_env,
+                    cfg.evaluation.episodes as usize,
+                    eval_seed,
+                    |&s| policy[s],
+                )?;
+                e.record.eval_return = returns.iter().sum::<f64>() / returns.len().max(1) as f64;
+            }
             records.push(*e.record);
             let stop = on_episode(e.record, e.actor);
             Ok(
@@ -278,7 +303,11 @@ pub fn run_neural_checkpointed(
 ) -> Result<NeuralRun, StateMismatch> {
     let env = vector_env(&cfg.env).expect("a neural agent runs on a vector environment");
     let eval_env = vector_env(&cfg.env).expect("the same environment");
-    let envs = NeuralEnvs { env, eval_env };
+    let envs = NeuralEnvs {
+        env,
+        eval_env,
+        oracle: None,
+    };
     let prior = &[];
     run_neural_on(
         cfg,
@@ -293,6 +322,7 @@ pub fn run_neural_checkpointed(
         RunError::Mismatch(m) => m,
         RunError::Loop(e) => unreachable!("an in-process neural run cannot fail: {e}"),
         RunError::Prior(e) => unreachable!("a run without prior demonstrations fits none: {e}"),
+        RunError::NoOracle => unreachable!("run_neural_checkpointed is not given gate `oracle`"),
     })
 }
 
@@ -340,6 +370,8 @@ impl PriorDemo {
 pub struct NeuralEnvs {
     pub env: Box<VectorEnv>,
     pub eval_env: Box<VectorEnv>,
+    /// The expert gate `oracle` consults (needed by that gate only).
+    pub oracle: Option<crate::query::Oracle<[f32]>>,
 }
 
 /// Why a run on environments of [`NeuralEnvs`] stopped short.
@@ -353,6 +385,9 @@ pub enum RunError {
     /// No demonstration model fits the prior demonstrations.
     #[error("the prior demonstrations (demos.prior): {0}")]
     Prior(crate::demo_model::DemoModelError),
+    /// Gate `oracle` without an expert to consult in this process.
+    #[error("gate `oracle` needs an expert it can consult at every step in this process (a built-in one)")]
+    NoOracle,
 }
 
 /// [`run_neural_checkpointed`] on the environments `envs` (the config's environment, made by
@@ -371,6 +406,7 @@ pub fn run_neural_on(
     let NeuralEnvs {
         mut env,
         mut eval_env,
+        oracle,
     } = envs;
     let (obs_dim, actions) = (env.observation_dim(), env.num_actions());
     let mut learner = NeuralLearner::new(
@@ -387,6 +423,9 @@ pub fn run_neural_on(
         actions,
         seeded(derive_seed(cfg.seed, "actor-0")),
     );
+    if core.needs_oracle() {
+        core.set_oracle(oracle.ok_or(RunError::NoOracle)?);
+    }
     let mut expert_core = ExpertCore::for_config(cfg, actions);
     if !prior.is_empty() {
         let records = prior.iter().enumerate().map(|(i, p)| p.record(i)).collect();

@@ -124,6 +124,7 @@ fn a_tabular_run_resumed_from_any_checkpoint_is_the_uninterrupted_run() {
             &c,
             env.clone(),
             &mut optimal.clone(),
+            None,
             Checkpoints {
                 from: None,
                 every: Some(7),
@@ -144,6 +145,7 @@ fn a_tabular_run_resumed_from_any_checkpoint_is_the_uninterrupted_run() {
                 &c,
                 env.clone(),
                 &mut optimal.clone(),
+                None,
                 Checkpoints {
                     from: Some(&s),
                     every: None,

@@ -15,7 +15,7 @@ use std::io::IsTerminal as _;
 use std::path::Path;
 
 use crate::error::Context as _;
-use alfd_common::config::{EnvName, ExperimentConfig, RuleKind};
+use alfd_common::config::{EnvName, ExperimentConfig};
 use alfd_common::record::{parse_episodes_csv, EpisodeRecord, RunSummary};
 use alfd_expert::registry::{self, ExpertEntry};
 
@@ -147,7 +147,7 @@ const RUN_FILES: [(&str, &str); 12] = [
     ),
     (
         "policy.json",
-        "the learned greedy policy, one action per CliffWalk state",
+        "the learned greedy policy, one action per state (CliffWalk's tiles, DeepSea's cells)",
     ),
     ("summary.json", "these numbers, as JSON"),
     (
@@ -246,7 +246,7 @@ pub(crate) fn expert_reference(cfg: &ExperimentConfig) -> ExpertReference {
                 .to_owned(),
         );
     }
-    if cfg.query.rule == RuleKind::Never || cfg.budget() == 0 {
+    if !cfg.query.asks() || cfg.budget() == 0 {
         notes.push("for reference only: this run asks for no demonstrations".to_owned());
     }
     ExpertReference {

@@ -36,6 +36,8 @@ fn main() -> anyhow::Result<()> {
         map: None,
         id: Some(id.clone()),
         kwargs: None,
+        size: None,
+        mapping_seed: None,
     };
     {
         let adapter = Arc::new(Adapter::env(

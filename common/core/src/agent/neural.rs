@@ -13,7 +13,7 @@ use crate::config::{AgentConfig, LrSchedule};
 use crate::demo_model::DemoModel;
 use crate::nn::{Adam, AdamConfig, AdamState, Mlp, NnError, TdConfig, TdLoss, TrainScratch};
 use crate::policy::{js_divergence, softmax_into};
-use crate::query::{novelty, q_spread, BudgetView, Rule, RuleSpec, Signal};
+use crate::query::{mean_greedy, novelty, q_spread, BudgetView, Oracle, Rule, RuleSpec, Signal};
 use crate::replay::{Batch, ReplayBuffer, Transition};
 use crate::rng::{Rng, RngState};
 use crate::shaping::{shaped_reward, ShapingKind};
@@ -40,6 +40,8 @@ pub struct NeuralActor {
     gamma: f64,
     n_step: u32,
     shaping_kind: ShapingKind,
+    /// The expert gate `oracle` consults (none for the other gates).
+    oracle: Option<Oracle<[f32]>>,
 }
 
 impl NeuralActor {
@@ -73,7 +75,18 @@ impl NeuralActor {
             gamma: agent.gamma,
             n_step: agent.n_step,
             shaping_kind,
+            oracle: None,
         }
+    }
+
+    /// The expert gate `oracle` consults at every step (for the gate alone).
+    pub fn set_oracle(&mut self, oracle: Oracle<[f32]>) {
+        self.oracle = Some(oracle);
+    }
+
+    /// Whether the rule needs an oracle ([`NeuralActor::set_oracle`]).
+    pub fn needs_oracle(&self) -> bool {
+        self.rule.reads(Signal::Oracle)
     }
 
     /// Replaces the acting weights (the flat parameter order of [`Mlp::params_flat`]).
@@ -133,7 +146,7 @@ impl NeuralActor {
         } else {
             0.0
         };
-        let (q, heads, held) = (&self.q, self.heads, &self.demo_states);
+        let (q, heads, held, oracle) = (&self.q, self.heads, &self.demo_states, &self.oracle);
         let query = self.rule.decide_at(
             budget,
             step,
@@ -142,6 +155,11 @@ impl NeuralActor {
             || {
                 let s: Vec<f64> = obs.iter().map(|&x| f64::from(x)).collect();
                 novelty(&s, held.iter().map(Vec::as_slice))
+            },
+            || {
+                oracle
+                    .as_ref()
+                    .map(|o| o.action(obs) != mean_greedy(q, heads))
             },
         );
         let a = self.actions;

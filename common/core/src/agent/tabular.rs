@@ -13,7 +13,7 @@ use crate::env::Step;
 use crate::math;
 use crate::policy::argmax;
 use crate::qfunction::{QFunction, TabularQ};
-use crate::query::{q_spread, BudgetView, Rule, RuleSpec, Signal};
+use crate::query::{mean_greedy, q_spread, BudgetView, Oracle, Rule, RuleSpec, Signal};
 use crate::rng::{Rng, RngState};
 
 /// A tabular agent over `states` states and `actions` actions.
@@ -38,6 +38,31 @@ pub struct TabularAgent {
     demo_states: Vec<usize>,
     /// SARSA's last transition `(s, a, r, s')`, learned from once the action at `s'` is known.
     pending: Option<(usize, usize, f64, usize)>,
+    /// The expert gate `oracle` consults (none for the other gates).
+    oracle: Option<Oracle<usize>>,
+}
+
+/// The Q-tables' start: zeros, or with `agent.prior_scale` β > 0, β times standard normal
+/// draws (Box-Muller) from a generator seeded with `agent.prior_seed`.
+fn prior_tables(cfg: &AgentConfig, states: usize, heads: usize, actions: usize) -> TabularQ {
+    let mut q = TabularQ::new(states, heads, actions, 0.0);
+    if cfg.prior_scale <= 0.0 {
+        return q;
+    }
+    let mut rng = crate::rng::seeded(crate::rng::derive_seed(
+        cfg.prior_seed.unwrap_or(0),
+        "tabular-prior",
+    ));
+    for s in 0..states {
+        for k in 0..heads {
+            for a in 0..actions {
+                let (u1, u2): (f64, f64) = (rng.random(), rng.random());
+                let z = (-2.0 * math::ln(1.0 - u1)).sqrt() * math::cos(std::f64::consts::TAU * u2);
+                q.set(s, k, a, cfg.prior_scale * z);
+            }
+        }
+    }
+    q
 }
 
 /// What a [`TabularAgent`] must remember to continue exactly: the Q-tables, the visit counts,
@@ -108,7 +133,7 @@ impl TabularAgent {
         Self {
             kind: cfg.kind,
             explorer: Explorer::new(cfg, actions),
-            q: TabularQ::new(states, heads, actions, 0.0),
+            q: prior_tables(cfg, states, heads, actions),
             temperature: cfg.temperature,
             lr: cfg.learning_rate(),
             lr_decay: cfg.learning_rate_decay,
@@ -120,7 +145,18 @@ impl TabularAgent {
             rule,
             demo_states: Vec::new(),
             pending: None,
+            oracle: None,
         }
+    }
+
+    /// The expert gate `oracle` consults at every step (for the gate alone).
+    pub fn set_oracle(&mut self, oracle: Oracle<usize>) {
+        self.oracle = Some(oracle);
+    }
+
+    /// Whether the rule needs an oracle ([`TabularAgent::set_oracle`]).
+    pub fn needs_oracle(&self) -> bool {
+        self.rule.reads(Signal::Oracle)
     }
 
     pub fn q(&self) -> &TabularQ {
@@ -155,7 +191,7 @@ impl TabularAgent {
     pub fn decide(&mut self, s: usize, step: u64, budget: BudgetView) -> Decision {
         let js = self.js_divergence(s);
         let action = self.act(s);
-        let (q, held) = (&self.q, &self.demo_states);
+        let (q, held, oracle) = (&self.q, &self.demo_states, &self.oracle);
         let heads = q.heads();
         let query = self.rule.decide_at(
             budget,
@@ -169,6 +205,13 @@ impl TabularAgent {
             },
             // A state is novel (1) until it is demonstrated (0).
             || (!held.is_empty()).then(|| f64::from(held.binary_search(&s).is_err())),
+            || {
+                let oracle = oracle.as_ref()?;
+                let values: Vec<f64> = (0..heads)
+                    .flat_map(|k| q.head_values(s, k).iter().copied())
+                    .collect();
+                Some(oracle.action(&s) != mean_greedy(&values, heads))
+            },
         );
         Decision { action, js, query }
     }
@@ -269,6 +312,30 @@ mod tests {
     fn cfg(kind: &str, extra: &str) -> AgentConfig {
         let text = format!("seed = 0\nepisodes = 1\n[env]\nname = \"cliffwalk\"\n[agent]\nkind = \"{kind}\"\n{extra}");
         ExperimentConfig::from_toml(&text).unwrap().agent
+    }
+
+    #[test]
+    fn a_prior_starts_each_head_from_its_own_draws_and_none_starts_from_zero() {
+        let spec = QueryConfig::default().spec(0, 0);
+        let make = |extra: &str| {
+            let c = cfg("bootstrapped-q", &format!("heads = 4\n{extra}"));
+            TabularAgent::new(&c, &spec, 50, 2, crate::rng::seeded(0))
+        };
+        let plain = make("");
+        assert!((0..50).all(|s| (0..4).all(|k| plain.q.head_values(s, k) == [0.0, 0.0])));
+        let a = make("prior_scale = 2.0");
+        let values: Vec<f64> = (0..50)
+            .flat_map(|s| (0..4).flat_map(move |k| [(s, k, 0), (s, k, 1)]))
+            .map(|(s, k, x)| a.q.get(s, k, x))
+            .collect();
+        // 400 draws of 2·N(0, 1): mean near 0, standard deviation near 2.
+        let mean = values.iter().sum::<f64>() / 400.0;
+        let sd = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / 400.0).sqrt();
+        assert!(mean.abs() < 0.4 && (sd - 2.0).abs() < 0.3, "{mean} {sd}");
+        assert_ne!(a.q.head_values(7, 0), a.q.head_values(7, 1), "heads differ");
+        // The same seed, the same prior; another prior_seed, another.
+        assert_eq!(make("prior_scale = 2.0").q, a.q);
+        assert_ne!(make("prior_scale = 2.0\nprior_seed = 9").q, a.q);
     }
 
     #[test]

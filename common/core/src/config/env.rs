@@ -18,16 +18,20 @@ pub enum EnvName {
     Acrobot,
     /// Any Gymnasium environment (`env.id`), served by a Python adapter in another process.
     Gymnasium,
+    /// bsuite's DeepSea(N) (`env.size`, `env.mapping_seed`): deterministic, the treasure at the
+    /// bottom right behind N moves right that each cost 0.01/N; the tabular agents see the cell.
+    Deepsea,
 }
 
 impl EnvName {
     /// Every environment, in the order a message lists them.
-    pub const ALL: [EnvName; 5] = [
+    pub const ALL: [EnvName; 6] = [
         EnvName::Cartpole,
         EnvName::Cliffwalk,
         EnvName::Mountaincar,
         EnvName::Acrobot,
         EnvName::Gymnasium,
+        EnvName::Deepsea,
     ];
 
     /// The name a config uses (`cartpole`, `cliffwalk`, `mountaincar`, `acrobot`, `gymnasium`).
@@ -38,6 +42,7 @@ impl EnvName {
             EnvName::Mountaincar => "mountaincar",
             EnvName::Acrobot => "acrobot",
             EnvName::Gymnasium => "gymnasium",
+            EnvName::Deepsea => "deepsea",
         }
     }
 
@@ -51,6 +56,8 @@ impl EnvName {
             EnvName::Mountaincar => 200,
             EnvName::Acrobot => 500,
             EnvName::Gymnasium => 0,
+            // N, set from `env.size` ([`EnvConfig::max_episode_steps`]).
+            EnvName::Deepsea => 0,
         }
     }
 
@@ -61,7 +68,7 @@ impl EnvName {
             EnvName::Cartpole => Some((1.0, 1.0)),
             EnvName::Mountaincar => Some((-1.0, -1.0)),
             EnvName::Acrobot => Some((-1.0, 0.0)),
-            EnvName::Cliffwalk | EnvName::Gymnasium => None,
+            EnvName::Cliffwalk | EnvName::Gymnasium | EnvName::Deepsea => None,
         }
     }
 
@@ -72,7 +79,7 @@ impl EnvName {
 
     /// Whether the states are ids (the tabular agents' environments) rather than vectors.
     pub fn is_tabular(self) -> bool {
-        self == EnvName::Cliffwalk
+        matches!(self, EnvName::Cliffwalk | EnvName::Deepsea)
     }
 }
 
@@ -104,7 +111,7 @@ pub struct EnvConfig {
     /// dynamics, reimplemented), or any Gymnasium environment.
     pub name: EnvName,
     /// Step limit after which an episode is truncated, ≥ 1 (by default CartPole 1000, CliffWalk 500,
-    /// MountainCar 200, Acrobot 500, a Gymnasium environment its registration's).
+    /// MountainCar 200, Acrobot 500, DeepSea N, a Gymnasium environment its registration's).
     #[serde(default)]
     pub max_episode_steps: Option<usize>,
     /// Gymnasium: the environment id given to `gymnasium.make`, e.g. `Acrobot-v1`.
@@ -120,7 +127,17 @@ pub struct EnvConfig {
     /// CliffWalk: a map file of `S`, `G`, `X`, `.`; the built-in map when absent.
     #[serde(default)]
     pub map: Option<String>,
+    /// DeepSea: N, the grid's side (1 to 100); episodes last N steps.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub size: Option<usize>,
+    /// DeepSea: the seed of the action mapping (bsuite's `mapping_seed`); by default the run's
+    /// `seed`, so that each seed of a sweep plays its own instance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mapping_seed: Option<u32>,
 }
+
+/// DeepSea's N when `env.size` is not given.
+pub const DEFAULT_DEEPSEA_SIZE: usize = 10;
 
 fn default_p_success() -> f64 {
     0.9
@@ -128,7 +145,41 @@ fn default_p_success() -> f64 {
 
 impl EnvConfig {
     pub fn max_episode_steps(&self) -> usize {
-        self.max_episode_steps
-            .unwrap_or(self.name.default_max_episode_steps())
+        let default = match self.name {
+            EnvName::Deepsea => self.size.unwrap_or(DEFAULT_DEEPSEA_SIZE),
+            other => other.default_max_episode_steps(),
+        };
+        self.max_episode_steps.unwrap_or(default)
+    }
+
+    /// DeepSea's N (`env.size`, default 10).
+    pub fn deepsea_size(&self) -> usize {
+        self.size.unwrap_or(DEFAULT_DEEPSEA_SIZE)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn deepsea_takes_its_size_and_mapping_seed_and_only_it_does() {
+        let parse = |text: &str| crate::config::ExperimentConfig::from_toml(text);
+        let c = parse(
+            "seed = 4\nepisodes = 3\n[env]\nname = \"deepsea\"\nsize = 20\n\
+             [agent]\nkind = \"bootstrapped-q\"\nheads = 20\n",
+        )
+        .unwrap();
+        assert_eq!((c.env.deepsea_size(), c.env.max_episode_steps()), (20, 20));
+        assert_eq!(c.expert.name, "deepsea-optimal");
+        let err = |text: &str| parse(text).unwrap_err().to_string();
+        assert!(err("seed = 1\nepisodes = 3\n[env]\nname = \"cartpole\"\nsize = 3\n[agent]\nkind = \"bdqn\"\n").contains("deepsea only"));
+        assert!(err(
+            "seed = 1\nepisodes = 3\n[env]\nname = \"deepsea\"\nsize = 101\n[agent]\nkind = \"qlearning\"\n"
+        )
+        .contains("1..=100"));
+        // 20 heads for Q-tables; the neural agents' heads travel on the wire (8 at most).
+        assert!(err(
+            "seed = 1\nepisodes = 3\n[env]\nname = \"deepsea\"\n[agent]\nkind = \"bootstrapped-q\"\nheads = 21\n"
+        )
+        .contains("at most 20"));
     }
 }

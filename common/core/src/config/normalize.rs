@@ -14,6 +14,7 @@ pub(super) fn default_expert_of_env(table: &mut toml::Table) {
         Some("cliffwalk") => "cliffwalk-optimal",
         Some("mountaincar") => "mountaincar-energy",
         Some("acrobot") => "acrobot-energy",
+        Some("deepsea") => "deepsea-optimal",
         _ => return,
     };
     let expert = table

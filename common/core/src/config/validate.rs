@@ -114,6 +114,21 @@ impl ExperimentConfig {
         if e.name != EnvName::Cliffwalk && e.map.is_some() {
             return Err(invalid("env.map", "applies to cliffwalk only"));
         }
+        if e.name != EnvName::Deepsea && (e.size.is_some() || e.mapping_seed.is_some()) {
+            let field = if e.size.is_some() {
+                "env.size"
+            } else {
+                "env.mapping_seed"
+            };
+            return Err(invalid(field, "applies to deepsea only"));
+        }
+        let max = crate::env::deepsea::MAX_SIZE;
+        if e.name == EnvName::Deepsea && !(1..=max).contains(&e.deepsea_size()) {
+            return Err(invalid(
+                "env.size",
+                format!("N must be in 1..={max}, got {}", e.deepsea_size()),
+            ));
+        }
         Ok(())
     }
 
@@ -124,10 +139,16 @@ impl ExperimentConfig {
         if a.heads() == 0 {
             return Err(invalid("agent.heads", "K must be at least 1"));
         }
-        if a.heads() > 8 {
+        // The neural agents' heads travel on the wire (8 at most); Q-tables stay in one process.
+        let most = if a.kind.is_tabular() { 20 } else { 8 };
+        if a.heads() > most {
             return Err(invalid(
                 "agent.heads",
-                format!("at most 8 heads are supported, got {}", a.heads()),
+                format!(
+                    "at most {most} heads are supported for {:?}, got {}",
+                    a.kind,
+                    a.heads()
+                ),
             ));
         }
         if matches!(
@@ -146,7 +167,7 @@ impl ExperimentConfig {
         if a.kind.is_tabular() != e.name.is_tabular() {
             return Err(invalid(
                 "agent.kind",
-                format!("{:?} does not run on {}: tabular agents run on cliffwalk, neural ones on cartpole, mountaincar, acrobot and gymnasium", a.kind, e.name),
+                format!("{:?} does not run on {}: tabular agents run on cliffwalk and deepsea, neural ones on cartpole, mountaincar, acrobot and gymnasium", a.kind, e.name),
             ));
         }
         if !(a.gamma >= 0.0 && a.gamma <= 1.0) {
@@ -317,12 +338,6 @@ impl ExperimentConfig {
                 return Err(invalid(field, format!("must be >= 0, got {v}")));
             }
         }
-        if a.prior_scale > 0.0 && a.kind.is_tabular() {
-            return Err(invalid(
-                "agent.prior_scale",
-                "applies to the neural agents (dqn, bdqn); the Q-tables have no prior network",
-            ));
-        }
         Ok(())
     }
 
@@ -351,11 +366,30 @@ impl ExperimentConfig {
         if q.gap == 0 {
             return Err(invalid("query.gap", "must be at least 1"));
         }
-        if q.rule == RuleKind::JsSpread && q.horizon_for(self.steps) == 0 {
+        if q.gate.is_some() && q.rule != RuleKind::Never {
+            return Err(invalid(
+                "query.gate",
+                format!(
+                    "a rule is either `query.rule` (here `{}`) or `query.allowance` with \
+                     `query.gate`, not both",
+                    q.rule.name()
+                ),
+            ));
+        }
+        if q.gate.is_none() && q.allowance.is_some() {
+            return Err(invalid(
+                "query.allowance",
+                "says when a demonstration may be asked for; `query.gate` must say which state",
+            ));
+        }
+        if q.spreads() && q.horizon_for(self.steps) == 0 {
             return Err(invalid(
                 "query.horizon",
-                "rule `js-spread` spreads B over the run's steps: set `steps`, or `query.horizon` \
-                 for a run limited by `episodes`",
+                format!(
+                    "`{}` spreads B over the run's steps: set `steps`, or `query.horizon` for a \
+                     run limited by `episodes`",
+                    q.rule_name()
+                ),
             ));
         }
         if q.rule == RuleKind::Random && q.schedule.is_none() {

@@ -26,7 +26,10 @@
 //! [`EnvError::EpisodeOver`], as for every [`Env`]. bsuite's count of "bad episodes" (a move left
 //! from the diagonal) is not kept.
 
+mod cells;
 pub mod numpy_legacy;
+
+pub use cells::DeepSeaCells;
 
 use super::episode::{Episode, Phase};
 use super::{Env, EnvError, EnvState, Step};

@@ -11,7 +11,7 @@ pub mod mountaincar;
 pub use acrobot::Acrobot;
 pub use cartpole::CartPole;
 pub use cliffwalk::CliffWalk;
-pub use deepsea::DeepSea;
+pub use deepsea::{DeepSea, DeepSeaCells};
 pub use mountaincar::MountainCar;
 
 /// What one call to [`Env::step`] returns, as Gymnasium's `step` does.
@@ -86,6 +86,12 @@ pub trait Env {
     fn restore(&mut self, state: &EnvState) -> Result<(), EnvError>;
 }
 
+/// An environment whose states are ids `0..num_states()` (the tabular agents' environments:
+/// CliffWalk, DeepSea's cells).
+pub trait TabularEnv: Env<Observation = usize> + Clone {
+    fn num_states(&self) -> usize;
+}
+
 /// An environment for the neural agents: observations as vectors of `f32`.
 pub type VectorEnv = dyn Env<Observation = Vec<f32>>;
 
@@ -153,6 +159,6 @@ pub fn vector_env_named(
         EnvName::Mountaincar => Some(Box::new(Vectorized(MountainCar::new(limit)))),
         EnvName::Acrobot => Some(Box::new(Vectorized(Acrobot::new(limit)))),
         // In another process (the Python adapter): built outside the core, by `alfd-wire`.
-        EnvName::Cliffwalk | EnvName::Gymnasium => None,
+        EnvName::Cliffwalk | EnvName::Gymnasium | EnvName::Deepsea => None,
     }
 }

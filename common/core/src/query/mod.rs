@@ -12,7 +12,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::rng::{Rng, RngState};
 
+mod composed;
 mod gate;
+pub use composed::{Allowance, AllowanceKind, Composed, Gate, GateKind, Oracle};
 pub use gate::{percentile, PercentileGate};
 
 /// Which rule decides when to ask (`query.rule`).
@@ -99,6 +101,9 @@ pub struct Signals {
     pub novelty: Option<f64>,
     /// Demonstrations used in the run so far, as far as the acting agent knows.
     pub used: u64,
+    /// Whether the learner's greedy action differs from the expert's (gate `oracle` only;
+    /// `None` when not computed).
+    pub disagrees: Option<bool>,
 }
 
 /// Budget B as the acting agent sees it at a step.
@@ -139,6 +144,10 @@ pub struct RuleSpec {
     pub total: u64,
     /// H, the steps over which rule `js-spread` spreads B (the config requires ≥ 1 for it).
     pub horizon: u64,
+    /// `query.allowance` and `query.gate`: a rule in two parts, in place of `kind`.
+    pub parts: Option<(AllowanceKind, GateKind)>,
+    /// W, gate `record`'s window in allowed steps.
+    pub window: u64,
 }
 
 /// Never asks.
@@ -161,12 +170,14 @@ impl QueryRule for First {
     }
 }
 
-/// Which signal a [`Disagreement`] rule thresholds.
+/// Which signal a [`Disagreement`] rule thresholds (and [`Signal::Oracle`], which only gate
+/// `oracle` reads).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Signal {
     Js,
     QStd,
     Novelty,
+    Oracle,
 }
 
 /// A signal above the `p_r` percentile of its last `L_q` values (Algorithm 1 lines 4-7 with the
@@ -187,6 +198,7 @@ impl QueryRule for Disagreement {
                 Some(u) => u,
                 None => return true,
             },
+            Signal::Oracle => unreachable!("the oracle is a gate of its own"),
         };
         self.gate.observe(u)
     }
@@ -327,6 +339,7 @@ pub enum Rule {
     Burst(Burst),
     Paced(Paced),
     Spread(Spread),
+    Composed(Composed),
 }
 
 impl Rule {
@@ -339,6 +352,12 @@ impl Rule {
                 gate: gate(),
             })
         };
+        if let Some((allowance, g)) = spec.parts {
+            return Rule::Composed(Composed {
+                allowance: Allowance::new(allowance, spec.total, spec.horizon),
+                gate: Gate::new(g, spec.queue_len, spec.percentile, spec.window, rng),
+            });
+        }
         match spec.kind {
             RuleKind::Never => Rule::Never(Never),
             RuleKind::First => Rule::First(First),
@@ -377,8 +396,8 @@ impl Rule {
         budget_left && self.ask(signals)
     }
 
-    /// [`Rule::decide`] at the run's global step `step` with divergence `js`, calling `q_std` and
-    /// `novelty` only when the budget is left and the rule reads them (the act step's hot path).
+    /// [`Rule::decide`] at the run's global step `step` with divergence `js`, calling the lazy
+    /// signals only when the budget is left and the rule reads them (the act step's hot path).
     pub fn decide_at(
         &mut self,
         budget: BudgetView,
@@ -386,6 +405,7 @@ impl Rule {
         js: f64,
         q_std: impl FnOnce() -> f64,
         novelty: impl FnOnce() -> Option<f64>,
+        disagrees: impl FnOnce() -> Option<bool>,
     ) -> bool {
         if !budget.left {
             return false;
@@ -404,14 +424,24 @@ impl Rule {
             } else {
                 None
             },
+            disagrees: if self.reads(Signal::Oracle) {
+                disagrees()
+            } else {
+                None
+            },
         };
         self.ask(&signals)
     }
 
     /// Whether the rule reads `signal` beyond the divergence (the agents keep the demonstrated
-    /// states only for a rule that reads the novelty).
+    /// states only for a rule that reads the novelty, and consult the expert only for gate
+    /// `oracle`).
     pub fn reads(&self, signal: Signal) -> bool {
-        matches!(self, Rule::Disagreement(d) if d.signal == signal)
+        match self {
+            Rule::Disagreement(d) => d.signal == signal,
+            Rule::Composed(c) => c.gate.reads(signal),
+            _ => false,
+        }
     }
 }
 
@@ -426,6 +456,7 @@ impl QueryRule for Rule {
             Rule::Burst(r) => r.ask(s),
             Rule::Paced(r) => r.ask(s),
             Rule::Spread(r) => r.ask(s),
+            Rule::Composed(r) => r.ask(s),
         }
     }
 }
@@ -453,7 +484,21 @@ pub fn schedule_from_demos(text: &str) -> Result<Vec<u64>, String> {
 pub fn q_spread(q: &[f64], heads: usize) -> f64 {
     let actions = q.len() / heads;
     let mean_q = |a: usize| (0..heads).map(|k| q[k * actions + a]).sum::<f64>() / heads as f64;
-    let best = (0..actions)
+    let best = mean_greedy(q, heads);
+    let mean = mean_q(best);
+    let var = (0..heads)
+        .map(|k| (q[k * actions + best] - mean).powi(2))
+        .sum::<f64>()
+        / heads as f64;
+    var.sqrt()
+}
+
+/// The greedy action of the heads' mean Q-values (`q`: `heads × actions`, head-major; the
+/// first of equal values).
+pub fn mean_greedy(q: &[f64], heads: usize) -> usize {
+    let actions = q.len() / heads;
+    let mean_q = |a: usize| (0..heads).map(|k| q[k * actions + a]).sum::<f64>() / heads as f64;
+    (0..actions)
         .map(mean_q)
         .enumerate()
         .fold((0, f64::NEG_INFINITY), |(bi, bv), (i, v)| {
@@ -463,13 +508,7 @@ pub fn q_spread(q: &[f64], heads: usize) -> f64 {
                 (bi, bv)
             }
         })
-        .0;
-    let mean = mean_q(best);
-    let var = (0..heads)
-        .map(|k| (q[k * actions + best] - mean).powi(2))
-        .sum::<f64>()
-        / heads as f64;
-    var.sqrt()
+        .0
 }
 
 /// The RBF kernel width of the demonstration models (`k(x, y) = exp(−γ|x − y|²)`).
@@ -554,6 +593,8 @@ mod tests {
             schedule: vec![9, 3, 5],
             total: 4,
             horizon: 20,
+            parts: None,
+            window: 8,
         }
     }
 
@@ -612,50 +653,97 @@ mod tests {
         let rng = crate::rng::seeded(0);
         let mut js = Rule::new(&spec(RuleKind::Js), &rng);
         let never_called = || -> f64 { panic!("q_std computed for the js rule") };
-        assert!(
-            !js.decide_at(BudgetView::FRESH, 0, 1.0, never_called, || panic!(
-                "novelty computed"
-            ))
-        );
-        assert!(
-            js.decide_at(BudgetView::FRESH, 1, 2.0, never_called, || panic!(
-                "novelty computed"
-            ))
-        );
+        assert!(!js.decide_at(
+            BudgetView::FRESH,
+            0,
+            1.0,
+            never_called,
+            || panic!("novelty computed"),
+            || None
+        ));
+        assert!(js.decide_at(
+            BudgetView::FRESH,
+            1,
+            2.0,
+            never_called,
+            || panic!("novelty computed"),
+            || None
+        ));
         let mut q = Rule::new(&spec(RuleKind::QStd), &rng);
         assert!(!q.decide_at(
             BudgetView::FRESH,
             0,
             9.0,
             || 1.0,
-            || panic!("novelty computed")
+            || panic!("novelty computed"),
+            || None
         ));
         assert!(q.decide_at(
             BudgetView::FRESH,
             1,
             0.0,
             || 2.0,
-            || panic!("novelty computed")
+            || panic!("novelty computed"),
+            || None
         ));
         assert!(!q.decide_at(
             BudgetView::default(),
             2,
             0.0,
             || panic!("computed without budget"),
+            || None,
             || None
         ));
         let mut n = Rule::new(&spec(RuleKind::Novelty), &rng);
         assert!(
-            n.decide_at(BudgetView::FRESH, 0, 0.0, never_called, || None),
+            n.decide_at(BudgetView::FRESH, 0, 0.0, never_called, || None, || None),
             "nothing held: ask"
         );
         // The budget's use reaches the rule: js-spread (B = 4, H = 20) with 1 used at step 1.
         let mut spread = Rule::new(&spec(RuleKind::JsSpread), &rng);
         let used = |used| BudgetView { left: true, used };
-        assert!(!spread.decide_at(used(0), 0, 1.0, never_called, || None));
-        assert!(!spread.decide_at(used(1), 1, 2.0, never_called, || None));
-        assert!(spread.decide_at(used(0), 2, 3.0, never_called, || None));
+        assert!(!spread.decide_at(used(0), 0, 1.0, never_called, || None, || None));
+        assert!(!spread.decide_at(used(1), 1, 2.0, never_called, || None, || None));
+        assert!(spread.decide_at(used(0), 2, 3.0, never_called, || None, || None));
         assert!(n.reads(Signal::Novelty) && !n.reads(Signal::QStd) && !js.reads(Signal::Novelty));
+    }
+
+    #[test]
+    fn the_old_rule_names_are_an_allowance_and_a_gate_with_the_same_decisions() {
+        let rng = crate::rng::seeded(0);
+        let pairs = [
+            (RuleKind::Js, AllowanceKind::First, GateKind::Js),
+            (RuleKind::QStd, AllowanceKind::First, GateKind::QStd),
+            (RuleKind::Novelty, AllowanceKind::First, GateKind::Novelty),
+            (RuleKind::JsSpread, AllowanceKind::Spread, GateKind::Js),
+        ];
+        let mut draw = crate::rng::seeded(5);
+        let stream: Vec<Signals> = (0..400)
+            .map(|t| Signals {
+                step: t,
+                js: draw.random(),
+                q_std: draw.random(),
+                novelty: (t > 3).then(|| draw.random()),
+                used: t / 7,
+                disagrees: None,
+            })
+            .collect();
+        for (kind, allowance, gate) in pairs {
+            let mut old = Rule::new(&spec(kind), &rng);
+            let parts = RuleSpec {
+                parts: Some((allowance, gate)),
+                ..spec(RuleKind::Never)
+            };
+            let mut new = Rule::new(&parts, &rng);
+            for s in &stream {
+                assert_eq!(
+                    old.decide(s, true),
+                    new.decide(s, true),
+                    "{kind:?} at {}",
+                    s.step
+                );
+            }
+        }
     }
 
     #[test]
@@ -824,14 +912,26 @@ mod tests {
     #[test]
     fn rules_survive_a_snapshot_exactly() {
         let rng = crate::rng::seeded(3);
-        for kind in RuleKind::ALL {
-            let mut rule = Rule::new(&spec(kind), &rng);
+        let parts = AllowanceKind::ALL
+            .into_iter()
+            .flat_map(|a| GateKind::ALL.into_iter().map(move |g| Some((a, g))));
+        let specs = RuleKind::ALL
+            .into_iter()
+            .map(spec)
+            .chain(parts.map(|parts| RuleSpec {
+                parts,
+                ..spec(RuleKind::Never)
+            }));
+        for spec in specs {
+            let kind = spec.clone();
+            let mut rule = Rule::new(&spec, &rng);
             let s = |t: u64| Signals {
                 step: t,
                 js: (t as f64 * 0.7).sin(),
                 q_std: (t as f64 * 1.3).cos(),
                 novelty: Some((t as f64 * 0.4).sin().abs()),
                 used: t / 4,
+                disagrees: Some(t.is_multiple_of(3)),
             };
             for t in 0..20 {
                 rule.decide(&s(t), true);

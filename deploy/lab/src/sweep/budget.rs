@@ -18,7 +18,7 @@ use super::summary::{Episodes, Run};
 /// steps of another rule than `js` in the same sweep (`{out}/runs/METHOD/SEED/demos.jsonl`, the
 /// method named `RULE-bB`) is named after it: `random (js-spread's steps)`.
 pub fn row_name(cfg: &alfd_common::config::ExperimentConfig) -> String {
-    let rule = cfg.query.rule.name();
+    let rule = cfg.query.rule_name();
     if cfg.query.rule == alfd_common::query::RuleKind::Random {
         if let Some(other) = cfg.query.schedule.as_deref().and_then(replayed_rule) {
             if other != "js" {

@@ -490,6 +490,12 @@ impl CliffWalk {
     }
 }
 
+impl crate::env::TabularEnv for CliffWalk {
+    fn num_states(&self) -> usize {
+        self.map.num_states()
+    }
+}
+
 impl Env for CliffWalk {
     type Observation = usize;
 
