@@ -375,6 +375,40 @@ fn tiny_sweep_writes_curves_and_summary_that_match_the_runs() {
         "BDQN+KRR asked for demonstrations"
     );
 
+    // runs.csv: one row per run, its final evaluation and the mean of its evaluations
+    // recomputed from its episodes.csv (Q-learning never evaluates: empty cells).
+    let table = std::fs::read_to_string(out.join("runs.csv")).unwrap();
+    let mut lines = table.lines();
+    assert!(lines
+        .next()
+        .unwrap()
+        .starts_with("method,seed,budget,demos,final_eval,eval_auc"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), METHODS.len() * SEEDS as usize);
+    for r in &rows {
+        let run = &runs[r[0]][r[1].parse::<usize>().unwrap()];
+        let evals: Vec<f64> = run
+            .eval
+            .iter()
+            .flatten()
+            .copied()
+            .filter(|v| !v.is_nan())
+            .collect();
+        assert_eq!(r[3].parse::<f64>().unwrap(), run.demos, "{r:?}");
+        if evals.is_empty() {
+            assert_eq!((r[4], r[5], r[6]), ("", "", "0"), "{r:?}");
+        } else {
+            assert_eq!(
+                r[4].parse::<f64>().unwrap(),
+                *evals.last().unwrap(),
+                "{r:?}"
+            );
+            let mean = evals.iter().sum::<f64>() / evals.len() as f64;
+            assert!(close(r[5].parse().unwrap(), mean, 1e-9), "{r:?}");
+            assert_eq!(r[6], evals.len().to_string());
+        }
+    }
+
     // curves.csv: mean, std, median, count and the mean's interval per method and episode,
     // recomputed.
     let (curves, rows) = read_curves(&out, "episode");
@@ -692,6 +726,16 @@ fn bad_experiments_are_refused_before_anything_runs() {
         None,
         &[],
         &["`qlearning` is listed twice"],
+    );
+    assert_refused(
+        "unknown-baseline",
+        "",
+        Some(&format!(
+            "title = \"t\"\nseeds = 2\nbaseline = \"nobody\"\n[[method]]\nname = \"ok\"\nconfig = \"{}\"\n",
+            config("cliffwalk-qlearning.toml")
+        )),
+        &[],
+        &["baseline `nobody`"],
     );
 }
 

@@ -95,6 +95,10 @@ struct ExperimentFile {
     /// reaches this return.
     #[serde(default)]
     eval_threshold: Option<f64>,
+    /// The method every other one is compared with, seed by seed (paired bootstrap intervals
+    /// of the differences in `summary.md`).
+    #[serde(default)]
+    baseline: Option<String>,
     /// The summary also reads the methods as query rules × budgets (each method's `query.rule`
     /// and `budget.total`): tables and plots against B.
     #[serde(default)]
@@ -176,6 +180,8 @@ pub struct Experiment {
     pub log_y: bool,
     pub thresholds: Vec<f64>,
     pub eval_threshold: Option<f64>,
+    /// The method the others are compared with seed by seed.
+    pub baseline: Option<String>,
     pub by_budget: bool,
     pub learner_episodes_only: bool,
     pub eval_curves: bool,
@@ -280,6 +286,14 @@ impl Experiment {
             y_range,
         } = check(&file, path, seeds, episodes)?;
         let methods = load_methods(&file, path, episodes, trainer)?;
+        if let Some(b) = &file.baseline {
+            if !methods.iter().any(|m| &m.name == b) {
+                return Err(usage(format!(
+                    "experiment file {}: baseline `{b}` is not one of its methods",
+                    path.display()
+                )));
+            }
+        }
         Ok(Self {
             name,
             title: file.title,
@@ -290,6 +304,7 @@ impl Experiment {
             log_y: file.log_y,
             thresholds: file.thresholds,
             eval_threshold: file.eval_threshold,
+            baseline: file.baseline,
             by_budget: file.by_budget,
             learner_episodes_only: file.learner_episodes_only,
             eval_curves: file.eval_curves,

@@ -29,6 +29,7 @@
 mod budget;
 mod experiment;
 pub(crate) mod plot;
+mod runs;
 mod shard;
 mod stats;
 mod summary;
@@ -236,6 +237,11 @@ fn run_training(ctx: &Ctx) -> crate::Result<()> {
     }
 
     let analysed = analyse_training(ctx)?;
+    write(
+        ctx.out,
+        "runs.csv",
+        runs::runs_csv(&analysed.rows).as_bytes(),
+    )?;
     let plotted = write_curves(ctx, &analysed.results, "curves.csv", &exp.name, "return")?;
     let wall = ctx.start.elapsed().as_secs_f64();
     let md = training_markdown(ctx, &analysed, pending_len, resumed, wall, &plotted)?;
@@ -249,7 +255,7 @@ fn run_training(ctx: &Ctx) -> crate::Result<()> {
         wall,
         ctx.out.join("summary.md").display()
     );
-    let files = ["summary.md", "curves.csv"].map(str::to_owned);
+    let files = ["summary.md", "curves.csv", "runs.csv"].map(str::to_owned);
     sweep_report(
         ctx,
         total,
@@ -326,6 +332,8 @@ struct Analysed<'a> {
     all_runs: Vec<Vec<summary::Run>>,
     /// The query-rule view, filled when the experiment asks for `by_budget`.
     by_budget: budget::Table,
+    /// Every run as a row of `runs.csv`.
+    rows: Vec<runs::RunRow>,
 }
 
 /// Reads back every method's runs and analyses them.
@@ -335,9 +343,15 @@ fn analyse_training<'a>(ctx: &Ctx<'a>) -> crate::Result<Analysed<'a>> {
         results: Vec::with_capacity(exp.methods.len()),
         all_runs: Vec::with_capacity(exp.methods.len()),
         by_budget: budget::Table::new(),
+        rows: Vec::new(),
     };
     for method in &exp.methods {
         let runs = read_runs(ctx.out, method, exp.seed_range())?;
+        for (seed, run) in exp.seed_range().zip(&runs) {
+            let budget = method.config(seed, exp.episodes)?.budget();
+            let row = runs::RunRow::of(&method.name, seed, budget, run, exp.eval_threshold);
+            analysed.rows.push(row);
+        }
         let own;
         let curve_runs = if exp.learner_episodes_only {
             own = with_episodes(&runs, summary::Episodes::without_expert);
@@ -386,6 +400,7 @@ fn training_markdown(
     if exp.by_budget {
         md.push_str(&budget_section(ctx, &analysed.by_budget)?);
     }
+    md.push_str(&runs::section(exp, &analysed.rows));
     Ok(md)
 }
 
