@@ -269,10 +269,13 @@ pub struct AgentConfig {
     /// in [0, 1] (0: uniform, the paper's).
     #[serde(default)]
     pub demo_fraction: f64,
-    /// Neural: λ_E of DQfD's large-margin loss on demonstrated transitions, ≥ 0 (0: off).
+    /// λ_E of DQfD's large-margin loss on demonstrated transitions, ≥ 0 (0: off). Neural: the
+    /// loss's weight. Tabular: any value > 0 makes the margin a hard constraint: at every
+    /// demonstrated state each head's value of the demonstrated action stays at least `margin`
+    /// above its others.
     #[serde(default)]
     pub margin_loss_weight: f64,
-    /// Neural: the margin `l` of that loss, ≥ 0 (Hester et al. use 0.8).
+    /// The margin `l` of that loss, ≥ 0 (Hester et al. use 0.8).
     #[serde(default = "default_margin")]
     pub margin: f64,
     /// Neural: Adam's learning rate goes linearly from `learning_rate` to this over the first

@@ -40,6 +40,11 @@ pub struct TabularAgent {
     pending: Option<(usize, usize, f64, usize)>,
     /// The expert gate `oracle` consults (none for the other gates).
     oracle: Option<Oracle<usize>>,
+    /// With `agent.margin_loss_weight` > 0, the margin by which a demonstrated action stays
+    /// above the others at its state in every head (DQfD's large margin as a hard constraint).
+    margin: Option<f64>,
+    /// The last action demonstrated at each demonstrated state (with a margin only).
+    demo_actions: std::collections::BTreeMap<usize, usize>,
 }
 
 /// The Q-tables' start: zeros, or with `agent.prior_scale` β > 0, β times standard normal
@@ -77,6 +82,9 @@ pub struct TabularSnapshot {
     pub rule: Rule,
     pub demo_states: Vec<usize>,
     pub pending: Option<(usize, usize, f64, usize)>,
+    /// The demonstrated actions the margin holds to, by state.
+    #[serde(default)]
+    pub demo_actions: std::collections::BTreeMap<usize, usize>,
 }
 
 impl TabularAgent {
@@ -90,6 +98,7 @@ impl TabularAgent {
             rule: self.rule.clone(),
             demo_states: self.demo_states.clone(),
             pending: self.pending,
+            demo_actions: self.demo_actions.clone(),
         }
     }
 
@@ -118,6 +127,7 @@ impl TabularAgent {
         self.rule = s.rule.clone();
         self.demo_states = s.demo_states.clone();
         self.pending = s.pending;
+        self.demo_actions = s.demo_actions.clone();
         Ok(())
     }
 
@@ -146,6 +156,8 @@ impl TabularAgent {
             demo_states: Vec::new(),
             pending: None,
             oracle: None,
+            margin: (cfg.margin_loss_weight > 0.0).then_some(cfg.margin),
+            demo_actions: std::collections::BTreeMap::new(),
         }
     }
 
@@ -256,6 +268,24 @@ impl TabularAgent {
             };
             self.q.update_towards(s, k, a, r + self.gamma * next, lr);
         }
+        self.hold_margin(s);
+    }
+
+    /// At a demonstrated state, raises every head's value of the demonstrated action to at least
+    /// the margin above its best other action (nothing without a margin or a demonstration).
+    fn hold_margin(&mut self, s: usize) {
+        let (Some(margin), Some(&a_e)) = (self.margin, self.demo_actions.get(&s)) else {
+            return;
+        };
+        for k in 0..self.q.heads() {
+            let others = (0..self.q.actions())
+                .filter(|&a| a != a_e)
+                .map(|a| self.q.get(s, k, a))
+                .fold(f64::NEG_INFINITY, f64::max);
+            if self.q.get(s, k, a_e) < others + margin {
+                self.q.set(s, k, a_e, others + margin);
+            }
+        }
     }
 
     /// The greedy policy of the agent (of head 0, or of the mean over heads when K > 1).
@@ -283,6 +313,10 @@ impl TabularAgent {
     pub fn observe_step(&mut self, obs: usize, action: usize, step: &Step<usize>, demo: bool) {
         if demo && self.rule.reads(Signal::Novelty) {
             self.note_demo(obs);
+        }
+        if demo && self.margin.is_some() {
+            self.demo_actions.insert(obs, action);
+            self.hold_margin(obs);
         }
         if let Some((s, a, r, s_next)) = self.pending.take() {
             self.learn(s, a, r, s_next, false, Some(action));
@@ -336,6 +370,41 @@ mod tests {
         // The same seed, the same prior; another prior_seed, another.
         assert_eq!(make("prior_scale = 2.0").q, a.q);
         assert_ne!(make("prior_scale = 2.0\nprior_seed = 9").q, a.q);
+    }
+
+    #[test]
+    fn a_margin_keeps_the_demonstrated_action_ahead_in_every_head() {
+        let spec = QueryConfig::default().spec(0, 0);
+        let c = cfg(
+            "bootstrapped-q",
+            "heads = 3\nlearning_rate = 1.0\nmargin_loss_weight = 1.0\nmargin = 0.5",
+        );
+        let mut a = TabularAgent::new(&c, &spec, 4, 2, crate::rng::seeded(0));
+        for k in 0..3 {
+            a.q.set(2, k, 0, 1.0);
+        }
+        let step = |r| Step {
+            observation: 3,
+            reward: r,
+            terminated: false,
+            truncated: false,
+        };
+        // The expert moved with action 1 at state 2: ahead of action 0 by the margin everywhere.
+        a.observe_step(2, 1, &step(0.0), true);
+        for k in 0..3 {
+            assert!(a.q.get(2, k, 1) >= a.q.get(2, k, 0) + 0.5, "head {k}");
+        }
+        // Learning that raises action 0 keeps action 1 ahead.
+        a.observe_step(2, 0, &step(5.0), false);
+        for k in 0..3 {
+            assert!(a.q.get(2, k, 1) >= a.q.get(2, k, 0) + 0.5, "head {k}");
+        }
+        assert_eq!(a.greedy_policy()[2], 1);
+        // Without the margin a demonstration is one more step to learn from.
+        let plain = cfg("bootstrapped-q", "heads = 3\nlearning_rate = 1.0");
+        let mut b = TabularAgent::new(&plain, &spec, 4, 2, crate::rng::seeded(0));
+        b.observe_step(2, 1, &step(0.0), true);
+        assert!(b.demo_actions.is_empty());
     }
 
     #[test]
