@@ -163,15 +163,19 @@ fn demos_agree(
         return Err(format!("{n} demonstrations against a budget of {budget}"));
     }
     let s = summary.as_ref().map_err(Clone::clone)?;
-    let counted = (s["demos"].as_u64(), s["demos_used"].as_u64());
-    if counted != (Some(n), Some(n)) {
+    let (demos, used) = (s["demos"].as_u64(), s["demos_used"].as_u64());
+    // A demonstration whose answer came after its actor stopped waiting is kept, not used.
+    let late = s["answers_late"].as_u64().unwrap_or(0);
+    let unused = n.saturating_sub(used.unwrap_or(0));
+    if demos != Some(n) || used.is_none_or(|u| u > n) || unused > late {
         return Err(format!(
-            "demos.jsonl holds {n}; summary.json counts demos {:?}, demos_used {:?}",
-            counted.0, counted.1
+            "demos.jsonl holds {n}; summary.json counts demos {demos:?}, demos_used {used:?}, \
+             answers_late {late}"
         ));
     }
     Ok(format!(
-        "{n} of {budget}, indices 0..{n}, as summary.json counts"
+        "{n} of {budget}, indices 0..{n}, as summary.json counts ({unused} kept from answers \
+         that came late, of {late} late)"
     ))
 }
 
@@ -310,6 +314,15 @@ mod tests {
         assert!(demos_agree(&ok, &summary(5, 2, false), 3)
             .unwrap_err()
             .contains("counts demos Some(2)"));
+        // Unused demonstrations are only those whose answers came late.
+        let late = |used: u64, late: u64| {
+            Ok(serde_json::json!({"demos": 3, "demos_used": used, "answers_late": late}))
+        };
+        assert!(demos_agree(&ok, &late(1, 2), 3).is_ok());
+        assert!(demos_agree(&ok, &late(1, 1), 3)
+            .unwrap_err()
+            .contains("answers_late 1"));
+        assert!(demos_agree(&ok, &late(4, 0), 3).is_err());
         let gap = Ok(vec![0, 2]);
         assert!(demos_agree(&gap, &summary(5, 2, false), 3)
             .unwrap_err()
