@@ -13,7 +13,7 @@ use alfd_common::config::EnvName;
 use alfd_common::env::cliffwalk::{
     self, CliffMap, CliffWalk, DEFAULT_GAMMA, DEFAULT_MAX_EPISODE_STEPS, DEFAULT_P_SUCCESS,
 };
-use alfd_common::env::{Acrobot, CartPole, Env, MountainCar};
+use alfd_common::env::{Acrobot, CartPole, Env, MountainCar, Step};
 use anyhow::Context;
 
 #[cfg(test)]
@@ -286,17 +286,35 @@ fn roll<E: Env, const N: usize>(
         };
         serde_json::to_writer(&mut lines, &line).context("writing a step")?;
         lines.push(b'\n');
-        if step.done() && i + 1 < actions.len() {
-            warning = Some(format!(
-                "warning: the episode ended after step {} ({}); the {} remaining action(s) were ignored",
-                i + 1,
-                if step.terminated { "terminated" } else { "truncated" },
-                actions.len() - i - 1
-            ));
+        warning = ended_early(&step, i, actions.len());
+        if warning.is_some() {
             break;
         }
     }
-    out.write_all(&lines).context("writing the steps")?;
+    print_rollout(&lines, warning, out, err)
+}
+
+/// The warning of a rollout whose episode ended at step `i` (0-based) of `n` actions, if
+/// actions are left over.
+fn ended_early<O>(step: &Step<O>, i: usize, n: usize) -> Option<String> {
+    (step.done() && i + 1 < n).then(|| {
+        format!(
+            "warning: the episode ended after step {} ({}); the {} remaining action(s) were ignored",
+            i + 1,
+            if step.terminated { "terminated" } else { "truncated" },
+            n - i - 1
+        )
+    })
+}
+
+/// The rollout's lines on `out`, then its warning (if any) on `err`.
+fn print_rollout(
+    lines: &[u8],
+    warning: Option<String>,
+    out: &mut impl Write,
+    err: &mut impl Write,
+) -> anyhow::Result<()> {
+    out.write_all(lines).context("writing the steps")?;
     if let Some(w) = warning {
         writeln!(err, "{w}").context("writing to stderr")?;
     }
@@ -336,6 +354,7 @@ fn roll_deepsea(
     let actions = parse_actions(&args.actions, env.num_actions())?;
     env.reset(Some(0));
     let mut lines = Vec::new();
+    let mut warning = None;
     for (i, &action) in actions.iter().enumerate() {
         let step = env
             .step(action)
@@ -348,18 +367,12 @@ fn roll_deepsea(
         };
         serde_json::to_writer(&mut lines, &line).context("writing a step")?;
         lines.push(b'\n');
-        if step.done() && i + 1 < actions.len() {
-            out.write_all(&lines).context("writing the steps")?;
-            return writeln!(
-                err,
-                "warning: the episode ended after step {}; the {} remaining action(s) were ignored",
-                i + 1,
-                actions.len() - i - 1
-            )
-            .context("writing to stderr");
+        warning = ended_early(&step, i, actions.len());
+        if warning.is_some() {
+            break;
         }
     }
-    out.write_all(&lines).context("writing the steps")
+    print_rollout(&lines, warning, out, err)
 }
 
 /// Reads and parses a map file; both failures are usage errors naming the file.

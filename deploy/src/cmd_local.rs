@@ -9,6 +9,7 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use crate::setup::TabularEnvs;
 use alfd_common::agent::{DemoRecord, Demonstrator};
 use alfd_common::config::{DemoModelChoice, EnvName, ExperimentConfig};
 use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration, CliffWalk};
@@ -208,14 +209,14 @@ impl Pieces {
     pub(crate) fn of(cfg: &ExperimentConfig) -> anyhow::Result<Self> {
         let prior = read_prior(cfg)?;
         Ok(match cfg.env.name {
-            EnvName::Cliffwalk | EnvName::Deepsea => Self::Tabular {
-                env: match cfg.env.name {
-                    EnvName::Deepsea => TabularEnvs::DeepSea(Box::new(setup::deepsea(cfg)?)),
-                    _ => TabularEnvs::CliffWalk(Box::new(setup::cliffwalk(cfg)?)),
-                },
-                demonstrator: setup::tabular_demonstrator(cfg)?,
-                oracle: setup::oracle(cfg, || setup::tabular_demonstrator(cfg))?,
-            },
+            EnvName::Cliffwalk | EnvName::Deepsea => {
+                let env = TabularEnvs::of(cfg)?;
+                Self::Tabular {
+                    demonstrator: env.demonstrator(&cfg.expert.name)?,
+                    oracle: setup::oracle(cfg, || env.demonstrator(&cfg.expert.name))?,
+                    env,
+                }
+            }
             // Python pieces start with the run (their logs go to its directory).
             _ if crate::local_remote::needed(cfg) => {
                 setup::check_demonstrator(cfg)?;
@@ -390,26 +391,17 @@ impl Watch<'_> {
     }
 }
 
-/// The environment of a tabular run.
-pub(crate) enum TabularEnvs {
-    CliffWalk(Box<CliffWalk>),
-    DeepSea(Box<alfd_common::env::DeepSeaCells>),
-}
-
-/// Runs a DeepSea run and writes its `policy.json`; `None` when it stopped before its end. Its
-/// greedy value is the return of one greedy episode (DeepSea is deterministic).
-fn run_deepsea(
+/// Trains a tabular run on `env` and writes its `policy.json`; `None` when it stopped before
+/// its end.
+fn train_tabular<E: alfd_common::env::TabularEnv>(
     watch: &Watch<'_>,
-    env: alfd_common::env::DeepSeaCells,
+    env: E,
     demonstrator: &mut dyn Demonstrator<usize>,
     oracle: Option<Oracle<usize>>,
-) -> anyhow::Result<Option<Produced>> {
-    let cfg = watch.cfg;
+) -> anyhow::Result<Option<alfd_common::runner::TabularRun>> {
     let checkpoints = watch.resumable.checkpoints(RunState::tabular, "tabular")?;
-    let mut eval_env = env.clone();
-    let optimal = env.0.optimal_return();
     let run = run_tabular_checkpointed(
-        cfg,
+        watch.cfg,
         env,
         demonstrator,
         oracle,
@@ -421,10 +413,26 @@ fn run_deepsea(
     if watch.interrupted()? {
         return Ok(None);
     }
-    let policy = &run.greedy_policy;
-    let greedy = alfd_common::evaluate::evaluate(&mut eval_env, 1, 0, |&s| policy[s])?;
     let table = serde_json::json!({ "actions": run.greedy_policy });
     write(watch.out, "policy.json", table.to_string().as_bytes())?;
+    Ok(Some(run))
+}
+
+/// Runs a DeepSea run; `None` when it stopped before its end. Its greedy value is the return
+/// of one greedy episode (DeepSea is deterministic).
+fn run_deepsea(
+    watch: &Watch<'_>,
+    env: alfd_common::env::DeepSeaCells,
+    demonstrator: &mut dyn Demonstrator<usize>,
+    oracle: Option<Oracle<usize>>,
+) -> anyhow::Result<Option<Produced>> {
+    let mut eval_env = env.clone();
+    let optimal = env.0.optimal_return();
+    let Some(run) = train_tabular(watch, env, demonstrator, oracle)? else {
+        return Ok(None);
+    };
+    let policy = &run.greedy_policy;
+    let greedy = alfd_common::evaluate::evaluate(&mut eval_env, 1, 0, |&s| policy[s])?;
     Ok(Some(Produced {
         env_steps: run.records.last().map_or(0, |r| r.total_steps),
         updates: None,
@@ -435,33 +443,20 @@ fn run_deepsea(
     }))
 }
 
-/// Runs a CliffWalk run and writes its `policy.json`; `None` when it stopped before its end.
+/// Runs a CliffWalk run; `None` when it stopped before its end.
 fn run_tabular(
     watch: &Watch<'_>,
     env: &CliffWalk,
     demonstrator: &mut dyn Demonstrator<usize>,
     oracle: Option<Oracle<usize>>,
 ) -> anyhow::Result<Option<Produced>> {
-    let cfg = watch.cfg;
-    let checkpoints = watch.resumable.checkpoints(RunState::tabular, "tabular")?;
-    let run = run_tabular_checkpointed(
-        cfg,
-        env.clone(),
-        demonstrator,
-        oracle,
-        checkpoints,
-        |s| watch.save(RunState::Tabular(Box::new(s.clone()))),
-        |r, _| watch.show(r),
-    )
-    .map_err(|e| usage(format!("cannot resume from the checkpoint: {e}")))?;
-    if watch.interrupted()? {
+    let gamma = watch.cfg.agent.gamma;
+    let Some(run) = train_tabular(watch, env.clone(), demonstrator, oracle)? else {
         return Ok(None);
-    }
-    let vi = value_iteration(env, cfg.agent.gamma, 1e-10)?;
-    let greedy = policy_evaluation(env, &run.greedy_policy, cfg.agent.gamma)?;
+    };
+    let vi = value_iteration(env, gamma, 1e-10)?;
+    let greedy = policy_evaluation(env, &run.greedy_policy, gamma)?;
     let s0 = env.map().start();
-    let table = serde_json::json!({ "actions": run.greedy_policy });
-    write(watch.out, "policy.json", table.to_string().as_bytes())?;
     Ok(Some(Produced {
         env_steps: run.records.last().map_or(0, |r| r.total_steps),
         updates: None,

@@ -159,14 +159,32 @@ pub fn deepsea(cfg: &ExperimentConfig) -> anyhow::Result<alfd_common::env::DeepS
     Ok(alfd_common::env::DeepSeaCells(sea))
 }
 
-/// The demonstrator of a tabular config (CliffWalk's for its map, DeepSea's for its instance).
-pub fn tabular_demonstrator(
-    cfg: &ExperimentConfig,
-) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<usize> + Send>> {
-    Ok(match cfg.env.name {
-        EnvName::Deepsea => alfd_expert::registry::deepsea(&cfg.expert.name, &deepsea(cfg)?)?,
-        _ => alfd_expert::registry::cliffwalk(&cfg.expert.name, &cliffwalk(cfg)?)?,
-    })
+/// The environment of a tabular config.
+pub enum TabularEnvs {
+    CliffWalk(Box<CliffWalk>),
+    DeepSea(Box<alfd_common::env::DeepSeaCells>),
+}
+
+impl TabularEnvs {
+    /// The environment of a tabular config (CliffWalk, DeepSea).
+    pub fn of(cfg: &ExperimentConfig) -> anyhow::Result<Self> {
+        Ok(match cfg.env.name {
+            EnvName::Deepsea => Self::DeepSea(Box::new(deepsea(cfg)?)),
+            _ => Self::CliffWalk(Box::new(cliffwalk(cfg)?)),
+        })
+    }
+
+    /// The demonstrator `name` for this environment (CliffWalk's for its map, DeepSea's for its
+    /// instance).
+    pub fn demonstrator(
+        &self,
+        name: &str,
+    ) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<usize> + Send>> {
+        Ok(match self {
+            Self::DeepSea(env) => alfd_expert::registry::deepsea(name, env)?,
+            Self::CliffWalk(env) => alfd_expert::registry::cliffwalk(name, env)?,
+        })
+    }
 }
 
 /// The expert gate `oracle` consults, for a config whose gate is `oracle` (none otherwise): a
@@ -194,7 +212,9 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
         return Ok(alfd_expert::registry::check_external(&cfg.expert.name)?);
     }
     if cfg.env.name.is_tabular() {
-        return tabular_demonstrator(cfg).map(|_| ());
+        return TabularEnvs::of(cfg)?
+            .demonstrator(&cfg.expert.name)
+            .map(|_| ());
     }
     neural_demonstrator(cfg).map(|_| ())
 }

@@ -274,7 +274,8 @@ impl TabularAgent {
     /// At a demonstrated state, raises every head's value of the demonstrated action to at least
     /// the margin above its best other action (nothing without a margin or a demonstration).
     fn hold_margin(&mut self, s: usize) {
-        let (Some(margin), Some(&a_e)) = (self.margin, self.demo_actions.get(&s)) else {
+        let Some(margin) = self.margin else { return };
+        let Some(&a_e) = self.demo_actions.get(&s) else {
             return;
         };
         for k in 0..self.q.heads() {

@@ -10,7 +10,7 @@ use rand::Rng as _;
 use serde::{Deserialize, Serialize};
 
 use super::{PercentileGate, Signal, Signals};
-use crate::rng::{Rng, RngState};
+use crate::rng::Rng;
 
 /// When the `(n+1)`-th demonstration may be asked for (`query.allowance`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -170,11 +170,6 @@ impl<S: ?Sized> Oracle<S> {
         Self(Arc::new(Mutex::new(f)))
     }
 
-    /// A demonstrator as an oracle.
-    pub fn of(mut d: impl crate::agent::Demonstrator<S> + Send + 'static) -> Self {
-        Self::new(move |s: &S| d.act(s))
-    }
-
     /// The expert's action at `s`.
     pub fn action(&self, s: &S) -> usize {
         let mut f = self
@@ -194,10 +189,8 @@ impl<S: ?Sized> std::fmt::Debug for Oracle<S> {
 /// A gate with its state.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Gate {
-    Chance {
-        probability: f64,
-        rng: RngState,
-    },
+    /// Rule `uniform`'s draw, at the allowed steps only.
+    Chance(super::Uniform),
     Threshold {
         signal: Signal,
         gate: PercentileGate,
@@ -226,10 +219,8 @@ impl Gate {
         match kind {
             GateKind::Chance => {
                 let mut seeder = rng.clone();
-                Gate::Chance {
-                    probability: 1.0 - percentile / 100.0,
-                    rng: RngState::of(&crate::rng::seeded(seeder.random())),
-                }
+                let draws = crate::rng::seeded(seeder.random());
+                Gate::Chance(super::Uniform::new(1.0 - percentile / 100.0, &draws))
             }
             GateKind::Js => threshold(Signal::Js),
             GateKind::QStd => threshold(Signal::QStd),
@@ -249,7 +240,7 @@ impl Gate {
         match self {
             Gate::Threshold { signal: s, .. } => *s == signal,
             Gate::Oracle => signal == Signal::Oracle,
-            Gate::Chance { .. } | Gate::Record { .. } => false,
+            Gate::Chance(_) | Gate::Record { .. } => false,
         }
     }
 
@@ -276,12 +267,7 @@ impl Gate {
                 }
                 false
             }
-            Gate::Chance { probability, rng } => {
-                let mut r = rng.to_rng();
-                let u: f64 = r.random();
-                *rng = RngState::of(&r);
-                u < *probability
-            }
+            Gate::Chance(draw) => super::QueryRule::ask(draw, s),
             Gate::Oracle => s.disagrees == Some(true),
             Gate::Record {
                 watch,
