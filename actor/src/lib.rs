@@ -11,14 +11,13 @@ pub mod machine;
 use std::ops::ControlFlow;
 use std::time::Duration;
 
-use alfd_common::agent::NeuralActor;
+use alfd_common::agent::{build, NeuralActor};
 use alfd_common::checkpoint::Cadence;
 use alfd_common::env::VectorEnv;
 use alfd_common::environment_loop::{
     self, Actor as _, EpisodeEnd, GenericActor, LoopError, Schedule,
 };
 use alfd_common::evaluate::evaluate_greedy;
-use alfd_common::rng::{derive_seed, seeded};
 use alfd_harness::{BadInput, ProcessArgs, Session};
 use alfd_wire::{Doorbell, Process, Progress, Role, MAX_ACTORS};
 use tracing::info;
@@ -58,16 +57,6 @@ pub fn log_name(args: &Args) -> String {
     format!("actor-{}", args.actor_id)
 }
 
-/// The seed streams of an actor. Actor 0's first incarnation uses the single-process runner's
-/// streams (`actor-0`, `env`), so a one-actor run starts from the same seeds as `alfd local`.
-pub fn seed_streams(actor_id: u16, incarnation: u64) -> (String, String) {
-    match (actor_id, incarnation) {
-        (0, 1) => ("actor-0".to_owned(), "env".to_owned()),
-        (a, 1) => (format!("actor-{a}"), format!("env-{a}")),
-        (a, i) => (format!("actor-{a}-r{i}"), format!("env-{a}-r{i}")),
-    }
-}
-
 /// Runs the actor until the launcher says stop or a termination signal arrives.
 pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     // Woken by its answer, the actor runs before a busy learner or refit.
@@ -79,21 +68,12 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let mut adapter = None;
     let mut env = setup.actor_env(&mut adapter, &args.process, args.actor_id, schema)?;
     let (obs_dim, actions) = (env.observation_dim(), env.num_actions());
-    let (actor_stream, env_stream) = seed_streams(me.id, me.incarnation);
 
     let wire = args
         .process
         .connect(Process::new(Role::Actor, me.id), schema)?;
     let session = Session::join(&wire, Doorbell::Actor(me.id), runtime.handshake_timeout())?;
-    let rng = seeded(derive_seed(cfg.seed, &actor_stream));
-    let mut core = NeuralActor::new(
-        &cfg.agent,
-        &cfg.rule_spec(),
-        cfg.shaping.kind,
-        obs_dim,
-        actions,
-        rng,
-    );
+    let mut core = build::neural_actor(cfg, obs_dim, actions, me.id, me.incarnation);
     core.continue_exploration(args.explored_steps);
     let mut variables = WireVariables::new(&session)?;
     let poll = machine::credit_poll(std::env::var(machine::CREDIT_POLL_VAR).ok().as_deref());
@@ -139,7 +119,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let mut progress = wire.progress_sender()?;
     let mut actor = GenericActor::new(core, adder, variables);
     let mut eval_env = setup.actor_env(&mut adapter, &args.process, args.actor_id, schema)?;
-    let eval_seed = derive_seed(cfg.seed, "eval");
+    let eval_seed = build::eval_seed(cfg);
     let quota = args.episodes.map(|n| n.saturating_add(start.episodes));
     let every = Cadence::steps_for_updates(runtime.checkpoint_every, cfg.agent.updates_per_step);
     let mut checkpoints = Checkpoints::new(run_dir, me.id, &config_toml, every, quota, restored);
@@ -148,7 +128,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         &mut actor,
         &mut expert,
         Schedule {
-            env_seed: derive_seed(cfg.seed, &env_stream),
+            env_seed: build::env_seed(cfg, me.id, me.incarnation),
             episodes: quota,
             steps: None,
             actor_id: me.id,
@@ -409,26 +389,5 @@ mod tests {
         many.push(Duration::from_millis(500));
         assert_eq!(quantile_ms(&many, 0.99), 1.0);
         assert_eq!(quantile_ms(&many, 1.0), 500.0);
-    }
-
-    #[test]
-    fn actor_zero_uses_the_single_process_streams_and_restarts_new_ones() {
-        assert_eq!(seed_streams(0, 1), ("actor-0".to_owned(), "env".to_owned()));
-        assert_eq!(
-            seed_streams(3, 1),
-            ("actor-3".to_owned(), "env-3".to_owned())
-        );
-        assert_eq!(
-            seed_streams(0, 2),
-            ("actor-0-r2".to_owned(), "env-0-r2".to_owned())
-        );
-        let all: std::collections::HashSet<_> = (0..4u16)
-            .flat_map(|a| (1..4u64).map(move |i| seed_streams(a, i)))
-            .collect();
-        assert_eq!(
-            all.len(),
-            12,
-            "every actor and incarnation has its own streams"
-        );
     }
 }

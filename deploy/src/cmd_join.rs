@@ -13,6 +13,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use alfd_common::restarts::{Ended, GiveUp};
 use alfd_wire::{Process, Role, Wire, MAX_ACTORS, SCHEMA_VERSION};
 use anyhow::{bail, Context as _};
 use tracing::{info, warn};
@@ -364,12 +365,23 @@ impl Host<'_> {
                 continue;
             };
             let (id, _) = here.actors.remove(i);
-            if status.success() {
-                info!(actor = id, "stopped");
-                continue;
-            }
             let how = alfd_launcher::describe_status(status);
-            warn!(actor = id, "{how}");
+            // The run's restart rule (`alfd_common::restarts`); the run counts the restarts.
+            match Ended::of(status.code(), status.success()) {
+                Ended::Finished => {
+                    info!(actor = id, "stopped");
+                    continue;
+                }
+                Ended::Refused => {
+                    here.failed.push(format!(
+                        "actor-{id} {how}, and {}; see {}",
+                        GiveUp::Refused,
+                        self.dir.join(format!("actor-{id}.log")).display()
+                    ));
+                    continue;
+                }
+                Ended::Crashed => warn!(actor = id, "{how}"),
+            }
             match self.restart_actor(id, here.stopping.is_some()) {
                 Ok(Some(child)) => {
                     here.actors.insert(i, (id, child));

@@ -10,14 +10,13 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::setup::TabularEnvs;
-use alfd_common::agent::{DemoRecord, Demonstrator};
+use alfd_common::agent::{DemoRecord, Demonstrator, PriorDemo};
 use alfd_common::config::{DemoModelChoice, EnvName, ExperimentConfig};
 use alfd_common::env::cliffwalk::{policy_evaluation, value_iteration, CliffWalk};
 use alfd_common::query::Oracle;
 use alfd_common::record::{episodes_csv, EpisodeRecord, RunSummary};
 use alfd_common::runner::{
-    run_neural_on, run_tabular_checkpointed, Checkpoints, NeuralEnvs, NeuralRun, PriorDemo,
-    RunError, RunState,
+    run_neural_on, run_tabular_checkpointed, Checkpoints, NeuralEnvs, NeuralRun, RunError, RunState,
 };
 use anyhow::Context as _;
 

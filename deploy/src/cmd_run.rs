@@ -208,7 +208,7 @@ fn env_spec(
 fn prior_demos(
     cfg: &alfd_common::config::ExperimentConfig,
     spec: Option<&alfd_harness::python::EnvSpec>,
-) -> anyhow::Result<Vec<alfd_common::runner::PriorDemo>> {
+) -> anyhow::Result<Vec<alfd_common::agent::PriorDemo>> {
     let prior = crate::cmd_local::read_prior(cfg)?;
     if prior.is_none() {
         return Ok(Vec::new());

@@ -27,3 +27,10 @@ impl Trainer for Local {
 pub fn run(args: SweepArgs) -> anyhow::Result<()> {
     Ok(alfd_lab::sweep::run(args, &Local)?)
 }
+
+/// `alfd scaling`: writes the scaling table, CSV and plots, and prints the table.
+pub fn scaling(args: alfd_lab::sweep::scaling::ScalingArgs) -> anyhow::Result<()> {
+    let md = alfd_lab::sweep::scaling::run(&args)?;
+    print!("{md}");
+    Ok(())
+}

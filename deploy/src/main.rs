@@ -65,6 +65,9 @@ enum Command {
     DemoModel(cmd_demo_model::DemoModelArgs),
     /// Run an experiment file over many seeds: curves, plot, summary table.
     Sweep(cmd_sweep::SweepArgs),
+    /// How the time to a threshold grows with a task's size: one sweep's `runs.csv` per size, as
+    /// a table, a CSV and plots of the median demonstrations and episodes.
+    Scaling(alfd_lab::sweep::scaling::ScalingArgs),
     /// Evaluate a demonstration model fitted on an expert's demonstrations as a policy.
     DemoModelPolicy(cmd_demo_model_policy::DemoModelPolicyArgs),
     /// The Q-values of runs' learned networks on greedy episodes against the range of the true
@@ -104,6 +107,7 @@ fn main() {
         Command::Demos(a) => cmd_demos::run(a),
         Command::DemoModel(a) => cmd_demo_model::run(a),
         Command::Sweep(a) => cmd_sweep::run(a),
+        Command::Scaling(a) => cmd_sweep::scaling(a),
         Command::DemoModelPolicy(a) => cmd_demo_model_policy::run(a),
         Command::QRange(a) => cmd_q_range::run(a),
         Command::Docs(a) => cmd_docs::run(a),

@@ -141,6 +141,35 @@ fn alfd_run_accepts_the_rules_that_read_the_actor_s_own_signals() {
     }
 }
 
+/// A rule in two parts, an allowance and a gate, runs in `alfd run` as in `alfd local`: every
+/// demonstration in both files, within the budget, none after the run's end.
+#[test]
+fn alfd_run_accepts_a_rule_given_as_an_allowance_and_a_gate() {
+    let _time = timed!();
+    for (allowance, gate) in [
+        ("spread", "chance"),
+        ("uniform", "record"),
+        ("first", "novelty"),
+    ] {
+        let out = tmp(&format!("run-{allowance}-{gate}"));
+        let o = crate::runtime::run(
+            &out,
+            2,
+            &[
+                "episodes=40",
+                "budget.total=15",
+                "query.rule=never",
+                &format!("query.allowance={allowance}"),
+                &format!("query.gate={gate}"),
+                "query.horizon=4000",
+            ],
+        );
+        assert!(o.status.success(), "{allowance}+{gate}: {}", text(&o));
+        let demos = crate::runtime::check_run_dir(&out, 15);
+        assert!(!demos.is_empty(), "{allowance}+{gate} asked nothing");
+    }
+}
+
 #[test]
 fn a_sweep_replays_another_seed_s_js_steps_in_its_random_method() {
     let _time = timed!();

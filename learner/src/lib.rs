@@ -11,7 +11,6 @@ use std::time::{Duration, Instant};
 
 use alfd_common::agent::NeuralLearner;
 use alfd_common::checkpoint::Cadence;
-use alfd_common::rng::{derive_seed, seeded};
 use alfd_harness::{write_atomically_patiently, BadInput, ProcessArgs, Session, Setup};
 use alfd_wire::{
     self as wire, process_state, progress_kind, ActorBells, Credits, Doorbell, Process, Progress,
@@ -174,12 +173,7 @@ fn machine(
 ) -> alfd_harness::Result<LearnerMachine<NeuralLearner>> {
     let (cfg, runtime) = (&setup.config, &setup.runtime);
     let (obs_dim, num_actions) = setup.env_dims()?;
-    let mut learner = NeuralLearner::new(
-        &cfg.agent,
-        obs_dim,
-        num_actions,
-        seeded(derive_seed(cfg.seed, "learner")),
-    );
+    let mut learner = alfd_common::agent::build::neural_learner(cfg, obs_dim, num_actions);
     let mut book = CreditBook::new(
         runtime.window,
         BatchShape {

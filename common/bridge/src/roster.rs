@@ -3,9 +3,10 @@
 //! get free ids above them, the lowest first; an id given up (a host left or its link dropped) is
 //! given again with a new incarnation, so the learner's credit book sees a new actor process, as
 //! after a crash on one host. A remote actor that crashed is restarted by its host with a new
-//! incarnation of the id it holds, at most `max_restarts` times (the launcher's rule for its
-//! own actors).
+//! incarnation of the id it holds, at most `max_restarts` times (`alfd_common::restarts`, the
+//! launcher's rule for its own actors).
 
+use alfd_common::restarts::{Ended, Restarts, Verdict};
 use alfd_wire::MAX_ACTORS;
 use serde::{Deserialize, Serialize};
 
@@ -66,9 +67,8 @@ pub struct Joined {
 pub struct Roster {
     local: usize,
     first_incarnation: u64,
-    max_restarts: u32,
     /// Per id: restarts since its holder joined.
-    restarts: Vec<u32>,
+    restarts: Restarts<u16>,
     /// Per id: the join holding it.
     holders: Vec<Option<String>>,
     /// Per id: the incarnation the next holder gets.
@@ -84,8 +84,7 @@ impl Roster {
         Self {
             local: local.min(MAX_ACTORS),
             first_incarnation,
-            max_restarts,
-            restarts: vec![0; MAX_ACTORS],
+            restarts: Restarts::new(max_restarts),
             holders: vec![None; MAX_ACTORS],
             next_incarnation: vec![first_incarnation; MAX_ACTORS],
             experts: Vec::new(),
@@ -131,7 +130,7 @@ impl Roster {
             .iter()
             .map(|&i| {
                 self.holders[i] = Some(request.join_id.clone());
-                self.restarts[i] = 0;
+                self.restarts.forget(&(i as u16));
                 let inc = self.next_incarnation[i];
                 self.next_incarnation[i] += 1;
                 (i as u16, inc)
@@ -147,13 +146,9 @@ impl Roster {
         if self.holders.get(i).and_then(|h| h.as_deref()) != Some(join_id) {
             return Err(format!("actor {id} is not held by {join_id}"));
         }
-        if self.restarts[i] >= self.max_restarts {
-            return Err(format!(
-                "actor {id} was restarted {} times already (--max-restarts {})",
-                self.restarts[i], self.max_restarts
-            ));
+        if let Verdict::GiveUp(why) = self.restarts.ended(&id, Ended::Crashed) {
+            return Err(format!("actor {id} {why}"));
         }
-        self.restarts[i] += 1;
         let incarnation = self.next_incarnation[i];
         self.next_incarnation[i] += 1;
         Ok(incarnation)

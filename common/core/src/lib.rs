@@ -21,6 +21,7 @@ pub mod qfunction;
 pub mod query;
 pub mod record;
 pub mod replay;
+pub mod restarts;
 pub mod rng;
 pub mod runner;
 pub mod shaping;

@@ -7,9 +7,10 @@ use std::ops::ControlFlow;
 
 use serde::{Deserialize, Serialize};
 
+use crate::agent::build;
 use crate::agent::{
-    ActorSnapshot, DemoRecord, Demonstrator, ExpertCore, ExpertSnapshot, LearnerSnapshot,
-    NeuralActor, NeuralLearner, TabularAgent, TabularSnapshot,
+    ActorSnapshot, Demonstrator, ExpertCore, ExpertSnapshot, LearnerSnapshot, PriorDemo,
+    TabularAgent, TabularSnapshot,
 };
 use crate::checkpoint::StateMismatch;
 use crate::config::ExperimentConfig;
@@ -19,8 +20,6 @@ use crate::environment_loop::{self, GenericActor, Progress, Schedule};
 use crate::evaluate::evaluate_greedy;
 use crate::nn::Mlp;
 use crate::record::EpisodeRecord;
-use crate::replay::Transition;
-use crate::rng::{derive_seed, seeded};
 
 /// What a tabular run leaves behind.
 #[derive(Debug, Clone)]
@@ -158,7 +157,7 @@ impl<S> Checkpoints<'_, S> {
 /// The schedule of the single-process run (actor 0, the `env` seed stream).
 fn schedule(cfg: &ExperimentConfig) -> Schedule {
     Schedule {
-        env_seed: derive_seed(cfg.seed, "env"),
+        env_seed: build::env_seed(cfg, 0, 1),
         episodes: cfg.episode_limit(),
         steps: cfg.step_limit(),
         actor_id: 0,
@@ -204,18 +203,12 @@ pub fn run_tabular_checkpointed<E: TabularEnv>(
     mut save: impl FnMut(&TabularRunState) -> ControlFlow<()>,
     mut on_episode: impl FnMut(&EpisodeRecord, &TabularAgent) -> ControlFlow<()>,
 ) -> Result<TabularRun, StateMismatch> {
-    let mut agent = TabularAgent::new(
-        &cfg.agent,
-        &cfg.rule_spec(),
-        env.num_states(),
-        env.num_actions(),
-        seeded(derive_seed(cfg.seed, "agent")),
-    );
+    let mut agent = build::tabular_agent(cfg, env.num_states(), env.num_actions());
     if agent.needs_oracle() {
         agent.set_oracle(oracle.expect("gate `oracle` is given its oracle"));
     }
     let mut eval_env = env.clone();
-    let eval_seed = derive_seed(cfg.seed, "eval");
+    let eval_seed = build::eval_seed(cfg);
     let core = ExpertCore::for_config(cfg, env.num_actions());
     let mut expert = LocalExpert::new(core, demonstrator, &cfg.expert.name, false);
     let mut records = Vec::new();
@@ -326,45 +319,6 @@ pub fn run_neural_checkpointed(
     })
 }
 
-/// A step of an expert given before the run (`demos.prior`): a demonstration for the
-/// demonstration model and a transition for the replay buffer.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct PriorDemo {
-    pub state: Vec<f32>,
-    pub action: usize,
-    /// The environment's reward (unshaped).
-    pub reward: f64,
-    pub next_state: Vec<f32>,
-    pub terminated: bool,
-}
-
-impl PriorDemo {
-    /// Its demonstration record (`index`: its place among the prior ones).
-    pub fn record(&self, index: usize) -> DemoRecord {
-        DemoRecord {
-            index: index as u32,
-            state: self.state.iter().map(|&x| f64::from(x)).collect(),
-            action: self.action,
-            step: 0,
-            expert: "prior".to_owned(),
-        }
-    }
-
-    /// Its transition: a demonstration, so every head trains on it (as on the run's own).
-    pub fn transition(&self, heads: usize) -> Transition {
-        Transition {
-            state: self.state.clone(),
-            action: self.action as u32,
-            reward: self.reward as f32,
-            next_state: self.next_state.clone(),
-            terminated: self.terminated,
-            mask: vec![1.0; heads],
-            demo: true,
-            horizon: 1,
-        }
-    }
-}
-
 /// The environments of a neural run built outside the core (a Gymnasium environment in another
 /// process): the one trained on and the one evaluated on.
 pub struct NeuralEnvs {
@@ -409,20 +363,8 @@ pub fn run_neural_on(
         oracle,
     } = envs;
     let (obs_dim, actions) = (env.observation_dim(), env.num_actions());
-    let mut learner = NeuralLearner::new(
-        &cfg.agent,
-        obs_dim,
-        actions,
-        seeded(derive_seed(cfg.seed, "learner")),
-    );
-    let mut core = NeuralActor::new(
-        &cfg.agent,
-        &cfg.rule_spec(),
-        cfg.shaping.kind,
-        obs_dim,
-        actions,
-        seeded(derive_seed(cfg.seed, "actor-0")),
-    );
+    let mut learner = build::neural_learner(cfg, obs_dim, actions);
+    let mut core = build::neural_actor(cfg, obs_dim, actions, 0, 1);
     if core.needs_oracle() {
         core.set_oracle(oracle.ok_or(RunError::NoOracle)?);
     }
@@ -455,7 +397,7 @@ pub fn run_neural_on(
         &cfg.expert.name,
         cfg.shaping_enabled(),
     );
-    let eval_seed = derive_seed(cfg.seed, "eval");
+    let eval_seed = build::eval_seed(cfg);
     let limit = cfg.episode_limit();
     let end = environment_loop::run_from(
         env.as_mut(),

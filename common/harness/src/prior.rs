@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use alfd_common::runner::PriorDemo;
+use alfd_common::agent::PriorDemo;
 
 use crate::{BadInput, Result};
 

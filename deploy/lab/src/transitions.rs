@@ -11,8 +11,8 @@ use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::path::Path;
 
 use alfd_common::agent::DemoRecord;
+use alfd_common::agent::PriorDemo;
 use alfd_common::env::{Env, EnvError, EnvState, Step, VectorEnv};
-use alfd_common::runner::PriorDemo;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{usage, Context, Result};

@@ -20,6 +20,7 @@
 
 use std::time::{Duration, Instant};
 
+use alfd_common::restarts::{Ended, Restarts, Verdict};
 use serde::{Deserialize, Serialize};
 
 /// A request to swap the expert (`swap-expert.request.json`).
@@ -33,10 +34,6 @@ pub struct SwapRequest {
 pub const START_TIMEOUT: Duration = Duration::from_secs(60);
 /// How long an expert told to go may take to exit before it is killed.
 pub const LEAVE_TIMEOUT: Duration = Duration::from_secs(30);
-
-/// Exit code of a process refusing its input (`alfd_harness::BadInput`): restarting it with the
-/// same input cannot help.
-const BAD_INPUT: i32 = 2;
 
 /// What the launcher must do.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -119,7 +116,6 @@ struct Incoming {
 /// The expert generations of one run.
 #[derive(Debug, Clone)]
 pub struct ExpertLifecycle {
-    max_restarts: u32,
     /// The expert that answers (or answered last): generation and demonstrator.
     current: Option<(u16, String)>,
     incoming: Option<Incoming>,
@@ -128,7 +124,8 @@ pub struct ExpertLifecycle {
     last_generation: u16,
     newest: u16,
     active: u16,
-    restarts: u32,
+    /// The expert's restarts after crashes (one key: the run's expert, whichever generation).
+    restarts: Restarts<()>,
     swaps: u32,
 }
 
@@ -136,14 +133,13 @@ impl ExpertLifecycle {
     /// A run with at most `max_restarts` restarts of its expert after crashes.
     pub fn new(max_restarts: u32) -> Self {
         Self {
-            max_restarts,
             current: None,
             incoming: None,
             alive: Vec::new(),
             last_generation: 0,
             newest: 0,
             active: 0,
-            restarts: 0,
+            restarts: Restarts::new(max_restarts),
             swaps: 0,
         }
     }
@@ -172,7 +168,7 @@ impl ExpertLifecycle {
     }
 
     pub fn restarts(&self) -> u32 {
-        self.restarts
+        self.restarts.of(&())
     }
 
     pub fn swaps(&self) -> u32 {
@@ -263,8 +259,13 @@ impl ExpertLifecycle {
             match inc.why {
                 // Killed by a signal on its way in (not a failure of its own): the run's first
                 // expert is started again, a restart like any other.
-                Why::Start if exit.code.is_none() && self.restarts < self.max_restarts => {
-                    self.restarts += 1;
+                Why::Start
+                    if exit.code.is_none()
+                        && matches!(
+                            self.restarts.ended(&(), Ended::Crashed),
+                            Verdict::Restart { .. }
+                        ) =>
+                {
                     self.spawn(&inc.name, Why::Start, now, &mut out);
                     self.newest = self.last_generation;
                 }
@@ -294,14 +295,6 @@ impl ExpertLifecycle {
                     ),
                     &mut out,
                 ),
-                Why::Restart { .. } if exit.code == Some(BAD_INPUT) => out.push(Action::Fail {
-                    generation,
-                    message: format!(
-                        "alfd-expert (expert-{generation}), restarted after a crash, {}; \
-                         the run cannot go on without an expert",
-                        exit.describe()
-                    ),
-                }),
                 Why::Restart { .. } => self.restart(generation, exit, now, false, &mut out),
             }
         } else if current_died {
@@ -438,37 +431,36 @@ impl ExpertLifecycle {
         let Some((_, name)) = self.current.clone() else {
             return;
         };
-        if self.restarts >= self.max_restarts && remote {
-            let message = format!(
-                "the remote expert-{died} {}, and the expert was restarted {} times already \
-                 (--max-restarts {})",
-                exit.describe(),
-                self.restarts,
-                self.max_restarts
-            );
+        let why = match self.restarts.ended(&(), Ended::of(exit.code, false)) {
+            Verdict::GiveUp(why) => why,
+            Verdict::Restart { .. } | Verdict::Done => {
+                let why = Why::Restart {
+                    died,
+                    since: now,
+                    remote,
+                };
+                return self.spawn(&name, why, now, out);
+            }
+        };
+        let message = if remote {
+            format!(
+                "the remote expert-{died} {}, and the expert {why}",
+                exit.describe()
+            )
+        } else {
+            format!(
+                "alfd-expert (expert-{died}) {}, and the expert {why}",
+                exit.describe()
+            )
+        };
+        if remote {
             self.go_on_without(died, message, out);
-            return;
-        }
-        if self.restarts >= self.max_restarts {
+        } else {
             out.push(Action::Fail {
                 generation: died,
-                message: format!(
-                    "alfd-expert (expert-{died}) {}, and the expert was restarted {} times already \
-                     (--max-restarts {})",
-                    exit.describe(),
-                    self.restarts,
-                    self.max_restarts
-                ),
+                message,
             });
-            return;
         }
-        self.restarts += 1;
-        let why = Why::Restart {
-            died,
-            since: now,
-            remote,
-        };
-        self.spawn(&name, why, now, out);
     }
 
     /// No expert from now on (until a swap brings one): nobody answers, the actors act on

@@ -36,6 +36,8 @@ mod children;
 mod episodes;
 mod error;
 pub mod expert_lifecycle;
+mod experts;
+mod finish;
 mod remote;
 
 use std::collections::{HashMap, VecDeque};
@@ -54,6 +56,7 @@ use alfd_wire::{
 use serde::{Deserialize, Serialize};
 use tracing::{debug, info, warn};
 
+use alfd_common::restarts::{Ended, Restarts, Verdict};
 use children::{describe, last_error, pin, proc_binary, RateMeter};
 use episodes::{open_episodes, shares, EpisodeLog, Row};
 use error::{bail, ensure};
@@ -61,6 +64,13 @@ use expert_lifecycle::{Action, Exit, ExpertLifecycle};
 
 pub use children::{describe as describe_status, find_process};
 pub use error::{LaunchError, Result};
+
+/// The launcher's own processes whose restarts it counts (the expert's are the lifecycle's).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Supervised {
+    Actor(u16),
+    Learner,
+}
 
 /// Everything a launch needs.
 #[derive(Debug, Clone)]
@@ -308,16 +318,16 @@ struct Launcher<'a, 'w> {
     hub_counts: (u64, u64),
     /// The newest incarnation of each actor id that recorded an episode (0: none yet).
     incarnations: [u64; alfd_wire::MAX_ACTORS],
-    /// Actor restarts.
-    restarts: u32,
+    /// The restarts of the actors and the learner.
+    restarts: Restarts<Supervised>,
+    /// Restarts of remote actors by their hosts (the run's roster counts them per id).
+    remote_restarts: u32,
     /// Episodes each actor id is to play (a run with an episode limit), and has recorded.
     quota: Option<[u32; alfd_wire::MAX_ACTORS]>,
     recorded_by: [u32; alfd_wire::MAX_ACTORS],
     /// Per actor id: the steps of its recorded episodes, all incarnations and launches (ε's
     /// clock for an incarnation that takes over).
     explored: [u64; alfd_wire::MAX_ACTORS],
-    /// Learner restarts.
-    learner_restarts: u32,
     /// The expert generations: swaps and restarts.
     experts: ExpertLifecycle,
     started: Instant,
@@ -398,11 +408,11 @@ impl<'a, 'w> Launcher<'a, 'w> {
             answers_late: HashMap::new(),
             hub_counts: (0, 0),
             incarnations: [0; alfd_wire::MAX_ACTORS],
-            restarts: 0,
+            restarts: Restarts::new(plan.max_restarts),
+            remote_restarts: 0,
             quota,
             recorded_by: [0; alfd_wire::MAX_ACTORS],
             explored,
-            learner_restarts: 0,
             experts: ExpertLifecycle::new(plan.max_restarts),
             started: Instant::now(),
             running_since: Instant::now(),
@@ -759,25 +769,27 @@ impl<'a, 'w> Launcher<'a, 'w> {
             self.cleanup_dead_nodes();
             match proc.kind {
                 Kind::Actor { id, incarnation } => {
-                    if status.success() && self.episodes_left(id) == Some(0) {
-                        info!(process = %proc.name, "played its share of the episodes");
-                        continue;
-                    }
-                    warn!(process = %proc.name, "{how}");
-                    let restarts = u32::try_from(incarnation - self.plan.first_incarnation())
-                        .unwrap_or(u32::MAX);
-                    if restarts >= self.plan.max_restarts {
-                        bail!(
-                            "alfd-actor {} {how}, and was restarted {restarts} times already; see {}",
+                    let done = self.episodes_left(id) == Some(0);
+                    match self
+                        .restarts
+                        .ended(&Supervised::Actor(id), Ended::of(status.code(), done))
+                    {
+                        Verdict::Done => {
+                            info!(process = %proc.name, "played its share of the episodes");
+                        }
+                        Verdict::Restart { .. } => {
+                            warn!(process = %proc.name, "{how}");
+                            self.spawn(Kind::Actor {
+                                id,
+                                incarnation: incarnation + 1,
+                            })?;
+                        }
+                        Verdict::GiveUp(why) => bail!(
+                            "alfd-actor {} {how}, and {why}; see {}",
                             proc.name,
                             self.log_of(&proc.name)
-                        );
+                        ),
                     }
-                    self.restarts += 1;
-                    self.spawn(Kind::Actor {
-                        id,
-                        incarnation: incarnation + 1,
-                    })?;
                 }
                 Kind::Expert { generation, .. } => {
                     let reason = last_error(&self.plan.run_dir.join(format!("{}.log", proc.name)));
@@ -797,12 +809,14 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 }
                 Kind::Learner { incarnation } => {
                     let reason = last_error(&self.plan.run_dir.join("learner.log"));
-                    if self.learner_restarts >= self.plan.max_restarts {
+                    let how_ended = Ended::of(status.code(), false);
+                    if let Verdict::GiveUp(why) =
+                        self.restarts.ended(&Supervised::Learner, how_ended)
+                    {
                         bail!(
-                            "alfd-learner {how}{}, and was restarted {} times already; the \
-                             episodes so far are in {}, its last checkpoint in {}; see {}",
+                            "alfd-learner {how}{}, and {why}; the episodes so far are in {}, its \
+                             last checkpoint in {}; see {}",
                             reason.map(|r| format!(" ({r})")).unwrap_or_default(),
-                            self.learner_restarts,
                             self.plan.run_dir.join("episodes.csv").display(),
                             self.plan.run_dir.join("learner.ckpt").display(),
                             self.log_of(&proc.name)
@@ -812,7 +826,6 @@ impl<'a, 'w> Launcher<'a, 'w> {
                         "alfd-learner {how}; restarting it from its last checkpoint (the actors \
                          wait meanwhile)"
                     );
-                    self.learner_restarts += 1;
                     self.rate.reset();
                     self.spawn(Kind::Learner {
                         incarnation: incarnation + 1,
@@ -828,255 +841,6 @@ impl<'a, 'w> Launcher<'a, 'w> {
             Ok(removed) if !removed.is_empty() => info!(?removed, "dead nodes cleaned up"),
             Ok(_) => {}
             Err(e) => warn!("cannot clean up dead nodes: {e}"),
-        }
-    }
-
-    /// Carries out what the expert lifecycle decided.
-    fn apply(&mut self, actions: Vec<Action>) -> Result<()> {
-        for action in actions {
-            debug!(?action, "expert lifecycle");
-            match action {
-                Action::Spawn { generation, name } => {
-                    if self.spawn_remote_expert(generation, &name) {
-                        continue;
-                    }
-                    if generation > 1 {
-                        info!(generation, expert = %name, "starting a new expert generation");
-                    }
-                    self.spawn(Kind::Expert { generation, name })?;
-                }
-                Action::Kill { generation } => {
-                    self.kill_remote_expert(generation);
-                    for p in &mut self.procs {
-                        if matches!(&p.kind, Kind::Expert { generation: g, .. } if *g == generation)
-                        {
-                            warn!(process = %p.name, "killing");
-                            let _ = p.child.kill();
-                        }
-                    }
-                }
-                Action::Control { newest, active } => {
-                    self.control.newest_expert = u32::from(newest);
-                    self.control.active_expert = u32::from(active);
-                    self.publish_control()?;
-                }
-                Action::Respond {
-                    request,
-                    ok,
-                    message,
-                    from,
-                    generation,
-                } => {
-                    if ok {
-                        info!(generation, expert = %request.expert, "expert swapped");
-                    }
-                    if self.answer_remote_expert(&request, ok, &message) {
-                        continue;
-                    }
-                    self.respond(request, ok, message, from, generation)?;
-                }
-                Action::Recovered {
-                    generation,
-                    died,
-                    took,
-                } => warn!(
-                    "expert-{generation} answers again, {} ms after expert-{died} died",
-                    took.as_millis()
-                ),
-                Action::NoExpert {
-                    generation,
-                    message,
-                } => self.no_expert(generation, &message),
-                Action::Fail {
-                    generation,
-                    message,
-                } => bail!(
-                    "{message}; see {}",
-                    self.log_of(&format!("expert-{generation}"))
-                ),
-            }
-        }
-        Ok(())
-    }
-
-    fn log_of(&self, name: &str) -> String {
-        self.plan
-            .run_dir
-            .join(format!("{name}.log"))
-            .display()
-            .to_string()
-    }
-
-    /// Takes a swap request, and lets the expert lifecycle's timeouts run.
-    fn check_swap(&mut self) -> Result<()> {
-        let request_path = self.plan.run_dir.join(SWAP_REQUEST);
-        if request_path.exists() {
-            let text = std::fs::read_to_string(&request_path).unwrap_or_default();
-            let _ = std::fs::remove_file(&request_path);
-            match serde_json::from_str::<SwapRequest>(&text) {
-                Err(e) => warn!("ignoring a malformed swap request: {e}"),
-                Ok(request) => {
-                    info!(expert = %request.expert, "expert swap requested");
-                    let actions = self.experts.swap(request, Instant::now());
-                    self.apply(actions)?;
-                }
-            }
-        }
-        let actions = self.experts.tick(Instant::now());
-        self.apply(actions)
-    }
-
-    fn respond(
-        &self,
-        request: SwapRequest,
-        ok: bool,
-        message: String,
-        from: String,
-        generation: u16,
-    ) -> Result<()> {
-        let r = SwapResponse {
-            id: request.id,
-            ok,
-            message,
-            from,
-            to: request.expert,
-            generation: u32::from(generation),
-            at_episode: self.recorded,
-        };
-        if !ok {
-            warn!(message = %r.message, "expert swap failed");
-        }
-        // A response a full disk refuses is lost to the asker (its `alfd swap-expert` times
-        // out and says so), never the run's end: the swap itself is done or refused already.
-        let written = write(
-            &self.plan.run_dir,
-            SWAP_RESPONSE,
-            serde_json::to_string_pretty(&r)?.as_bytes(),
-        );
-        if let Err(e) = written {
-            warn!(
-                "the swap's response was not written ({}): its alfd swap-expert will time out",
-                alfd_harness::describe(&e)
-            );
-        }
-        Ok(())
-    }
-
-    /// Tells every process to stop and waits for them (the learner saves its weights).
-    fn shutdown(&mut self) -> Result<()> {
-        info!(
-            episodes = self.recorded,
-            remote_joins = self.remote_joins,
-            remote_losses = self.remote_losses,
-            "stopping the run"
-        );
-        self.control.command = command::SHUTDOWN;
-        self.publish_control()?;
-        let deadline = Instant::now() + Duration::from_secs(30);
-        let mut failures = Vec::new();
-        // Remote actors hear the shutdown through the hub; their hosts leave when they stopped.
-        // A remote expert's last demonstrations come up before its exit: it is waited for too.
-        let remote =
-            |l: &Self| l.hub.as_ref().map_or(0, |h| h.remote_actors()) + l.remote_experts.serving();
-        while (!self.procs.is_empty() || remote(self) > 0) && Instant::now() < deadline {
-            let wake = self.waiter.wait(Duration::from_millis(50))?;
-            self.drain_progress()?;
-            self.check_hub()?;
-            if self.last_control.elapsed() >= CONTROL_PERIOD {
-                self.publish_control()?;
-            }
-            let mut i = 0;
-            while i < self.procs.len() {
-                match self.procs[i].child.try_wait()? {
-                    None => i += 1,
-                    Some(status) => {
-                        let p = self.procs.remove(i);
-                        if !status.success() {
-                            failures.push(format!(
-                                "{} {}; see {}",
-                                proc_binary(&p.kind, &p.name),
-                                describe(status),
-                                self.log_of(&p.name)
-                            ));
-                        }
-                    }
-                }
-            }
-            let _ = wake;
-        }
-        for p in &self.procs {
-            failures.push(format!(
-                "{} did not stop within 30 s and was killed",
-                p.name
-            ));
-        }
-        if remote(self) > 0 {
-            warn!("remote actors or experts did not leave within 30 s; the run ends without them");
-        }
-        if let Some(hub) = self.hub.take() {
-            self.hub_counts = (hub.demos_refused(), hub.answers_late());
-            if let Err(e) = hub.stop() {
-                warn!("the hub: {e}");
-            }
-        }
-        self.stop_all();
-        self.drain_progress()?;
-        // Rows a full disk held back wait as long as the run's last files do.
-        self.csv
-            .flush_by(Instant::now() + alfd_harness::DISK_FULL_PATIENCE)?;
-        if !failures.is_empty() {
-            bail!("{}", failures.join("; "));
-        }
-        ensure!(
-            self.plan.run_dir.join("weights.safetensors").is_file(),
-            "the learner stopped without saving weights.safetensors; see {}",
-            self.log_of("learner")
-        );
-        Ok(())
-    }
-
-    /// Kills whatever child is still running (used on errors) and reaps it.
-    fn stop_all(&mut self) {
-        for p in &mut self.procs {
-            if matches!(p.child.try_wait(), Ok(None)) {
-                warn!(process = %p.name, "killing");
-                let _ = p.child.kill();
-            }
-            let _ = p.child.wait();
-        }
-        self.procs.clear();
-        let _ = wire::cleanup_dead_nodes(&self.plan.run_id);
-    }
-
-    fn summary(&self, interrupted: bool) -> RunSummary {
-        let wall = self.started.elapsed().as_secs_f64();
-        let running = self.running_since.elapsed().as_secs_f64().max(1e-9);
-        let demos = std::fs::read_to_string(self.plan.run_dir.join("demos.jsonl"))
-            .map(|t| t.lines().count())
-            .unwrap_or(0);
-        RunSummary {
-            episodes: self.all_returns.len(),
-            mean_return_last_50: mean_return_last_50(&self.all_returns),
-            demos_used: self.demos_used,
-            wall_clock_s: wall,
-            greedy_value_at_start: None,
-            optimal_value_at_start: None,
-            env_steps: Some(self.seen.learner_env_steps),
-            updates: Some(self.seen.learner_updates),
-            env_steps_per_s: Some(self.seen.learner_env_steps as f64 / running),
-            updates_per_s: Some(self.seen.learner_updates as f64 / running),
-            runtime: Some(RuntimeSummary {
-                run_id: self.plan.run_id.clone(),
-                demos,
-                actor_restarts: self.restarts,
-                expert_swaps: self.experts.swaps(),
-                expert_restarts: self.experts.restarts(),
-                learner_restarts: self.learner_restarts,
-                interrupted,
-                demos_refused: self.hub_counts.0,
-                answers_late: self.answers_late(),
-                demos_experts_wrote: self.demos_experts_wrote,
-            }),
         }
     }
 }

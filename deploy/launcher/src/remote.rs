@@ -115,8 +115,8 @@ impl Launcher<'_, '_> {
                     actor,
                     incarnation,
                 } => {
-                    // Counted as the launcher's own actors' restarts are.
-                    self.restarts += 1;
+                    // Counted with the launcher's own actors' restarts (the roster decided it).
+                    self.remote_restarts += 1;
                     warn!(%join_id, actor, incarnation, "a remote actor died; its host restarts it");
                 }
                 alfd_bridge::HubEvent::ExpertExited {

@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use super::demo::DemoRecord;
 use super::refit::{RefitJob, RefitOutcome, Refitted};
 use crate::checkpoint::StateMismatch;
 use crate::config::DemoModelChoice;
@@ -92,19 +93,6 @@ impl Demonstrator<[f32]> for NetworkDemonstrator {
         }
         argmax(&self.mean)
     }
-}
-
-/// One answered query, as `demos.jsonl` records it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct DemoRecord {
-    /// 0-based index of the demonstration in the run (the budget spent before it).
-    pub index: u32,
-    pub state: Vec<f64>,
-    pub action: usize,
-    /// The global environment step at which it was asked for.
-    pub step: u64,
-    /// The demonstrator that answered.
-    pub expert: String,
 }
 
 /// What an [`ExpertCore`] must remember: the demonstrations (the budget spent is their number,

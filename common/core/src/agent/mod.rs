@@ -4,14 +4,16 @@
 //! demonstrations, demonstration model). The single-process runner and the processes of the
 //! multi-process runtime both drive these same types.
 
+pub mod build;
+pub mod demo;
 pub mod expert;
 pub mod neural;
 pub mod refit;
 pub mod tabular;
 
+pub use demo::{DemoRecord, PriorDemo};
 pub use expert::{
-    BalancingController, DemoRecord, Demonstrator, ExpertCore, ExpertSnapshot, NetworkDemonstrator,
-    TablePolicy,
+    BalancingController, Demonstrator, ExpertCore, ExpertSnapshot, NetworkDemonstrator, TablePolicy,
 };
 pub use neural::{ActorSnapshot, LearnerSnapshot, NeuralActor, NeuralLearner};
 pub use refit::{RefitJob, Refitted};

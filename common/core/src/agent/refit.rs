@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use super::expert::DemoRecord;
+use super::demo::DemoRecord;
 use crate::config::DemoModelChoice;
 use crate::demo_model::krr::KrrFactor;
 use crate::demo_model::lanes::{Lanes, Serial, SharedLanes};

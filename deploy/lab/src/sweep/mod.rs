@@ -30,6 +30,7 @@ mod budget;
 mod experiment;
 pub(crate) mod plot;
 mod runs;
+pub mod scaling;
 mod shard;
 mod stats;
 mod summary;

@@ -81,6 +81,15 @@ impl Resamples {
         }
     }
 
+    /// A time that may never come (`stat` of the seeds drawn, by index: `None` for never) and
+    /// the interval of its resamples, a resample whose time never comes counting as +∞ (the
+    /// quantiles of [`crossing_interval`]).
+    pub fn time(&self, stat: impl Fn(&[usize]) -> Option<f64>) -> (Option<f64>, CrossingCi) {
+        let all: Vec<usize> = (0..self.n).collect();
+        let times: Vec<Option<f64>> = self.draws.iter().map(|d| stat(d)).collect();
+        (stat(&all), crossing_interval(&times))
+    }
+
     /// The bootstrap of a mean curve: `runs[i][k]` is seed `i`'s value at `xs[k]` (every run as
     /// long as `xs`). Each resample's mean curve gives a value at every x, an area and, for each
     /// threshold, its first crossing.
