@@ -76,26 +76,13 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let mut core = build::neural_actor(cfg, obs_dim, actions, me.id, me.incarnation);
     core.continue_exploration(args.explored_steps);
     let mut variables = WireVariables::new(&session)?;
-    let poll = machine::credit_poll(std::env::var(machine::CREDIT_POLL_VAR).ok().as_deref());
-    if !poll.is_zero() {
-        // Polls of the doorbell sleep 200 µs, not up to 250 µs as with the default slack.
-        alfd_harness::set_timer_slack(Duration::from_micros(1));
-    }
-    let mut adder = WireAdder::new(
-        &session,
-        me,
-        runtime.window,
-        CreditPoll::new(poll),
-        obs_dim,
-        cfg.agent.heads(),
-    )?;
+    let mut adder = wire_adder(&session, me, runtime.window, obs_dim, cfg.agent.heads())?;
     let mut expert = wire_expert(&session, me, &setup, &args.process.run_dir)?;
     // A restored actor continues where its checkpoint stands.
     let run_dir = &args.process.run_dir;
     let config_toml = std::fs::read_to_string(run_dir.join("config.toml"))
         .map_err(|e| BadInput(format!("cannot read the run's config.toml: {e}")))?;
-    let restored = args
-        .restore_step
+    let restored = (args.restore_step)
         .map(|step| restore(run_dir, me.id, step, &config_toml))
         .transpose()?;
     let mut start = environment_loop::Progress::default();
@@ -216,6 +203,23 @@ fn identity(args: &Args) -> alfd_harness::Result<Identity> {
 
 /// The expert as this actor's client: budget, shaping schedule and timeouts of the run, and the
 /// run's prior demonstrations (`RUN_DIR/prior-demos.jsonl`), which its model counts too.
+/// Where the actor's transitions go: batches under the learner's credits, polled as
+/// `ALFD_CREDIT_POLL_US` says (waiting on the doorbell by default).
+fn wire_adder<'s, 'w>(
+    session: &'s Session<'w>,
+    me: Identity,
+    window: u64,
+    obs_dim: usize,
+    heads: usize,
+) -> alfd_harness::Result<WireAdder<'s, 'w>> {
+    let poll = machine::credit_poll(std::env::var(machine::CREDIT_POLL_VAR).ok().as_deref());
+    if !poll.is_zero() {
+        // Polls of the doorbell sleep 200 µs, not up to 250 µs as with the default slack.
+        alfd_harness::set_timer_slack(Duration::from_micros(1));
+    }
+    WireAdder::new(session, me, window, CreditPoll::new(poll), obs_dim, heads)
+}
+
 fn wire_expert<'s, 'w>(
     session: &'s Session<'w>,
     me: Identity,

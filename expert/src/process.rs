@@ -84,19 +84,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let source = source(args, cfg.env.name, &name, me, schema, actions)?;
     let wire = args.process.connect(me, schema)?;
     let session = Session::join(&wire, Doorbell::Expert, runtime.handshake_timeout())?;
-    let mut core = ExpertCore::for_config(cfg, actions);
-    // Models fitted anew (the prior's, the SVM's at each demonstration) on this machine's cores.
-    core.set_lanes(SharedLanes::new(alfd_harness::Threads::machine()));
-    let prior = alfd_harness::read_prior(&args.process.run_dir, obs_dim, actions)?;
-    if !prior.is_empty() {
-        let records = prior.iter().enumerate().map(|(i, p)| p.record(i)).collect();
-        core.set_prior(records)
-            .what(|| "the demonstration model of the prior demonstrations".to_owned())?;
-        info!(
-            demos = prior.len(),
-            "prior demonstrations in the demonstration model"
-        );
-    }
+    let core = expert_core(args, cfg, obs_dim, actions)?;
     let page = match source {
         Source::Person => Some(start_page(
             args,
@@ -139,28 +127,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     };
     let start = machine.start(shell.now());
     shell.apply(&mut machine, start)?;
-    let stop_reason = loop {
-        if let Some(stop) = session.should_stop()? {
-            break stop.0;
-        }
-        let c = session.control();
-        let control = machine.control(c.active_expert, c.newest_expert);
-        if let Some(reason) = shell.apply(&mut machine, control)? {
-            break reason;
-        }
-        shell.poll_queries(&mut machine)?;
-        shell.poll_page(&mut machine)?;
-        if let Some(reason) = shell.poll_refit(&mut machine)? {
-            break reason;
-        }
-        let tick = machine.tick(shell.now());
-        shell.apply(&mut machine, tick)?;
-        // An actor that subscribed since the last publication gets the history sample now.
-        shell.model_tx.update_connections()?;
-        if let Some(stop) = session.wait(shell.patience())? {
-            break stop.0;
-        }
-    };
+    let stop_reason = serve(&session, &mut machine, &mut shell)?;
     let stop = machine.stop();
     shell.apply(&mut machine, stop)?;
     let c = machine.counts();
@@ -174,6 +141,61 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         "expert stopping"
     );
     Ok(())
+}
+
+/// The expert's side of the config, with the run's prior demonstrations (`demos.prior`) in its
+/// model, fitting on this machine's cores.
+fn expert_core(
+    args: &Args,
+    cfg: &alfd_common::config::ExperimentConfig,
+    obs_dim: usize,
+    actions: usize,
+) -> alfd_harness::Result<ExpertCore> {
+    let mut core = ExpertCore::for_config(cfg, actions);
+    // Models fitted anew (the prior's, the SVM's at each demonstration) on this machine's cores.
+    core.set_lanes(SharedLanes::new(alfd_harness::Threads::machine()));
+    let prior = alfd_harness::read_prior(&args.process.run_dir, obs_dim, actions)?;
+    if !prior.is_empty() {
+        let records = prior.iter().enumerate().map(|(i, p)| p.record(i)).collect();
+        core.set_prior(records)
+            .what(|| "the demonstration model of the prior demonstrations".to_owned())?;
+        info!(
+            demos = prior.len(),
+            "prior demonstrations in the demonstration model"
+        );
+    }
+    Ok(core)
+}
+
+/// The expert's loop: the launcher's control, queries, the person's page and a background
+/// refit in, the machine's actions carried out, until a stop; returns why it stopped.
+fn serve<'w>(
+    session: &Session<'_>,
+    machine: &mut Machine<'w>,
+    shell: &mut Shell<'w>,
+) -> alfd_harness::Result<&'static str> {
+    Ok(loop {
+        if let Some(stop) = session.should_stop()? {
+            break stop.0;
+        }
+        let c = session.control();
+        let control = machine.control(c.active_expert, c.newest_expert);
+        if let Some(reason) = shell.apply(machine, control)? {
+            break reason;
+        }
+        shell.poll_queries(machine)?;
+        shell.poll_page(machine)?;
+        if let Some(reason) = shell.poll_refit(machine)? {
+            break reason;
+        }
+        let tick = machine.tick(shell.now());
+        shell.apply(machine, tick)?;
+        // An actor that subscribed since the last publication gets the history sample now.
+        shell.model_tx.update_connections()?;
+        if let Some(stop) = session.wait(shell.patience())? {
+            break stop.0;
+        }
+    })
 }
 
 /// A fault drill's knob: the expert takes this many milliseconds more for each demonstration

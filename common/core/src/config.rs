@@ -445,7 +445,7 @@ impl AgentConfig {
 
 pub use crate::query::RuleKind;
 pub use crate::shaping::ShapingKind;
-pub use env::{EnvConfig, EnvName};
+pub use env::{EnvConfig, EnvName, MAX_DEEPSEA_SIZE};
 pub use query::QueryConfig;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]

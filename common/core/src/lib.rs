@@ -9,6 +9,7 @@ pub mod agent;
 pub mod alloc;
 pub mod checkpoint;
 pub mod config;
+pub mod cpu;
 pub mod demo_model;
 pub mod env;
 pub mod environment_loop;

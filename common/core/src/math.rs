@@ -84,7 +84,7 @@ mod x86 {
     /// The CPU has AVX2 and the portable kernels were not asked for (as for the products:
     /// `ALFD_PORTABLE_KERNELS=1` runs every value through [`super::exp`]).
     pub(super) fn available() -> bool {
-        crate::nn::wide_available()
+        crate::cpu::avx2_fma()
     }
 
     pub(super) fn exp_in_place(xs: &mut [f64]) {

@@ -74,6 +74,97 @@ fn workspace_rust_files() -> Vec<PathBuf> {
     files
 }
 
+/// The core's top-level module of `file` (`agent` for `src/agent/neural.rs`, `math` for
+/// `src/math.rs`).
+fn core_module(src: &Path, file: &Path) -> String {
+    let first = file.strip_prefix(src).unwrap().components().next().unwrap();
+    let name = first.as_os_str().to_string_lossy();
+    name.trim_end_matches(".rs").to_owned()
+}
+
+/// Which of the core's top-level modules each one names (`crate::NAME`) outside its tests.
+fn core_imports() -> BTreeMap<String, BTreeSet<String>> {
+    let src = workspace().join("common/core/src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let modules: BTreeSet<String> = files.iter().map(|f| core_module(&src, f)).collect();
+    let mut edges: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for f in &files {
+        let from = core_module(&src, f);
+        let text = std::fs::read_to_string(f).unwrap();
+        let code = text.split("#[cfg(test)]").next().unwrap_or("");
+        for (i, _) in code.match_indices("crate::") {
+            let to: String = code[i + "crate::".len()..]
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                .collect();
+            if to != from && modules.contains(&to) {
+                edges.entry(from.clone()).or_default().insert(to);
+            }
+        }
+    }
+    edges
+}
+
+/// A circle in `edges`, as the modules along it, if there is one.
+fn circle(edges: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
+    fn visit(
+        m: &str,
+        edges: &BTreeMap<String, BTreeSet<String>>,
+        path: &mut Vec<String>,
+        done: &mut BTreeSet<String>,
+    ) -> Option<Vec<String>> {
+        if let Some(i) = path.iter().position(|p| p == m) {
+            let mut c = path[i..].to_vec();
+            c.push(m.to_owned());
+            return Some(c);
+        }
+        if done.contains(m) {
+            return None;
+        }
+        path.push(m.to_owned());
+        for next in edges.get(m).into_iter().flatten() {
+            if let Some(c) = visit(next, edges, path, done) {
+                return Some(c);
+            }
+        }
+        path.pop();
+        done.insert(m.to_owned());
+        None
+    }
+    let mut done = BTreeSet::new();
+    edges
+        .keys()
+        .find_map(|m| visit(m, edges, &mut Vec::new(), &mut done))
+}
+
+/// The core's modules import one another in one direction: no circle among its top-level
+/// modules (`config` reads no environment, `math` no network).
+#[test]
+fn the_cores_modules_import_one_another_in_one_direction() {
+    let edges = core_imports();
+    assert!(
+        edges.len() > 10,
+        "found the imports of {} modules",
+        edges.len()
+    );
+    assert!(edges["runner"].contains("environment_loop"), "{edges:?}");
+    assert_eq!(
+        circle(&edges),
+        None,
+        "a circle of imports among the core's modules"
+    );
+    // The check finds a circle where there is one.
+    let mut with = edges.clone();
+    with.entry("math".into())
+        .or_default()
+        .insert("runner".into());
+    with.entry("runner".into())
+        .or_default()
+        .insert("math".into());
+    assert!(circle(&with).is_some());
+}
+
 /// A file a reader can hold in their head: the crates' files stay under 1,000 lines.
 #[test]
 fn no_source_file_is_over_a_thousand_lines() {

@@ -266,25 +266,40 @@ pub fn launch(plan: &Plan) -> Result<RunSummary> {
     if !left.is_empty() {
         warn!(files = ?left, "iceoryx2 files left behind");
     }
-    clean_earlier_launches(&plan.earlier_run_ids);
+    // A child started just before its launcher died gives up at its handshake timeout.
+    let patience = plan.runtime.handshake_timeout() + Duration::from_secs(10);
+    clean_earlier_launches(&plan.earlier_run_ids, patience);
     result
 }
 
 /// Removes what the processes of the run's earlier launches left: `alfd resume` cleans the
 /// launch before it as it starts, but a process of a killed launcher that comes up (or is
-/// killed) after that cleaning leaves files that only this removes. A launch with a live
-/// process is left alone.
-fn clean_earlier_launches(run_ids: &[String]) {
+/// killed) after that cleaning leaves files that only this removes. A launch whose processes
+/// still live is waited for, up to `patience` in all (a child started just before its launcher
+/// was killed lives until its handshake times out), then left alone with a warning.
+fn clean_earlier_launches(run_ids: &[String], patience: Duration) {
+    let deadline = Instant::now() + patience;
     for id in run_ids.iter().filter(|id| wire::is_launcher_run_id(id)) {
-        match wire::clean_run(id) {
-            Ok(wire::Cleaned::Removed(files)) if !files.is_empty() => {
-                info!(run_id = %id, files = files.len(), "removed what an earlier launch left");
+        loop {
+            match wire::clean_run(id) {
+                Ok(wire::Cleaned::Live(_)) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(200));
+                }
+                Ok(wire::Cleaned::Live(nodes)) => {
+                    warn!(run_id = %id, ?nodes, "an earlier launch's processes are still alive");
+                    break;
+                }
+                Ok(wire::Cleaned::Removed(files)) => {
+                    if !files.is_empty() {
+                        info!(run_id = %id, files = files.len(), "removed what an earlier launch left");
+                    }
+                    break;
+                }
+                Err(e) => {
+                    warn!(run_id = %id, "cannot remove what an earlier launch left: {e}");
+                    break;
+                }
             }
-            Ok(wire::Cleaned::Live(nodes)) => {
-                warn!(run_id = %id, ?nodes, "an earlier launch's processes are still alive");
-            }
-            Ok(_) => {}
-            Err(e) => warn!(run_id = %id, "cannot remove what an earlier launch left: {e}"),
         }
     }
 }

@@ -220,9 +220,18 @@ fn expert_host(host: &Value, summary: &Value) -> String {
     }
 }
 
-/// No process of any of the run's launches is alive, and none left iceoryx2 files.
+/// No process of any of the run's launches is alive, and none left iceoryx2 files: the system
+/// alone removed what its launches left (`swept`, the files of dead launches the harness found
+/// at the end, must be none). A killed joined host cannot clean up after itself: its copy's
+/// files are removed by the harness, as `alfd clean` would, before the check.
 pub(super) fn nothing_left(run_ids: &[String], swept: usize) -> Verdict {
     let mut left = Vec::new();
+    if swept > 0 {
+        left.push(format!(
+            "{swept} files of dead launches were still there at the end (the run's last launcher \
+             should have removed them)"
+        ));
+    }
     for id in run_ids {
         let alive = alfd_wire::alive_nodes(id).unwrap_or_default();
         let files = alfd_wire::leftover_files(id);
@@ -240,7 +249,7 @@ pub(super) fn nothing_left(run_ids: &[String], swept: usize) -> Verdict {
         detail: if left.is_empty() {
             format!(
                 "{} runs' processes gone (launches and joined hosts' copies), their files removed \
-                 ({swept} of dead processes swept at the end, as `alfd clean` would)",
+                 (the launches' by the run itself)",
                 run_ids.len()
             )
         } else {

@@ -138,6 +138,8 @@ pub struct EnvConfig {
 
 /// DeepSea's N when `env.size` is not given.
 pub const DEFAULT_DEEPSEA_SIZE: usize = 10;
+/// The largest DeepSea N a config may ask for (a grid of N² cells).
+pub const MAX_DEEPSEA_SIZE: usize = 100;
 
 fn default_p_success() -> f64 {
     0.9

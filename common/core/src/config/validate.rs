@@ -122,7 +122,7 @@ impl ExperimentConfig {
             };
             return Err(invalid(field, "applies to deepsea only"));
         }
-        let max = crate::env::deepsea::MAX_SIZE;
+        let max = crate::config::MAX_DEEPSEA_SIZE;
         if e.name == EnvName::Deepsea && !(1..=max).contains(&e.deepsea_size()) {
             return Err(invalid(
                 "env.size",

@@ -351,7 +351,7 @@ mod x86 {
     use super::{TILE_COLS, TILE_ROWS};
 
     pub(super) fn available() -> bool {
-        crate::nn::wide_available()
+        crate::cpu::avx2_fma()
     }
 
     /// # Safety

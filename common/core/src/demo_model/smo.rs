@@ -617,7 +617,7 @@ mod tests {
 
     #[test]
     fn the_wide_loops_choose_the_pair_and_move_the_gradient_as_the_portable_ones() {
-        if !cfg!(target_arch = "x86_64") || !crate::nn::wide_available() {
+        if !cfg!(target_arch = "x86_64") || !crate::cpu::avx2_fma() {
             eprintln!("skipped: the CPU has no AVX2");
             return;
         }

@@ -36,7 +36,7 @@ use super::{Env, EnvError, EnvState, Step};
 use numpy_legacy::RandomState;
 
 /// The largest N: an observation has N² values (10,000 at N = 100), and an episode N steps.
-pub const MAX_SIZE: usize = 100;
+pub const MAX_SIZE: usize = crate::config::MAX_DEEPSEA_SIZE;
 /// bsuite's `unscaled_move_cost`: a move right costs this divided by N.
 pub const UNSCALED_MOVE_COST: f64 = 0.01;
 /// The reward for moving right from the bottom-right cell.

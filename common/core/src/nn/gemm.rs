@@ -253,16 +253,6 @@ pub(crate) fn simd() -> bool {
     false
 }
 
-/// Set by [`use_portable_kernels`].
-static PORTABLE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
-/// Makes this process use the portable kernels (no AVX2, `f32::mul_add` per element) even on a
-/// CPU that has AVX2 and FMA: to check that they give the same numbers (the binaries call it
-/// when `ALFD_PORTABLE_KERNELS=1`). Slow: every fused multiply-add is a software one.
-pub fn use_portable_kernels(yes: bool) {
-    PORTABLE.store(yes, std::sync::atomic::Ordering::Relaxed);
-}
-
 /// The single-core FMA peak probe of the benchmarks: `rounds` rounds of 12 independent chains of
 /// fused multiply-adds as wide as the products' kernels use ([`fma_peak_flops_per_round`]);
 /// returns a value that depends on all of them. `None` without AVX2 and FMA.
@@ -298,15 +288,6 @@ pub fn fma_peak_flops_per_round() -> Option<u64> {
 pub(crate) fn avx512_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     return avx512::available();
-    #[cfg(not(target_arch = "x86_64"))]
-    false
-}
-
-/// Whether [`wide`] runs its function compiled for AVX2: the CPU has AVX2 and FMA and the
-/// portable kernels were not asked for.
-pub(crate) fn wide_available() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return x86::available();
     #[cfg(not(target_arch = "x86_64"))]
     false
 }
@@ -348,19 +329,13 @@ mod avx512;
 #[allow(unsafe_code)]
 mod x86 {
     use std::arch::x86_64::*;
-    use std::sync::OnceLock;
 
     use super::{Epi, MatRef};
 
     /// Whether the CPU has AVX2 and FMA and the portable kernels were not asked for
-    /// ([`super::use_portable_kernels`]).
+    /// ([`crate::cpu::avx2_fma`]).
     pub(super) fn available() -> bool {
-        static DETECTED: OnceLock<bool> = OnceLock::new();
-        !super::PORTABLE.load(std::sync::atomic::Ordering::Relaxed)
-            && *DETECTED.get_or_init(|| {
-                std::arch::is_x86_feature_detected!("avx2")
-                    && std::arch::is_x86_feature_detected!("fma")
-            })
+        crate::cpu::avx2_fma()
     }
 
     /// `pack[i + p m] = a(i, p)` for `a` whose rows are contiguous (`a.cs == 1`): the

@@ -22,13 +22,14 @@ mod io;
 mod mlp;
 mod prior;
 
+pub use crate::cpu::use_portable_kernels;
 pub use adam::{Adam, AdamConfig, AdamState};
 pub use dqn::{
     clip_grad_norm, dqn_loss, loss_and_grads, loss_and_grads_with, train_step, train_step_with,
     TdConfig, TdLoss, TrainScratch,
 };
-pub(crate) use gemm::{avx512_available, wide, wide_available};
-pub use gemm::{fma_peak_flops_per_round, fma_peak_probe, use_portable_kernels};
+pub(crate) use gemm::{avx512_available, wide};
+pub use gemm::{fma_peak_flops_per_round, fma_peak_probe};
 pub use io::FORMAT_VERSION;
 pub use mlp::{ForwardCache, Mlp};
 pub use prior::Prior;

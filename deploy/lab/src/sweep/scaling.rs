@@ -399,7 +399,7 @@ mod tests {
         assert!(b.demos.value.is_infinite());
         assert!(cell(&t, "c", 10.0).is_none());
         let md = markdown(&[a, b], "N");
-        let md = md.replace('\n', "\n@");
+        let md = md.replace('\n', "@");
         assert!(
             md.contains("@| method | N = 10 |@|---|---:|@| a | 2 of 3 |@| b | 0 of 1 |"),
             "{md}"

@@ -20,7 +20,7 @@ const LOW_REGS: usize = 2;
 pub(super) const LOW_LANES: usize = LOW_REGS * V;
 
 pub(super) fn available() -> bool {
-    crate::nn::wide_available()
+    crate::cpu::avx2_fma()
 }
 
 /// Whether the active set's arrays have its length and its rows are below the lengths of

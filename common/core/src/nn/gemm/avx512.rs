@@ -13,9 +13,7 @@ use super::{Epi, MatRef};
 /// Whether the CPU has AVX-512 (foundation) besides AVX2 and FMA, and the portable kernels were
 /// not asked for.
 pub(super) fn available() -> bool {
-    static DETECTED: OnceLock<bool> = OnceLock::new();
-    super::x86::available()
-        && *DETECTED.get_or_init(|| std::arch::is_x86_feature_detected!("avx512f"))
+    crate::cpu::avx512f()
 }
 
 /// [`super::widest`] once [`available`] said yes.
