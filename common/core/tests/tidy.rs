@@ -31,18 +31,43 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// The workspace's member crates, as the root `Cargo.toml` lists them (`members = [...]`, one
-/// line), so that a crate added there is checked without a change here.
+/// The workspace's member crates, each as its folder relative to the workspace, read from
+/// `cargo metadata --no-deps`, so that a crate added to the workspace is checked without a
+/// change here.
 fn workspace_members() -> Vec<String> {
-    let manifest = std::fs::read_to_string(workspace().join("Cargo.toml")).unwrap();
-    let line = manifest
-        .lines()
-        .find(|l| l.trim_start().starts_with("members = ["))
-        .expect("the root Cargo.toml lists its members on one line");
-    line.split('"')
-        .skip(1)
-        .step_by(2)
-        .map(str::to_owned)
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| env!("CARGO").into());
+    let manifest = workspace().join("Cargo.toml");
+    let output = std::process::Command::new(&cargo)
+        .args([
+            "metadata",
+            "--format-version",
+            "1",
+            "--no-deps",
+            "--offline",
+        ])
+        .arg("--manifest-path")
+        .arg(&manifest)
+        .output()
+        .expect("run cargo metadata");
+    assert!(
+        output.status.success(),
+        "cargo metadata failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let meta: Value = serde_json::from_slice(&output.stdout).expect("cargo metadata JSON");
+    let root = workspace();
+    meta["packages"]
+        .as_array()
+        .expect("packages")
+        .iter()
+        .map(|p| {
+            let manifest = PathBuf::from(p["manifest_path"].as_str().expect("manifest_path"));
+            let dir = manifest.parent().expect("a manifest's folder");
+            let rel = dir
+                .strip_prefix(&root)
+                .expect("a member inside the workspace");
+            rel.to_string_lossy().into_owned()
+        })
         .collect()
 }
 
