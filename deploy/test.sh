@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 # The fuzz pass (proptest) draws its cases from this seed, so the test command gives the same
 # verdict every time; set PROPTEST_RNG_SEED to another number (or unset it) to explore more cases.
 export PROPTEST_RNG_SEED="${PROPTEST_RNG_SEED:-20261129}"
-# The tests of deploy/tests append "NAME SECONDS" to $ALFD_TEST_TIMES/times.txt as they end.
+# The tests of deploy/cli/tests append "NAME SECONDS" to $ALFD_TEST_TIMES/times.txt as they end.
 export ALFD_TEST_TIMES="${ALFD_TEST_TIMES:-${CARGO_TARGET_DIR:-$PWD/target}/test-times}"
 mkdir -p "$ALFD_TEST_TIMES"
 rm -f "$ALFD_TEST_TIMES/times.txt"
@@ -45,7 +45,7 @@ cargo build --release --workspace --locked
 # the way alfd installs it on first use, so that no test waits on it (a no-op once installed).
 bash deploy/python/setup-venv.sh >/dev/null
 # The human page's browser test: Debian's Chromium driven by Playwright
-# (deploy/tests/browser/package.json, pinned), installed with npm here as the test would. Chromium
+# (deploy/cli/tests/browser/package.json, pinned), installed with npm here as the test would. Chromium
 # is installed from Debian's packages when absent and this runs as root; a browser test that still
 # cannot run fails when CI is set (as .ci/run sets it) and says SKIPPED otherwise.
 if [ ! -x /usr/bin/chromium ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
@@ -53,7 +53,7 @@ if [ ! -x /usr/bin/chromium ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/
   (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) >/dev/null ||
     echo "warning: apt-get install chromium failed"
 fi
-if [ -x /usr/bin/chromium ] && [ ! -d deploy/tests/browser/node_modules/playwright-core ]; then
-  (cd deploy/tests/browser && npm ci --no-audit --no-fund --silent)
+if [ -x /usr/bin/chromium ] && [ ! -d deploy/cli/tests/browser/node_modules/playwright-core ]; then
+  (cd deploy/cli/tests/browser && npm ci --no-audit --no-fund --silent)
 fi
 cargo test --release --workspace --locked

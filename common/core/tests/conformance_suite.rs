@@ -3,7 +3,7 @@
 //! whatever the seed), the action space, truncation at the step limit, termination (always
 //! exercised, by a policy that reaches a terminal state), no step after the end and no step
 //! before the first reset. Run on every built-in environment (`env_conformance.rs`) and on a
-//! Gymnasium environment through the Python adapter (`deploy/tests/gymnasium.rs`, which includes
+//! Gymnasium environment through the Python adapter (`deploy/cli/tests/gymnasium.rs`, which includes
 //! this file).
 
 use alfd_common::env::{Env, EnvError, Step};

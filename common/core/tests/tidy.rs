@@ -78,7 +78,7 @@ fn the_file_checks_walk_every_member_crate() {
         "common/core",
         "deploy/launcher",
         "deploy/lab",
-        "deploy",
+        "deploy/cli",
         "actor",
     ] {
         assert!(
@@ -906,7 +906,7 @@ fn code_configs_scripts_and_documents_carry_no_development_history() {
         "deploy/experiments",
         "deploy/bench",
         "deploy/python",
-        "deploy",
+        "deploy/cli",
     ] {
         let Ok(entries) = std::fs::read_dir(workspace().join(dir)) else {
             continue;

@@ -44,7 +44,7 @@ fn scratch(name: &str) -> TestDir {
 
 fn config(name: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("configs")
+        .join("../configs")
         .join(name)
         .display()
         .to_string()

@@ -1,4 +1,4 @@
-"""The Minari side of alfd's Minari round trip (deploy/tests/minari.rs), run with the pinned
+"""The Minari side of alfd's Minari round trip (deploy/cli/tests/minari.rs), run with the pinned
 `minari` package of the project's .venv. MINARI_DATASETS_PATH names the datasets' root.
 
   python minari_check.py load ID     # prints what minari.load_dataset(ID) reads, as JSON

@@ -158,7 +158,7 @@ mod tests {
         use std::time::Instant;
         let text = std::fs::read_to_string(concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/configs/cartpole-bdqn-krr.toml"
+            "/../configs/cartpole-bdqn-krr.toml"
         ))
         .unwrap();
         let overrides = ["episodes=100000".to_owned()];

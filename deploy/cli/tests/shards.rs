@@ -12,7 +12,7 @@ use crate::support::{alfd, text, timed, tmp};
 fn experiment(dir: &Path, name: &str, episodes: u32) -> PathBuf {
     let config = |f: &str| {
         Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("configs")
+            .join("../configs")
             .join(f)
             .display()
             .to_string()

@@ -14,7 +14,7 @@
 
 use crate::support::{alfd, text, timed, tmp};
 
-const CONFIG: &str = "deploy/tests/data/golden-cartpole.toml";
+const CONFIG: &str = "deploy/cli/tests/data/golden-cartpole.toml";
 const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/");
 /// What glibc may use on a CPU without AVX2 and FMA (and AVX-512, FMA4).
 const NO_FMA: &str = "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F,-FMA4";

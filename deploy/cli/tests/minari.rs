@@ -21,7 +21,7 @@ fn minari(root: &Path, args: &[&str]) -> Value {
     assert!(setup.status.success(), "{}", text(&setup));
     let python = String::from_utf8(setup.stdout).unwrap();
     let o = Command::new(python.trim())
-        .arg(repo().join("deploy/tests/minari_check.py"))
+        .arg(repo().join("deploy/cli/tests/minari_check.py"))
         .args(args)
         .env("MINARI_DATASETS_PATH", root)
         .output()

@@ -17,7 +17,7 @@ use alfd_launcher::{
 
 /// The default experiment: the recommended CartPole-1000 preset (Bootstrapped DQN with 300 active
 /// demonstrations of the 1000 expert, 50,000 steps).
-pub const DEFAULT_CONFIG: &str = include_str!("../configs/recommended/cartpole.toml");
+pub const DEFAULT_CONFIG: &str = include_str!("../../configs/recommended/cartpole.toml");
 
 #[derive(Debug, clap::Args)]
 pub struct RunArgs {

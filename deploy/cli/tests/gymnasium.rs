@@ -14,7 +14,7 @@ use alfd_common::env::{CartPole, Env, EnvError};
 use alfd_harness::python::{Adapter, AdapterEnv};
 use alfd_wire::{self as wire, Process, Role, SCHEMA_VERSION};
 
-#[path = "../../common/core/tests/conformance_suite.rs"]
+#[path = "../../../common/core/tests/conformance_suite.rs"]
 mod conformance_suite;
 
 use crate::support::{alfd, text, timed, tmp};

@@ -1,6 +1,6 @@
 //! A person as the expert: `alfd run --expert human` serves a page on
 //! 127.0.0.1; these tests act as the person, over HTTP from Rust and in Debian's Chromium driven
-//! by Playwright (`deploy/tests/browser/`, installed with npm by the test itself).
+//! by Playwright (`deploy/cli/tests/browser/`, installed with npm by the test itself).
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -291,13 +291,13 @@ fn chromium() -> Option<PathBuf> {
     p.is_file().then_some(p)
 }
 
-/// Playwright (`playwright-core`, pinned in deploy/tests/browser/package.json), installed with
+/// Playwright (`playwright-core`, pinned in deploy/cli/tests/browser/package.json), installed with
 /// `npm ci` on first use; the error says why it cannot be.
 fn browser_driver() -> Result<PathBuf, String> {
     // One install at a time (the browser tests run in parallel).
     static INSTALL: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _one = INSTALL.lock().unwrap_or_else(|e| e.into_inner());
-    let dir = repo().join("deploy/tests/browser");
+    let dir = repo().join("deploy/cli/tests/browser");
     if !dir.join("node_modules/playwright-core").is_dir() {
         let status = Command::new("npm")
             .args(["ci", "--no-audit", "--no-fund", "--silent"])
