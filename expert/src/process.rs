@@ -26,10 +26,10 @@ use alfd_wire::{
 };
 use tracing::{debug, info};
 
-use crate::demo_log::{self, DemoLog};
 use crate::human::{self, HumanPage, PageState, HUMAN};
 use crate::machine::{Action, ExpertMachine, Mode, QueryIn};
-use crate::registry;
+use alfd_demonstrators::demo_log::{self, DemoLog};
+use alfd_demonstrators::registry;
 
 /// `alfd-expert`: the expert process of a run (started by `alfd run` and `alfd swap-expert`).
 #[derive(Debug, Clone, clap::Parser)]

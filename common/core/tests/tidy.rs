@@ -767,11 +767,23 @@ fn the_dependency_graph_keeps_its_shape() {
             "alfd-common",
             "alfd-harness",
             "alfd-wire",
-            "alfd-expert"
+            "alfd-demonstrators"
         ])),
         "{:?}",
         inside("alfd-lab")
     );
+    // The demonstrators come without the expert process's page server.
+    assert!(
+        inside("alfd-demonstrators").is_subset(&BTreeSet::from(["alfd-common", "alfd-harness"])),
+        "{:?}",
+        inside("alfd-demonstrators")
+    );
+    for server in ["axum", "tokio"] {
+        assert!(
+            !g.transitive("alfd-demonstrators").contains_key(server),
+            "alfd-demonstrators reaches {server}"
+        );
+    }
     for m in &g.members {
         assert!(
             !g.direct(g.name(m)).contains("alfd-deploy"),
@@ -786,6 +798,7 @@ fn the_dependency_graph_keeps_its_shape() {
         "alfd-wire",
         "alfd-harness",
         "alfd-bridge",
+        "alfd-demonstrators",
         "alfd-launcher",
         "alfd-lab",
     ] {

@@ -59,7 +59,7 @@ pub fn run(args: DemoModelPolicyArgs) -> anyhow::Result<()> {
             u64::MAX
         )));
     }
-    alfd_expert::registry::cartpole(&args.expert)?;
+    alfd_demonstrators::registry::cartpole(&args.expert)?;
     let source = match &args.queries_config {
         None => DemoSource::ExpertTrajectory,
         Some(path) => {

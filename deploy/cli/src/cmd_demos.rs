@@ -48,7 +48,7 @@ fn export(args: ExportArgs) -> anyhow::Result<()> {
     };
     let (header, episodes) = transitions::read(&args.run_dir)?;
     let demos_path = args.run_dir.join("demos.jsonl");
-    let demos = alfd_expert::demo_log::read(&demos_path)
+    let demos = alfd_demonstrators::demo_log::read(&demos_path)
         .map_err(|e| usage(format!("{}: {e}", demos_path.display())))?;
     let ds = transitions::dataset(&header, episodes, &demos, &id);
     minari::write(&args.out, &ds)?;

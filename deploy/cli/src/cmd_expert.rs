@@ -9,7 +9,7 @@ use alfd_common::env::vector_env_named;
 use alfd_common::evaluate::{evaluate, evaluate_cartpole, evaluate_cliffwalk};
 use alfd_common::record::ReturnStats;
 use alfd_common::runner::{run_neural, run_tabular};
-use alfd_expert::registry::{self, ExpertEntry};
+use alfd_demonstrators::registry::{self, ExpertEntry};
 use anyhow::Context as _;
 
 use crate::usage::usage;
@@ -125,7 +125,7 @@ pub struct TrainExpertsArgs {
     #[arg(long)]
     pub env: String,
     /// Where to write the demonstrators and their manifest entries.
-    #[arg(long, default_value = "expert/demonstrators")]
+    #[arg(long, default_value = "common/demonstrators/shipped")]
     pub out: PathBuf,
     /// First training seed; further seeds are tried until every level is found.
     #[arg(long, default_value_t = 0)]

@@ -17,7 +17,8 @@ const EXPERT_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// Whether `cfg` needs Python pieces in `alfd local`.
 pub(crate) fn needed(cfg: &ExperimentConfig) -> bool {
-    cfg.env.name.is_remote() || alfd_expert::registry::external_policy(&cfg.expert.name).is_some()
+    cfg.env.name.is_remote()
+        || alfd_demonstrators::registry::external_policy(&cfg.expert.name).is_some()
 }
 
 /// The adapters of one single-process run; dropping it stops them and removes the run id's
@@ -101,7 +102,7 @@ pub(crate) fn start(cfg: &ExperimentConfig, out: &std::path::Path) -> anyhow::Re
         None
     };
     let demonstrator: Box<dyn Demonstrator<[f32]>> =
-        match alfd_expert::registry::external_policy(&cfg.expert.name) {
+        match alfd_demonstrators::registry::external_policy(&cfg.expert.name) {
             Some(policy) => {
                 let log = out.join("adapter-expert-1.log");
                 let adapter = Adapter::expert(policy, &run_id, "expert-1", SCHEMA_VERSION, &log)?;

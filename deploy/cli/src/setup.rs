@@ -181,8 +181,8 @@ impl TabularEnvs {
         name: &str,
     ) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<usize> + Send>> {
         Ok(match self {
-            Self::DeepSea(env) => alfd_expert::registry::deepsea(name, env)?,
-            Self::CliffWalk(env) => alfd_expert::registry::cliffwalk(name, env)?,
+            Self::DeepSea(env) => alfd_demonstrators::registry::deepsea(name, env)?,
+            Self::CliffWalk(env) => alfd_demonstrators::registry::cliffwalk(name, env)?,
         })
     }
 }
@@ -208,8 +208,10 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
         // A person answers on a web page: any environment, any number of actions.
         return Ok(());
     }
-    if alfd_expert::registry::external_policy(&cfg.expert.name).is_some() {
-        return Ok(alfd_expert::registry::check_external(&cfg.expert.name)?);
+    if alfd_demonstrators::registry::external_policy(&cfg.expert.name).is_some() {
+        return Ok(alfd_demonstrators::registry::check_external(
+            &cfg.expert.name,
+        )?);
     }
     if cfg.env.name.is_tabular() {
         return TabularEnvs::of(cfg)?
@@ -229,7 +231,7 @@ pub fn neural_demonstrator(
              swap-expert` only: its page is served by the expert process",
         ));
     }
-    Ok(alfd_expert::registry::for_env(
+    Ok(alfd_demonstrators::registry::for_env(
         cfg.env.name,
         &cfg.expert.name,
     )?)

@@ -211,7 +211,7 @@ fn a_seeded_chaos_run_with_its_expert_behind_a_slow_link_loses_no_demonstration(
         "{summary:#}"
     );
     assert_eq!(summary["demos_refused"], 0);
-    let records = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let records = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     let remote = records
         .iter()
         .filter(|d| d.expert == "cartpole-200")

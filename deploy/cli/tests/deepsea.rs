@@ -153,7 +153,8 @@ fn every_gate_runs_on_deepsea_within_its_allowance() {
         let s = local(&dir, gate);
         let used = s["demos_used"].as_u64().unwrap();
         assert!(used <= 12, "{gate}: {used}");
-        let demos = alfd_expert::demo_log::read(&dir.join(gate).join("demos.jsonl")).unwrap();
+        let demos =
+            alfd_demonstrators::demo_log::read(&dir.join(gate).join("demos.jsonl")).unwrap();
         // Spread over 1,600 steps: the (n+1)-th not before step 133·n.
         for (n, d) in demos.iter().enumerate() {
             assert!(

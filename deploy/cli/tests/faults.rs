@@ -334,8 +334,8 @@ fn a_lockstep_run_stopped_and_resumed_is_the_uninterrupted_run_to_the_byte() {
     let resumed = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
     assert_eq!(single.lines().count(), 121);
     assert_eq!(resumed, single, "stopped after {stopped_at} episodes");
-    let d1 = alfd_expert::demo_log::read(&local.join("demos.jsonl")).unwrap();
-    let d2 = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let d1 = alfd_demonstrators::demo_log::read(&local.join("demos.jsonl")).unwrap();
+    let d2 = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     assert!(!d1.is_empty());
     assert_eq!(d2[..d1.len()], d1[..]);
 }

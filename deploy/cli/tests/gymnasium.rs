@@ -206,7 +206,7 @@ fn an_environment_of_ones_own_module_runs_with_its_kwargs() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", text(&o));
-    let demos = alfd_expert::demo_log::read(&out.join("run/demos.jsonl")).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&out.join("run/demos.jsonl")).unwrap();
     assert_eq!(demos.len(), 4);
     assert!(demos.iter().all(|d| d.action == 1 && d.state.len() == 6));
     // The first state is the start, one-hot in the first of 6 cells.
@@ -275,7 +275,7 @@ fn a_run_on_gymnasium_acrobot_with_an_external_python_expert_completes() {
     }
     assert!(rows.iter().any(|r| r[8] == "0") && rows.iter().any(|r| r[8] == "1"));
     // The whole budget, spent on the first steps, each answer the controller's, with its name.
-    let demos = alfd_expert::demo_log::read(&run_dir.join("demos.jsonl")).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&run_dir.join("demos.jsonl")).unwrap();
     assert_eq!(demos.len(), 25);
     assert_eq!(summary["demos"], 25);
     for d in &demos {
@@ -316,7 +316,7 @@ fn swap_expert_goes_from_a_built_in_expert_to_an_external_one_and_back() {
     let out = tmp("gym-swap");
     let external = "python:alfd_examples:acrobot_pump";
     let demos_of = |name: &str| {
-        alfd_expert::demo_log::read(&out.join("demos.jsonl"))
+        alfd_demonstrators::demo_log::read(&out.join("demos.jsonl"))
             .unwrap_or_default()
             .iter()
             .filter(|d| d.expert == name)
@@ -377,7 +377,7 @@ fn swap_expert_goes_from_a_built_in_expert_to_an_external_one_and_back() {
     });
     let o = crate::runtime::interrupt(run);
     assert_eq!(o.status.code(), Some(130), "{}", text(&o));
-    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     assert_eq!(crate::runtime::summary(&out)["demos"], demos.len());
     let id = crate::runtime::run_id(&out);
     assert_eq!(wire::leftover_files(&id), Vec::<std::path::PathBuf>::new());
@@ -431,7 +431,7 @@ fn alfd_local_plays_a_gymnasium_environment_with_an_external_expert_reproducibly
     let csv = |d: &Path| std::fs::read_to_string(d.join("episodes.csv")).unwrap();
     assert_eq!(csv(&a), csv(&b), "one config and seed, one result");
     assert_eq!(csv(&a).lines().count(), 6);
-    let demos = alfd_expert::demo_log::read(&a.join("demos.jsonl")).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&a.join("demos.jsonl")).unwrap();
     assert_eq!(demos.len(), 15);
     for d in &demos {
         assert_eq!(

@@ -257,7 +257,7 @@ fn a_person_answers_and_declines_over_http_and_only_answers_spend_budget() {
         )),
         "{stderr}"
     );
-    let demos = alfd_expert::demo_log::read(&run_dir.join("demos.jsonl")).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&run_dir.join("demos.jsonl")).unwrap();
     assert_eq!(demos.len(), 2);
     for (d, (_, action, shown)) in demos.iter().zip(&given) {
         assert_eq!(d.expert, "human");
@@ -390,7 +390,7 @@ fn in_chromium_a_person_sees_cartpole_declines_one_query_and_clicks_an_action() 
     let o = child.0.take().unwrap().wait_with_output().unwrap();
     assert!(o.status.success(), "{}", text(&o));
     // The decline spent nothing; the click is the one demonstration, with the person's name.
-    let demos = alfd_expert::demo_log::read(&run_dir.join("demos.jsonl")).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&run_dir.join("demos.jsonl")).unwrap();
     assert_eq!(demos.len(), 1);
     assert_eq!((demos[0].action, demos[0].expert.as_str()), (1, "human"));
     let clicked: Vec<f64> = seen[1]["state"]
@@ -523,7 +523,7 @@ fn a_persons_click_after_the_actor_stopped_waiting_is_refused_and_records_nothin
 fn swap_expert_goes_from_a_built_in_expert_to_a_person_and_back() {
     let _time = timed!();
     let out = tmp("human-swap");
-    let demos = || alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap_or_default();
+    let demos = || alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap_or_default();
     // CartPole's built-in expert, asked on every step (a budget that lasts).
     let mut run = Background(Some(
         alfd()

@@ -213,7 +213,7 @@ fn late_answers_of_an_expert_on_another_host_reach_the_runs_file_in_order() {
     let there = std::fs::read_to_string(expert_host.join("join").join("demos.jsonl")).unwrap();
     assert_eq!(here, there, "the two copies of demos.jsonl differ");
     check_late(&out, budget);
-    let records = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let records = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     assert!(records.iter().all(|d| d.expert == "cartpole-200"));
     for id in [
         run_id(&out),
@@ -270,7 +270,7 @@ fn a_python_demonstrator_slower_than_the_expert_waits_gives_no_answer_to_another
     ));
     let o = crate::runtime::wait_output(run, Duration::from_secs(240));
     ok(&o);
-    let records = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let records = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     assert!(
         !records.is_empty(),
         "no demonstration in time: {}",

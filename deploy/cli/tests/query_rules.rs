@@ -11,7 +11,7 @@ use crate::support::{alfd, text, timed, tmp};
 
 /// The global steps of a run's demonstrations, in order.
 fn demo_steps(dir: &Path) -> Vec<u64> {
-    alfd_expert::demo_log::read(&dir.join("demos.jsonl"))
+    alfd_demonstrators::demo_log::read(&dir.join("demos.jsonl"))
         .expect("demos.jsonl valid")
         .iter()
         .map(|d| d.step)

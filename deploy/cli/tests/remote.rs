@@ -124,7 +124,7 @@ fn two_remote_actors_over_zenoh_play_a_run_to_its_end_within_the_budget() {
     assert!(rows.iter().all(|r| r[8] == "0" || r[8] == "1"));
     assert!(rows.iter().any(|r| r[8] == "0") && rows.iter().any(|r| r[8] == "1"));
     // The budget holds across hosts, and every demonstration written was used by an actor.
-    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     assert_eq!(demos.len(), 10);
     assert_eq!(s["demos"], 10);
     let queries: u32 = rows.iter().map(|r| r[5].parse::<u32>().unwrap()).sum();
@@ -196,7 +196,7 @@ fn an_expert_on_another_host_answers_every_query_and_its_demonstrations_are_writ
     let rows = rows(&out);
     // Every demonstration is on the learner's host, each from the remote expert, within the
     // budget, and each was used by an actor (none lost, none counted twice).
-    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     assert_eq!(demos.len(), 12);
     assert!(
         demos.iter().all(|d| d.expert == "cartpole-200"),
@@ -208,7 +208,8 @@ fn an_expert_on_another_host_answers_every_query_and_its_demonstrations_are_writ
     assert_eq!(queries, 12, "every demonstration was used by an actor");
     assert_eq!(rows.last().unwrap()[3], "12", "demos_used");
     // The remote expert's own copy holds the same demonstrations.
-    let there = alfd_expert::demo_log::read(&expert_host.join("join").join("demos.jsonl")).unwrap();
+    let there =
+        alfd_demonstrators::demo_log::read(&expert_host.join("join").join("demos.jsonl")).unwrap();
     assert_eq!(there, demos);
     for id in [
         run_id(&out),
@@ -266,7 +267,7 @@ fn alfd_swap_expert_swaps_away_from_a_remote_expert_and_its_host_leaves() {
     assert_eq!(s["expert_swaps"], 2, "{}", text(&o));
     // Every demonstration on the learner's host, in order (read checks the indices): the run's
     // first expert's, then the remote expert's, then only the local one's again.
-    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     let names: Vec<&str> = demos.iter().map(|d| d.expert.as_str()).collect();
     let mut runs: Vec<&str> = names.clone();
     runs.dedup();
@@ -347,7 +348,7 @@ fn a_remote_host_lost_mid_run_is_a_crash_and_a_rejoin_plays_on() {
     assert!(j.status.success(), "{}", text(&j));
     let s = summary(&out);
     assert_eq!(s["interrupted"], true);
-    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     assert!(
         demos.len() <= 20,
         "{} demonstrations, budget 20",
@@ -499,7 +500,7 @@ fn a_remote_expert_killed_mid_run_is_restarted_here_and_no_demonstration_is_lost
     crate::runtime::signal("KILL", expert.child().id());
     let _ = expert.0.take().expect("running").wait();
     let there = expert_host.join("join").join("demos.jsonl");
-    let remote_demos = alfd_expert::demo_log::read(&there).unwrap();
+    let remote_demos = alfd_demonstrators::demo_log::read(&there).unwrap();
     assert!(
         remote_demos.len() < budget,
         "the budget was spent before the kill"
@@ -521,7 +522,7 @@ fn a_remote_expert_killed_mid_run_is_restarted_here_and_no_demonstration_is_lost
         .contains("answering queries"));
     // Every demonstration is on the learner's host, in order, within the budget, and each is
     // counted once: the file, the summary and the last episode agree.
-    let demos = alfd_expert::demo_log::read(&demos_here).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&demos_here).unwrap();
     for (i, d) in demos.iter().enumerate() {
         assert_eq!(d.index as usize, i);
         assert_eq!(d.expert, "cartpole-200");
@@ -586,7 +587,7 @@ fn a_remote_python_expert_lost_with_its_host_leaves_the_run_going_without_an_exp
     wait_answering(&expert_host.join("join"), 2);
     let demos_here = out.join("demos.jsonl");
     let remote = || {
-        alfd_expert::demo_log::read(&demos_here)
+        alfd_demonstrators::demo_log::read(&demos_here)
             .unwrap_or_default()
             .iter()
             .filter(|d| d.expert == name)
@@ -623,7 +624,7 @@ fn a_remote_python_expert_lost_with_its_host_leaves_the_run_going_without_an_exp
     assert_eq!(s["expert_restarts"].as_u64(), Some(1), "{s}");
     // Nothing was written after the loss, and every line before it is in order: the run's
     // first expert's, then the remote one's.
-    let demos = alfd_expert::demo_log::read(&demos_here).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&demos_here).unwrap();
     assert_eq!(demos.len(), at_loss);
     assert!(
         demos
@@ -689,7 +690,7 @@ fn a_remote_actor_killed_with_sigkill_is_restarted_by_its_host_with_a_new_incarn
     );
     assert!(rows.len() - at_kill >= 1);
     // The budget holds, and every demonstration written was used.
-    let demos = alfd_expert::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    let demos = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     assert!(
         demos.len() <= 20,
         "{} demonstrations, budget 20",

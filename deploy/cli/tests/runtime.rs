@@ -137,7 +137,8 @@ pub(crate) fn summary(dir: &Path) -> serde_json::Value {
 /// What every finished run must satisfy: a valid `demos.jsonl` within the budget and counted in
 /// the summary, weights saved, one log per process, nothing left in iceoryx2's directories.
 pub(crate) fn check_run_dir(dir: &Path, budget: usize) -> Vec<alfd_common::agent::DemoRecord> {
-    let demos = alfd_expert::demo_log::read(&dir.join("demos.jsonl")).expect("demos.jsonl valid");
+    let demos =
+        alfd_demonstrators::demo_log::read(&dir.join("demos.jsonl")).expect("demos.jsonl valid");
     assert!(
         demos.len() <= budget,
         "{} demos for a budget of {budget}",
@@ -283,7 +284,7 @@ fn one_actor_in_lockstep_reproduces_the_single_process_run() {
     assert_eq!(many, single);
     // The demonstrations too (the multi-process run may have a few more, asked in the episode
     // that was still running when the run stopped).
-    let d1 = alfd_expert::demo_log::read(&local.join("demos.jsonl")).unwrap();
+    let d1 = alfd_demonstrators::demo_log::read(&local.join("demos.jsonl")).unwrap();
     let d2 = check_run_dir(&multi, 100);
     assert!(!d1.is_empty());
     assert_eq!(d2[..d1.len()], d1[..]);
@@ -332,7 +333,7 @@ fn the_expert_is_swapped_in_a_live_run_without_losing_or_repeating_a_demonstrati
     // Demonstrations flow before, during and after the swap from the 200 expert to the 1000 one.
     let mut child = spawn_run(&out, 2, &ASKING_ALL_ALONG);
     wait_rows(&out, 10, &mut child);
-    let before = alfd_expert::demo_log::read(&out.join("demos.jsonl"))
+    let before = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl"))
         .unwrap()
         .len();
     let o = alfd()

@@ -77,7 +77,7 @@ pub fn play(
     seed: u64,
     source: &DemoSource,
 ) -> Result<PolicyRun> {
-    let mut demonstrator = alfd_expert::registry::cartpole(expert)?;
+    let mut demonstrator = alfd_demonstrators::registry::cartpole(expert)?;
     let mut env = CartPole::new(MAX_STEPS);
     let mut states = Vec::with_capacity(demos);
     let mut actions = Vec::with_capacity(demos);

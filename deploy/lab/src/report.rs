@@ -17,7 +17,7 @@ use std::path::Path;
 use crate::error::Context as _;
 use alfd_common::config::{EnvName, ExperimentConfig};
 use alfd_common::record::{parse_episodes_csv, EpisodeRecord, RunSummary};
-use alfd_expert::registry::{self, ExpertEntry};
+use alfd_demonstrators::registry::{self, ExpertEntry};
 
 /// What a command prints at its end (`--json`, `--quiet`).
 #[derive(Debug, Clone, Copy)]

@@ -289,7 +289,7 @@ fn experts_of(cfg: Option<&alfd_common::config::ExperimentConfig>) -> Vec<String
         return Vec::new();
     };
     let env = format!("{:?}", cfg.env.name).to_lowercase();
-    alfd_expert::registry::list()
+    alfd_demonstrators::registry::list()
         .into_iter()
         .filter(|e| e.env == env)
         .map(|e| e.name)

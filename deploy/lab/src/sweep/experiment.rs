@@ -495,7 +495,7 @@ fn policy_spec(m: &MethodFile, dir: &Path) -> crate::Result<MethodSpec> {
         .expert
         .clone()
         .ok_or_else(|| crate::error::msg!("`expert` is missing"))?;
-    alfd_expert::registry::cartpole(&expert)?;
+    alfd_demonstrators::registry::cartpole(&expert)?;
     let demos = m.demos.unwrap_or(100);
     if demos == 0 {
         crate::error::bail!("`demos` must be at least 1");

@@ -1,4 +1,4 @@
-//! Demonstrators by name. Trained ones ship in `expert/demonstrators/` and are compiled into the
+//! Demonstrators by name. Trained ones ship in `common/demonstrators/shipped/` and are compiled into the
 //! binaries (no file to find at run time), scripted ones are built from [`crate::scripted`];
 //! `manifest.json` there records how each was made and its measured quality.
 
@@ -20,7 +20,7 @@ pub struct ExpertEntry {
     pub env: String,
     /// `analytic`, `value-iteration`, `dqn-checkpoint`, `policy-table` or `scripted`.
     pub kind: String,
-    /// File in `expert/demonstrators/`, if any.
+    /// File in `common/demonstrators/shipped/`, if any.
     #[serde(default)]
     pub file: Option<String>,
     /// Measured mean return of the demonstrator's greedy policy (see `evaluation`).
@@ -67,7 +67,7 @@ impl From<RegistryError> for BadInput {
     }
 }
 
-const MANIFEST: &str = include_str!("../demonstrators/manifest.json");
+const MANIFEST: &str = include_str!("../shipped/manifest.json");
 
 /// The bytes of a shipped file, by its name in the manifest.
 fn shipped_file(file: &str) -> Option<&'static [u8]> {
@@ -78,61 +78,62 @@ fn shipped_file(file: &str) -> Option<&'static [u8]> {
 const SHIPPED: &[(&str, &[u8])] = &[
     (
         "cartpole-100.safetensors",
-        include_bytes!("../demonstrators/cartpole-100.safetensors"),
+        include_bytes!("../shipped/cartpole-100.safetensors"),
     ),
     (
         "cartpole-1000.safetensors",
-        include_bytes!("../demonstrators/cartpole-1000.safetensors"),
+        include_bytes!("../shipped/cartpole-1000.safetensors"),
     ),
     (
         "cartpole-200.safetensors",
-        include_bytes!("../demonstrators/cartpole-200.safetensors"),
+        include_bytes!("../shipped/cartpole-200.safetensors"),
     ),
     (
         "cartpole-50.safetensors",
-        include_bytes!("../demonstrators/cartpole-50.safetensors"),
+        include_bytes!("../shipped/cartpole-50.safetensors"),
     ),
     (
         "cartpole-500.safetensors",
-        include_bytes!("../demonstrators/cartpole-500.safetensors"),
+        include_bytes!("../shipped/cartpole-500.safetensors"),
     ),
     (
         "cliffwalk-qlearning-1000.json",
-        include_bytes!("../demonstrators/cliffwalk-qlearning-1000.json"),
+        include_bytes!("../shipped/cliffwalk-qlearning-1000.json"),
     ),
     (
         "cliffwalk-qlearning-200.json",
-        include_bytes!("../demonstrators/cliffwalk-qlearning-200.json"),
+        include_bytes!("../shipped/cliffwalk-qlearning-200.json"),
     ),
     (
         "cliffwalk-qlearning-3000.json",
-        include_bytes!("../demonstrators/cliffwalk-qlearning-3000.json"),
+        include_bytes!("../shipped/cliffwalk-qlearning-3000.json"),
     ),
     (
         "cliffwalk-qlearning-50.json",
-        include_bytes!("../demonstrators/cliffwalk-qlearning-50.json"),
+        include_bytes!("../shipped/cliffwalk-qlearning-50.json"),
     ),
     (
         "cliffwalk-sarsa-1000.json",
-        include_bytes!("../demonstrators/cliffwalk-sarsa-1000.json"),
+        include_bytes!("../shipped/cliffwalk-sarsa-1000.json"),
     ),
     (
         "cliffwalk-sarsa-200.json",
-        include_bytes!("../demonstrators/cliffwalk-sarsa-200.json"),
+        include_bytes!("../shipped/cliffwalk-sarsa-200.json"),
     ),
     (
         "cliffwalk-sarsa-3000.json",
-        include_bytes!("../demonstrators/cliffwalk-sarsa-3000.json"),
+        include_bytes!("../shipped/cliffwalk-sarsa-3000.json"),
     ),
     (
         "cliffwalk-sarsa-50.json",
-        include_bytes!("../demonstrators/cliffwalk-sarsa-50.json"),
+        include_bytes!("../shipped/cliffwalk-sarsa-50.json"),
     ),
 ];
 
 /// Every demonstrator in the manifest.
 pub fn list() -> Vec<ExpertEntry> {
-    serde_json::from_str(MANIFEST).expect("expert/demonstrators/manifest.json is valid (tested)")
+    serde_json::from_str(MANIFEST)
+        .expect("common/demonstrators/shipped/manifest.json is valid (tested)")
 }
 
 /// The manifest's entry `name` for `env`; the error names the experts of `env` (and the
