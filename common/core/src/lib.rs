@@ -17,6 +17,7 @@ pub mod evaluate;
 pub mod math;
 pub mod n_step;
 pub mod nn;
+pub mod panel;
 pub mod policy;
 pub mod qfunction;
 pub mod query;

@@ -1,0 +1,307 @@
+//! Several experts at once, as a pure state machine: which expert a query goes to (the route),
+//! whether a second expert is asked the same state too (a double ask, the run's only way to
+//! compare experts without a gold one), each expert's quality learned from what the run sees,
+//! and the cost spent.
+//!
+//! Quality, after IEThresh (Donmez, Carbonell and Schneider, KDD 2009): each answer earns its
+//! expert a reward, the share of the other opinions on that state it agrees with (a second
+//! expert's answer on a double ask, the demonstration model fitted on the others' answers); an
+//! expert's quality is the mean of its last `window` rewards, with a 95% interval (mean ± 1.96
+//! standard errors, within [0, 1]; [0, 1] before two rewards). A change of an expert's quality
+//! shows once its window has turned over.
+//!
+//! Routes: `best-known` always asks the expert named best in advance (for comparison);
+//! `cheapest` the cheapest; `round-robin` each in turn; `interval` the cheapest expert whose
+//! interval can still hold the best quality (its upper end at least every other expert's lower
+//! end, IEThresh's rule); `upper-per-cost` the expert whose interval's upper end per unit of cost
+//! is highest (optimism under uncertainty, paid for).
+
+use std::collections::VecDeque;
+
+use rand::Rng as _;
+use serde::{Deserialize, Serialize};
+
+use crate::rng::Rng;
+
+/// How a query picks its expert.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Route {
+    BestKnown,
+    Cheapest,
+    RoundRobin,
+    Interval,
+    UpperPerCost,
+}
+
+/// One expert of the panel: its name and what one answer costs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Member {
+    pub name: String,
+    pub cost: f64,
+}
+
+/// Whom to ask about one state: `first` answers it; `second`, if any, is asked the same state to
+/// compare (its answer costs too, and is a demonstration like any other).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Ask {
+    pub first: usize,
+    pub second: Option<usize>,
+}
+
+/// An expert's quality as the run sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Quality {
+    pub answers: u64,
+    pub quality: f64,
+    pub low: f64,
+    pub high: f64,
+}
+
+/// The panel: its experts, the route, and what was learned of them.
+#[derive(Debug, Clone)]
+pub struct Panel {
+    members: Vec<Member>,
+    route: Route,
+    best_known: usize,
+    double_ask: f64,
+    window: usize,
+    answers: Vec<u64>,
+    rewards: Vec<VecDeque<f64>>,
+    next: usize,
+    spent: f64,
+}
+
+impl Panel {
+    /// A panel of `members` (at least one), routed by `route`; `best_known` is the expert
+    /// `best-known` asks; a query is also asked of a second expert with probability
+    /// `double_ask`; qualities are over each expert's last `window` rewards (at least 2).
+    pub fn new(
+        members: Vec<Member>,
+        route: Route,
+        best_known: usize,
+        double_ask: f64,
+        window: usize,
+    ) -> Self {
+        assert!(!members.is_empty() && best_known < members.len());
+        let n = members.len();
+        Self {
+            members,
+            route,
+            best_known,
+            double_ask: double_ask.clamp(0.0, 1.0),
+            window: window.max(2),
+            answers: vec![0; n],
+            rewards: vec![VecDeque::new(); n],
+            next: 0,
+            spent: 0.0,
+        }
+    }
+
+    pub fn members(&self) -> &[Member] {
+        &self.members
+    }
+
+    /// The cost spent on answers so far.
+    pub fn spent(&self) -> f64 {
+        self.spent
+    }
+
+    /// Whom to ask about the next state.
+    pub fn route(&mut self, rng: &mut Rng) -> Ask {
+        let first = match self.route {
+            Route::BestKnown => self.best_known,
+            Route::Cheapest => self.cheapest(|_| true),
+            Route::RoundRobin => {
+                let i = self.next % self.members.len();
+                self.next = i + 1;
+                i
+            }
+            Route::Interval => {
+                let q: Vec<Quality> = (0..self.members.len()).map(|i| self.quality(i)).collect();
+                let best_low = q.iter().map(|q| q.low).fold(0.0, f64::max);
+                self.cheapest(|i| q[i].high >= best_low)
+            }
+            Route::UpperPerCost => {
+                let value = |i: usize| self.quality(i).high / self.members[i].cost.max(1e-12);
+                (0..self.members.len())
+                    .max_by(|&a, &b| value(a).total_cmp(&value(b)).then(b.cmp(&a)))
+                    .expect("a panel has an expert")
+            }
+        };
+        let second = (self.members.len() > 1 && rng.random::<f64>() < self.double_ask)
+            .then(|| self.least_answered_but(first));
+        Ask { first, second }
+    }
+
+    /// Expert `expert` answered; `agreed` of the `opinions` other opinions on the state agree
+    /// with its answer (no opinion: the answer counts, but earns no reward).
+    pub fn answered(&mut self, expert: usize, agreed: usize, opinions: usize) {
+        self.answers[expert] += 1;
+        self.spent += self.members[expert].cost;
+        if opinions > 0 {
+            let r = &mut self.rewards[expert];
+            r.push_back(agreed.min(opinions) as f64 / opinions as f64);
+            if r.len() > self.window {
+                r.pop_front();
+            }
+        }
+    }
+
+    /// Expert `i`'s quality and its interval.
+    pub fn quality(&self, i: usize) -> Quality {
+        let r = &self.rewards[i];
+        let n = r.len();
+        let mean = if n == 0 {
+            0.5
+        } else {
+            r.iter().sum::<f64>() / n as f64
+        };
+        let (low, high) = if n < 2 {
+            (0.0, 1.0)
+        } else {
+            let var = r.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+            let half = 1.96 * (var / n as f64).sqrt();
+            ((mean - half).max(0.0), (mean + half).min(1.0))
+        };
+        Quality {
+            answers: self.answers[i],
+            quality: mean,
+            low,
+            high,
+        }
+    }
+
+    /// The cheapest expert among those `ok` keeps (the first of equal costs); the cheapest of
+    /// all when `ok` keeps none.
+    fn cheapest(&self, ok: impl Fn(usize) -> bool) -> usize {
+        let pick = |keep: &dyn Fn(usize) -> bool| {
+            (0..self.members.len())
+                .filter(|&i| keep(i))
+                .min_by(|&a, &b| self.members[a].cost.total_cmp(&self.members[b].cost))
+        };
+        pick(&ok)
+            .or_else(|| pick(&|_| true))
+            .expect("a panel has an expert")
+    }
+
+    /// The expert other than `first` with the fewest answers (the first of equals).
+    fn least_answered_but(&self, first: usize) -> usize {
+        (0..self.members.len())
+            .filter(|&i| i != first)
+            .min_by_key(|&i| self.answers[i])
+            .expect("a panel of two or more")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::seeded;
+
+    fn panel(route: Route, double_ask: f64) -> Panel {
+        let m = |name: &str, cost| Member {
+            name: name.into(),
+            cost,
+        };
+        Panel::new(
+            vec![m("good", 10.0), m("fair", 2.0), m("poor", 1.0)],
+            route,
+            0,
+            double_ask,
+            50,
+        )
+    }
+
+    #[test]
+    fn fixed_routes_ask_the_best_known_the_cheapest_or_each_in_turn() {
+        let mut rng = seeded(1);
+        let mut p = panel(Route::BestKnown, 0.0);
+        assert_eq!(
+            p.route(&mut rng),
+            Ask {
+                first: 0,
+                second: None
+            }
+        );
+        let mut p = panel(Route::Cheapest, 0.0);
+        assert_eq!(p.route(&mut rng).first, 2);
+        let mut p = panel(Route::RoundRobin, 0.0);
+        let firsts: Vec<usize> = (0..4).map(|_| p.route(&mut rng).first).collect();
+        assert_eq!(firsts, [0, 1, 2, 0]);
+    }
+
+    #[test]
+    fn answers_cost_and_earn_the_share_of_opinions_they_agree_with() {
+        let mut p = panel(Route::Cheapest, 0.0);
+        p.answered(2, 1, 2);
+        p.answered(2, 0, 1);
+        p.answered(1, 0, 0);
+        assert_eq!(p.spent(), 1.0 + 1.0 + 2.0);
+        // Rewards 0.5 and 0: mean 0.25, sample sd 0.3536, half-width 1.96 * 0.3536 / sqrt 2 = 0.49.
+        let q = p.quality(2);
+        assert_eq!((q.answers, q.quality), (2, 0.25));
+        assert!((q.high - 0.74).abs() < 1e-9 && q.low == 0.0, "{q:?}");
+        // No opinion: counted, unrated, the interval all of [0, 1].
+        let q = p.quality(1);
+        assert_eq!((q.answers, q.low, q.high), (1, 0.0, 1.0));
+    }
+
+    #[test]
+    fn the_interval_route_asks_the_cheapest_expert_that_can_still_be_the_best() {
+        let mut rng = seeded(2);
+        let mut p = panel(Route::Interval, 0.0);
+        // Nothing known: every interval is [0, 1], so the cheapest.
+        assert_eq!(p.route(&mut rng).first, 2);
+        // The poor one disagrees always, the fair one half the time, the good one never.
+        for _ in 0..20 {
+            p.answered(2, 0, 1);
+            p.answered(1, 0, 1);
+            p.answered(1, 1, 1);
+            p.answered(0, 1, 1);
+        }
+        // poor: [0, 0]; fair: 0.5 ± 1.96 * 0.5064 / sqrt 40 = [0.343, 0.657]; good: [1, 1].
+        // Only the good one's upper end reaches the best lower end (1).
+        assert_eq!(p.route(&mut rng).first, 0);
+        // Value per cost: good 1/10, fair 0.657/2, poor 0/1: the fair one.
+        p.route = Route::UpperPerCost;
+        assert_eq!(p.route(&mut rng).first, 1);
+    }
+
+    #[test]
+    fn double_asks_go_to_the_least_answered_other_expert_at_their_rate() {
+        let mut rng = seeded(3);
+        let mut p = panel(Route::Cheapest, 0.25);
+        let mut doubles = 0;
+        for _ in 0..4000 {
+            let ask = p.route(&mut rng);
+            if let Some(s) = ask.second {
+                assert_ne!(s, ask.first);
+                doubles += 1;
+                p.answered(s, 0, 0);
+            }
+            p.answered(ask.first, 0, 0);
+        }
+        assert!((900..1100).contains(&doubles), "{doubles}");
+        // The second asks alternate between the two others as their answers even out.
+        let (good, fair) = (p.quality(0).answers, p.quality(1).answers);
+        assert!(good.abs_diff(fair) <= 1, "{good} {fair}");
+    }
+
+    #[test]
+    fn a_quality_follows_a_change_once_its_window_turns_over() {
+        let mut p = panel(Route::Interval, 0.0);
+        for _ in 0..50 {
+            p.answered(0, 1, 1);
+        }
+        assert_eq!(p.quality(0).quality, 1.0);
+        for _ in 0..50 {
+            p.answered(0, 0, 1);
+        }
+        assert_eq!(
+            p.quality(0).quality,
+            0.0,
+            "the window holds the last 50 only"
+        );
+    }
+}
