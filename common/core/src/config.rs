@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 mod env;
+mod expert;
 mod normalize;
 mod query;
 pub mod reference;
@@ -65,6 +66,11 @@ pub struct ExperimentConfig {
     pub shaping: ShapingConfig,
     #[serde(default, skip_serializing_if = "DemosConfig::is_default")]
     pub demos: DemosConfig,
+    /// Several experts at once (`[[experts]]`, one table each), asked as `expert.route` says;
+    /// `[expert]` keeps what is the run's (the demonstration model). In one process only
+    /// (`alfd local`, `alfd sweep`), neural agents only. Empty: the one expert `expert.name`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub experts: Vec<PanelEntry>,
 }
 
 /// Demonstrations the run starts with, besides the ones it asks for.
@@ -446,27 +452,8 @@ impl AgentConfig {
 pub use crate::query::RuleKind;
 pub use crate::shaping::ShapingKind;
 pub use env::{EnvConfig, EnvName, MAX_DEEPSEA_SIZE};
+pub use expert::{BudgetConfig, ExpertConfig, PanelEntry};
 pub use query::QueryConfig;
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct BudgetConfig {
-    /// B: how many demonstrations may be asked for in the whole run (≥ 0).
-    #[serde(default = "default_budget")]
-    pub total: i64,
-}
-
-fn default_budget() -> i64 {
-    100
-}
-
-impl Default for BudgetConfig {
-    fn default() -> Self {
-        Self {
-            total: default_budget(),
-        }
-    }
-}
 
 /// Which model of the demonstrations shapes the reward.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -481,34 +468,6 @@ pub enum DemoModelChoice {
     /// KRR on the first 512 demonstrations as Nyström landmarks (α = 0.1, RBF γ = 0.1): for
     /// budgets beyond the exact models' 10,000, up to 1,000,000.
     Nystrom,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct ExpertConfig {
-    /// The demonstrator, by name (`alfd expert list`); default the environment's reference expert
-    /// (`cartpole-1000`, `cliffwalk-optimal`, `mountaincar-energy`, `acrobot-energy`).
-    #[serde(default = "default_expert")]
-    pub name: String,
-    /// The demonstration model fitted on the demonstrations.
-    #[serde(default = "default_model")]
-    pub model: DemoModelChoice,
-}
-
-fn default_expert() -> String {
-    "cartpole-1000".to_owned()
-}
-fn default_model() -> DemoModelChoice {
-    DemoModelChoice::None
-}
-
-impl Default for ExpertConfig {
-    fn default() -> Self {
-        Self {
-            name: default_expert(),
-            model: default_model(),
-        }
-    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -572,6 +531,7 @@ impl ExperimentConfig {
             .parse()
             .map_err(|e: toml::de::Error| ConfigError::Parse(e.to_string()))?;
         normalize::rename_query_mode(&mut value)?;
+        expert::check_named_once(&value, overrides)?;
         normalize::default_expert_of_env(&mut value);
         for o in overrides {
             apply_override(&mut value, o)?;
@@ -594,20 +554,34 @@ impl ExperimentConfig {
     /// environment with vector observations).
     pub fn for_multi_process(text: &str) -> Result<Self> {
         let cfg = Self::from_toml(text)?;
-        if cfg.agent.kind.is_tabular() {
+        cfg.check_multi_process()?;
+        Ok(cfg)
+    }
+
+    /// What the multi-process runtime cannot run: tabular agents, gate `oracle` (it consults
+    /// the expert at every step), several experts.
+    pub fn check_multi_process(&self) -> Result<()> {
+        if self.agent.kind.is_tabular() {
             return Err(invalid(
                 "agent.kind",
                 "the multi-process runtime runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
             ));
         }
-        if cfg.query.gate == Some(crate::query::GateKind::Oracle) {
+        if !self.experts.is_empty() {
+            return Err(invalid(
+                "experts",
+                "several experts run in one process (`alfd local`, `alfd sweep`); `alfd run` \
+                 takes one expert, `expert.name`",
+            ));
+        }
+        if self.query.gate == Some(crate::query::GateKind::Oracle) {
             return Err(invalid(
                 "query.gate",
                 "gate `oracle` consults the expert at every step, in the actor's process: run it \
                  with `alfd local` or `alfd sweep`",
             ));
         }
-        Ok(cfg)
+        Ok(())
     }
 
     /// Reads rule `random`'s schedule (`query.schedule`, `{seed}` replaced by the run's seed)
@@ -633,7 +607,18 @@ impl ExperimentConfig {
 
     /// The config as TOML (what a run directory records as `config.toml`).
     pub fn to_toml(&self) -> String {
-        toml::to_string(self).expect("an ExperimentConfig always serialises")
+        if self.experts.is_empty() {
+            return toml::to_string(self).expect("an ExperimentConfig always serialises");
+        }
+        let mut table = toml::Table::try_from(self).expect("an ExperimentConfig always serialises");
+        {
+            // With several experts `expert.name` is not the run's (it is the environment's
+            // default, unused); written, it could name one of them and be refused on reading.
+            if let Some(toml::Value::Table(e)) = table.get_mut("expert") {
+                e.remove("name");
+            }
+        }
+        toml::to_string(&table).expect("a config table always serialises")
     }
 
     /// The budget B, validated non-negative.

@@ -24,14 +24,31 @@ use serde::{Deserialize, Serialize};
 use crate::rng::Rng;
 
 /// How a query picks its expert.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Route {
+    /// Always the expert named best in advance.
     BestKnown,
+    /// The cheapest.
     Cheapest,
+    /// Each in turn.
     RoundRobin,
+    /// The cheapest whose quality interval can still hold the best quality.
     Interval,
+    /// The highest upper end of the quality interval per unit of cost.
     UpperPerCost,
+}
+
+impl Route {
+    pub fn name(self) -> &'static str {
+        match self {
+            Route::BestKnown => "best-known",
+            Route::Cheapest => "cheapest",
+            Route::RoundRobin => "round-robin",
+            Route::Interval => "interval",
+            Route::UpperPerCost => "upper-per-cost",
+        }
+    }
 }
 
 /// One expert of the panel: its name and what one answer costs.

@@ -16,6 +16,7 @@ use crate::checkpoint::StateMismatch;
 use crate::config::ExperimentConfig;
 use crate::env::{vector_env, EnvState, TabularEnv, VectorEnv};
 use crate::environment_loop::in_process::{LearnerHandle, LocalExpert};
+use crate::environment_loop::panel_expert::{PanelAsk, PanelLog};
 use crate::environment_loop::{self, GenericActor, Progress, Schedule};
 use crate::evaluate::evaluate_greedy;
 use crate::nn::Mlp;
@@ -38,6 +39,8 @@ pub struct NeuralRun {
     pub records: Vec<EpisodeRecord>,
     pub network: Mlp,
     pub expert: ExpertCore,
+    /// With several experts: who answered, at what cost, and their qualities over the run.
+    pub panel: Option<PanelLog>,
     /// Environment steps taken, the episode cut short by a step limit included.
     pub env_steps: u64,
     /// The learner's updates.
@@ -300,6 +303,7 @@ pub fn run_neural_checkpointed(
         env,
         eval_env,
         oracle: None,
+        panel: Vec::new(),
     };
     let prior = &[];
     run_neural_on(
@@ -326,6 +330,8 @@ pub struct NeuralEnvs {
     pub eval_env: Box<VectorEnv>,
     /// The expert gate `oracle` consults (needed by that gate only).
     pub oracle: Option<crate::query::Oracle<[f32]>>,
+    /// The demonstrators of `[[experts]]`, in order (empty: the one expert answers).
+    pub panel: Vec<Box<dyn Demonstrator<[f32]> + Send>>,
 }
 
 /// Why a run on environments of [`NeuralEnvs`] stopped short.
@@ -361,6 +367,7 @@ pub fn run_neural_on(
         mut env,
         mut eval_env,
         oracle,
+        panel,
     } = envs;
     let (obs_dim, actions) = (env.observation_dim(), env.num_actions());
     let mut learner = build::neural_learner(cfg, obs_dim, actions);
@@ -397,6 +404,13 @@ pub fn run_neural_on(
         &cfg.expert.name,
         cfg.shaping_enabled(),
     );
+    if !panel.is_empty() {
+        let members = panel
+            .into_iter()
+            .map(|d| d as Box<dyn Demonstrator<[f32]>>)
+            .collect();
+        expert = expert.with_panel(PanelAsk::new(cfg, members));
+    }
     let eval_seed = build::eval_seed(cfg);
     let limit = cfg.episode_limit();
     let end = environment_loop::run_from(
@@ -432,10 +446,12 @@ pub fn run_neural_on(
     )?;
     drop(actor);
     let learner = handle.into_inner();
+    let (expert, panel) = expert.into_parts();
     Ok(NeuralRun {
         records,
         network: learner.network().clone(),
-        expert: expert.core,
+        expert,
+        panel,
         env_steps: end.progress.steps,
         updates: learner.updates(),
     })

@@ -65,6 +65,12 @@ pub fn run(args: LocalArgs) -> anyhow::Result<()> {
     let cfg = setup::load_config(&args.config, &args.set)?;
     // Every input is checked before the directory is claimed.
     let pieces = Pieces::of(&cfg)?;
+    if !cfg.experts.is_empty() && args.checkpoint_every.is_some() {
+        return Err(usage(
+            "--checkpoint-every: a run with several experts (`[[experts]]`) cannot be \
+             checkpointed; their qualities and costs are not in a checkpoint",
+        ));
+    }
     if cfg.env.name.is_remote() && args.checkpoint_every.is_some() {
         return Err(usage(
             "--checkpoint-every: a gymnasium environment's state lives in its Python adapter; \
@@ -179,9 +185,35 @@ impl Resumable {
 }
 
 fn demos_jsonl(demos: &[DemoRecord]) -> anyhow::Result<Vec<u8>> {
+    demos_jsonl_with(demos, None)
+}
+
+/// With several experts, each line also says what its answer cost and whether its state was
+/// asked of two experts (`cost`, `double_asked`).
+fn demos_jsonl_with(
+    demos: &[DemoRecord],
+    panel: Option<&[(f64, bool)]>,
+) -> anyhow::Result<Vec<u8>> {
+    #[derive(serde::Serialize)]
+    struct Line<'a> {
+        #[serde(flatten)]
+        record: &'a DemoRecord,
+        cost: f64,
+        double_asked: bool,
+    }
     let mut jsonl = Vec::new();
-    for d in demos {
-        serde_json::to_writer(&mut jsonl, d)?;
+    for (i, d) in demos.iter().enumerate() {
+        match panel.and_then(|p| p.get(i)) {
+            Some(&(cost, double_asked)) => {
+                let line = Line {
+                    record: d,
+                    cost,
+                    double_asked,
+                };
+                serde_json::to_writer(&mut jsonl, &line)?;
+            }
+            None => serde_json::to_writer(&mut jsonl, d)?,
+        }
         jsonl.push(b'\n');
     }
     Ok(jsonl)
@@ -215,6 +247,12 @@ impl Pieces {
                     oracle: setup::oracle(cfg, || env.demonstrator(&cfg.expert.name))?,
                     env,
                 }
+            }
+            _ if crate::local_remote::needed(cfg) && !cfg.experts.is_empty() => {
+                return Err(usage(
+                    "several experts (`[[experts]]`) answer in runs of the built-in \
+                     environments, each a built-in expert",
+                ))
             }
             // Python pieces start with the run (their logs go to its directory).
             _ if crate::local_remote::needed(cfg) => {
@@ -311,6 +349,8 @@ struct Produced {
     /// Environment steps taken, and the learner's updates (neural runs).
     env_steps: u64,
     updates: Option<u64>,
+    /// With several experts: each demonstration's cost and whether its state was asked twice.
+    costs: Option<Vec<(f64, bool)>>,
 }
 
 /// What a run's callbacks share: the progress bar, the checkpoints, and why the run stopped
@@ -381,6 +421,7 @@ impl Watch<'_> {
             env: Box::new(env),
             eval_env: envs.eval_env,
             oracle: envs.oracle,
+            panel: envs.panel,
         })
     }
 
@@ -439,6 +480,7 @@ fn run_deepsea(
         demos: run.demos,
         greedy: Some(greedy[0]),
         optimal: Some(optimal),
+        costs: None,
     }))
 }
 
@@ -463,6 +505,7 @@ fn run_tabular(
         demos: run.demos,
         greedy: Some(greedy[s0]),
         optimal: Some(vi.values[s0]),
+        costs: None,
     }))
 }
 
@@ -535,6 +578,7 @@ fn builtin_envs(cfg: &ExperimentConfig) -> anyhow::Result<NeuralEnvs> {
         env: env()?,
         eval_env: env()?,
         oracle: setup::oracle(cfg, || setup::neural_demonstrator(cfg))?,
+        panel: setup::panel(cfg)?,
     })
 }
 
@@ -601,6 +645,9 @@ fn neural_outputs(out: &Path, run: NeuralRun) -> anyhow::Result<Produced> {
         "weights.safetensors",
         &run.network.to_safetensors_bytes(),
     )?;
+    if let Some(panel) = &run.panel {
+        write(out, "experts.csv", panel.csv().as_bytes())?;
+    }
     Ok(Produced {
         records: run.records,
         demos: run.expert.demos().to_vec(),
@@ -608,6 +655,7 @@ fn neural_outputs(out: &Path, run: NeuralRun) -> anyhow::Result<Produced> {
         optimal: None,
         env_steps: run.env_steps,
         updates: Some(run.updates),
+        costs: run.panel.map(|p| p.answers),
     })
 }
 
@@ -621,9 +669,14 @@ fn write_outputs(out: &Path, produced: Produced, wall: f64) -> anyhow::Result<Ru
         optimal,
         env_steps,
         updates,
+        costs,
     } = produced;
     write(out, "episodes.csv", episodes_csv(&records).as_bytes())?;
-    write(out, "demos.jsonl", &demos_jsonl(&demos)?)?;
+    write(
+        out,
+        "demos.jsonl",
+        &demos_jsonl_with(&demos, costs.as_deref())?,
+    )?;
     let summary = RunSummary {
         greedy_value_at_start: greedy,
         optimal_value_at_start: optimal,

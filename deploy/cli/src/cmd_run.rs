@@ -101,17 +101,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if let Some(expert) = &args.expert {
         cfg.expert.name = expert.clone();
     }
-    if cfg.agent.kind.is_tabular() {
-        return Err(usage(
-            "`alfd run` runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
-        ));
-    }
-    if cfg.query.gate == Some(alfd_common::query::GateKind::Oracle) {
-        return Err(usage(
-            "query.gate: gate `oracle` consults the expert at every step, in the actor's \
-             process: run it with `alfd local` or `alfd sweep`",
-        ));
-    }
+    cfg.check_multi_process()
+        .map_err(|e| usage(e.to_string()))?;
     let env_spec = env_spec(&cfg)?;
     let prior = prior_demos(&cfg, env_spec.as_ref())?;
     let listen = args

@@ -97,6 +97,7 @@ pub(crate) fn start(cfg: &ExperimentConfig, out: &std::path::Path) -> anyhow::Re
             env: Box::new(env),
             eval_env: Box::new(eval_env),
             oracle: None,
+            panel: Vec::new(),
         })
     } else {
         None

@@ -204,6 +204,9 @@ pub fn oracle<S: ?Sized + 'static>(
 /// map), or a well-formed external one (`python:MODULE:FUNCTION`, `sb3:ALGO:PATH`), which the
 /// expert process starts.
 pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
+    if !cfg.experts.is_empty() {
+        return panel(cfg).map(|_| ());
+    }
     if cfg.expert.name == alfd_expert::human::HUMAN {
         // A person answers on a web page: any environment, any number of actions.
         return Ok(());
@@ -219,6 +222,29 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
             .map(|_| ());
     }
     neural_demonstrator(cfg).map(|_| ())
+}
+
+/// The demonstrators of `[[experts]]`, in order, each a built-in one of the config's
+/// environment (none without `[[experts]]`).
+pub fn panel(
+    cfg: &ExperimentConfig,
+) -> anyhow::Result<Vec<Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>>> {
+    cfg.experts
+        .iter()
+        .map(|e| {
+            if e.name == alfd_expert::human::HUMAN
+                || alfd_demonstrators::registry::external_policy(&e.name).is_some()
+            {
+                return Err(usage(format!(
+                    "[[experts]]: `{}` is not a built-in expert; several experts are built-in \
+                     ones (`alfd expert list`)",
+                    e.name
+                )));
+            }
+            alfd_demonstrators::registry::for_env(cfg.env.name, &e.name)
+                .map_err(|err| usage(format!("[[experts]]: {err}")))
+        })
+        .collect()
 }
 
 /// The demonstrator named by a neural config, for its environment.

@@ -4,6 +4,7 @@ mod chaos;
 mod cli;
 mod deepsea;
 mod demo_model;
+mod experts;
 mod faults;
 mod golden;
 mod gymnasium;

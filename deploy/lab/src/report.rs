@@ -120,7 +120,7 @@ fn read_records(dir: &Path) -> crate::Result<Vec<EpisodeRecord>> {
 }
 
 /// The files a run directory may hold, in the order the summary lists them, with what each holds.
-const RUN_FILES: [(&str, &str); 12] = [
+const RUN_FILES: [(&str, &str); 13] = [
     (
         "config.toml",
         "the experiment config as run, every default written out",
@@ -140,6 +140,10 @@ const RUN_FILES: [(&str, &str); 12] = [
     (
         "demos.jsonl",
         "one line per demonstration: state, action, step, the expert that gave it",
+    ),
+    (
+        "experts.csv",
+        "several experts: each one's answers and quality interval after each of its answers",
     ),
     (
         "weights.safetensors",

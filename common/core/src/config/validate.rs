@@ -58,6 +58,7 @@ impl ExperimentConfig {
         self.validate_agent_training()?;
         self.validate_query()?;
         self.validate_budget()?;
+        self.validate_experts()?;
         Ok(())
     }
 

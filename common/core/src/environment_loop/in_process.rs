@@ -5,6 +5,7 @@
 use std::borrow::Borrow;
 use std::cell::RefCell;
 
+use super::panel_expert::{PanelAsk, PanelLog};
 use super::{Adder, ExpertClient, LoopError, Result, VariableSource};
 use crate::agent::{Demonstrator, ExpertCore, NeuralActor, NeuralLearner};
 use crate::demo_model::DemoModel;
@@ -40,6 +41,8 @@ pub struct LocalExpert<'d, S: ?Sized> {
     demonstrator: &'d mut dyn Demonstrator<S>,
     name: String,
     shaping: bool,
+    /// Several experts (`[[experts]]`): they answer instead of `demonstrator`.
+    panel: Option<PanelAsk<'d, S>>,
 }
 
 impl<S: ?Sized> std::fmt::Debug for LocalExpert<'_, S> {
@@ -66,16 +69,31 @@ impl<'d, S: ?Sized> LocalExpert<'d, S> {
             demonstrator,
             name: name.to_owned(),
             shaping,
+            panel: None,
         }
+    }
+
+    /// Several experts answer, as `panel` routes each query.
+    pub fn with_panel(mut self, panel: PanelAsk<'d, S>) -> Self {
+        self.panel = Some(panel);
+        self
+    }
+
+    /// The expert's core, and with several experts what they did.
+    pub fn into_parts(self) -> (ExpertCore, Option<PanelLog>) {
+        (self.core, self.panel.map(PanelAsk::into_log))
     }
 }
 
 impl<S: ?Sized, O: Borrow<S> + Features> ExpertClient<O> for LocalExpert<'_, S> {
     fn budget_left(&self) -> bool {
-        !self.core.budget().is_exhausted()
+        !self.core.budget().is_exhausted() && self.panel.as_ref().is_none_or(PanelAsk::can_pay)
     }
 
     fn ask(&mut self, obs: &O, step: u64) -> Result<Option<usize>> {
+        if let Some(panel) = &mut self.panel {
+            return panel.ask(&mut self.core, obs.borrow(), &obs.features(), step);
+        }
         if self.core.budget().is_exhausted() {
             return Ok(None);
         }

@@ -17,6 +17,7 @@
 //! Nothing here does I/O; a transport's errors reach the caller as [`LoopError::Link`].
 
 pub mod in_process;
+pub mod panel_expert;
 
 use std::ops::ControlFlow;
 

@@ -1,0 +1,289 @@
+//! The budget and the expert: `[budget]`, `[expert]` and, for several experts at once,
+//! `[[experts]]` with the route that picks one per query (`crate::panel`).
+
+use serde::{Deserialize, Serialize};
+
+use super::{invalid, DemoModelChoice, ExperimentConfig, Result};
+use crate::panel::Route;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct BudgetConfig {
+    /// B: how many demonstrations may be asked for in the whole run (≥ 0).
+    #[serde(default = "default_budget")]
+    pub total: i64,
+    /// With several experts: the most the run may spend on answers, in the experts' `cost`
+    /// (> 0); absent: no limit but `total`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost: Option<f64>,
+}
+
+fn default_budget() -> i64 {
+    100
+}
+
+impl Default for BudgetConfig {
+    fn default() -> Self {
+        Self {
+            total: default_budget(),
+            cost: None,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ExpertConfig {
+    /// The demonstrator, by name (`alfd expert list`); default the environment's reference expert
+    /// (`cartpole-1000`, `cliffwalk-optimal`, `mountaincar-energy`, `acrobot-energy`).
+    #[serde(default = "default_expert")]
+    pub name: String,
+    /// The demonstration model fitted on the demonstrations.
+    #[serde(default = "default_model")]
+    pub model: DemoModelChoice,
+    /// With several experts (`[[experts]]`): which one a query goes to. `best-known` (always
+    /// `best_known`, for comparison), `cheapest`, `round-robin`, `interval` (the cheapest whose
+    /// quality interval can still be the best's, after IEThresh), `upper-per-cost` (the highest
+    /// upper end of the quality interval per unit of cost).
+    #[serde(default = "default_route", skip_serializing_if = "is_default_route")]
+    pub route: Route,
+    /// With several experts: the expert `best-known` asks (default the first of `[[experts]]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub best_known: Option<String>,
+    /// With several experts: the probability that a query is also asked of a second expert (the
+    /// one with the fewest answers), so that experts can be compared, in [0, 1].
+    #[serde(
+        default = "default_double_ask",
+        skip_serializing_if = "is_default_double_ask"
+    )]
+    pub double_ask: f64,
+    /// With several experts: each expert's quality is over its last this many rewards (≥ 2).
+    #[serde(
+        default = "default_quality_window",
+        skip_serializing_if = "is_default_window"
+    )]
+    pub quality_window: usize,
+}
+
+fn default_route() -> Route {
+    Route::Interval
+}
+fn is_default_route(r: &Route) -> bool {
+    *r == default_route()
+}
+fn default_double_ask() -> f64 {
+    0.1
+}
+fn is_default_double_ask(p: &f64) -> bool {
+    *p == default_double_ask()
+}
+fn default_quality_window() -> usize {
+    100
+}
+fn is_default_window(w: &usize) -> bool {
+    *w == default_quality_window()
+}
+
+/// One of several experts (`[[experts]]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PanelEntry {
+    /// The demonstrator, by name (`alfd expert list`).
+    pub name: String,
+    /// What one answer costs (> 0), in any unit the run's `budget.cost` shares.
+    #[serde(default = "default_cost")]
+    pub cost: f64,
+    /// A name for tables and plots (default `name`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub label: Option<String>,
+}
+
+fn default_cost() -> f64 {
+    1.0
+}
+
+fn default_expert() -> String {
+    "cartpole-1000".to_owned()
+}
+fn default_model() -> DemoModelChoice {
+    DemoModelChoice::None
+}
+
+impl Default for ExpertConfig {
+    fn default() -> Self {
+        Self {
+            name: default_expert(),
+            model: default_model(),
+            route: default_route(),
+            best_known: None,
+            double_ask: default_double_ask(),
+            quality_window: default_quality_window(),
+        }
+    }
+}
+
+/// An expert named both in `[expert]` and in `[[experts]]` is refused: which one the run means
+/// would be a guess. Read from the TOML as written (and the `--set` overrides), before the
+/// environment's default expert is filled in.
+pub(super) fn check_named_once(table: &toml::Table, overrides: &[String]) -> Result<()> {
+    let listed: Vec<&str> = match table.get("experts") {
+        Some(toml::Value::Array(a)) => a
+            .iter()
+            .filter_map(|e| e.get("name").and_then(toml::Value::as_str))
+            .collect(),
+        _ => return Ok(()),
+    };
+    let written = table
+        .get("expert")
+        .and_then(|e| e.get("name"))
+        .and_then(toml::Value::as_str);
+    let set = overrides
+        .iter()
+        .rev()
+        .find_map(|o| o.strip_prefix("expert.name="))
+        .map(|v| v.trim().trim_matches('"'));
+    match set.or(written) {
+        Some(name) if listed.contains(&name) => Err(invalid(
+            "expert.name",
+            format!(
+                "names `{name}`, which `[[experts]]` lists too: with several experts, list every \
+                 one in `[[experts]]` and leave `expert.name` out"
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
+impl ExperimentConfig {
+    /// `[[experts]]`, `budget.cost` and the route's settings.
+    pub(super) fn validate_experts(&self) -> Result<()> {
+        let e = &self.expert;
+        if !(0.0..=1.0).contains(&e.double_ask) {
+            return Err(invalid(
+                "expert.double_ask",
+                format!("must be in [0, 1], got {}", e.double_ask),
+            ));
+        }
+        if e.quality_window < 2 {
+            return Err(invalid("expert.quality_window", "must be at least 2"));
+        }
+        if let Some(c) = self.budget.cost {
+            if !(c > 0.0 && c.is_finite()) {
+                return Err(invalid("budget.cost", format!("must be > 0, got {c}")));
+            }
+        }
+        if self.experts.is_empty() {
+            if self.budget.cost.is_some() {
+                return Err(invalid(
+                    "budget.cost",
+                    "counts the cost of several experts: list them in `[[experts]]`",
+                ));
+            }
+            if e.best_known.is_some() {
+                return Err(invalid(
+                    "expert.best_known",
+                    "names one of several experts: list them in `[[experts]]`",
+                ));
+            }
+            return Ok(());
+        }
+        if self.agent.kind.is_tabular() {
+            return Err(invalid(
+                "experts",
+                "several experts need a neural agent (`dqn`, `bdqn`)",
+            ));
+        }
+        for (i, x) in self.experts.iter().enumerate() {
+            if x.name.trim().is_empty() {
+                return Err(invalid("experts", format!("entry {} has no name", i + 1)));
+            }
+            if !(x.cost > 0.0 && x.cost.is_finite()) {
+                return Err(invalid(
+                    "experts",
+                    format!("`{}` costs {}: a cost must be > 0", x.name, x.cost),
+                ));
+            }
+            if self.experts[..i].iter().any(|y| y.name == x.name) {
+                return Err(invalid("experts", format!("`{}` is listed twice", x.name)));
+            }
+        }
+        if let Some(b) = &e.best_known {
+            if !self.experts.iter().any(|x| &x.name == b) {
+                return Err(invalid(
+                    "expert.best_known",
+                    format!("`{b}` is not one of `[[experts]]`"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The index in `[[experts]]` of the expert route `best-known` asks.
+    pub fn best_known(&self) -> usize {
+        let named = self.expert.best_known.as_ref();
+        named
+            .and_then(|b| self.experts.iter().position(|x| &x.name == b))
+            .unwrap_or(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::config::ExperimentConfig;
+
+    const BASE: &str =
+        "seed = 1\nepisodes = 3\n[env]\nname = \"mountaincar\"\n[agent]\nkind = \"bdqn\"\n";
+
+    fn parse(extra: &str, sets: &[&str]) -> Result<ExperimentConfig, String> {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        ExperimentConfig::from_toml_with_overrides(&format!("{BASE}{extra}"), &sets)
+            .map_err(|e| e.to_string())
+    }
+
+    const THREE: &str = "[[experts]]\nname = \"mountaincar-energy\"\ncost = 10\n\
+                         [[experts]]\nname = \"mountaincar-fair\"\ncost = 2\n\
+                         [[experts]]\nname = \"mountaincar-poor\"\n";
+
+    #[test]
+    fn several_experts_are_listed_with_costs_and_a_route() {
+        let c = parse(THREE, &["expert.route=cheapest", "budget.cost=50"]).unwrap();
+        assert_eq!(c.experts.len(), 3);
+        assert_eq!((c.experts[0].cost, c.experts[2].cost), (10.0, 1.0));
+        assert_eq!(c.expert.route, crate::panel::Route::Cheapest);
+        assert_eq!((c.budget.cost, c.best_known()), (Some(50.0), 0));
+        let c = parse(THREE, &["expert.best_known=mountaincar-fair"]).unwrap();
+        assert_eq!(c.best_known(), 1);
+        // It reads back equal once written.
+        assert_eq!(ExperimentConfig::from_toml(&c.to_toml()).unwrap(), c);
+    }
+
+    #[test]
+    fn an_expert_named_in_both_places_or_a_bad_entry_is_refused() {
+        let both = parse(
+            &format!("[expert]\nname = \"mountaincar-fair\"\n{THREE}"),
+            &[],
+        )
+        .unwrap_err();
+        assert!(
+            both.contains("expert.name") && both.contains("mountaincar-fair"),
+            "{both}"
+        );
+        let set = parse(THREE, &["expert.name=mountaincar-poor"]).unwrap_err();
+        assert!(set.contains("leave `expert.name` out"), "{set}");
+        let twice = format!("{THREE}[[experts]]\nname = \"mountaincar-poor\"\n");
+        assert!(parse(&twice, &[]).unwrap_err().contains("listed twice"));
+        let free = "[[experts]]\nname = \"mountaincar-poor\"\ncost = 0\n";
+        assert!(parse(free, &[]).unwrap_err().contains("must be > 0"));
+        assert!(parse("", &["budget.cost=5"])
+            .unwrap_err()
+            .contains("[[experts]]"));
+        assert!(parse(THREE, &["expert.best_known=nobody"])
+            .unwrap_err()
+            .contains("nobody"));
+        assert!(parse(THREE, &["expert.double_ask=2"])
+            .unwrap_err()
+            .contains("[0, 1]"));
+        let multi = ExperimentConfig::for_multi_process(&format!("{BASE}{THREE}")).unwrap_err();
+        assert!(multi.to_string().contains("one process"), "{multi}");
+    }
+}

@@ -1,0 +1,261 @@
+//! Several experts beside the actor (`[[experts]]`, in one process): each query goes where the
+//! [`Panel`] routes it, a second expert is sometimes asked the same state, and every answer is
+//! a demonstration of its expert at its cost. An answer's reward for the panel's quality
+//! estimate is the share of the state's other opinions it agrees with: the second expert's
+//! answer on a double ask, and the greedy action of the demonstration model fitted so far (on
+//! every expert's demonstrations).
+
+use crate::agent::{Demonstrator, ExpertCore};
+use crate::config::ExperimentConfig;
+use crate::panel::{Member, Panel, Quality};
+use crate::policy::argmax;
+use crate::rng::{derive_seed, seeded, Rng};
+
+use super::{LoopError, Result};
+
+/// One row of `experts.csv`: an expert's quality as the run saw it after one of its answers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct QualityRow {
+    pub step: u64,
+    pub expert: usize,
+    pub quality: Quality,
+}
+
+/// What a run with several experts leaves: per demonstration, in order, its cost and whether its
+/// state was asked twice; the quality rows; the experts' names and the cost spent.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PanelLog {
+    pub names: Vec<String>,
+    pub answers: Vec<(f64, bool)>,
+    pub rows: Vec<QualityRow>,
+    pub spent: f64,
+}
+
+impl PanelLog {
+    /// `experts.csv`: `step,expert,answers,quality,low,high`, one row per answer.
+    pub fn csv(&self) -> String {
+        let mut out = "step,expert,answers,quality,low,high\n".to_owned();
+        for r in &self.rows {
+            let q = r.quality;
+            out.push_str(&format!(
+                "{},{},{},{},{},{}\n",
+                r.step, self.names[r.expert], q.answers, q.quality, q.low, q.high
+            ));
+        }
+        out
+    }
+}
+
+/// The experts of a run and the panel that routes its queries among them.
+pub struct PanelAsk<'d, S: ?Sized> {
+    members: Vec<Box<dyn Demonstrator<S> + 'd>>,
+    panel: Panel,
+    rng: Rng,
+    cost_budget: Option<f64>,
+    log: PanelLog,
+}
+
+impl<'d, S: ?Sized> PanelAsk<'d, S> {
+    /// The panel of `cfg`'s `[[experts]]`, `members` their demonstrators in the same order.
+    pub fn new(cfg: &ExperimentConfig, members: Vec<Box<dyn Demonstrator<S> + 'd>>) -> Self {
+        assert_eq!(
+            members.len(),
+            cfg.experts.len(),
+            "one demonstrator per expert"
+        );
+        let panel_members = cfg
+            .experts
+            .iter()
+            .map(|e| Member {
+                name: e.name.clone(),
+                cost: e.cost,
+            })
+            .collect();
+        let e = &cfg.expert;
+        Self {
+            members,
+            panel: Panel::new(
+                panel_members,
+                e.route,
+                cfg.best_known(),
+                e.double_ask,
+                e.quality_window,
+            ),
+            rng: seeded(derive_seed(cfg.seed, "panel")),
+            cost_budget: cfg.budget.cost,
+            log: PanelLog {
+                names: cfg.experts.iter().map(|e| e.name.clone()).collect(),
+                ..PanelLog::default()
+            },
+        }
+    }
+
+    pub fn into_log(mut self) -> PanelLog {
+        self.log.spent = self.panel.spent();
+        self.log
+    }
+
+    /// Whether the cost budget allows one more answer of `expert`.
+    fn affordable(&self, expert: usize) -> bool {
+        let cost = self.panel.members()[expert].cost;
+        self.cost_budget
+            .is_none_or(|b| self.panel.spent() + cost <= b + 1e-9)
+    }
+
+    /// Whether any expert can still be paid.
+    pub fn can_pay(&self) -> bool {
+        (0..self.panel.members().len()).any(|i| self.affordable(i))
+    }
+
+    /// Asks the state `obs` (features `x`) at global step `step`: the routed expert's action,
+    /// recorded in `core` as a demonstration, and on a double ask a second expert's too; `None`
+    /// when the budget or the cost budget is spent.
+    pub fn ask(
+        &mut self,
+        core: &mut ExpertCore,
+        obs: &S,
+        x: &[f64],
+        step: u64,
+    ) -> Result<Option<usize>> {
+        let ask = self.panel.route(&mut self.rng);
+        if core.budget().is_exhausted() || !self.affordable(ask.first) {
+            return Ok(None);
+        }
+        let first = self.act(ask.first, obs)?;
+        let second = match ask.second.filter(|&s| self.affordable(s)) {
+            Some(s) => Some((s, self.act(s, obs)?)),
+            None => None,
+        };
+        let model = core.model().map(|m| argmax(&m.probs(x)));
+        let double = second.is_some();
+        let mut answers = vec![(ask.first, first)];
+        answers.extend(second);
+        for (i, &(expert, action)) in answers.iter().enumerate() {
+            let others = answers
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, &(_, a))| a)
+                .chain(model);
+            let (agreed, opinions) =
+                others.fold((0, 0), |(g, n), a| (g + usize::from(a == action), n + 1));
+            let name = self.panel.members()[expert].name.clone();
+            if core.record(x, action, step, &name).is_none() {
+                break;
+            }
+            self.panel.answered(expert, agreed, opinions);
+            let cost = self.panel.members()[expert].cost;
+            self.log.answers.push((cost, double));
+            self.log.rows.push(QualityRow {
+                step,
+                expert,
+                quality: self.panel.quality(expert),
+            });
+        }
+        Ok(Some(first))
+    }
+
+    fn act(&mut self, expert: usize, obs: &S) -> Result<usize> {
+        self.members[expert].try_act(obs).map_err(|e| {
+            let name = &self.panel.members()[expert].name;
+            LoopError::link(format!("the expert `{name}`: {e}"))
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An expert that always answers `0`: its action.
+    struct Always(usize);
+
+    impl Demonstrator<[f32]> for Always {
+        fn act(&mut self, _: &[f32]) -> usize {
+            self.0
+        }
+    }
+
+    fn setup(extra: &str) -> (ExperimentConfig, ExpertCore, PanelAsk<'static, [f32]>) {
+        let cfg = ExperimentConfig::from_toml(&format!(
+            "seed = 1\nepisodes = 3\n[env]\nname = \"mountaincar\"\n[agent]\nkind = \"bdqn\"\n\
+             [expert]\nroute = \"round-robin\"\ndouble_ask = 1.0\n{extra}\
+             [[experts]]\nname = \"mountaincar-energy\"\ncost = 10\n\
+             [[experts]]\nname = \"mountaincar-fair\"\ncost = 2\n\
+             [[experts]]\nname = \"mountaincar-poor\"\n"
+        ))
+        .unwrap();
+        let core = ExpertCore::for_config(&cfg, 3);
+        let members: Vec<Box<dyn Demonstrator<[f32]>>> = vec![
+            Box::new(Always(2)),
+            Box::new(Always(2)),
+            Box::new(Always(0)),
+        ];
+        let ask = PanelAsk::new(&cfg, members);
+        (cfg, core, ask)
+    }
+
+    #[test]
+    fn a_double_ask_records_both_answers_at_their_costs_and_rates_them_against_each_other() {
+        let (_, mut core, mut ask) = setup("[budget]\ntotal = 5\n");
+        let x = [0.5f32, 0.0];
+        // Round-robin: energy first; the second is the least answered other (fair, the first of
+        // equals). Both say 2: each agrees with its one opinion.
+        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 7).unwrap(), Some(2));
+        // Then fair, with poor asked too (fewest answers): 2 against 0, both disagree.
+        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 9).unwrap(), Some(2));
+        let names: Vec<&str> = core.demos().iter().map(|d| d.expert.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "mountaincar-energy",
+                "mountaincar-fair",
+                "mountaincar-fair",
+                "mountaincar-poor"
+            ]
+        );
+        // The fifth answer is the budget's last: poor first, its second ask not recorded.
+        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 11).unwrap(), Some(0));
+        assert_eq!(core.demos().len(), 5);
+        assert_eq!(
+            ask.ask(&mut core, &x, &[0.5, 0.0], 12).unwrap(),
+            None,
+            "the budget is spent"
+        );
+        let log = ask.into_log();
+        assert_eq!(
+            log.answers[..4],
+            [(10.0, true), (2.0, true), (2.0, true), (1.0, true)]
+        );
+        assert_eq!(log.spent, 10.0 + 2.0 + 2.0 + 1.0 + 1.0);
+        // fair: rewards 1 (with energy) then 0 (with poor).
+        let fair: Vec<f64> = log
+            .rows
+            .iter()
+            .filter(|r| r.expert == 1)
+            .map(|r| r.quality.quality)
+            .collect();
+        assert_eq!(fair, [1.0, 0.5]);
+        let csv = log.csv();
+        assert!(
+            csv.starts_with("step,expert,answers,quality,low,high\n7,mountaincar-energy,1,1,0,1\n"),
+            "{csv}"
+        );
+    }
+
+    #[test]
+    fn the_cost_budget_stops_the_answers_it_cannot_pay() {
+        let (_, mut core, mut ask) = setup("[budget]\ntotal = 100\ncost = 13\n");
+        let x = [0.5f32, 0.0];
+        // energy (10) and fair (2): 12 spent, 1 left.
+        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 1).unwrap(), Some(2));
+        assert!(ask.can_pay(), "poor costs 1");
+        // fair (2) cannot be paid any more: no answer.
+        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 2).unwrap(), None);
+        // poor (1) can, but not its second expert.
+        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 3).unwrap(), Some(0));
+        assert!(!ask.can_pay());
+        assert_eq!(ask.into_log().spent, 13.0);
+        assert_eq!(core.demos().len(), 3);
+    }
+}
