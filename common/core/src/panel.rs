@@ -39,18 +39,6 @@ pub enum Route {
     UpperPerCost,
 }
 
-impl Route {
-    pub fn name(self) -> &'static str {
-        match self {
-            Route::BestKnown => "best-known",
-            Route::Cheapest => "cheapest",
-            Route::RoundRobin => "round-robin",
-            Route::Interval => "interval",
-            Route::UpperPerCost => "upper-per-cost",
-        }
-    }
-}
-
 /// One expert of the panel: its name and what one answer costs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Member {
