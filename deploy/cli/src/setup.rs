@@ -241,8 +241,17 @@ pub fn panel(
                     e.name
                 )));
             }
-            alfd_demonstrators::registry::for_env(cfg.env.name, &e.name)
-                .map_err(|err| usage(format!("[[experts]]: {err}")))
+            let built = |name: &str| {
+                alfd_demonstrators::registry::for_env(cfg.env.name, name)
+                    .map_err(|err| usage(format!("[[experts]]: {err}")))
+            };
+            let first = built(&e.name)?;
+            Ok(match (&e.becomes, e.after) {
+                (Some(then), Some(after)) => {
+                    Box::new(alfd_common::agent::Becomes::new(first, built(then)?, after))
+                }
+                _ => first,
+            })
         })
         .collect()
 }

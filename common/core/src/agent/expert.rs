@@ -29,6 +29,41 @@ pub trait Demonstrator<S: ?Sized> {
     }
 }
 
+/// One demonstrator for its first `after` answers and another from then on: an expert whose
+/// quality changes behind the same name (`[[experts]]`' `becomes`).
+pub struct Becomes<'d, S: ?Sized> {
+    pub first: Box<dyn Demonstrator<S> + Send + 'd>,
+    pub then: Box<dyn Demonstrator<S> + Send + 'd>,
+    pub after: u64,
+    answers: u64,
+}
+
+impl<'d, S: ?Sized> Becomes<'d, S> {
+    pub fn new(
+        first: Box<dyn Demonstrator<S> + Send + 'd>,
+        then: Box<dyn Demonstrator<S> + Send + 'd>,
+        after: u64,
+    ) -> Self {
+        Self {
+            first,
+            then,
+            after,
+            answers: 0,
+        }
+    }
+}
+
+impl<S: ?Sized> Demonstrator<S> for Becomes<'_, S> {
+    fn act(&mut self, s: &S) -> usize {
+        self.answers += 1;
+        if self.answers > self.after {
+            self.then.act(s)
+        } else {
+            self.first.act(s)
+        }
+    }
+}
+
 /// A deterministic policy table (CliffWalk experts).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct TablePolicy {
@@ -405,6 +440,14 @@ mod tests {
     fn demo(i: usize) -> (Vec<f64>, usize) {
         let t = i as f64;
         (vec![(t * 0.7).sin() * 2.0, (t * 1.3).cos()], i % 2)
+    }
+
+    #[test]
+    fn an_expert_that_becomes_another_answers_as_it_after_its_first_answers() {
+        let table = |a| Box::new(TablePolicy { actions: vec![a] });
+        let mut e = Becomes::new(table(1), table(3), 2);
+        let answers: Vec<usize> = (0..4).map(|_| e.act(&0)).collect();
+        assert_eq!(answers, [1, 1, 3, 3]);
     }
 
     #[test]

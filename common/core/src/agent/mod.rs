@@ -13,7 +13,8 @@ pub mod tabular;
 
 pub use demo::{DemoRecord, PriorDemo};
 pub use expert::{
-    BalancingController, Demonstrator, ExpertCore, ExpertSnapshot, NetworkDemonstrator, TablePolicy,
+    BalancingController, Becomes, Demonstrator, ExpertCore, ExpertSnapshot, NetworkDemonstrator,
+    TablePolicy,
 };
 pub use neural::{ActorSnapshot, LearnerSnapshot, NeuralActor, NeuralLearner};
 pub use refit::{RefitJob, Refitted};

@@ -96,6 +96,14 @@ pub struct PanelEntry {
     /// A name for tables and plots (default `name`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub label: Option<String>,
+    /// A change behind the same name: after `after` answers this expert answers as the
+    /// demonstrator `becomes` (`alfd expert list`), as a live `alfd swap-expert` would; for
+    /// measuring how fast the quality estimate follows. Given together with `after`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub becomes: Option<String>,
+    /// The answers after which `becomes` answers instead (≥ 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub after: Option<u64>,
 }
 
 fn default_cost() -> f64 {
@@ -203,6 +211,19 @@ impl ExperimentConfig {
                     format!("`{}` costs {}: a cost must be > 0", x.name, x.cost),
                 ));
             }
+            match (&x.becomes, x.after) {
+                (Some(_), Some(n)) if n >= 1 => {}
+                (None, None) => {}
+                _ => {
+                    return Err(invalid(
+                        "experts",
+                        format!(
+                            "`{}`: `becomes` and `after` (≥ 1 answers) are given together",
+                            x.name
+                        ),
+                    ))
+                }
+            }
             if self.experts[..i].iter().any(|y| y.name == x.name) {
                 return Err(invalid("experts", format!("`{}` is listed twice", x.name)));
             }
@@ -272,6 +293,10 @@ mod tests {
         assert!(set.contains("leave `expert.name` out"), "{set}");
         let twice = format!("{THREE}[[experts]]\nname = \"mountaincar-poor\"\n");
         assert!(parse(&twice, &[]).unwrap_err().contains("listed twice"));
+        let half = "[[experts]]\nname = \"mountaincar-good\"\nbecomes = \"mountaincar-poor\"\n";
+        assert!(parse(half, &[]).unwrap_err().contains("given together"));
+        let whole = format!("{half}after = 40\n");
+        assert_eq!(parse(&whole, &[]).unwrap().experts[0].after, Some(40));
         let free = "[[experts]]\nname = \"mountaincar-poor\"\ncost = 0\n";
         assert!(parse(free, &[]).unwrap_err().contains("must be > 0"));
         assert!(parse("", &["budget.cost=5"])

@@ -16,6 +16,8 @@ pub struct RunRow {
     pub budget: u32,
     /// Demonstrations the run used in all.
     pub demos: f64,
+    /// With several experts: what the run spent on answers in all (NaN: one expert, no costs).
+    pub cost: f64,
     /// The last greedy evaluation's return (NaN: none).
     pub final_eval: f64,
     /// The mean of the greedy evaluations: the area under the evaluation curve over its length.
@@ -33,6 +35,8 @@ pub struct ToThreshold {
     pub episodes: f64,
     pub steps: f64,
     pub demos: f64,
+    /// What the first `demos` answers cost (NaN: no costs).
+    pub cost: f64,
 }
 
 impl RunRow {
@@ -49,14 +53,17 @@ impl RunRow {
             .collect();
         let values: Vec<f64> = evals.iter().map(|&(_, v)| v).collect();
         let steps = |i: usize| e.total_steps.as_ref().map_or(f64::NAN, |s| s[i]);
+        let cost_of = |demos: f64| cost_of_first(run.costs.as_deref(), demos);
         let to_threshold = threshold.map(|t| {
             let hit = evals.iter().find(|&&(_, v)| v >= t).map(|&(i, _)| i);
             let i = hit.unwrap_or(e.returns.len().saturating_sub(1));
+            let demos = e.demos.get(i).copied().unwrap_or(f64::NAN);
             ToThreshold {
                 reached: hit.is_some(),
                 episodes: (i + 1) as f64,
                 steps: steps(i),
-                demos: e.demos.get(i).copied().unwrap_or(f64::NAN),
+                demos,
+                cost: cost_of(demos),
             }
         });
         Self {
@@ -64,6 +71,7 @@ impl RunRow {
             seed,
             budget,
             demos: e.demos_used,
+            cost: cost_of(e.demos_used),
             final_eval: values.last().copied().unwrap_or(f64::NAN),
             eval_auc: if values.is_empty() {
                 f64::NAN
@@ -76,11 +84,20 @@ impl RunRow {
     }
 }
 
-/// `runs.csv`: a header and one line per row.
+/// What the first `demos` demonstrations cost, from each one's cost in order; NaN without costs.
+fn cost_of_first(costs: Option<&[f64]>, demos: f64) -> f64 {
+    match costs {
+        Some(c) if !demos.is_nan() => c.iter().take(demos as usize).sum(),
+        _ => f64::NAN,
+    }
+}
+
+/// `runs.csv`: a header and one line per row (`cost` and `cost_to_threshold` empty for a run
+/// of one expert).
 pub fn runs_csv(rows: &[RunRow]) -> String {
     let mut out = String::from(
         "method,seed,budget,demos,final_eval,eval_auc,evaluations,reached,\
-         episodes_to_threshold,steps_to_threshold,demos_to_threshold\n",
+         episodes_to_threshold,steps_to_threshold,demos_to_threshold,cost,cost_to_threshold\n",
     );
     let num = |x: f64| {
         if x.is_nan() {
@@ -92,7 +109,7 @@ pub fn runs_csv(rows: &[RunRow]) -> String {
     for r in rows {
         let t = r.to_threshold;
         out.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             r.method,
             r.seed,
             r.budget,
@@ -107,6 +124,9 @@ pub fn runs_csv(rows: &[RunRow]) -> String {
                 .map_or(String::new(), |t| num(t.steps)),
             t.filter(|t| t.reached)
                 .map_or(String::new(), |t| num(t.demos)),
+            num(r.cost),
+            t.filter(|t| t.reached)
+                .map_or(String::new(), |t| num(t.cost)),
         ));
     }
     out
@@ -181,15 +201,18 @@ pub fn section(exp: &super::experiment::Experiment, rows: &[RunRow]) -> String {
         Some(_) => ", and when greedy evaluation first reached the threshold.\n",
         None => ".\n",
     });
+    let costed = rows.iter().any(|r| !r.cost.is_nan());
     if let Some(t) = exp.eval_threshold {
         md.push_str(&format!(
             "\nTime until greedy evaluation first reaches {t}: Kaplan-Meier medians over the seeds, \
              a run that never reaches it counted as still waiting at its end (\"not reached\": \
              fewer than half reach it).\n\n\
-             | method | reached | median episodes | median demonstrations |\n|---|---:|---:|---:|\n"
+             | method | reached | median episodes | median demonstrations |{}\n|---|---:|---:|---:|{}\n",
+            if costed { " median cost |" } else { "" },
+            if costed { "---:|" } else { "" },
         ));
         for m in &exp.methods {
-            md.push_str(&threshold_row(&m.name, rows));
+            md.push_str(&threshold_row(&m.name, rows, costed));
         }
     }
     if let Some(b) = &exp.baseline {
@@ -226,7 +249,7 @@ pub fn section(exp: &super::experiment::Experiment, rows: &[RunRow]) -> String {
 }
 
 /// A method's row of the threshold table.
-fn threshold_row(method: &str, rows: &[RunRow]) -> String {
+fn threshold_row(method: &str, rows: &[RunRow], costed: bool) -> String {
     let times: Vec<ToThreshold> = rows
         .iter()
         .filter(|r| r.method == method)
@@ -237,8 +260,13 @@ fn threshold_row(method: &str, rows: &[RunRow]) -> String {
         let pairs: Vec<(f64, bool)> = times.iter().map(|t| (f(t), t.reached)).collect();
         km_median(&pairs).map_or("not reached".to_owned(), |m| format!("{m}"))
     };
+    let cost = if costed {
+        format!(" {} |", median(|t| t.cost))
+    } else {
+        String::new()
+    };
     format!(
-        "| {method} | {reached} of {} | {} | {} |\n",
+        "| {method} | {reached} of {} | {} | {} |{cost}\n",
         times.len(),
         median(|t| t.episodes),
         median(|t| t.demos)
@@ -271,6 +299,7 @@ mod tests {
             wall_clock_s: 0.0,
             greedy_value: None,
             optimal_value: None,
+            costs: None,
         }
     }
 
@@ -290,8 +319,27 @@ mod tests {
         assert_eq!(never.to_threshold.unwrap().episodes, 6.0);
         let csv = runs_csv(&[row, never]);
         let lines: Vec<&str> = csv.lines().collect();
-        assert_eq!(lines[1], "m,7,10,6,0.5,0.5,3,true,4,40,4");
-        assert_eq!(lines[2], "m,8,10,6,0.5,0.5,3,false,,,");
+        assert_eq!(lines[1], "m,7,10,6,0.5,0.5,3,true,4,40,4,,");
+        assert_eq!(lines[2], "m,8,10,6,0.5,0.5,3,false,,,,,");
+    }
+
+    #[test]
+    fn with_costs_a_row_sums_what_the_demonstrations_up_to_the_threshold_cost() {
+        let nan = f64::NAN;
+        let mut r = run(&[nan, 0.0, nan, 1.0], &[1., 2., 2., 3.]);
+        r.costs = Some(vec![10.0, 1.0, 2.0]);
+        let row = RunRow::of("m", 7, 10, &r, Some(0.9));
+        assert_eq!(row.cost, 13.0);
+        let t = row.to_threshold.unwrap();
+        assert_eq!((t.demos, t.cost), (3.0, 13.0));
+        let early = RunRow::of("m", 7, 10, &r, Some(0.0));
+        assert_eq!(
+            early.to_threshold.unwrap().cost,
+            11.0,
+            "two demonstrations by episode 2"
+        );
+        let csv = runs_csv(&[early]);
+        assert!(csv.lines().nth(1).unwrap().ends_with(",2,13,11"), "{csv}");
     }
 
     #[test]
@@ -321,6 +369,7 @@ mod tests {
             seed,
             budget: 5,
             demos: 5.0,
+            cost: f64::NAN,
             final_eval: 0.0,
             eval_auc: auc,
             evaluations: 1,

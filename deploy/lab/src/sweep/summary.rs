@@ -85,6 +85,8 @@ pub struct Run {
     /// CliffWalk: the value at S of the run's greedy policy, and the optimal one.
     pub greedy_value: Option<f64>,
     pub optimal_value: Option<f64>,
+    /// With several experts: what each demonstration cost, in order (`demos.jsonl`'s `cost`).
+    pub costs: Option<Vec<f64>>,
 }
 
 /// The first crossing of a threshold by the mean curve, and its interval.
@@ -693,6 +695,7 @@ mod tests {
             wall_clock_s: 0.0,
             greedy_value: None,
             optimal_value: None,
+            costs: None,
         };
         assert_eq!(final_eval(&[run(None)]), None);
         assert_eq!(final_eval(&[run(Some(vec![f64::NAN; 3]))]), None);

@@ -1,0 +1,121 @@
+"""Writes the several-experts study's files (run from anywhere: python3 make.py [DOUBLE_ASK]).
+
+Three experts of one task at once, a good, a fair and a poor one at costs 10, 2 and 1 per answer
+(`alfd expert eval` ranks them good > fair > poor). Each run: the task's recommended preset with
+the experts in `[[experts]]`, B = 150 answers spread over the run's steps
+(`query.allowance = "spread"`), asked at state-blind moments (`query.gate = "chance"`: the study is
+about whom to ask, not where), shaping from the first demonstration (`shaping.min_demos = 1`),
+greedy evaluation of 20 episodes after every 10 training episodes.
+
+Methods: one per route (`best-known` = always the good expert, `cheapest` = always the poor one,
+`round-robin`, `interval`, `upper-per-cost`), B = 0, and `good-turns-poor` (round-robin, the good
+expert answering as the poor one after its 25th answer). Primary metrics: the cost spent when
+greedy evaluation first reaches the threshold (Kaplan-Meier median; a run that never reaches it
+is censored at its total cost) and the paired difference of the final greedy evaluation against
+`best-known`.
+
+Tuning (seeds 1000-1009, `tune-TASK.toml`): `expert.double_ask` in {0.1, 0.3} for `interval` and
+`upper-per-cost` (`round-robin` and `good-turns-poor` ask a second expert at the first value, the
+fixed routes never). The choice, fixed before the tuning runs: the value under which those two
+routes together reach the threshold in the most runs, ties broken by the lower mean cost to the
+threshold (censored runs at their total cost). The reported seeds 0-29 (`study-TASK.toml`) run
+with the chosen value only.
+"""
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+PRESETS = HERE.parent.parent / "configs" / "recommended"
+TASKS = {
+    # task: (preset, experts good/fair/poor, steps, evaluation threshold)
+    "mountaincar": ("mountaincar.toml", "mountaincar", 60000, -140),
+    "acrobot": ("acrobot.toml", "acrobot", 100000, -100),
+}
+COSTS = {"good": 10, "fair": 2, "poor": 1}
+BUDGET = 150
+TURN_AFTER = 25
+ROUTES = ["best-known", "cheapest", "round-robin", "interval", "upper-per-cost"]
+TUNED = ["interval", "upper-per-cost"]
+FIXED = ["best-known", "cheapest"]
+
+
+def config(task):
+    """The preset with its `[expert]` name left out and the three experts listed."""
+    preset, prefix, _, _ = TASKS[task]
+    lines, section = [], None
+    for line in (PRESETS / preset).read_text().splitlines():
+        if line.startswith("["):
+            section = line.strip()
+        if section == "[expert]" and line.startswith("name ="):
+            continue
+        lines.append(line)
+    head = [f"# The {task} preset with three experts at once.",
+            "# Written by deploy/experiments/experts/make.py."]
+    for quality, cost in COSTS.items():
+        lines += ["", "[[experts]]", f'name = "{prefix}-{quality}"', f"cost = {cost}"]
+    (HERE / f"config-{task}.toml").write_text("\n".join(head + lines) + "\n")
+
+
+def common(task):
+    _, prefix, steps, _ = TASKS[task]
+    return [
+        "query.rule=never", f"query.horizon={steps}", "query.allowance=spread", "query.gate=chance",
+        f"budget.total={BUDGET}", "shaping.min_demos=1", "evaluation.every=10",
+        "evaluation.episodes=20", f"expert.best_known={prefix}-good",
+    ]
+
+
+def methods(task, double_asks):
+    out = [("never", "B = 0", common(task) + ["budget.total=0"], None)]
+    for route in ROUTES:
+        # The two fixed routes ask one expert and never a second: the plain baselines.
+        for d in double_asks if route in TUNED else [0 if route in FIXED else double_asks[0]]:
+            tag = f"-d{d}" if len(double_asks) > 1 and route in TUNED else ""
+            out.append((f"{route}{tag}", f"{route}{tag}",
+                        common(task) + [f"expert.route={route}", f"expert.double_ask={d}"], None))
+    return out
+
+
+def write(task, name, title, seeds, double_asks, turn):
+    _, _, _, threshold = TASKS[task]
+    lines = [
+        f"# {title}", "# Written by deploy/experiments/experts/make.py.",
+        f'title = "{title}"', f"seeds = {seeds}", 'x = "steps"', "last = 20", "smooth = 3",
+        'legend = "lower-right"', f"eval_threshold = {threshold}", "eval_curves = true",
+        'baseline = "best-known"',
+    ]
+    ms = methods(task, double_asks)
+    if turn:
+        ms.append(("good-turns-poor", "good turns poor", common(task) + [
+            "expert.route=round-robin", f"expert.double_ask={double_asks[0]}"], f"config-{task}-turns.toml"))
+    for m, label, sets, cfg in ms:
+        quoted = ", ".join(f'"{s}"' for s in sets)
+        lines += ["", "[[method]]", f'name = "{m}"', f'label = "{label}"',
+                  f'config = "{cfg or f"config-{task}.toml"}"', f"set = [{quoted}]"]
+    (HERE / name).write_text("\n".join(lines) + "\n")
+
+
+def turns(task):
+    """The same experts, the good one answering as the poor one after its 25th answer."""
+    _, prefix, _, _ = TASKS[task]
+    text = (HERE / f"config-{task}.toml").read_text()
+    good = f'name = "{prefix}-good"\ncost = 10\n'
+    assert good in text
+    text = text.replace(good, good + f'becomes = "{prefix}-poor"\nafter = {TURN_AFTER}\n')
+    (HERE / f"config-{task}-turns.toml").write_text(text)
+
+
+def main():
+    chosen = sys.argv[1] if len(sys.argv) > 1 else None
+    for task in TASKS:
+        config(task)
+        turns(task)
+        write(task, f"tune-{task}.toml", f"{task}: three experts, tuning seeds", 10,
+              [0.1, 0.3], False)
+        if chosen:
+            write(task, f"study-{task}.toml", f"{task}: three experts at costs 10/2/1", 30,
+                  [float(chosen)], True)
+
+
+if __name__ == "__main__":
+    main()
