@@ -56,4 +56,19 @@ fi
 if [ -x /usr/bin/chromium ] && [ ! -d deploy/cli/tests/browser/node_modules/playwright-core ]; then
   (cd deploy/cli/tests/browser && npm ci --no-audit --no-fund --silent)
 fi
+# The manual (docs/, an mdBook): mdBook is built from crates.io into .tools/ on first use (its
+# own pinned lock file, without the server and search features, at a lower optimisation level so
+# that it builds in about a minute), then the book is built; the links are checked by a test.
+mdbook_version=0.4.52
+if ! .tools/bin/mdbook --version 2>/dev/null | grep -q "v$mdbook_version"; then
+  echo "== building mdBook $mdbook_version into .tools/ (once)"
+  CARGO_PROFILE_RELEASE_OPT_LEVEL=1 CARGO_PROFILE_RELEASE_LTO=false \
+    CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16 CARGO_PROFILE_RELEASE_DEBUG=0 \
+    cargo install --quiet --locked "mdbook@$mdbook_version" --no-default-features --root .tools
+fi
+book="$(.tools/bin/mdbook build docs 2>&1)" || { echo "$book"; exit 1; }
+if grep -E '\[(WARN|ERROR)\]' <<<"$book"; then
+  echo "mdbook: the manual builds with the warnings above"
+  exit 1
+fi
 cargo test --release --workspace --locked

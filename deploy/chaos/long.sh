@@ -2,7 +2,7 @@
 # The long chaos run: seeded `alfd chaos` runs of the recommended CartPole preset back to back for
 # MINUTES minutes (default 40), each beside the same run without faults (same config seed), then
 # results/chaos-long/summary.md and runs.csv: faults by kind, the invariants, and the last 50
-# episodes' mean return with and without faults (the README's "Faults" section quotes them).
+# episodes' mean return with and without faults (the manual's "Faults" chapter, docs/src/faults.md, quotes them).
 #
 #   bash deploy/chaos/long.sh [MINUTES] [ROOT]
 #

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 mod env;
 mod expert;
+mod logging;
 mod normalize;
 mod query;
 pub mod reference;
@@ -71,6 +72,8 @@ pub struct ExperimentConfig {
     /// (`alfd local`, `alfd sweep`), neural agents only. Empty: the one expert `expert.name`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub experts: Vec<PanelEntry>,
+    #[serde(default, skip_serializing_if = "LoggingConfig::is_default")]
+    pub logging: LoggingConfig,
 }
 
 /// Demonstrations the run starts with, besides the ones it asks for.
@@ -453,6 +456,7 @@ pub use crate::query::RuleKind;
 pub use crate::shaping::ShapingKind;
 pub use env::{EnvConfig, EnvName, MAX_DEEPSEA_SIZE};
 pub use expert::{BudgetConfig, ExpertConfig, PanelEntry};
+pub use logging::LoggingConfig;
 pub use query::QueryConfig;
 
 /// Which model of the demonstrations shapes the reward.

@@ -27,3 +27,4 @@ pub mod restarts;
 pub mod rng;
 pub mod runner;
 pub mod shaping;
+pub mod tensorboard;

@@ -9,6 +9,7 @@ mod gymnasium_reference;
 mod js_reference;
 mod kernel_reference;
 mod learner_options;
+mod manual;
 mod mlp_reference;
 mod nn_checkpoint;
 mod resume;

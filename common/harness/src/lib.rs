@@ -17,6 +17,7 @@ mod runtime;
 mod sched;
 mod session;
 mod startup;
+pub mod tensorboard;
 mod threads;
 
 pub use bad_input::{chain, describe, exit_code, BadInput, HarnessError, Result, What};

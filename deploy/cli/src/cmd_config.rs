@@ -11,7 +11,7 @@ pub struct ConfigArgs {
 #[derive(Debug, clap::Subcommand)]
 pub enum ConfigCommand {
     /// Print every key of an experiment config with its type, default and meaning (Markdown,
-    /// made from the config types; README.md, "Configuration reference", is this text).
+    /// made from the config types; the manual's docs/src/configuration.md, "Configuration reference", is this text).
     Reference,
     /// Read and validate a config (with `--set` overrides; its expert must exist) and print it in
     /// full as TOML, every default filled in; a bad one is refused with exit code 2, naming the

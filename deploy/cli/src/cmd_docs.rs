@@ -12,7 +12,8 @@
 //! The source is a path from the repository's root; `, section "NAME"` takes the part of a
 //! Markdown file under its heading `## NAME` (to the next heading of that level or higher),
 //! without it the whole file. The source [`CONFIG_REFERENCE`] is the configuration reference
-//! made from the config types (`alfd config reference`). `alfd docs` rewrites the documents; `alfd docs --check` changes
+//! made from the config types (`alfd config reference`). The documents are README.md,
+//! EXPERIMENTS.md, BENCHMARKS.md and the manual's chapters (`docs/src/*.md`). `alfd docs` rewrites them; `alfd docs --check` changes
 //! nothing and fails (exit code 1) naming each part that differs.
 
 use std::path::{Path, PathBuf};
@@ -21,8 +22,28 @@ use anyhow::Context as _;
 
 use crate::usage::usage;
 
-/// The documents with generated parts.
+/// The documents at the repository's root that may have generated parts; the manual's chapters
+/// (`docs/src/*.md`, see [`documents`]) may too.
 pub const DOCUMENTS: [&str; 3] = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"];
+/// The manual's chapters, beside [`DOCUMENTS`].
+pub const CHAPTERS: &str = "docs/src";
+
+/// Every document `alfd docs` reads under `root`: [`DOCUMENTS`], then the chapters in name order.
+pub fn documents(root: &Path) -> anyhow::Result<Vec<String>> {
+    let mut docs: Vec<String> = DOCUMENTS.iter().map(|d| (*d).to_owned()).collect();
+    let dir = root.join(CHAPTERS);
+    let entries = std::fs::read_dir(&dir)
+        .map_err(|e| usage(format!("cannot read {}: {e}", dir.display())))?;
+    let mut chapters: Vec<String> = entries
+        .flatten()
+        .filter_map(|e| e.file_name().into_string().ok())
+        .filter(|n| n.ends_with(".md"))
+        .map(|n| format!("{CHAPTERS}/{n}"))
+        .collect();
+    chapters.sort();
+    docs.extend(chapters);
+    Ok(docs)
+}
 
 const BEGIN: &str = "<!-- generated from ";
 /// The source name of the configuration reference.
@@ -41,7 +62,8 @@ pub struct DocsArgs {
 
 pub fn run(args: DocsArgs) -> anyhow::Result<()> {
     let mut stale = Vec::new();
-    for doc in DOCUMENTS {
+    for doc in documents(&args.root)? {
+        let doc = doc.as_str();
         let path = args.root.join(doc);
         let text = std::fs::read_to_string(&path)
             .map_err(|e| usage(format!("cannot read {}: {e}", path.display())))?;

@@ -311,6 +311,7 @@ pub(crate) fn run_pieces(
         bar,
         stopped: Cell::new(false),
         save_error: Cell::new(None),
+        board: std::cell::RefCell::new(alfd_harness::tensorboard::Board::open(out, "local", cfg)),
     };
     let start = Instant::now();
     let produced = match pieces {
@@ -366,6 +367,8 @@ struct Watch<'a> {
     stopped: Cell<bool>,
     /// The checkpoint that could not be written, which stops the run.
     save_error: Cell<Option<anyhow::Error>>,
+    /// The run's TensorBoard scalars (`OUT/tb/`).
+    board: std::cell::RefCell<alfd_harness::tensorboard::Board>,
 }
 
 impl Watch<'_> {
@@ -378,6 +381,7 @@ impl Watch<'_> {
         };
         self.bar
             .set_message(format!("return {:.1}{eval}  demos {}", r.ret, r.demos_used));
+        self.board.borrow_mut().episode(r);
         match self.cfg.episode_limit() {
             Some(_) => self.bar.inc(1),
             None => self.bar.set_position(r.total_steps),

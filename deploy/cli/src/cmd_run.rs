@@ -51,7 +51,7 @@ pub struct RunArgs {
     /// Credit window: steps an actor may run ahead of the learner's updates (1..=64); default 1
     /// (actors in lockstep with the learner: with one actor, `alfd local`'s run to the byte), or
     /// 32 with --listen (remote actors' transitions cross the link in batches). Less lag learns
-    /// more reliably at the same speed (README, the main job: ten runs at each window).
+    /// more reliably at the same speed (BENCHMARKS.md, the credit window).
     #[arg(long)]
     pub window: Option<u64>,
     /// Milliseconds an actor waits for the expert's answer before acting on its own.

@@ -73,8 +73,8 @@ enum Command {
     /// The Q-values of runs' learned networks on greedy episodes against the range of the true
     /// values: a check for divergence.
     QRange(cmd_q_range::QRangeArgs),
-    /// Re-make the generated tables of README.md, EXPERIMENTS.md and BENCHMARKS.md from the
-    /// committed results (`--check`: fail if any differs).
+    /// Re-make the generated tables of README.md, EXPERIMENTS.md, BENCHMARKS.md and the manual
+    /// (docs/src) from the committed results (`--check`: fail if any differs).
     Docs(cmd_docs::DocsArgs),
     /// Experiment configs: every key with its default (`reference`), or one file validated and
     /// printed in full (`check`).

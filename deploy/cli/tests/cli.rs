@@ -289,9 +289,23 @@ fn local_refuses_an_output_directory_holding_a_run_and_leaves_it_untouched() {
             .unwrap()
             .map(|e| {
                 let e = e.unwrap();
+                // A directory (`tb/`) by the bytes of its files, in name order.
+                let bytes = if e.path().is_dir() {
+                    let mut inner: Vec<_> = std::fs::read_dir(e.path())
+                        .unwrap()
+                        .map(|f| f.unwrap().path())
+                        .collect();
+                    inner.sort();
+                    inner
+                        .iter()
+                        .flat_map(|f| std::fs::read(f).unwrap())
+                        .collect()
+                } else {
+                    std::fs::read(e.path()).unwrap()
+                };
                 (
                     e.file_name(),
-                    std::fs::read(e.path()).unwrap(),
+                    bytes,
                     e.metadata().unwrap().modified().unwrap(),
                 )
             })
@@ -822,9 +836,10 @@ fn q_range_checks_a_run_and_refuses_what_is_not_one() {
 }
 
 #[test]
-fn the_readme_documents_every_output_column_and_summary_field() {
+fn the_manual_documents_every_output_column_and_summary_field() {
     use alfd_common::record::{RunSummary, RuntimeSummary, CSV_HEADER};
-    let readme = std::fs::read_to_string(crate::support::repo().join("README.md")).unwrap();
+    let readme =
+        std::fs::read_to_string(crate::support::repo().join("docs/src/outputs.md")).unwrap();
     let documented = |name: &str| {
         readme.lines().any(|l| {
             l.starts_with('|')
@@ -836,7 +851,7 @@ fn the_readme_documents_every_output_column_and_summary_field() {
     for column in CSV_HEADER.split(',') {
         assert!(
             documented(column),
-            "episodes.csv column `{column}` is not in README.md"
+            "episodes.csv column `{column}` is not in docs/src/outputs.md"
         );
     }
     let summary = RunSummary {
@@ -869,7 +884,7 @@ fn the_readme_documents_every_output_column_and_summary_field() {
     for field in fields.keys() {
         assert!(
             documented(field),
-            "summary.json field `{field}` is not in README.md"
+            "summary.json field `{field}` is not in docs/src/outputs.md"
         );
     }
 }
@@ -885,8 +900,17 @@ fn the_documents_generated_tables_match_the_committed_results() {
     assert!(o.status.success(), "{}", stderr(&o));
     // A part edited by hand is found.
     let dir = tmp("docs-check");
-    for doc in ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"] {
-        std::fs::copy(crate::support::repo().join(doc), dir.join(doc)).unwrap();
+    let root = crate::support::repo();
+    std::fs::create_dir_all(dir.join("docs/src")).unwrap();
+    let chapters = std::fs::read_dir(root.join("docs/src")).unwrap();
+    let chapters =
+        chapters.map(|e| format!("docs/src/{}", e.unwrap().file_name().to_str().unwrap()));
+    for doc in ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"]
+        .map(String::from)
+        .into_iter()
+        .chain(chapters)
+    {
+        std::fs::copy(root.join(&doc), dir.join(&doc)).unwrap();
     }
     std::fs::create_dir_all(dir.join("results")).unwrap();
     let copy = Command::new("cp")

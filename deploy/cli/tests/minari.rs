@@ -14,13 +14,7 @@ const CONFIG: &str = "deploy/configs/cartpole-bdqn-krr.toml";
 
 /// The project's Python, with `MINARI_DATASETS_PATH=root`, running `minari_check.py args`.
 fn minari(root: &Path, args: &[&str]) -> Value {
-    let setup = Command::new("bash")
-        .arg(repo().join("deploy/python/setup-venv.sh"))
-        .output()
-        .unwrap();
-    assert!(setup.status.success(), "{}", text(&setup));
-    let python = String::from_utf8(setup.stdout).unwrap();
-    let o = Command::new(python.trim())
+    let o = Command::new(crate::support::project_python())
         .arg(repo().join("deploy/cli/tests/minari_check.py"))
         .args(args)
         .env("MINARI_DATASETS_PATH", root)

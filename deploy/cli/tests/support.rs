@@ -282,3 +282,13 @@ pub(crate) fn fill_up(path: &Path) -> std::fs::File {
 pub(crate) fn under_ci() -> bool {
     std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0")
 }
+
+/// The project's Python (`.venv/`, installed by `deploy/python/setup-venv.sh` as `alfd` does).
+pub(crate) fn project_python() -> String {
+    let setup = std::process::Command::new("bash")
+        .arg(repo().join("deploy/python/setup-venv.sh"))
+        .output()
+        .unwrap();
+    assert!(setup.status.success(), "{}", text(&setup));
+    String::from_utf8(setup.stdout).unwrap().trim().to_owned()
+}

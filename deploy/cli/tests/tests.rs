@@ -18,3 +18,4 @@ mod runtime;
 mod shards;
 mod support;
 mod sweep;
+mod tensorboard;

@@ -9,6 +9,7 @@
 //! is a warning.
 
 mod curve;
+mod experts;
 
 use std::fmt::Write as _;
 use std::io::IsTerminal as _;
@@ -94,6 +95,12 @@ pub fn finish_run(
             );
         }
     }
+    if let Err(e) = experts::write(dir) {
+        eprintln!(
+            "warning: the experts' qualities were not drawn: {}",
+            alfd_harness::describe(&e)
+        );
+    }
     if output.machine_line() {
         println!("{}", serde_json::to_string(summary)?);
     }
@@ -120,7 +127,7 @@ fn read_records(dir: &Path) -> crate::Result<Vec<EpisodeRecord>> {
 }
 
 /// The files a run directory may hold, in the order the summary lists them, with what each holds.
-const RUN_FILES: [(&str, &str); 13] = [
+const RUN_FILES: [(&str, &str); 16] = [
     (
         "config.toml",
         "the experiment config as run, every default written out",
@@ -144,6 +151,15 @@ const RUN_FILES: [(&str, &str); 13] = [
     (
         "experts.csv",
         "several experts: each one's answers and quality interval after each of its answers",
+    ),
+    (
+        "experts.svg",
+        "several experts: each one's estimated quality against the step",
+    ),
+    ("experts.png", "the same picture as PNG"),
+    (
+        "tb/",
+        "TensorBoard event files, written as the run goes (`tensorboard --logdir DIR`)",
     ),
     (
         "weights.safetensors",

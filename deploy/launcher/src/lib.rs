@@ -315,6 +315,8 @@ struct Launcher<'a, 'w> {
     procs: Vec<Proc>,
     seen: Seen,
     csv: EpisodeLog,
+    /// The run's TensorBoard scalars (`RUN_DIR/tb/`).
+    board: alfd_harness::tensorboard::Board,
     recorded: u64,
     returns: VecDeque<f64>,
     all_returns: Vec<f64>,
@@ -414,6 +416,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             procs: Vec::new(),
             seen: Seen::default(),
             csv: EpisodeLog::new(csv, plan.run_dir.join("episodes.csv")),
+            board: alfd_harness::tensorboard::Board::open(&plan.run_dir, "launcher", &plan.cfg),
             recorded: all_returns.len() as u64,
             returns: all_returns.iter().rev().take(20).rev().copied().collect(),
             all_returns,
@@ -536,6 +539,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     self.seen.learner_env_steps = p.env_steps;
                     self.seen.learner_updates = p.updates;
                     self.rate.observe(p.env_steps, p.updates);
+                    self.board.learner(p.env_steps, p.updates, p.loss);
                 }
                 (progress_kind::STATUS, Some(Role::Expert)) => {
                     debug!(
@@ -630,6 +634,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         // stays whole rows for `alfd resume`; the row waits in memory for room.
         self.csv
             .append(u64::from(r.episode), format!("{}\n", r.csv_row()));
+        self.board.episode(&r);
         self.recorded += 1;
         self.returns.push_back(r.ret);
         if self.returns.len() > 20 {

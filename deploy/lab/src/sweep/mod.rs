@@ -587,29 +587,30 @@ fn read_runs(
                 wall_clock_s: s.wall_clock_s,
                 greedy_value: s.greedy_value_at_start,
                 optimal_value: s.optimal_value_at_start,
-                costs: demo_costs(&dir.join("demos.jsonl"))?,
+                costs: demo_costs(&dir)?,
             })
         })
         .collect()
 }
 
-/// Each demonstration's `cost` in `demos.jsonl`, in order: `None` when the file is absent or its
-/// lines carry no cost (a run of one expert).
-fn demo_costs(path: &Path) -> crate::Result<Option<Vec<f64>>> {
-    let Ok(text) = std::fs::read_to_string(path) else {
+/// A run of several experts (`experts.csv` beside it): each demonstration's `cost` in
+/// `demos.jsonl`, in order (none without demonstrations); `None` for a run of one expert.
+fn demo_costs(dir: &Path) -> crate::Result<Option<Vec<f64>>> {
+    if !dir.join("experts.csv").is_file() {
         return Ok(None);
-    };
+    }
+    let path = dir.join("demos.jsonl");
+    let text = std::fs::read_to_string(&path).unwrap_or_default();
     let mut costs = Vec::new();
     for (i, line) in text.lines().filter(|l| !l.trim().is_empty()).enumerate() {
         let v: serde_json::Value = serde_json::from_str(line)
             .with_context(|| format!("line {} of {}", i + 1, path.display()))?;
         match v.get("cost").and_then(serde_json::Value::as_f64) {
             Some(c) => costs.push(c),
-            None if costs.is_empty() => return Ok(None),
             None => crate::error::bail!("line {} of {} has no `cost`", i + 1, path.display()),
         }
     }
-    Ok((!costs.is_empty()).then_some(costs))
+    Ok(Some(costs))
 }
 
 /// The query-rule view of the sweep ([`budget`]): its Markdown, its plots against B and

@@ -39,7 +39,7 @@ const WIDTH: u32 = 960;
 const HEIGHT: u32 = 600;
 
 /// Line colours (the "tab10" palette).
-const PALETTE: [RGBColor; 10] = [
+pub(crate) const PALETTE: [RGBColor; 10] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),

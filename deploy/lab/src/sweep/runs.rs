@@ -87,7 +87,8 @@ impl RunRow {
 /// What the first `demos` demonstrations cost, from each one's cost in order; NaN without costs.
 fn cost_of_first(costs: Option<&[f64]>, demos: f64) -> f64 {
     match costs {
-        Some(c) if !demos.is_nan() => c.iter().take(demos as usize).sum(),
+        // A fold from +0: an empty sum is 0, not the -0 of `Sum`.
+        Some(c) if !demos.is_nan() => c.iter().take(demos as usize).fold(0.0, |a, b| a + b),
         _ => f64::NAN,
     }
 }
