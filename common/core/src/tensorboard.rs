@@ -96,6 +96,126 @@ pub fn scalars_event(wall_time: f64, step: u64, values: &[(String, f32)]) -> Vec
     record(&e)
 }
 
+/// One scalar as a file holds it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScalarEvent {
+    pub wall_time: f64,
+    pub step: u64,
+    pub tag: String,
+    pub value: f32,
+}
+
+/// A varint at the start of `b`, and the bytes it took.
+fn read_varint(b: &[u8]) -> Option<(u64, usize)> {
+    let mut v = 0u64;
+    for (i, &byte) in b.iter().enumerate().take(10) {
+        v |= u64::from(byte & 0x7f) << (7 * i);
+        if byte & 0x80 == 0 {
+            return Some((v, i + 1));
+        }
+    }
+    None
+}
+
+/// One field of a protocol buffer message: its number, its wire type, its bytes (the value of a
+/// fixed-width field, the contents of a length-delimited one, empty for a varint) and a varint's
+/// value.
+type Field<'a> = (u64, u64, &'a [u8], u64);
+
+/// The fields of one protocol buffer message; `None` on one this reader does not understand.
+fn fields(mut b: &[u8]) -> Option<Vec<Field<'_>>> {
+    let mut out = Vec::new();
+    while !b.is_empty() {
+        let (key, n) = read_varint(b)?;
+        b = &b[n..];
+        let (field, wire) = (key >> 3, key & 7);
+        match wire {
+            0 => {
+                let (v, n) = read_varint(b)?;
+                out.push((field, wire, &b[..0], v));
+                b = &b[n..];
+            }
+            1 | 5 => {
+                let width = if wire == 1 { 8 } else { 4 };
+                out.push((field, wire, b.get(..width)?, 0));
+                b = &b[width..];
+            }
+            2 => {
+                let (len, n) = read_varint(b)?;
+                let end = n + usize::try_from(len).ok()?;
+                out.push((field, wire, b.get(n..end)?, 0));
+                b = &b[end..];
+            }
+            _ => return None,
+        }
+    }
+    Some(out)
+}
+
+/// The scalars of an event file's bytes, in file order (what [`scalars_event`] writes). A record
+/// cut short at the end (one being written) or with a wrong checksum ends the reading.
+pub fn read_scalars(mut b: &[u8]) -> Vec<ScalarEvent> {
+    let mut out = Vec::new();
+    while b.len() >= 12 {
+        let len = u64::from_le_bytes(b[..8].try_into().expect("8 bytes"));
+        let Ok(len) = usize::try_from(len) else { break };
+        if u32::from_le_bytes(b[8..12].try_into().expect("4 bytes")) != masked_crc(&b[..8]) {
+            break;
+        }
+        let Some(data) = b.get(12..12 + len) else {
+            break;
+        };
+        let Some(crc) = b.get(12 + len..16 + len) else {
+            break;
+        };
+        if u32::from_le_bytes(crc.try_into().expect("4 bytes")) != masked_crc(data) {
+            break;
+        }
+        out.extend(event_scalars(data));
+        b = &b[16 + len..];
+    }
+    out
+}
+
+/// The scalars of one `Event`'s bytes.
+fn event_scalars(data: &[u8]) -> Vec<ScalarEvent> {
+    let Some(event) = fields(data) else {
+        return Vec::new();
+    };
+    let (mut wall_time, mut step, mut out) = (0.0, 0, Vec::new());
+    for &(field, _, bytes, v) in &event {
+        match field {
+            1 => wall_time = f64::from_le_bytes(bytes.try_into().unwrap_or([0; 8])),
+            2 => step = v,
+            _ => {}
+        }
+    }
+    for &(field, _, summary, _) in &event {
+        if field != 5 {
+            continue;
+        }
+        for (_, _, value, _) in fields(summary).unwrap_or_default() {
+            let (mut tag, mut number) = (None, None);
+            for &(f, _, bytes, _) in &fields(value).unwrap_or_default() {
+                match f {
+                    1 => tag = std::str::from_utf8(bytes).ok().map(str::to_owned),
+                    2 => number = bytes.try_into().ok().map(f32::from_le_bytes),
+                    _ => {}
+                }
+            }
+            if let (Some(tag), Some(value)) = (tag, number) {
+                out.push(ScalarEvent {
+                    wall_time,
+                    step,
+                    tag,
+                    value,
+                });
+            }
+        }
+    }
+    out
+}
+
 /// The scalars of a run's episodes, one episode at a time, in the order they end.
 #[derive(Debug, Clone)]
 pub struct EpisodeScalars {
@@ -189,6 +309,39 @@ mod tests {
         want.extend_from_slice(&[0x2A, 12, 0x0A, 10, 0x0A, 3, b'a', b'/', b'b', 0x15]);
         want.extend_from_slice(&2.0f32.to_le_bytes());
         assert_eq!(data, &want[..]);
+    }
+
+    #[test]
+    fn what_is_written_reads_back_and_a_cut_record_ends_the_reading() {
+        let mut file = file_version_event(1.0);
+        file.extend(scalars_event(
+            2.5,
+            300,
+            &[("a".into(), 1.5), ("b/c".into(), -2.0)],
+        ));
+        file.extend(scalars_event(3.5, 301, &[("a".into(), 4.0)]));
+        let read = read_scalars(&file);
+        let got: Vec<(f64, u64, &str, f32)> = read
+            .iter()
+            .map(|e| (e.wall_time, e.step, e.tag.as_str(), e.value))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                (2.5, 300, "a", 1.5),
+                (2.5, 300, "b/c", -2.0),
+                (3.5, 301, "a", 4.0)
+            ]
+        );
+        assert_eq!(
+            read_scalars(&file[..file.len() - 3]).len(),
+            2,
+            "the last record cut"
+        );
+        let mut bad = file.clone();
+        let at = bad.len() - 6;
+        bad[at] ^= 1;
+        assert_eq!(read_scalars(&bad).len(), 2, "a wrong checksum ends it");
     }
 
     #[test]

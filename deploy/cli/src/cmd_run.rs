@@ -91,6 +91,13 @@ pub struct RunArgs {
     /// an otherwise idle machine, hurts on a shared one.
     #[arg(long)]
     pub pin: bool,
+    /// Serve a page on 127.0.0.1 that shows the run as it learns (as `alfd watch RUN_DIR`); its
+    /// address is printed and kept in RUN_DIR/watch-page.txt.
+    #[arg(long)]
+    pub watch: bool,
+    /// The port of that page (0: a free port).
+    #[arg(long, default_value_t = 0)]
+    pub watch_port: u16,
 }
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
@@ -143,6 +150,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| PathBuf::from("runs").join(&run_id));
     // A run directory belongs to one run: refused if it holds one, locked while this one runs.
     let _lock = run_dir::claim_new(&run_dir)?;
+    if args.watch {
+        let page = crate::cmd_watch::serve(&run_dir, args.watch_port)?;
+        eprintln!("watch the run at {}", page.url());
+    }
     if !prior.is_empty() {
         std::fs::create_dir_all(&run_dir)?;
         alfd_harness::write_prior(&run_dir, &prior)?;

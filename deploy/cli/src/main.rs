@@ -18,6 +18,7 @@ mod cmd_q_range;
 mod cmd_resume;
 mod cmd_run;
 mod cmd_sweep;
+mod cmd_watch;
 mod link_flags;
 mod local_remote;
 mod setup;
@@ -79,6 +80,9 @@ enum Command {
     /// Experiment configs: every key with its default (`reference`), or one file validated and
     /// printed in full (`check`).
     Config(cmd_config::ConfigArgs),
+    /// Serve a page on 127.0.0.1 that shows a run (running or finished) as it learns: learning
+    /// curves, demonstrations against the budget, the gate's firing, throughput.
+    Watch(cmd_watch::WatchArgs),
 }
 
 /// Blocks the products read start on a cache line (see `alfd_common::alloc`).
@@ -112,6 +116,7 @@ fn main() {
         Command::QRange(a) => cmd_q_range::run(a),
         Command::Docs(a) => cmd_docs::run(a),
         Command::Config(a) => cmd_config::run(a),
+        Command::Watch(a) => cmd_watch::run(a),
     };
     if let Err(err) = result {
         eprintln!("error: {}", alfd_harness::describe(err.as_ref()));

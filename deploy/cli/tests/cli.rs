@@ -284,35 +284,7 @@ fn local_refuses_an_output_directory_holding_a_run_and_leaves_it_untouched() {
     ];
     let first = alfd(&args);
     assert!(first.status.success(), "{}", stderr(&first));
-    let snapshot = || {
-        let mut files: Vec<_> = std::fs::read_dir(&out)
-            .unwrap()
-            .map(|e| {
-                let e = e.unwrap();
-                // A directory (`tb/`) by the bytes of its files, in name order.
-                let bytes = if e.path().is_dir() {
-                    let mut inner: Vec<_> = std::fs::read_dir(e.path())
-                        .unwrap()
-                        .map(|f| f.unwrap().path())
-                        .collect();
-                    inner.sort();
-                    inner
-                        .iter()
-                        .flat_map(|f| std::fs::read(f).unwrap())
-                        .collect()
-                } else {
-                    std::fs::read(e.path()).unwrap()
-                };
-                (
-                    e.file_name(),
-                    bytes,
-                    e.metadata().unwrap().modified().unwrap(),
-                )
-            })
-            .collect();
-        files.sort();
-        files
-    };
+    let snapshot = || crate::support::dir_snapshot(&out);
     let before = snapshot();
     assert_usage_error(&args, "already holds a run");
     assert_usage_error(&args, &format!("--out {o}-2"));

@@ -293,7 +293,7 @@ fn chromium() -> Option<PathBuf> {
 
 /// Playwright (`playwright-core`, pinned in deploy/cli/tests/browser/package.json), installed with
 /// `npm ci` on first use; the error says why it cannot be.
-fn browser_driver() -> Result<PathBuf, String> {
+pub(crate) fn browser_driver() -> Result<PathBuf, String> {
     // One install at a time (the browser tests run in parallel).
     static INSTALL: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _one = INSTALL.lock().unwrap_or_else(|e| e.into_inner());
@@ -313,7 +313,7 @@ fn browser_driver() -> Result<PathBuf, String> {
 
 /// The browser and its driver; `None` only when Chromium is not installed (said loudly), and a
 /// failure then when `CI` is set: a test that did not run does not pass there.
-fn browser() -> Option<PathBuf> {
+pub(crate) fn browser() -> Option<PathBuf> {
     if chromium().is_none() {
         assert!(
             !crate::support::under_ci(),
@@ -330,7 +330,7 @@ fn browser() -> Option<PathBuf> {
 }
 
 /// Where a screenshot goes: `docs/` with `ALFD_UPDATE_SCREENSHOTS=1`, else `dir`.
-fn screenshot(dir: &Path, name: &str) -> PathBuf {
+pub(crate) fn screenshot(dir: &Path, name: &str) -> PathBuf {
     if std::env::var_os("ALFD_UPDATE_SCREENSHOTS").is_some() {
         repo().join("docs").join(name)
     } else {

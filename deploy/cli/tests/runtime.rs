@@ -674,22 +674,7 @@ fn a_run_directory_belongs_to_one_run() {
     assert_eq!(o.status.code(), Some(130), "{}", text(&o));
 
     // A finished run's directory: refused, and nothing in it changes.
-    let snapshot = |dir: &Path| {
-        let mut files: Vec<(String, Vec<u8>, std::time::SystemTime)> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| {
-                let e = e.unwrap();
-                let m = e.metadata().unwrap();
-                (
-                    e.file_name().to_string_lossy().into_owned(),
-                    std::fs::read(e.path()).unwrap(),
-                    m.modified().unwrap(),
-                )
-            })
-            .collect();
-        files.sort();
-        files
-    };
+    let snapshot = crate::support::dir_snapshot;
     let before = snapshot(&out);
     let err = refused(&run(&out, 1, &["episodes=5"]));
     assert!(err.contains("already holds a run"), "{err}");

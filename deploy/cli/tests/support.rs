@@ -292,3 +292,35 @@ pub(crate) fn project_python() -> String {
     assert!(setup.status.success(), "{}", text(&setup));
     String::from_utf8(setup.stdout).unwrap().trim().to_owned()
 }
+
+/// What `dir` holds, for telling whether anything in it changed: each entry's name, bytes
+/// (a directory, such as `tb/`, by the bytes of its files in name order) and modification time.
+pub(crate) fn dir_snapshot(dir: &Path) -> Vec<(String, Vec<u8>, std::time::SystemTime)> {
+    let bytes = |p: &Path| -> Vec<u8> {
+        if !p.is_dir() {
+            return std::fs::read(p).unwrap();
+        }
+        let mut inner: Vec<_> = std::fs::read_dir(p)
+            .unwrap()
+            .map(|f| f.unwrap().path())
+            .collect();
+        inner.sort();
+        inner
+            .iter()
+            .flat_map(|f| std::fs::read(f).unwrap())
+            .collect()
+    };
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let e = e.unwrap();
+            (
+                e.file_name().to_string_lossy().into_owned(),
+                bytes(&e.path()),
+                e.metadata().unwrap().modified().unwrap(),
+            )
+        })
+        .collect();
+    files.sort();
+    files
+}

@@ -19,3 +19,4 @@ mod shards;
 mod support;
 mod sweep;
 mod tensorboard;
+mod watch;
