@@ -110,6 +110,9 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let quota = args.episodes.map(|n| n.saturating_add(start.episodes));
     let every = Cadence::steps_for_updates(runtime.checkpoint_every, cfg.agent.updates_per_step);
     let mut checkpoints = Checkpoints::new(run_dir, me.id, &config_toml, every, quota, restored);
+    let mut board =
+        alfd_harness::tensorboard::Board::open(run_dir, &format!("actor-{}", me.id), cfg);
+    let mut waits_seen = 0;
     let end = environment_loop::run_from(
         env.as_mut(),
         &mut actor,
@@ -134,6 +137,17 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
             progress
                 .send(Progress::episode(me.incarnation, *e.record))
                 .map_err(LoopError::link)?;
+            // The expert's answers of this episode: how long this actor waited for them.
+            let waits = &e.expert.answer_waits[waits_seen..];
+            waits_seen = e.expert.answer_waits.len();
+            if !waits.is_empty() {
+                let ms =
+                    waits.iter().map(|w| w.as_secs_f64() * 1e3).sum::<f64>() / waits.len() as f64;
+                board.scalars(
+                    e.record.total_steps,
+                    &[("expert/answer_wait_ms".to_owned(), ms as f32)],
+                );
+            }
             checkpoints.episode_end(&e);
             Ok(ControlFlow::Continue(()))
         },

@@ -116,6 +116,7 @@ fn serve(
         config_toml,
         clock: Instant::now(),
         stats: Stats::default(),
+        board: alfd_harness::tensorboard::Board::open(run_dir, "learner", &setup.config),
     };
     shell.publish(&m)?;
     shell.credits_tx.send(m.book().credits(0))?;
@@ -265,6 +266,8 @@ struct Shell<'w, 'a> {
     config_toml: &'a str,
     clock: Instant,
     stats: Stats,
+    /// The learner's TensorBoard scalars (`RUN_DIR/tb/`).
+    board: alfd_harness::tensorboard::Board,
 }
 
 type Machine = LearnerMachine<NeuralLearner>;
@@ -422,6 +425,13 @@ impl Shell<'_, '_> {
     }
 
     fn status(&mut self, m: &mut Machine, state: u32) -> alfd_harness::Result<()> {
+        let l = m.learner();
+        self.board.learner(
+            m.book().env_steps(),
+            l.updates(),
+            m.loss(),
+            f64::from(l.q_mean()),
+        );
         self.progress.send(Progress {
             kind: progress_kind::STATUS,
             state,

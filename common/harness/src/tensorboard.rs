@@ -109,9 +109,14 @@ impl Board {
         self.write(r.total_steps, &values);
     }
 
-    /// The learner's report: its last TD loss (NaN: none yet) and its update rate since its
-    /// previous report, at the environment step it has learned from.
-    pub fn learner(&mut self, env_steps: u64, updates: u64, loss: f64) {
+    /// Scalars of this process's own at `step`.
+    pub fn scalars(&mut self, step: u64, values: &[(String, f32)]) {
+        self.write(step, values);
+    }
+
+    /// The learner's report: its last TD loss and mean Q-value (NaN: none yet) and its update
+    /// rate since its previous report, at the environment step it has learned from.
+    pub fn learner(&mut self, env_steps: u64, updates: u64, loss: f64, q_mean: f64) {
         if self.writer.is_none() {
             return;
         }
@@ -119,6 +124,9 @@ impl Board {
         let mut values = Vec::new();
         if !loss.is_nan() {
             values.push(("learner/td_loss".to_owned(), loss as f32));
+        }
+        if !q_mean.is_nan() {
+            values.push(("learner/q_mean".to_owned(), q_mean as f32));
         }
         if let Some((then, before)) = self.last_learner {
             if now > then && updates >= before {

@@ -1,7 +1,8 @@
 //! TensorBoard event files, read back with TensorBoard's own reader (the pinned `tensorboard`
-//! package of the project's `.venv/`): `alfd local` and a 2-actor `alfd run` write every tag
-//! the manual names, at the run's environment steps, with the values of `episodes.csv`; and
-//! `logging.tensorboard = false` writes none.
+//! package of the project's `.venv/`): `alfd local` and a 2-actor `alfd run` (the launcher's,
+//! the learner's and each actor's file under one `tb/`) write every tag the manual names, at the
+//! run's environment steps, with the values of `episodes.csv`; and `logging.tensorboard = false`
+//! writes none.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -129,11 +130,13 @@ fn a_two_actor_alfd_run_shows_each_actor_and_the_learner() {
         .unwrap();
     assert!(o.status.success(), "{}", text(&o));
     let s = read(&out.join("tb"));
-    for tag in
-        EPISODE_TAGS
-            .iter()
-            .chain(&["actor/1/sps", "learner/td_loss", "learner/updates_per_s"])
-    {
+    for tag in EPISODE_TAGS.iter().chain(&[
+        "actor/1/sps",
+        "learner/td_loss",
+        "learner/updates_per_s",
+        "learner/q_mean",
+        "expert/answer_wait_ms",
+    ]) {
         assert!(s.contains_key(*tag), "no `{tag}` in {:?}", s.keys());
     }
     assert_eq!(s["demos/used"].len(), column(&out, "demos_used").len());
@@ -141,4 +144,7 @@ fn a_two_actor_alfd_run_shows_each_actor_and_the_learner() {
     let updates: Vec<f64> = s["learner/updates"].iter().map(|p| p.1).collect();
     assert!(updates.windows(2).all(|w| w[0] <= w[1]), "{updates:?}");
     assert!(s["learner/td_loss"].iter().all(|p| p.1.is_finite()));
+    assert!(s["learner/q_mean"].iter().all(|p| p.1.is_finite()));
+    // Each actor's waits for the expert, in milliseconds: never negative.
+    assert!(s["expert/answer_wait_ms"].iter().all(|p| p.1 >= 0.0));
 }

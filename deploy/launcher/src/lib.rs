@@ -539,7 +539,6 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     self.seen.learner_env_steps = p.env_steps;
                     self.seen.learner_updates = p.updates;
                     self.rate.observe(p.env_steps, p.updates);
-                    self.board.learner(p.env_steps, p.updates, p.loss);
                 }
                 (progress_kind::STATUS, Some(Role::Expert)) => {
                     debug!(

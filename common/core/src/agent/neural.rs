@@ -472,6 +472,12 @@ impl NeuralLearner {
         self.updates
     }
 
+    /// The mean Q-value of the online network over the last batch it learned from (NaN before
+    /// the first update).
+    pub fn q_mean(&self) -> f32 {
+        self.scratch.q_mean()
+    }
+
     pub fn network(&self) -> &Mlp {
         &self.online
     }

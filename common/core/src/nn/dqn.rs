@@ -102,6 +102,17 @@ impl TrainScratch {
     pub fn grads(&self) -> Option<&Params> {
         self.grads.as_ref()
     }
+
+    /// The mean of the online network's Q-values over the last batch (every head and action);
+    /// NaN before the first.
+    pub fn q_mean(&self) -> f32 {
+        let q = self.online.q();
+        if q.is_empty() {
+            f32::NAN
+        } else {
+            q.mean()
+        }
+    }
 }
 
 /// SmoothL1 with `beta = 1` (the Huber loss with δ = 1).
