@@ -119,3 +119,33 @@ fn the_manual_s_summary_lists_every_chapter_once() {
         ["c.md#d", "h.png"]
     );
 }
+
+#[test]
+fn experiments_and_benchmarks_list_every_section_in_their_contents() {
+    for doc in ["EXPERIMENTS.md", "BENCHMARKS.md"] {
+        let text = std::fs::read_to_string(workspace().join(doc)).unwrap();
+        let contents = text
+            .split("## Contents\n")
+            .nth(1)
+            .unwrap_or_else(|| panic!("{doc} has no `## Contents`"));
+        let contents = &contents[..contents.find("\n## ").unwrap_or(contents.len())];
+        let listed = link_targets(contents);
+        let mut fenced = false;
+        for line in text.lines() {
+            if line.starts_with("```") {
+                fenced = !fenced;
+            }
+            let Some(head) = line.strip_prefix("## ").filter(|_| !fenced) else {
+                continue;
+            };
+            if head == "Contents" {
+                continue;
+            }
+            let anchor = format!("#{}", slug(head));
+            assert!(
+                listed.contains(&anchor),
+                "{doc}: `{head}` is not in its contents"
+            );
+        }
+    }
+}
