@@ -11,8 +11,9 @@
 //! - a demonstration is on disk here before its answer reaches an actor (an answer whose line is
 //!   not here is dropped), and a model that counts demonstrations not yet written here waits
 //!   until they are;
-//! - nothing more is taken from a generation whose host left or whose expert exited (its lines
-//!   are refused and counted, its answers neither written nor answered);
+//! - nothing more is taken from a generation whose host left or whose expert exited, nor from one
+//!   the control no longer names active (its lines are refused and counted, its answers neither
+//!   written nor answered): one writer of `demos.jsonl` at a time;
 //! - an answer goes only to the query it answers (an actor's newer query replaces its older one;
 //!   an answer with a demonstration that comes too late for its query is counted late).
 
@@ -203,6 +204,16 @@ impl<Q> ExpertDesk<Q> {
                 lines.len()
             ));
         }
+        // Only the active generation writes: a generation the control has moved on from (its
+        // successor may have written at the same indices) is not taken.
+        if self.active != 0 && self.active != u32::from(generation) {
+            self.refused += lines.len() as u64;
+            return Intake::Refused(format!(
+                "{} demonstrations of generation {generation}, which is not the active one ({})",
+                lines.len(),
+                self.active
+            ));
+        }
         let first = first as usize;
         if first > self.written {
             if self.resend_asked == Some(self.written) {
@@ -291,6 +302,24 @@ impl<Q> ExpertDesk<Q> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lines_of_a_generation_the_control_moved_on_from_are_refused() {
+        let mut d = ExpertDesk::<u8>::default();
+        d.started(2, "a");
+        assert_eq!(d.control(2), Some(2));
+        d.log_sent(136);
+        let line = || vec!["{\"index\":136}".to_owned()];
+        assert_eq!(d.demos(2, 136, line()), Intake::Append(line()));
+        d.appended(1);
+        // A local generation 3 is made active (it reads the file and writes at 137 on); a late
+        // line of generation 2 must not follow its lines.
+        assert_eq!(d.control(3), None);
+        assert!(
+            matches!(d.demos(2, 137, line()), Intake::Refused(why) if why.contains("not the active one"))
+        );
+        assert_eq!(d.refused(), 1);
+    }
 
     #[test]
     fn only_the_host_serving_a_generation_speaks_for_its_expert() {

@@ -132,7 +132,7 @@ impl Hub {
 
         let queryable = joins(&session, &opts, &roster, &events_tx)?;
         let restarts = restarts(&session, &opts.run_id, &roster, &events_tx)?;
-        let members = members(&session, &opts.run_id, &roster, &post, &events_tx)?;
+        let members = members(&session, &opts.run_id, &post)?;
         let token = session
             .liveliness()
             .declare_token(keys::hub(&opts.run_id))
@@ -327,17 +327,17 @@ fn restarts(
         .map_err(zenoh_error)
 }
 
-/// Members: each joined host holds a liveliness token; when it goes, so do its actors.
+/// Members: each joined host holds a liveliness token; when it goes, so do its actors. Its
+/// going is posted to the hub's thread, in order with the host's last frames: the roster and the
+/// launcher learn it only there, after every frame the host sent before it is handled (a
+/// remote expert counted gone while its last demonstrations wait in the inbox would let a new
+/// expert write at their indices).
 fn members(
     session: &zenoh::Session,
     run_id: &str,
-    roster: &Arc<Mutex<Roster>>,
     post: &Post,
-    events_tx: &mpsc::Sender<HubEvent>,
 ) -> Result<zenoh::pubsub::Subscriber<()>> {
-    let roster = Arc::clone(roster);
     let post = post.clone();
-    let events_tx = events_tx.clone();
     let prefix = keys::member(run_id, "");
     session
         .liveliness()
@@ -350,17 +350,7 @@ fn members(
                     debug!(%join_id, "remote host up");
                     post.send(Mail::Joined);
                 }
-                SampleKind::Delete => {
-                    post.send(Mail::Left(join_id.clone()));
-                    let left = roster.lock().expect("roster").leave(&join_id);
-                    if !left.actors.is_empty() || left.expert {
-                        let _ = events_tx.send(HubEvent::Left {
-                            join_id,
-                            actors: left.actors,
-                            expert: left.expert,
-                        });
-                    }
-                }
+                SampleKind::Delete => post.send(Mail::Left(join_id)),
             }
         })
         .wait()
@@ -566,8 +556,18 @@ impl<'w, 'a> Forwarder<'w, 'a> {
                 self.newest.orders.push(f);
             }
             Mail::Left(join_id) => {
+                // In the inbox's order: every frame the host sent before it left is handled, so
+                // its expert's last lines are in demos.jsonl before the launcher counts it gone.
                 for generation in self.desk.host_left(&join_id) {
                     info!(generation, %join_id, "the remote expert's host left");
+                }
+                let left = self.roster.lock().expect("roster").leave(&join_id);
+                if !left.actors.is_empty() || left.expert {
+                    let _ = self.events.send(HubEvent::Left {
+                        join_id,
+                        actors: left.actors,
+                        expert: left.expert,
+                    });
                 }
             }
             Mail::Exited { .. } => {}
