@@ -80,29 +80,20 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let mut expert = wire_expert(&session, me, &setup, &args.process.run_dir)?;
     // A restored actor continues where its checkpoint stands.
     let run_dir = &args.process.run_dir;
-    let config_toml = std::fs::read_to_string(run_dir.join("config.toml"))
-        .map_err(|e| BadInput(format!("cannot read the run's config.toml: {e}")))?;
-    let restored = (args.restore_step)
-        .map(|step| restore(run_dir, me.id, step, &config_toml))
-        .transpose()?;
+    let (config_toml, restored) = restored(args, me.id)?;
     let mut start = environment_loop::Progress::default();
     if let Some(c) = &restored {
         start = continue_from(c, &mut core, env.as_mut(), &mut adder, &mut expert)?;
     }
-    if let Some(stop) = variables.first(&session, &mut core, runtime.handshake_timeout())? {
-        // A restarted actor the run's end overtook: nothing to play, nothing lost.
-        info!(
-            reason = stop.0,
-            "stopped before the learner's first weights arrived"
-        );
+    if !first_weights(
+        &mut variables,
+        &session,
+        &mut core,
+        me,
+        runtime.handshake_timeout(),
+    )? {
         return Ok(());
     }
-    info!(
-        actor = me.id,
-        incarnation = me.incarnation,
-        weights = core.weights_version(),
-        "actor running"
-    );
     let mut progress = wire.progress_sender()?;
     let mut actor = GenericActor::new(core, adder, variables);
     let mut eval_env = setup.actor_env(&mut adapter, &args.process, args.actor_id, schema)?;
@@ -110,9 +101,10 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let quota = args.episodes.map(|n| n.saturating_add(start.episodes));
     let every = Cadence::steps_for_updates(runtime.checkpoint_every, cfg.agent.updates_per_step);
     let mut checkpoints = Checkpoints::new(run_dir, me.id, &config_toml, every, quota, restored);
-    let mut board =
-        alfd_harness::tensorboard::Board::open(run_dir, &format!("actor-{}", me.id), cfg);
-    let mut waits_seen = 0;
+    let mut waits = AnswerWaits {
+        board: alfd_harness::tensorboard::Board::open(run_dir, &format!("actor-{}", me.id), cfg),
+        seen: 0,
+    };
     let end = environment_loop::run_from(
         env.as_mut(),
         &mut actor,
@@ -137,30 +129,71 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
             progress
                 .send(Progress::episode(me.incarnation, *e.record))
                 .map_err(LoopError::link)?;
-            // The expert's answers of this episode: how long this actor waited for them.
-            let waits = &e.expert.answer_waits[waits_seen..];
-            waits_seen = e.expert.answer_waits.len();
-            if !waits.is_empty() {
-                let ms =
-                    waits.iter().map(|w| w.as_secs_f64() * 1e3).sum::<f64>() / waits.len() as f64;
-                board.scalars(
-                    e.record.total_steps,
-                    &[("expert/answer_wait_ms".to_owned(), ms as f32)],
-                );
-            }
+            waits.episode_end(&e.expert.answer_waits, e.record.total_steps);
             checkpoints.episode_end(&e);
             Ok(ControlFlow::Continue(()))
         },
     )?;
     log_end(&end, &actor, &expert, &checkpoints);
     if end.stopped.is_none() {
-        // Its share played: it stays until the launcher says stop, since messages of a process
-        // that has exited may never reach their receiver (its episodes, its last transitions).
-        info!("played its share of the episodes; waiting for the run to end");
-        let reason = wait_for_stop(&session)?;
-        info!(reason, "actor leaving");
+        stay_until_stop(&session)?;
     }
     Ok(())
+}
+
+/// Waits for the learner's first weights; `false` when the run's end overtook a restarted actor
+/// first (nothing to play, nothing lost).
+fn first_weights(
+    variables: &mut WireVariables<'_>,
+    session: &Session<'_>,
+    core: &mut NeuralActor,
+    me: Identity,
+    timeout: Duration,
+) -> alfd_harness::Result<bool> {
+    if let Some(stop) = variables.first(session, core, timeout)? {
+        info!(
+            reason = stop.0,
+            "stopped before the learner's first weights arrived"
+        );
+        return Ok(false);
+    }
+    info!(
+        actor = me.id,
+        incarnation = me.incarnation,
+        weights = core.weights_version(),
+        "actor running"
+    );
+    Ok(true)
+}
+
+/// Its share played, the actor stays until the launcher says stop, since messages of a process
+/// that has exited may never reach their receiver (its episodes, its last transitions).
+fn stay_until_stop(session: &Session<'_>) -> alfd_harness::Result<()> {
+    info!("played its share of the episodes; waiting for the run to end");
+    let reason = wait_for_stop(session)?;
+    info!(reason, "actor leaving");
+    Ok(())
+}
+
+/// This actor's TensorBoard file: at each episode's end, the mean time it waited for the
+/// expert's answers of that episode (`expert/answer_wait_ms`).
+struct AnswerWaits {
+    board: alfd_harness::tensorboard::Board,
+    /// The answers already reported.
+    seen: usize,
+}
+
+impl AnswerWaits {
+    fn episode_end(&mut self, all: &[std::time::Duration], step: u64) {
+        let new = &all[self.seen.min(all.len())..];
+        self.seen = all.len();
+        if new.is_empty() {
+            return;
+        }
+        let ms = new.iter().map(|w| w.as_secs_f64() * 1e3).sum::<f64>() / new.len() as f64;
+        let tag = "expert/answer_wait_ms".to_owned();
+        self.board.scalars(step, &[(tag, ms as f32)]);
+    }
 }
 
 /// How the actor's run ended, with what waiting and checkpoints cost it.
@@ -329,6 +362,20 @@ impl<'a> Checkpoints<'a> {
 }
 
 /// Puts a checkpoint's state into the actor's pieces; the progress it continues from.
+/// The run's `config.toml` and, for an actor restarted from a checkpoint, that checkpoint.
+fn restored(
+    args: &Args,
+    id: u16,
+) -> alfd_harness::Result<(String, Option<checkpoint::ActorCheckpoint>)> {
+    let run_dir = &args.process.run_dir;
+    let config_toml = std::fs::read_to_string(run_dir.join("config.toml"))
+        .map_err(|e| BadInput(format!("cannot read the run's config.toml: {e}")))?;
+    let restored = (args.restore_step)
+        .map(|step| restore(run_dir, id, step, &config_toml))
+        .transpose()?;
+    Ok((config_toml, restored))
+}
+
 fn continue_from(
     c: &checkpoint::ActorCheckpoint,
     core: &mut NeuralActor,
