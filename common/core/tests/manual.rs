@@ -149,3 +149,115 @@ fn experiments_and_benchmarks_list_every_section_in_their_contents() {
         }
     }
 }
+
+/// A number as prose writes it (the minus sign `−` or `-`, a `+`, thousands commas), if it is one.
+fn number(token: &str) -> Option<(f64, usize)> {
+    let t: String = token
+        .trim_start_matches('+')
+        .replace('−', "-")
+        .replace(',', "");
+    let ok = t.chars().any(|c| c.is_ascii_digit())
+        && t.chars()
+            .all(|c| c.is_ascii_digit() || c == '.' || c == '-');
+    let decimals = t.split_once('.').map_or(0, |(_, d)| d.len());
+    ok.then(|| t.parse().ok().map(|v| (v, decimals))).flatten()
+}
+
+/// Every `value [low, high]` of `text`, each number with its decimals.
+fn intervals(text: &str) -> Vec<[(f64, usize); 3]> {
+    let mut out = Vec::new();
+    let mut rest = text;
+    while let Some(i) = rest.find(" [") {
+        let before = rest[..i].rsplit(|c: char| c.is_whitespace() || c == '|' || c == '(');
+        let inside = rest[i + 2..].split(']').next().unwrap_or("");
+        rest = &rest[i + 2..];
+        let Some(value) = before.into_iter().next().and_then(number) else {
+            continue;
+        };
+        let parts: Vec<&str> = inside.split(", ").collect();
+        if let [lo, hi] = parts[..] {
+            if let (Some(lo), Some(hi)) = (number(lo), number(hi)) {
+                out.push([value, lo, hi]);
+            }
+        }
+    }
+    out
+}
+
+/// `text` without its generated parts and code blocks.
+fn prose(text: &str) -> String {
+    let mut out = String::new();
+    let (mut generated, mut fenced) = (false, false);
+    for line in text.lines() {
+        if line.starts_with("<!-- generated from") {
+            generated = true;
+        }
+        if line.starts_with("```") {
+            fenced = !fenced;
+        }
+        if !generated && !fenced && !line.starts_with("```") {
+            out.push_str(line);
+            out.push('\n');
+        }
+        if line.starts_with("<!-- end generated -->") {
+            generated = false;
+        }
+    }
+    out
+}
+
+#[test]
+fn every_interval_quoted_in_prose_is_in_a_committed_results_file() {
+    let mut found: Vec<[f64; 3]> = Vec::new();
+    let mut dirs = vec![workspace().join("results")];
+    while let Some(dir) = dirs.pop() {
+        for e in std::fs::read_dir(&dir).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                dirs.push(p);
+            } else if p
+                .extension()
+                .is_some_and(|x| ["md", "csv", "txt", "json"].contains(&x.to_str().unwrap()))
+            {
+                let text = std::fs::read_to_string(&p).unwrap_or_default();
+                found.extend(intervals(&text).iter().map(|t| t.map(|(v, _)| v)));
+            }
+        }
+    }
+    let mut docs: Vec<PathBuf> = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"]
+        .iter()
+        .map(|d| workspace().join(d))
+        .collect();
+    docs.extend(chapters());
+    let mut missing = Vec::new();
+    let mut quoted = 0;
+    for doc in &docs {
+        for t in intervals(&prose(&std::fs::read_to_string(doc).unwrap())) {
+            quoted += 1;
+            // A results value rounded to the prose's decimals.
+            let same = |r: &[f64; 3]| {
+                (0..3).all(|i| format!("{:.*}", t[i].1, r[i]) == format!("{:.*}", t[i].1, t[i].0))
+            };
+            if !found.iter().any(same) {
+                let name = doc.strip_prefix(workspace()).unwrap().display();
+                missing.push(format!("{name}: {} [{}, {}]", t[0].0, t[1].0, t[2].0));
+            }
+        }
+    }
+    assert!(
+        quoted >= 100,
+        "only {quoted} intervals read: the reader is broken"
+    );
+    assert!(
+        missing.is_empty(),
+        "intervals in prose that no file under results/ holds:\n{}",
+        missing.join("\n")
+    );
+    assert_eq!(
+        intervals("mean −2.1 [−8.6, +4.3] and (11,155 [10,351, 12,762]) | x [a, b]"),
+        [
+            [(-2.1, 1), (-8.6, 1), (4.3, 1)],
+            [(11155.0, 0), (10351.0, 0), (12762.0, 0)]
+        ]
+    );
+}
