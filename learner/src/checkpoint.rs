@@ -44,7 +44,7 @@ pub fn save(
 }
 
 /// Reads the checkpoint, if there is one; one that cannot be trusted (truncated, corrupt, of
-/// another version or another config) is [`BadInput`](alfd_harness::BadInput) saying which, and
+/// another version or another config) is [`BadInput`] saying which, and
 /// is left as it is.
 pub fn load(run_dir: &Path, config_toml: &str) -> alfd_harness::Result<Option<LearnerCheckpoint>> {
     load_checkpoint(&path(run_dir), config_toml, "the learner was not restored")

@@ -29,7 +29,7 @@ pub struct Sched {
 }
 
 impl Sched {
-    /// The query path: the short [`QUERY_SLICE`] (or what [`QUERY_SLICE_VAR`] says), the nice
+    /// The query path: the short [`QUERY_SLICE`] (or what `QUERY_SLICE_VAR` says), the nice
     /// value the thread has (lowering it would need a privilege).
     pub fn query_path() -> Sched {
         Sched {

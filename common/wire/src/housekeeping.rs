@@ -100,7 +100,7 @@ pub fn wait_for_run_end(run_id: &str, timeout: std::time::Duration) -> Result<Ve
 /// no public way to: the dead-node clean-up above (`Node::list`, `DeadNodeView`) leaves it, and
 /// `Node::force_remove_service` removes services only. It is POSIX shared memory named
 /// `<prefix><40 hex digits>_node.<version>.global_mgmt` (`/dev/shm`), used only while a node is
-/// created; [`node_counters`] finds it by that exact form, so never another run's, even one whose
+/// created; `node_counters` finds it by that exact form, so never another run's, even one whose
 /// id starts with this one's (the part after this run's prefix would hold a `_` or a non-hex
 /// letter). A test checks that no file of a closed run is left.
 pub fn close_run(run_id: &str) -> Result<()> {

@@ -353,7 +353,7 @@ impl PendingQuery<'_> {
 
     /// The answer, once. Any further response to the same request (two experts up during a
     /// swap), or a response to another request, is dropped and counted in
-    /// [`PendingQuery::duplicates`].
+    /// `PendingQuery::duplicates`.
     pub fn poll(&mut self) -> Result<Option<QueryResponse>> {
         while let Some(r) = self
             .pending

@@ -33,7 +33,7 @@ pub struct EnvArgs {
 pub enum EnvCommand {
     /// Step CartPole, MountainCar or Acrobot from a given state through a list of actions,
     /// printing one JSON object per step with the float64 state after it, e.g. for CartPole
-    /// {"state":[x,x_dot,theta,theta_dot],"reward":1.0,"terminated":false,"truncated":false}.
+    /// `{"state":[x,x_dot,theta,theta_dot],"reward":1.0,"terminated":false,"truncated":false}`.
     Rollout(RolloutArgs),
     /// Print a CliffWalk map as text, then its size and the optimal value of S.
     Show(ShowArgs),

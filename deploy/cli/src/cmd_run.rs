@@ -66,7 +66,7 @@ pub struct RunArgs {
     #[arg(long, default_value_t = alfd_harness::DEFAULT_HUMAN_QUERY_TIMEOUT_MS)]
     pub human_query_timeout_ms: u64,
     /// The port of the human expert's page on 127.0.0.1 (0: a free port; the address is
-    /// printed, and kept in RUN_DIR/human-page-<generation>.txt).
+    /// printed, and kept in `RUN_DIR/human-page-<generation>.txt`).
     #[arg(long, default_value_t = 0)]
     pub human_port: u16,
     /// The learner publishes its weights every this many updates.
@@ -257,7 +257,7 @@ fn runtime_config(
 }
 
 /// Runs `plan` to its end, writes `summary.json` and reports (the learning curve, the JSON
-/// line, the summary: see [`crate::report`]).
+/// line, the summary: see `alfd_lab::report`).
 pub fn finish(plan: &Plan, output: Output) -> anyhow::Result<()> {
     let run_dir = &plan.run_dir;
     let summary = launcher::launch(plan)?;

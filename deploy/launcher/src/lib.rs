@@ -20,7 +20,7 @@
 //! - An expert that dies is restarted as a new generation, like a swap without the old one: it
 //!   reads `demos.jsonl` back, so the budget and the demonstrations carry over; meanwhile the
 //!   actors act on their own (up to `--max-restarts` expert restarts). The decisions are in
-//!   [`ExpertLifecycle`](crate::expert_lifecycle::ExpertLifecycle).
+//!   [`ExpertLifecycle`].
 //! - A learner that dies is restarted from its last checkpoint (`RUN_DIR/learner.ckpt`, every
 //!   `checkpoint_every` updates) while the actors wait for credits; what it learned since that
 //!   checkpoint is lost (up to `--max-restarts` learner restarts).

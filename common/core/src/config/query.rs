@@ -53,7 +53,7 @@ pub struct QueryConfig {
     #[serde(default, skip_serializing_if = "super::is_zero_u64")]
     pub horizon: u64,
     /// Rule `random`: the global steps read from `schedule` by
-    /// [`ExperimentConfig::load_schedule`] (not part of the TOML).
+    /// [`ExperimentConfig::load_schedule`](crate::config::ExperimentConfig::load_schedule) (not part of the TOML).
     #[serde(skip)]
     pub schedule_steps: Vec<u64>,
 }

@@ -331,7 +331,7 @@ impl KrrFactor {
     /// The regression on the demonstrations factored: `L Lᵀ C = Y` solved for the dual
     /// coefficients, O(n²) per action: by nalgebra below [`BLOCKED_FROM`] demonstrations (the
     /// numbers every smaller run keeps), from there on by back substitution from the kept
-    /// `L⁻¹ Y` ([`KrrFactor::back_solve`]).
+    /// `L⁻¹ Y` (`KrrFactor::back_solve`).
     pub fn model(&self) -> KernelRidge {
         self.model_on(&Serial)
     }

@@ -11,7 +11,7 @@
 //!   with the pure [`NeuralActor`] by [`GenericActor`]: the learner in the same process
 //!   ([`in_process::LearnerHandle`]) or the learner process over the wire.
 //!
-//! The tabular agents learn where they act: [`TabularAgent`](crate::agent::TabularAgent) is an
+//! The tabular agents learn where they act: [`TabularAgent`] is an
 //! [`Actor`] by itself.
 //!
 //! Nothing here does I/O; a transport's errors reach the caller as [`LoopError::Link`].

@@ -25,7 +25,7 @@
 //! - `double`: Double DQN targets, `y = r + gamma * Q_target_k(s', argmax_a Q_k(s', a))`
 //!   (van Hasselt et al. 2016), the action chosen by the online head;
 //! - `margin_weight > 0`: DQfD's large-margin loss on demonstrated transitions (Hester et al.
-//!   2018; the paper's ref. [5] adds it to the TD loss),
+//!   2018; the paper's ref. \[5\] adds it to the TD loss),
 //!   `lambda_E * (max_a [Q_k(s, a) + l(a_E, a)] - Q_k(s, a_E)) / B` with `l = margin` for
 //!   `a != a_E`, 0 otherwise;
 //! - `target_bounds = (lo, hi)`: each target `y` clamped to `[lo, hi]`, the range every true value
