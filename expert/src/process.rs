@@ -81,7 +81,13 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let earlier = read_demos(&demos_path, obs_dim, actions)?;
     info!(expert = %name, generation = args.generation, demos = earlier.len(), "expert starting");
     let me = Process::new(Role::Expert, args.generation);
-    let source = source(args, cfg.env.name, &name, me, schema, actions)?;
+    // A run that never asks (B = 0) needs no expert for its environment: its own (the config's)
+    // is not built; one swapped in by name is.
+    let source = if name == cfg.expert.name && !cfg.needs_expert() {
+        Source::BuiltIn(Box::new(alfd_common::agent::NoExpert))
+    } else {
+        source(args, cfg.env.name, &name, me, schema, actions)?
+    };
     let wire = args.process.connect(me, schema)?;
     let session = Session::join(&wire, Doorbell::Expert, runtime.handshake_timeout())?;
     let core = expert_core(args, cfg, obs_dim, actions)?;

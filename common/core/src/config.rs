@@ -630,6 +630,14 @@ impl ExperimentConfig {
         self.budget.total as u32
     }
 
+    /// Whether the run ever consults an expert: a budget to ask it, several experts, or the
+    /// `oracle` gate. Without, no expert need exist for the environment (B = 0 anywhere).
+    pub fn needs_expert(&self) -> bool {
+        self.budget() > 0
+            || !self.experts.is_empty()
+            || self.query.gate == Some(crate::query::GateKind::Oracle)
+    }
+
     /// The query rule's spec: `[query]` with the run's budget and length.
     pub fn rule_spec(&self) -> crate::query::RuleSpec {
         self.query.spec(u64::from(self.budget()), self.steps)

@@ -207,6 +207,9 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
     if !cfg.experts.is_empty() {
         return panel(cfg).map(|_| ());
     }
+    if !cfg.needs_expert() {
+        return Ok(());
+    }
     if cfg.expert.name == alfd_expert::human::HUMAN {
         // A person answers on a web page: any environment, any number of actions.
         return Ok(());
@@ -260,6 +263,9 @@ pub fn panel(
 pub fn neural_demonstrator(
     cfg: &ExperimentConfig,
 ) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>> {
+    if !cfg.needs_expert() {
+        return Ok(Box::new(alfd_common::agent::NoExpert));
+    }
     if cfg.expert.name == alfd_expert::human::HUMAN {
         return Err(usage(
             "the human expert (a person on a web page) answers in `alfd run` and `alfd \

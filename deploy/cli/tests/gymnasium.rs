@@ -495,3 +495,46 @@ fn an_adapter_killed_with_sigkill_takes_its_actor_down_and_both_are_restarted() 
     let id = crate::runtime::run_id(&out);
     assert_eq!(wire::leftover_files(&id), Vec::<std::path::PathBuf>::new());
 }
+
+#[test]
+fn a_gymnasium_run_with_no_budget_needs_no_expert_and_one_with_a_budget_does() {
+    let _time = timed!();
+    let out = tmp("gym-no-expert");
+    let config = out.join("acrobot.toml");
+    // No expert named: the default one is CartPole's, which cannot play Acrobot.
+    std::fs::write(
+        &config,
+        "seed = 3\nepisodes = 3\n[env]\nname = \"gymnasium\"\nid = \"Acrobot-v1\"\n\
+         max_episode_steps = 40\n[agent]\nkind = \"bdqn\"\nbatch_size = 16\n\
+         [query]\nrule = \"never\"\n[budget]\ntotal = 0\n",
+    )
+    .unwrap();
+    for cmd in ["local", "run"] {
+        let run_dir = out.join(cmd);
+        let o = alfd()
+            .args([cmd, "--quiet"])
+            .arg(format!("--config={}", config.display()))
+            .arg(format!("--out={}", run_dir.display()))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{cmd}: {}", text(&o));
+        let csv = std::fs::read_to_string(run_dir.join("episodes.csv")).unwrap();
+        assert_eq!(csv.lines().count(), 4, "{cmd}: {csv}");
+    }
+    // With a budget the expert is needed, and the default one is refused, naming it.
+    let o = alfd()
+        .args([
+            "local",
+            "--quiet",
+            "--set",
+            "budget.total=5",
+            "--set",
+            "query.rule=\"first\"",
+        ])
+        .arg(format!("--config={}", config.display()))
+        .arg(format!("--out={}", out.join("refused").display()))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("cartpole-1000"), "{}", text(&o));
+}

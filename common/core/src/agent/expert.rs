@@ -29,6 +29,20 @@ pub trait Demonstrator<S: ?Sized> {
     }
 }
 
+/// The demonstrator of a run that never asks one (B = 0, no oracle): asking it is a bug.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoExpert;
+
+impl<S: ?Sized> Demonstrator<S> for NoExpert {
+    fn act(&mut self, _: &S) -> usize {
+        unreachable!("a run with a budget of 0 asked its expert")
+    }
+
+    fn try_act(&mut self, _: &S) -> Result<usize, String> {
+        Err("the run has no expert (budget.total = 0)".to_owned())
+    }
+}
+
 /// One demonstrator for its first `after` answers and another from then on: an expert whose
 /// quality changes behind the same name (`[[experts]]`' `becomes`).
 pub struct Becomes<'d, S: ?Sized> {

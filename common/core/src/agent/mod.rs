@@ -14,7 +14,7 @@ pub mod tabular;
 pub use demo::{DemoRecord, PriorDemo};
 pub use expert::{
     BalancingController, Becomes, Demonstrator, ExpertCore, ExpertSnapshot, NetworkDemonstrator,
-    TablePolicy,
+    NoExpert, TablePolicy,
 };
 pub use neural::{ActorSnapshot, LearnerSnapshot, NeuralActor, NeuralLearner};
 pub use refit::{RefitJob, Refitted};
