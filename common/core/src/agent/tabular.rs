@@ -1,6 +1,6 @@
 //! The tabular agents of section 5.1.1: Q-learning and SARSA with softmax exploration, and
 //! bootstrapped Q-learning (K Q-tables, randomized masked updates, one greedy head per episode).
-//! A tabular agent learns where it acts: it is an [`Actor`](crate::environment_loop::Actor) of the environment loop by itself.
+//! A tabular agent learns where it acts: it is an `Actor` of the environment loop by itself.
 
 use rand::Rng as _;
 
