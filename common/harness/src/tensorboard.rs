@@ -74,6 +74,9 @@ impl EventWriter {
 #[derive(Debug)]
 pub struct Board {
     writer: Option<EventWriter>,
+    /// Where the file goes once there is something to write (none is made for a run refused
+    /// before its first episode): the run directory and the process's name.
+    pending: Option<(PathBuf, String)>,
     scalars: EpisodeScalars,
     start: Instant,
     /// The learner's last report: when, and its updates then.
@@ -83,17 +86,13 @@ pub struct Board {
 impl Board {
     /// The board of `process` in `run_dir`; writes nothing when `logging.tensorboard` is off.
     pub fn open(run_dir: &Path, process: &str, cfg: &ExperimentConfig) -> Self {
-        let writer = if cfg.logging.tensorboard {
-            EventWriter::create(run_dir, process)
-                .map_err(|e| {
-                    tracing::warn!("no TensorBoard event file in {}: {e}", run_dir.display())
-                })
-                .ok()
-        } else {
-            None
-        };
+        let pending = cfg
+            .logging
+            .tensorboard
+            .then(|| (run_dir.to_path_buf(), process.to_owned()));
         Self {
-            writer,
+            writer: None,
+            pending,
             scalars: EpisodeScalars::new(cfg.budget()),
             start: Instant::now(),
             last_learner: None,
@@ -102,7 +101,7 @@ impl Board {
 
     /// The scalars after episode `r`.
     pub fn episode(&mut self, r: &EpisodeRecord) {
-        if self.writer.is_none() {
+        if !self.on() {
             return;
         }
         let values = self.scalars.after(r, self.start.elapsed().as_secs_f64());
@@ -117,7 +116,7 @@ impl Board {
     /// The learner's report: its last TD loss and mean Q-value (NaN: none yet) and its update
     /// rate since its previous report, at the environment step it has learned from.
     pub fn learner(&mut self, env_steps: u64, updates: u64, loss: f64, q_mean: f64) {
-        if self.writer.is_none() {
+        if !self.on() {
             return;
         }
         let now = self.start.elapsed().as_secs_f64();
@@ -139,7 +138,20 @@ impl Board {
         self.write(env_steps, &values);
     }
 
+    /// Whether scalars are written; the file is made at the first call.
+    fn on(&mut self) -> bool {
+        if let Some((dir, process)) = self.pending.take() {
+            self.writer = EventWriter::create(&dir, &process)
+                .map_err(|e| tracing::warn!("no TensorBoard event file in {}: {e}", dir.display()))
+                .ok();
+        }
+        self.writer.is_some()
+    }
+
     fn write(&mut self, step: u64, values: &[(String, f32)]) {
+        if !self.on() {
+            return;
+        }
         if let Some(w) = &mut self.writer {
             if let Err(e) = w.scalars(step, values) {
                 tracing::warn!(

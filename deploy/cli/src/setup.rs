@@ -208,6 +208,10 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
         return panel(cfg).map(|_| ());
     }
     if !cfg.needs_expert() {
+        // No expert to check; a map is still read now, so that a bad one is refused first.
+        if cfg.env.name.is_tabular() {
+            TabularEnvs::of(cfg)?;
+        }
         return Ok(());
     }
     if cfg.expert.name == alfd_expert::human::HUMAN {
