@@ -77,10 +77,7 @@ pub fn serve(run_dir: &Path, port: u16) -> anyhow::Result<WatchPage> {
     })?;
     listener.set_nonblocking(true)?;
     let addr = listener.local_addr()?;
-    let token = {
-        use rand::Rng as _;
-        format!("{:032x}", rand::rng().random::<u128>())
-    };
+    let token = alfd_expert::human::new_token();
     let dir = Arc::new(run_dir.to_path_buf());
     let at = |path: &str| format!("/{token}/{path}");
     let app = Router::new()

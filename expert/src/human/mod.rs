@@ -226,8 +226,9 @@ impl HumanPage {
     }
 }
 
-/// 128 random bits from the operating system's generator, as 32 hexadecimal digits.
-fn new_token() -> String {
+/// 128 random bits from the operating system's generator, as 32 hexadecimal digits: the secret
+/// path segment of a page on 127.0.0.1 (this one's, and `alfd watch`'s).
+pub fn new_token() -> String {
     use rand::Rng as _;
     format!("{:032x}", rand::rng().random::<u128>())
 }
