@@ -277,11 +277,15 @@ fn wire_expert<'s, 'w>(
     let schedule = cfg.shaping_enabled().then(|| cfg.shaping.schedule());
     let (obs_dim, actions) = setup.env_dims()?;
     let prior = alfd_harness::read_prior(run_dir, obs_dim, actions)?.len();
-    Ok(
-        WireExpert::new(session, me, cfg.budget(), schedule, runtime.query_timeout())?
-            .with_human_timeout(runtime.query_timeout_for(alfd_harness::HUMAN_EXPERT))
-            .with_prior_demos(prior),
-    )
+    Ok(WireExpert::new(
+        session,
+        me,
+        (cfg.budget(), obs_dim),
+        schedule,
+        runtime.query_timeout(),
+    )?
+    .with_human_timeout(runtime.query_timeout_for(alfd_harness::HUMAN_EXPERT))
+    .with_prior_demos(prior))
 }
 
 /// The actor's checkpoints: every `checkpoint_every` updates' worth of global steps, between two

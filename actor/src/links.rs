@@ -14,8 +14,8 @@ use alfd_common::replay::Transition;
 use alfd_common::shaping::ShapingSchedule;
 use alfd_harness::{Session, What as _};
 use alfd_wire::{
-    Bell, Credits, DemoModelReceiver, QueryClient, QueryRequest, Receiver, Sender, TransitionBatch,
-    WeightsReceiver,
+    Bell, Credits, DemoModelReceiver, QueryClient, QueryRequest, Receiver, TransitionBatch,
+    TransitionSender, WeightsReceiver,
 };
 use tracing::{debug, warn};
 
@@ -33,7 +33,7 @@ pub struct WireAdder<'s, 'w> {
     me: Identity,
     gate: CreditGate,
     poll: CreditPoll,
-    tx: Sender<'w, TransitionBatch>,
+    tx: TransitionSender<'w>,
     learner: Bell,
     credits_rx: Receiver<'w, Credits>,
     batch: TransitionBatch,
@@ -62,7 +62,7 @@ impl<'s, 'w> WireAdder<'s, 'w> {
             me,
             gate: CreditGate::new(me, window),
             poll,
-            tx: wire.transitions_sender()?,
+            tx: wire.transitions_sender(obs_dim, heads)?,
             learner: wire.bell(alfd_wire::Doorbell::Learner)?,
             credits_rx: wire.credits_receiver()?,
             batch: TransitionBatch::new(me.id, me.incarnation, obs_dim, heads, 0)?,
@@ -100,7 +100,7 @@ impl<'s, 'w> WireAdder<'s, 'w> {
     fn flush(&mut self, blocked: bool) -> Result<()> {
         if blocked || !self.batch.is_empty() {
             self.batch.blocked = u32::from(blocked);
-            self.tx.send(self.batch).map_err(LoopError::link)?;
+            self.tx.send(&self.batch).map_err(LoopError::link)?;
             self.learner.ring().map_err(LoopError::link)?;
         }
         self.batch = TransitionBatch::new(
@@ -303,7 +303,7 @@ impl<'s, 'w> WireExpert<'s, 'w> {
     pub fn new(
         session: &'s Session<'w>,
         me: Identity,
-        budget: u32,
+        (budget, obs_dim): (u32, usize),
         schedule: Option<ShapingSchedule>,
         timeout: Duration,
     ) -> alfd_harness::Result<Self> {
@@ -311,7 +311,7 @@ impl<'s, 'w> WireExpert<'s, 'w> {
         Ok(Self {
             session,
             me,
-            client: wire.query_client()?,
+            client: wire.query_client(obs_dim)?,
             expert: wire.bell(alfd_wire::Doorbell::Expert)?,
             model_rx: wire.demo_model_receiver()?,
             model_bytes: Vec::new(),
@@ -385,7 +385,7 @@ impl<'s, 'w> WireExpert<'s, 'w> {
         if self.session.control().active_expert == 0 {
             return Ok(Answer::NoExpert);
         }
-        let mut pending = self.client.ask(request).map_err(LoopError::link)?;
+        let mut pending = self.client.ask(&request).map_err(LoopError::link)?;
         if pending.servers() == 0 {
             return Ok(Answer::NoExpert);
         }

@@ -7,7 +7,9 @@ alfd processes over iceoryx2 (the `remote/<name>` services of common/wire/src/re
     alfd_adapter.py expert ... --policy sb3:ALGO:PATH.zip   (Stable-Baselines3, if installed)
 
 An environment must have a `Discrete` action space and a one-dimensional `Box` observation of at
-most MAX_OBS_DIM values; any other space is refused at start-up (exit code 2, naming the space).
+most MAX_OBS_DIM values, or a `Discrete` observation of at most MAX_OBS_DIM states, which the agent
+(and an external demonstrator) sees one-hot encoded; any other space is refused at start-up (exit
+code 2, naming the space).
 `--check` only makes the environment and prints its spec as JSON (the launcher's probe).
 The alfd processes start the adapters; a person does not need to.
 """
@@ -20,9 +22,9 @@ import os
 import signal
 import sys
 
-# Mirrors of common/wire/src/remote.rs and messages.rs (checked there: sizes 184 and 328).
-MAX_OBS_DIM = 8
-MAX_REMOTE_VALUES = 16
+# Mirrors of common/wire/src/remote.rs (checked there: sizes 568 and 712).
+MAX_REMOTE_VALUES = 64
+MAX_OBS_DIM = MAX_REMOTE_VALUES
 REMOTE_MESSAGE_LEN = 128
 ROLE_TOOL = 5
 
@@ -93,7 +95,7 @@ class RemoteResponse(ctypes.Structure):
         return "alfd.RemoteResponse"
 
 
-assert ctypes.sizeof(RemoteRequest) == 184 and ctypes.sizeof(RemoteResponse) == 328
+assert ctypes.sizeof(RemoteRequest) == 568 and ctypes.sizeof(RemoteResponse) == 712
 
 
 class BadInput(Exception):
@@ -126,9 +128,16 @@ def make_env(env_id, kwargs, max_episode_steps):
         )
     if int(act.start) != 0:
         raise BadInput(f"{env_id}: the action space {act} does not start at 0")
+    if isinstance(obs, gym.spaces.Discrete):
+        if not 0 < int(obs.n) <= MAX_OBS_DIM:
+            raise BadInput(
+                f"{env_id}: the observation space {obs} has {int(obs.n)} states; one-hot, the "
+                f"wire carries 1 to MAX_OBS_DIM = {MAX_OBS_DIM}"
+            )
+        return env
     if not isinstance(obs, gym.spaces.Box) or len(obs.shape) != 1:
         raise BadInput(
-            f"{env_id}: the observation space {obs} is not a one-dimensional Box"
+            f"{env_id}: the observation space {obs} is neither a one-dimensional Box nor Discrete"
         )
     if obs.shape[0] > MAX_OBS_DIM or obs.shape[0] == 0:
         raise BadInput(
@@ -140,10 +149,26 @@ def make_env(env_id, kwargs, max_episode_steps):
     return env
 
 
+def obs_dim_of(space):
+    """Values the agent sees of an observation of `space` (a Discrete one one-hot)."""
+    n = getattr(space, "n", None)
+    return int(n) if n is not None else int(space.shape[0])
+
+
+def encode(space, obs):
+    """An observation as the agent sees it: a Discrete state one-hot, anything else as it is."""
+    n = getattr(space, "n", None)
+    if n is None:
+        return obs
+    one_hot = [0.0] * int(n)
+    one_hot[int(obs) - int(space.start)] = 1.0
+    return one_hot
+
+
 def spec_of(env):
     limit = env.spec.max_episode_steps if env.spec is not None else None
     return {
-        "obs_dim": int(env.observation_space.shape[0]),
+        "obs_dim": obs_dim_of(env.observation_space),
         "num_actions": int(env.action_space.n),
         "max_episode_steps": int(limit or 0),
     }
@@ -184,10 +209,10 @@ class EnvServer:
                 seed = None
             s["seeded"] = True
             obs, _info = env.reset(seed=seed)
-            put_values(resp, obs)
+            put_values(resp, encode(env.observation_space, obs))
         elif kind == STEP:
             obs, reward, terminated, truncated, _info = env.step(int(req.action))
-            put_values(resp, obs)
+            put_values(resp, encode(env.observation_space, obs))
             resp.reward = float(reward)
             resp.terminated = int(bool(terminated))
             resp.truncated = int(bool(truncated))

@@ -416,7 +416,7 @@ impl<'w> Shell<'w> {
                 }
                 Err(e) => return Err(e.into()),
             };
-            let request = *query.request();
+            let request = query.request();
             let q = QueryIn {
                 actor: request.actor,
                 step: request.global_step,

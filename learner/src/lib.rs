@@ -257,7 +257,7 @@ impl Stats {
 
 /// The learner's I/O: the wire's ports and the run directory.
 struct Shell<'w, 'a> {
-    rx: wire::Receiver<'w, wire::TransitionBatch>,
+    rx: wire::TransitionReceiver<'w>,
     credits_tx: wire::Sender<'w, Credits>,
     actors: ActorBells<'w>,
     progress: wire::Sender<'w, Progress>,

@@ -367,12 +367,12 @@ impl HostForwarder<'_, '_> {
             Route::Query(q) => {
                 let client = match self.clients.entry(q.actor) {
                     Entry::Occupied(o) => o.into_mut(),
-                    Entry::Vacant(v) => v.insert(self.wire.query_client()?),
+                    Entry::Vacant(v) => v.insert(self.wire.query_client(q.state.len())?),
                 };
                 // A newer query of the same actor replaces the older one (it gave up): an answer
                 // to that one already here still goes up.
                 let (seq, actor) = (q.header.seq, q.actor);
-                if let Some((mut old, old_seq)) = self.pending.insert(actor, (client.ask(q)?, seq))
+                if let Some((mut old, old_seq)) = self.pending.insert(actor, (client.ask(&q)?, seq))
                 {
                     if let Ok(Some(r)) = old.poll() {
                         self.replaced.push(QueryResponse {
@@ -491,7 +491,10 @@ mod route_tests {
         let mut mine = HashSet::new();
         // A query before the run gave this host a generation: not for it.
         let q = alfd_wire::QueryRequest::default();
-        assert_eq!(route("me", &mut mine, Frame::Query(q)), Route::Ignore);
+        assert_eq!(
+            route("me", &mut mine, Frame::Query(q.clone())),
+            Route::Ignore
+        );
         // Another host's start, and a kill of a generation not its own: ignored.
         assert_eq!(route("me", &mut mine, start("other", 2)), Route::Ignore);
         let kill = || Frame::Order(ExpertOrder::Kill { generation: 2 });

@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use alfd_wire::{
     outcome, DemoModelHeader, Doorbell, IncomingQuery, PendingQuery, Process, QueryClient,
-    QueryResponse, Role, Sender, TransitionBatch, Wake, Wire, WireError, MAX_ACTORS,
+    QueryResponse, Role, Sender, TransitionSender, Wake, Wire, WireError, MAX_ACTORS,
     SCHEMA_VERSION,
 };
 use tracing::{debug, info, warn};
@@ -451,7 +451,7 @@ struct Forwarder<'w, 'a> {
     launcher: alfd_wire::Bell,
     /// One publisher per remote actor, as each actor has its own on one host (the learner's
     /// buffer is per publisher).
-    transitions: HashMap<u32, Sender<'w, TransitionBatch>>,
+    transitions: HashMap<u32, TransitionSender<'w>>,
     clients: HashMap<u32, QueryClient<'w>>,
     /// Remote actors' queries to this host's expert: the pending answer, the query's sequence
     /// number, when it was asked.
@@ -602,17 +602,20 @@ impl<'w, 'a> Forwarder<'w, 'a> {
             Frame::Transitions(batch) => {
                 let tx = match self.transitions.entry(batch.actor) {
                     Entry::Occupied(o) => o.into_mut(),
-                    Entry::Vacant(v) => v.insert(self.wire.transitions_sender()?),
+                    Entry::Vacant(v) => v.insert(self.wire.transitions_sender(
+                        usize::from(batch.obs_dim),
+                        usize::from(batch.heads),
+                    )?),
                 };
-                tx.forward(batch).map(|_| self.learner.ring())
+                tx.forward(&batch).map(|_| self.learner.ring())
             }
             Frame::Progress(p) => self.progress.forward(p).map(|_| self.launcher.ring()),
             Frame::Query(q) => {
                 let client = match self.clients.entry(q.actor) {
                     Entry::Occupied(o) => o.into_mut(),
-                    Entry::Vacant(v) => v.insert(self.wire.query_client()?),
+                    Entry::Vacant(v) => v.insert(self.wire.query_client(q.state.len())?),
                 };
-                let ask = client.ask(q)?;
+                let ask = client.ask(&q)?;
                 // A newer query of the same actor replaces the older one (it gave up): an answer
                 // to that one already here is late.
                 if let Some((mut old, ..)) = self
@@ -748,7 +751,7 @@ impl<'w, 'a> Forwarder<'w, 'a> {
             || server.receive(),
             |q| {
                 if desk.holds_queries() {
-                    link::put(down, &Frame::Query(*q.request()))?;
+                    link::put(down, &Frame::Query(q.request().clone()))?;
                     desk.hold(q.request().actor, q);
                 }
                 Ok(())
@@ -874,7 +877,7 @@ mod tests {
         };
         let held = |id: u16| holder(id) == Some("a");
         let batch = |actor: u32, schema: u32| {
-            let mut b = TransitionBatch::new(actor as u16, 1, 4, 2, 0).unwrap();
+            let mut b = alfd_wire::TransitionBatch::new(actor as u16, 1, 4, 2, 0).unwrap();
             b.header = header(Role::Actor, actor as u16, schema);
             Frame::Transitions(b)
         };

@@ -309,7 +309,7 @@ fn forward(
         drain(
             || queries.receive(),
             |q| {
-                put(&Frame::Query(*q.request()))?;
+                put(&Frame::Query(q.request().clone()))?;
                 held.hold(q.request().actor, q);
                 Ok(())
             },

@@ -454,7 +454,7 @@ impl AgentConfig {
 
 pub use crate::query::RuleKind;
 pub use crate::shaping::ShapingKind;
-pub use env::{EnvConfig, EnvName, MAX_DEEPSEA_SIZE};
+pub use env::{EnvConfig, EnvName, MAX_DEEPSEA_SIZE, MAX_HEADS};
 pub use expert::{BudgetConfig, ExpertConfig, PanelEntry};
 pub use logging::LoggingConfig;
 pub use query::QueryConfig;

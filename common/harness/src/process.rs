@@ -78,7 +78,7 @@ impl Setup {
                      writes it)"
                 ))
             })?;
-            check_wire_limits(spec.obs_dim, self.config.agent.heads())?;
+            check_wire_limits(spec.obs_dim, self.config.agent.heads(), 1)?;
             return Ok((spec.obs_dim, spec.num_actions));
         }
         let env = self.vector_env()?;
@@ -137,25 +137,75 @@ impl Setup {
                 self.config.env.name
             ))
         })?;
-        check_wire_limits(env.observation_dim(), self.config.agent.heads())?;
+        check_wire_limits(env.observation_dim(), self.config.agent.heads(), 1)?;
         Ok(env)
     }
 }
 
-/// Refuses an environment or an agent larger than the wire's fixed-size messages carry.
-pub fn check_wire_limits(obs_dim: usize, heads: usize) -> Result<(), BadInput> {
+/// Where iceoryx2 keeps the shared memory of every run on this host.
+const SHM_DIR: &str = "/dev/shm";
+
+/// Refuses a run whose transitions the machine's shared memory cannot hold: `actors` actors,
+/// each publishing batches of observations of `obs_dim` values and masks of `heads` values
+/// ([`alfd_wire::transitions_bytes`] each), against what `/dev/shm` has free.
+pub fn check_wire_limits(obs_dim: usize, heads: usize, actors: usize) -> Result<(), BadInput> {
+    check_sizes(obs_dim, heads, actors, shm_free(Path::new(SHM_DIR)))
+}
+
+/// [`check_wire_limits`] with the free shared memory given (`None`: not known, not checked).
+fn check_sizes(
+    obs_dim: usize,
+    heads: usize,
+    actors: usize,
+    free: Option<u64>,
+) -> Result<(), BadInput> {
     if obs_dim > MAX_OBS_DIM {
         return Err(BadInput(format!(
-            "the environment's observations have {obs_dim} values; the wire carries at most \
+            "the environment's observations have {obs_dim} values; a message carries at most \
              MAX_OBS_DIM = {MAX_OBS_DIM}"
         )));
     }
     if heads > MAX_HEADS {
         return Err(BadInput(format!(
-            "the agent has {heads} heads; the wire carries at most MAX_HEADS = {MAX_HEADS}"
+            "the agent has {heads} heads; a message carries at most MAX_HEADS = {MAX_HEADS}"
         )));
     }
-    Ok(())
+    let need = alfd_wire::transitions_bytes(obs_dim, heads).saturating_mul(actors.max(1) as u64);
+    match free {
+        Some(free) if need > free => Err(BadInput(format!(
+            "{actors} actor(s) with observations of {obs_dim} values and {heads} heads need \
+             {} MiB of shared memory for their transitions; {SHM_DIR} has {} MiB free \
+             (fewer actors, a smaller observation or fewer heads fit)",
+            need >> 20,
+            free >> 20
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// Bytes free to an unprivileged user on the file system of `dir`; `None` if it cannot be read.
+#[cfg(target_os = "linux")]
+#[allow(unsafe_code)]
+// The counts are u64 on 64-bit Linux and may be u32 elsewhere.
+#[allow(clippy::useless_conversion)]
+fn shm_free(dir: &Path) -> Option<u64> {
+    use std::os::unix::ffi::OsStrExt;
+    let path = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
+    let mut st = std::mem::MaybeUninit::<libc::statvfs>::uninit();
+    // SAFETY: `path` is a NUL-terminated string that outlives the call, and `st` points to
+    // memory for one `statvfs`, which the call fills when it returns 0 (read only then).
+    let st = unsafe {
+        if libc::statvfs(path.as_ptr(), st.as_mut_ptr()) != 0 {
+            return None;
+        }
+        st.assume_init()
+    };
+    Some(u64::from(st.f_bavail).saturating_mul(u64::from(st.f_frsize)))
+}
+
+#[cfg(not(target_os = "linux"))]
+fn shm_free(_dir: &Path) -> Option<u64> {
+    None
 }
 
 /// The `main` of a process binary: logs to `RUN_DIR/LOG.log`, learns the schema version it
@@ -190,16 +240,36 @@ mod tests {
 
     #[test]
     fn limits_name_both_numbers_and_bad_input_exits_2() {
-        assert!(check_wire_limits(MAX_OBS_DIM, MAX_HEADS).is_ok());
-        let e = check_wire_limits(MAX_OBS_DIM + 2, 1)
+        assert!(check_sizes(MAX_OBS_DIM, MAX_HEADS, 1, None).is_ok());
+        let e = check_sizes(MAX_OBS_DIM + 2, 1, 1, None)
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("have 10 values") && e.contains("MAX_OBS_DIM = 8"),
+            e.contains("have 65537 values") && e.contains("MAX_OBS_DIM = 65535"),
             "{e}"
         );
-        let e = check_wire_limits(4, MAX_HEADS + 1).unwrap_err().to_string();
-        assert!(e.contains("9 heads") && e.contains("MAX_HEADS = 8"), "{e}");
+        let e = check_sizes(4, MAX_HEADS + 1, 1, None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("65536 heads") && e.contains("MAX_HEADS = 65535"),
+            "{e}"
+        );
+        // DeepSea(50)'s grid, 20 heads, 2 actors: 2 × 266 samples of 32 × 5,020 values.
+        let one = alfd_wire::transitions_bytes(2500, 20);
+        assert_eq!(
+            one,
+            266 * (32 * 5020 * 4 + std::mem::size_of::<alfd_wire::TransitionHeader>() as u64)
+        );
+        assert!(check_sizes(2500, 20, 2, Some(2 * one)).is_ok());
+        let e = check_sizes(2500, 20, 2, Some(2 * one - 1))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("2 actor(s)") && e.contains("/dev/shm has 326 MiB free"),
+            "{e}"
+        );
+        assert!(shm_free(Path::new(SHM_DIR)).is_some_and(|b| b > 0));
         let bad = anyhow::Error::new(BadInput("x".into())).context("while starting");
         assert_eq!(exit_code(&bad), 2);
         assert_eq!(exit_code(&anyhow::anyhow!("broken pipe")), 1);

@@ -8,11 +8,11 @@
 //!
 //! | service             | pattern           | from → to               | payload                      |
 //! |---------------------|-------------------|-------------------------|------------------------------|
-//! | `transitions`       | pub/sub           | actors → learner        | [`TransitionBatch`]          |
+//! | `transitions`       | pub/sub           | actors → learner        | `[f32]` + [`TransitionHeader`] ([`TransitionBatch`]) |
 //! | `credits`           | pub/sub, hist. 1  | learner → actors        | [`Credits`]                  |
 //! | `weights`           | pub/sub, hist. 1  | learner → actors        | `[f32]` + [`WeightsHeader`]  |
 //! | `demo-model`        | pub/sub, hist. 1  | expert → actors         | `[u8]` + [`DemoModelHeader`] |
-//! | `query`             | request/response  | actors → expert → actor | [`QueryRequest`] → [`QueryResponse`] |
+//! | `query`             | request/response  | actors → expert → actor | `[f32]` + [`QueryHeader`] ([`QueryRequest`]) → [`QueryResponse`] |
 //! | `progress`          | pub/sub           | every process → launcher| [`Progress`]                 |
 //! | `control`           | pub/sub, hist. 1  | launcher → every process| [`Control`]                  |
 //! | `doorbell/<who>`    | event             | anyone → one process    | (wakes a blocked process)    |
@@ -83,19 +83,21 @@ pub use housekeeping::{
 };
 pub use messages::{
     command, flags, name_from_bytes, name_to_bytes, outcome, process_state, progress_kind, Control,
-    Credits, DemoModelHeader, Header, Message, Process, Progress, QueryRequest, QueryResponse,
-    Role, TransitionBatch, TransitionRecord, WeightsHeader, MAX_ACTORS, MAX_CREDIT_WINDOW,
-    MAX_HEADS, MAX_OBS_DIM, NAME_LEN, SCHEMA_VERSION, TRANSITIONS_BUFFER, TRANSITIONS_PER_BATCH,
+    Credits, DemoModelHeader, Header, Message, Process, Progress, QueryHeader, QueryRequest,
+    QueryResponse, Role, TransitionBatch, TransitionHeader, TransitionRecord, WeightsHeader,
+    MAX_ACTORS, MAX_CREDIT_WINDOW, MAX_HEADS, MAX_OBS_DIM, NAME_LEN, SCHEMA_VERSION,
+    TRANSITIONS_BUFFER, TRANSITIONS_PER_BATCH,
 };
 pub use ports::{
     DemoModelReceiver, DemoModelSender, IncomingQuery, PendingQuery, QueryClient, QueryServer,
-    Receiver, Sender, WeightsReceiver, WeightsSender,
+    Receiver, Sender, TransitionReceiver, TransitionSender, WeightsReceiver, WeightsSender,
 };
 pub use remote::{
     remote_kind, remote_limits, remote_status, Liveness, RemoteClient, RemoteDemonstrator,
     RemoteEnv, RemoteRequest, RemoteResponse, RemoteSpec, MAX_REMOTE_VALUES, REMOTE_MESSAGE_LEN,
 };
 pub use services::{
-    Channel, CHANNELS, CONTROL, CREDITS, DEMO_MODEL, PROGRESS, TRANSITIONS, WEIGHTS,
+    transitions_bytes, Channel, CHANNELS, CONTROL, CREDITS, DEMO_MODEL, PROGRESS, TRANSITIONS,
+    WEIGHTS,
 };
 pub use wakeups::{ActorBells, Bell, Doorbell, Waiter, Wake};

@@ -12,13 +12,15 @@ use crate::error::{Result, WireError};
 /// The version of the messages below. Bump it whenever a message changes, or the zenoh keys the
 /// bridges send them on (`alfd_bridge`), so that a process or host of another build is refused
 /// by name.
-pub const SCHEMA_VERSION: u32 = 6;
+pub const SCHEMA_VERSION: u32 = 7;
 /// Actors per run (the credit table has one slot per actor id).
 pub const MAX_ACTORS: usize = 16;
-/// Largest observation a transition or a query can carry.
-pub const MAX_OBS_DIM: usize = 8;
-/// Largest number of heads (K) a bootstrap mask can carry.
-pub const MAX_HEADS: usize = 8;
+/// Largest observation a message may claim (a peer's bytes can make a receiver allocate no
+/// more). A run sizes its services to its own observations and heads; how much shared memory
+/// that takes is [`transitions_bytes`].
+pub const MAX_OBS_DIM: usize = u16::MAX as usize;
+/// Largest number of heads (K) a bootstrap mask may claim.
+pub const MAX_HEADS: usize = u16::MAX as usize;
 /// Transitions per [`TransitionBatch`].
 pub const TRANSITIONS_PER_BATCH: usize = 32;
 /// The learner's subscriber queue per actor, in batches. The credit window may not exceed it:
@@ -170,17 +172,38 @@ fn horizon_of(bits: u32) -> u32 {
     ((bits >> flags::HORIZON_SHIFT) & flags::HORIZON_MASK) + 1
 }
 
-/// One environment step as it travels from an actor to the learner.
+/// Values one step of a batch takes: `state`, `next_state` and the mask.
+fn stride(obs_dim: usize, heads: usize) -> usize {
+    2 * obs_dim + heads
+}
+
+/// Refuses an observation or a mask larger than a message may claim.
+fn check_sizes(obs_dim: usize, heads: usize) -> Result<()> {
+    if obs_dim > MAX_OBS_DIM {
+        return Err(WireError::TooLarge {
+            what: "observation",
+            got: obs_dim,
+            max: MAX_OBS_DIM,
+        });
+    }
+    if heads > MAX_HEADS {
+        return Err(WireError::TooLarge {
+            what: "bootstrap mask",
+            got: heads,
+            max: MAX_HEADS,
+        });
+    }
+    Ok(())
+}
+
+/// The fixed part of one environment step as it travels from an actor to the learner; its
+/// observations and bootstrap mask travel in [`TransitionBatch::values`].
 #[repr(C)]
 #[derive(
     Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
 )]
 #[type_name("alfd.TransitionRecord")]
 pub struct TransitionRecord {
-    pub state: [f32; MAX_OBS_DIM],
-    pub next_state: [f32; MAX_OBS_DIM],
-    /// The Bernoulli bootstrap mask, one value per head.
-    pub mask: [f32; MAX_HEADS],
     pub action: u32,
     /// The reward learned from (shaped when shaping was on).
     pub reward: f32,
@@ -188,12 +211,29 @@ pub struct TransitionRecord {
     pub flags: u32,
 }
 
-/// Up to [`TRANSITIONS_PER_BATCH`] consecutive steps of one actor.
+/// What a [`TransitionBatch`] carries besides its values: the user header of a `transitions`
+/// sample, whose payload is the batch's values.
 #[repr(C)]
 #[derive(
     Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
 )]
-#[type_name("alfd.TransitionBatch")]
+#[type_name("alfd.TransitionHeader")]
+pub struct TransitionHeader {
+    pub header: Header,
+    pub actor: u32,
+    pub obs_dim: u16,
+    pub heads: u16,
+    pub incarnation: u64,
+    pub first_seq: u64,
+    pub len: u32,
+    pub blocked: u32,
+    pub records: [TransitionRecord; TRANSITIONS_PER_BATCH],
+}
+
+/// Up to [`TRANSITIONS_PER_BATCH`] consecutive steps of one actor. Its observations and masks
+/// are as long as the run's (`obs_dim`, `heads`): the `transitions` service carries them as a
+/// slice sized by each actor for its run.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TransitionBatch {
     pub header: Header,
     pub actor: u32,
@@ -208,8 +248,10 @@ pub struct TransitionBatch {
     /// new ones (the learner then rings its doorbell); 0 otherwise.
     pub blocked: u32,
     pub records: [TransitionRecord; TRANSITIONS_PER_BATCH],
+    /// Per step, one after another: `state`, `next_state` (`obs_dim` values each) and the
+    /// bootstrap mask (`heads` values); [`TransitionBatch::stride`] values a step.
+    pub values: Vec<f32>,
 }
-message!(TransitionBatch, "transitions");
 
 impl TransitionBatch {
     /// An empty batch whose first step will have sequence number `first_seq`.
@@ -220,28 +262,56 @@ impl TransitionBatch {
         heads: usize,
         first_seq: u64,
     ) -> Result<Self> {
-        if obs_dim > MAX_OBS_DIM {
-            return Err(WireError::TooLarge {
-                what: "observation",
-                got: obs_dim,
-                max: MAX_OBS_DIM,
-            });
-        }
-        if heads > MAX_HEADS {
-            return Err(WireError::TooLarge {
-                what: "bootstrap mask",
-                got: heads,
-                max: MAX_HEADS,
-            });
-        }
+        check_sizes(obs_dim, heads)?;
         Ok(Self {
             actor: u32::from(actor),
             obs_dim: obs_dim as u16,
             heads: heads as u16,
             incarnation,
             first_seq,
+            values: Vec::with_capacity(TRANSITIONS_PER_BATCH * stride(obs_dim, heads)),
             ..Self::default()
         })
+    }
+
+    /// Values one step takes: two observations and a mask.
+    pub fn stride(&self) -> usize {
+        stride(usize::from(self.obs_dim), usize::from(self.heads))
+    }
+
+    /// The batch's header on the wire (all but its values).
+    pub fn wire_header(&self) -> TransitionHeader {
+        TransitionHeader {
+            header: self.header,
+            actor: self.actor,
+            obs_dim: self.obs_dim,
+            heads: self.heads,
+            incarnation: self.incarnation,
+            first_seq: self.first_seq,
+            len: self.len,
+            blocked: self.blocked,
+            records: self.records,
+        }
+    }
+
+    /// A batch as received: its header and the values of its sample (the values of `len`
+    /// steps and no more are kept; [`TransitionBatch::check`] refuses a batch short of them).
+    pub fn from_wire(h: &TransitionHeader, values: &[f32]) -> Self {
+        let used = (h.len as usize)
+            .min(TRANSITIONS_PER_BATCH)
+            .saturating_mul(stride(usize::from(h.obs_dim), usize::from(h.heads)));
+        Self {
+            header: h.header,
+            actor: h.actor,
+            obs_dim: h.obs_dim,
+            heads: h.heads,
+            incarnation: h.incarnation,
+            first_seq: h.first_seq,
+            len: h.len,
+            blocked: h.blocked,
+            records: h.records,
+            values: values[..used.min(values.len())].to_vec(),
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -264,8 +334,9 @@ impl TransitionBatch {
     }
 
     /// Checks a received batch against what its receiver expects: at most
-    /// [`TRANSITIONS_PER_BATCH`] steps, the observation size `obs_dim` and `heads` heads, each
-    /// action below `actions`, and sequence numbers that fit in a `u64`. The error names the field.
+    /// [`TRANSITIONS_PER_BATCH`] steps, the observation size `obs_dim` and `heads` heads, the
+    /// values of every step, each action below `actions`, and sequence numbers that fit in a
+    /// `u64`. The error names the field.
     pub fn check(&self, obs_dim: usize, heads: usize, actions: usize) -> Result<()> {
         if self.len() > TRANSITIONS_PER_BATCH {
             return Err(WireError::TooLarge {
@@ -295,6 +366,13 @@ impl TransitionBatch {
                 "the config's K",
             );
         }
+        if self.values.len() != self.len() * self.stride() {
+            return range(
+                "transition batch values",
+                self.values.len() as u64,
+                "len × (2 obs_dim + heads)",
+            );
+        }
         if self.first_seq.checked_add(u64::from(self.len)).is_none() {
             return range(
                 "transition batch first_seq",
@@ -302,17 +380,15 @@ impl TransitionBatch {
                 "first_seq + len must fit in 64 bits",
             );
         }
-        if let Some(r) = self.records[..self.len()]
-            .iter()
-            .find(|r| r.action as usize >= actions)
-        {
+        let records = &self.records[..self.len()];
+        if let Some(r) = records.iter().find(|r| r.action as usize >= actions) {
             return range(
                 "transition action",
                 u64::from(r.action),
                 "below the environment's number of actions",
             );
         }
-        if let Some(r) = self.records[..self.len()]
+        if let Some(r) = records
             .iter()
             .find(|r| horizon_of(r.flags) > alfd_common::config::MAX_N_STEP)
         {
@@ -334,8 +410,8 @@ impl TransitionBatch {
                 max: TRANSITIONS_PER_BATCH,
             });
         }
-        let d = self.obs_dim as usize;
-        let h = self.heads as usize;
+        let d = usize::from(self.obs_dim);
+        let h = usize::from(self.heads);
         if t.state.len() != d || t.next_state.len() != d {
             return Err(WireError::TooLarge {
                 what: "transition state (batch obs_dim differs)",
@@ -350,37 +426,39 @@ impl TransitionBatch {
                 max: h,
             });
         }
-        let r = &mut self.records[self.len as usize];
-        *r = TransitionRecord::default();
-        r.state[..d].copy_from_slice(&t.state);
-        r.next_state[..d].copy_from_slice(&t.next_state);
-        r.mask[..h].copy_from_slice(&t.mask);
-        r.action = t.action;
-        r.reward = t.reward;
-        r.flags = (if t.terminated { flags::TERMINATED } else { 0 })
-            | (if t.demo { flags::DEMO } else { 0 })
-            | (u32::from(t.horizon.max(1) - 1) << flags::HORIZON_SHIFT);
+        self.values.truncate(self.len() * self.stride());
+        self.values.extend_from_slice(&t.state);
+        self.values.extend_from_slice(&t.next_state);
+        self.values.extend_from_slice(&t.mask);
+        self.records[self.len()] = TransitionRecord {
+            action: t.action,
+            reward: t.reward,
+            flags: (if t.terminated { flags::TERMINATED } else { 0 })
+                | (if t.demo { flags::DEMO } else { 0 })
+                | (u32::from(t.horizon.max(1) - 1) << flags::HORIZON_SHIFT),
+        };
         self.len += 1;
         Ok(())
     }
 
     /// Step `i` of the batch as the replay buffer stores it; `None` beyond the batch's steps
-    /// (`len`, at most [`TRANSITIONS_PER_BATCH`]). An `obs_dim` or `heads` beyond the wire's
-    /// limits is cut to them; [`TransitionBatch::check`] refuses such a batch.
+    /// (`len`, at most [`TRANSITIONS_PER_BATCH`]) or its values ([`TransitionBatch::check`]
+    /// refuses a batch short of them).
     pub fn transition(&self, i: usize) -> Option<Transition> {
         if i >= self.len().min(TRANSITIONS_PER_BATCH) {
             return None;
         }
-        let d = (self.obs_dim as usize).min(MAX_OBS_DIM);
-        let h = (self.heads as usize).min(MAX_HEADS);
+        let d = usize::from(self.obs_dim);
+        let start = i.checked_mul(self.stride())?;
+        let v = self.values.get(start..start.checked_add(self.stride())?)?;
         let r = &self.records[i];
         Some(Transition {
-            state: r.state[..d].to_vec(),
+            state: v[..d].to_vec(),
             action: r.action,
             reward: r.reward,
-            next_state: r.next_state[..d].to_vec(),
+            next_state: v[d..2 * d].to_vec(),
             terminated: r.flags & flags::TERMINATED != 0,
-            mask: r.mask[..h].to_vec(),
+            mask: v[2 * d..].to_vec(),
             demo: r.flags & flags::DEMO != 0,
             horizon: horizon_of(r.flags).min(u32::from(u8::MAX)) as u8,
         })
@@ -498,12 +576,23 @@ impl DemoModelHeader {
     }
 }
 
-/// An actor asks the expert for the action at `state`.
+/// What a [`QueryRequest`] carries besides its state: the user header of a `query` request,
+/// whose payload is the state.
 #[repr(C)]
 #[derive(
     Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize,
 )]
-#[type_name("alfd.QueryRequest")]
+#[type_name("alfd.QueryHeader")]
+pub struct QueryHeader {
+    pub header: Header,
+    pub actor: u32,
+    pub obs_dim: u32,
+    pub incarnation: u64,
+    pub global_step: u64,
+}
+
+/// An actor asks the expert for the action at `state` (as long as the run's observations).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct QueryRequest {
     pub header: Header,
     pub actor: u32,
@@ -511,38 +600,54 @@ pub struct QueryRequest {
     pub incarnation: u64,
     /// The global step as the actor knows it.
     pub global_step: u64,
-    pub state: [f32; MAX_OBS_DIM],
+    pub state: Vec<f32>,
 }
-message!(QueryRequest, "query");
 
 impl QueryRequest {
     pub fn new(actor: u16, incarnation: u64, global_step: u64, state: &[f32]) -> Result<Self> {
-        if state.len() > MAX_OBS_DIM {
-            return Err(WireError::TooLarge {
-                what: "query state",
-                got: state.len(),
-                max: MAX_OBS_DIM,
-            });
-        }
-        let mut s = [0.0; MAX_OBS_DIM];
-        s[..state.len()].copy_from_slice(state);
+        check_sizes(state.len(), 0)?;
         Ok(Self {
             actor: u32::from(actor),
             obs_dim: state.len() as u32,
             incarnation,
             global_step,
-            state: s,
+            state: state.to_vec(),
             ..Self::default()
         })
     }
 
+    /// The request's header on the wire (all but its state).
+    pub fn wire_header(&self) -> QueryHeader {
+        QueryHeader {
+            header: self.header,
+            actor: self.actor,
+            obs_dim: self.obs_dim,
+            incarnation: self.incarnation,
+            global_step: self.global_step,
+        }
+    }
+
+    /// A request as received: its header and the values of its payload (at most `obs_dim` of
+    /// them are kept; [`QueryRequest::checked_state`] refuses a request short of them).
+    pub fn from_wire(h: &QueryHeader, values: &[f32]) -> Self {
+        let used = (h.obs_dim as usize).min(values.len());
+        Self {
+            header: h.header,
+            actor: h.actor,
+            obs_dim: h.obs_dim,
+            incarnation: h.incarnation,
+            global_step: h.global_step,
+            state: values[..used].to_vec(),
+        }
+    }
+
     pub fn state(&self) -> &[f32] {
-        &self.state[..(self.obs_dim as usize).min(MAX_OBS_DIM)]
+        &self.state[..(self.obs_dim as usize).min(self.state.len())]
     }
 
     /// The state, if it has the `obs_dim` its receiver expects and only finite values.
     pub fn checked_state(&self, obs_dim: usize) -> Result<&[f32]> {
-        if self.obs_dim as usize != obs_dim || obs_dim > MAX_OBS_DIM {
+        if self.obs_dim as usize != obs_dim || self.state().len() != obs_dim {
             return Err(WireError::OutOfRange {
                 what: "query obs_dim",
                 value: u64::from(self.obs_dim),

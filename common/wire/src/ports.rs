@@ -14,7 +14,10 @@ use iceoryx2::port::update_connections::UpdateConnections;
 
 use crate::connection::{Transport, Wire};
 use crate::error::{transport, Result};
-use crate::messages::{DemoModelHeader, Message, QueryRequest, QueryResponse, WeightsHeader};
+use crate::messages::{
+    DemoModelHeader, Message, QueryHeader, QueryRequest, QueryResponse, TransitionBatch,
+    TransitionHeader, WeightsHeader,
+};
 use crate::stream;
 
 /// Sends messages of type `T`, stamping each with the schema version, the sender and a sequence
@@ -99,6 +102,87 @@ impl<T: Message> Receiver<'_, T> {
             last = Some(m);
         }
         Ok(last)
+    }
+}
+
+/// An actor's side of `transitions` (or a bridge's, for the actors of another host).
+pub struct TransitionSender<'w> {
+    pub(crate) wire: &'w Wire,
+    pub(crate) port: Publisher<Transport, [f32], TransitionHeader>,
+    pub(crate) seq: u64,
+}
+
+impl fmt::Debug for TransitionSender<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "TransitionSender(seq {})", self.seq)
+    }
+}
+
+impl TransitionSender<'_> {
+    /// Sends `batch`, stamped with this process's header; returns the sequence number it got.
+    pub fn send(&mut self, batch: &TransitionBatch) -> Result<u64> {
+        let seq = self.seq;
+        let mut header = batch.wire_header();
+        header.header = self.wire.header(seq);
+        self.put(header, &batch.values)?;
+        self.seq += 1;
+        Ok(seq)
+    }
+
+    /// Sends `batch` under its own header (a bridge passes on what another process sent). The
+    /// schema version is checked like a received message's.
+    pub fn forward(&mut self, batch: &TransitionBatch) -> Result<()> {
+        self.wire.check("transitions", &batch.header)?;
+        self.put(batch.wire_header(), &batch.values)
+    }
+
+    /// Sends `values` under `header` (an empty batch as one value: iceoryx2 loans no empty
+    /// slice; `len` says how many steps there are).
+    fn put(&mut self, header: TransitionHeader, values: &[f32]) -> Result<()> {
+        let mut sample = self
+            .port
+            .loan_slice_uninit(values.len().max(1))
+            .map_err(transport("loan on", "transitions"))?;
+        *sample.user_header_mut() = header;
+        let payload = if values.is_empty() {
+            &[0.0][..]
+        } else {
+            values
+        };
+        sample
+            .write_from_slice(payload)
+            .send()
+            .map_err(transport("send on", "transitions"))?;
+        Ok(())
+    }
+}
+
+/// The learner's side of `transitions`.
+pub struct TransitionReceiver<'w> {
+    pub(crate) wire: &'w Wire,
+    pub(crate) port: Subscriber<Transport, [f32], TransitionHeader>,
+}
+
+impl fmt::Debug for TransitionReceiver<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "TransitionReceiver")
+    }
+}
+
+impl TransitionReceiver<'_> {
+    /// The next batch, if any. A batch of another schema version is consumed and reported as
+    /// [`WireError::SchemaMismatch`](crate::WireError::SchemaMismatch).
+    pub fn receive(&self) -> Result<Option<TransitionBatch>> {
+        let Some(sample) = self
+            .port
+            .receive()
+            .map_err(transport("receive on", "transitions"))?
+        else {
+            return Ok(None);
+        };
+        let header = sample.user_header();
+        self.wire.check("transitions", &header.header)?;
+        Ok(Some(TransitionBatch::from_wire(header, sample.payload())))
     }
 }
 
@@ -294,7 +378,7 @@ impl DemoModelReceiver<'_> {
 /// An actor's side of `query`.
 pub struct QueryClient<'w> {
     pub(crate) wire: &'w Wire,
-    pub(crate) port: Client<Transport, QueryRequest, (), QueryResponse, ()>,
+    pub(crate) port: Client<Transport, [f32], QueryHeader, QueryResponse, ()>,
     pub(crate) seq: u64,
 }
 
@@ -307,12 +391,23 @@ impl fmt::Debug for QueryClient<'_> {
 impl<'w> QueryClient<'w> {
     /// Sends `request`. With no expert connected it still succeeds, and
     /// [`PendingQuery::servers`] is 0: no answer will come.
-    pub fn ask(&mut self, mut request: QueryRequest) -> Result<PendingQuery<'w>> {
+    pub fn ask(&mut self, request: &QueryRequest) -> Result<PendingQuery<'w>> {
         let seq = self.seq;
-        request.header = self.wire.header(seq);
-        let pending = self
+        let mut header = request.wire_header();
+        header.header = self.wire.header(seq);
+        let mut loan = self
             .port
-            .send_copy(request)
+            .loan_slice_uninit(request.state.len().max(1))
+            .map_err(transport("loan on", "query"))?;
+        *loan.user_header_mut() = header;
+        let payload = if request.state.is_empty() {
+            &[0.0][..]
+        } else {
+            &request.state[..]
+        };
+        let pending = loan
+            .write_from_slice(payload)
+            .send()
             .map_err(transport("send on", "query"))?;
         self.seq += 1;
         Ok(PendingQuery {
@@ -328,7 +423,7 @@ impl<'w> QueryClient<'w> {
 /// A query on its way; poll it for the answer.
 pub struct PendingQuery<'w> {
     wire: &'w Wire,
-    pending: PendingResponse<Transport, QueryRequest, (), QueryResponse, ()>,
+    pending: PendingResponse<Transport, [f32], QueryHeader, QueryResponse, ()>,
     seq: u64,
     duplicates: u32,
     answered: bool,
@@ -387,7 +482,7 @@ impl PendingQuery<'_> {
 /// The expert's side of `query`.
 pub struct QueryServer<'w> {
     pub(crate) wire: &'w Wire,
-    pub(crate) port: Server<Transport, QueryRequest, (), QueryResponse, ()>,
+    pub(crate) port: Server<Transport, [f32], QueryHeader, QueryResponse, ()>,
 }
 
 impl fmt::Debug for QueryServer<'_> {
@@ -407,7 +502,7 @@ impl<'w> QueryServer<'w> {
         {
             None => Ok(None),
             Some(active) => {
-                let request = *active.payload();
+                let request = QueryRequest::from_wire(active.user_header(), active.payload());
                 self.wire.check("query", &request.header)?;
                 Ok(Some(IncomingQuery {
                     wire: self.wire,
@@ -422,7 +517,7 @@ impl<'w> QueryServer<'w> {
 /// A request the expert holds; answer it or drop it.
 pub struct IncomingQuery<'w> {
     wire: &'w Wire,
-    active: ActiveRequest<Transport, QueryRequest, (), QueryResponse, ()>,
+    active: ActiveRequest<Transport, [f32], QueryHeader, QueryResponse, ()>,
     request: QueryRequest,
 }
 
@@ -502,7 +597,7 @@ mod tests {
             let actor = wire(run, Role::Actor, 3);
             let learner = wire(run, Role::Learner, 0);
             let rx = learner.transitions_receiver().unwrap();
-            let mut tx = actor.transitions_sender().unwrap();
+            let mut tx = actor.transitions_sender(4, 2).unwrap();
 
             let sent = [
                 transition(1.0, false, false),
@@ -515,9 +610,9 @@ mod tests {
                 assert_eq!(batch.len(), i + 1);
             }
             assert_eq!(batch.end_seq(), 13);
-            assert_eq!(tx.send(batch).unwrap(), 0);
+            assert_eq!(tx.send(&batch).unwrap(), 0);
             assert_eq!(
-                tx.send(TransitionBatch::new(3, 77, 4, 2, 13).unwrap())
+                tx.send(&TransitionBatch::new(3, 77, 4, 2, 13).unwrap())
                     .unwrap(),
                 1
             );
@@ -535,6 +630,54 @@ mod tests {
             assert_eq!(second.header.seq, 1);
             assert!(second.is_empty());
             assert!(rx.receive().unwrap().is_none());
+        });
+    }
+
+    /// A step of `obs_dim` values and `heads` mask values, each value telling where it is.
+    fn wide_step(k: usize, obs_dim: usize, heads: usize) -> Transition {
+        let values = |base: usize, n: usize| (0..n).map(|i| (base + i) as f32).collect();
+        Transition {
+            state: values(k * 10_000, obs_dim),
+            action: 1,
+            reward: k as f32,
+            next_state: values(k * 10_000 + 5_000, obs_dim),
+            terminated: false,
+            mask: values(k, heads),
+            demo: k.is_multiple_of(2),
+            horizon: 1,
+        }
+    }
+
+    #[test]
+    fn batches_and_queries_as_large_as_the_run_needs_arrive_whole() {
+        with_run("wide", |run| {
+            let actor = wire(run, Role::Actor, 0);
+            let learner = wire(run, Role::Learner, 0);
+            let expert = wire(run, Role::Expert, 1);
+            let rx = learner.transitions_receiver().unwrap();
+            // Sized for DeepSea(50)'s one-hot grid and 20 heads; then a sender sized for less
+            // than it sends, which allocates anew.
+            for (sized, (obs_dim, heads)) in [((2500, 20), (2500, 20)), ((4, 2), (300, 12))] {
+                let mut tx = actor.transitions_sender(sized.0, sized.1).unwrap();
+                let sent: Vec<Transition> = (0..TRANSITIONS_PER_BATCH)
+                    .map(|k| wide_step(k, obs_dim, heads))
+                    .collect();
+                let mut batch = TransitionBatch::new(0, 1, obs_dim, heads, 0).unwrap();
+                sent.iter().for_each(|t| batch.push(t).unwrap());
+                tx.send(&batch).unwrap();
+                let got = rx.receive().unwrap().expect("a batch");
+                got.check(obs_dim, heads, 2).unwrap();
+                assert_eq!(got.transitions().collect::<Vec<_>>(), sent);
+            }
+            let server = expert.query_server().unwrap();
+            let mut client = actor.query_client(2500).unwrap();
+            let state: Vec<f32> = (0..2500).map(|i| i as f32 / 7.0).collect();
+            let _pending = client
+                .ask(&QueryRequest::new(0, 1, 3, &state).unwrap())
+                .unwrap();
+            let q = server.receive().unwrap().expect("the query");
+            assert_eq!(q.request().checked_state(2500).unwrap(), &state[..]);
+            assert!(q.request().checked_state(2499).is_err());
         });
     }
 
@@ -651,10 +794,10 @@ mod tests {
     fn a_query_without_expert_reaches_nobody() {
         with_run("query-none", |run| {
             let actor = wire(run, Role::Actor, 1);
-            let mut client = actor.query_client().unwrap();
+            let mut client = actor.query_client(4).unwrap();
             assert_eq!(actor.query_servers().unwrap(), 0);
             let mut pending = client
-                .ask(QueryRequest::new(1, 9, 0, &[0.1, 0.2, 0.3, 0.4]).unwrap())
+                .ask(&QueryRequest::new(1, 9, 0, &[0.1, 0.2, 0.3, 0.4]).unwrap())
                 .unwrap();
             assert_eq!(pending.servers(), 0);
             assert!(pending.poll().unwrap().is_none());
@@ -669,17 +812,17 @@ mod tests {
             let new = wire(run, Role::Expert, 2);
             let s1 = old.query_server().unwrap();
             let s2 = new.query_server().unwrap();
-            let mut client = actor.query_client().unwrap();
+            let mut client = actor.query_client(4).unwrap();
             assert_eq!(actor.query_servers().unwrap(), 2);
 
             // A first request, answered by nobody, then a second one answered by both experts.
             drop(
                 client
-                    .ask(QueryRequest::new(1, 9, 5, &[0.0; 4]).unwrap())
+                    .ask(&QueryRequest::new(1, 9, 5, &[0.0; 4]).unwrap())
                     .unwrap(),
             );
             let mut pending = client
-                .ask(QueryRequest::new(1, 9, 42, &[0.1, 0.2, 0.3, 0.4]).unwrap())
+                .ask(&QueryRequest::new(1, 9, 42, &[0.1, 0.2, 0.3, 0.4]).unwrap())
                 .unwrap();
             assert_eq!(pending.seq(), 1);
             assert_eq!(pending.servers(), 2);
@@ -723,9 +866,9 @@ mod tests {
             let actor = wire(run, Role::Actor, 0);
             let expert = wire(run, Role::Expert, 1);
             let server = expert.query_server().unwrap();
-            let mut client = actor.query_client().unwrap();
+            let mut client = actor.query_client(4).unwrap();
             let pending = client
-                .ask(QueryRequest::new(0, 1, 0, &[0.0; 4]).unwrap())
+                .ask(&QueryRequest::new(0, 1, 0, &[0.0; 4]).unwrap())
                 .unwrap();
             let q = server.receive().unwrap().unwrap();
             assert!(q.is_connected());

@@ -27,12 +27,12 @@ use iceoryx2::prelude::*;
 
 use crate::connection::{run_config, Transport};
 use crate::error::{transport, Result, WireError};
-use crate::messages::{Header, Process, MAX_OBS_DIM};
+use crate::messages::{Header, Process};
 use crate::services::patiently;
 
-/// Values a remote message carries: an observation (at most [`MAX_OBS_DIM`]) or an
-/// environment's internal state.
-pub const MAX_REMOTE_VALUES: usize = 16;
+/// Values a remote message carries: an observation (a Gymnasium environment's, one-hot for a
+/// `Discrete` space) or an environment's internal state.
+pub const MAX_REMOTE_VALUES: usize = 64;
 /// Bytes of the error message of a [`RemoteResponse`].
 pub const REMOTE_MESSAGE_LEN: usize = 128;
 
@@ -464,11 +464,11 @@ impl RemoteEnv {
             num_actions: resp.action as usize,
             max_episode_steps: resp.max_episode_steps as usize,
         };
-        if spec.obs_dim == 0 || spec.obs_dim > MAX_OBS_DIM {
+        if spec.obs_dim == 0 || spec.obs_dim > MAX_REMOTE_VALUES {
             return Err(WireError::TooLarge {
                 what: "remote environment observation",
                 got: spec.obs_dim,
-                max: MAX_OBS_DIM,
+                max: MAX_REMOTE_VALUES,
             });
         }
         if spec.num_actions == 0 {
@@ -687,12 +687,12 @@ mod tests {
     #[test]
     fn the_remote_messages_have_the_layout_python_mirrors() {
         // deploy/python/alfd_adapter.py declares the same fields; these sizes are its checks.
-        assert_eq!(std::mem::size_of::<RemoteRequest>(), 184);
-        assert_eq!(std::mem::size_of::<RemoteResponse>(), 328);
+        assert_eq!(std::mem::size_of::<RemoteRequest>(), 568);
+        assert_eq!(std::mem::size_of::<RemoteResponse>(), 712);
         assert_eq!(std::mem::align_of::<RemoteRequest>(), 8);
         assert_eq!(std::mem::offset_of!(RemoteRequest, values), 56);
         assert_eq!(std::mem::offset_of!(RemoteResponse, values), 72);
-        assert_eq!(std::mem::offset_of!(RemoteResponse, message), 200);
+        assert_eq!(std::mem::offset_of!(RemoteResponse, message), 584);
         let r = RemoteRequest::new(remote_kind::STEP, 3)
             .with_values(&[1.0, 2.0])
             .unwrap();

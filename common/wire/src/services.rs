@@ -19,12 +19,13 @@ use iceoryx2::service::builder::request_response::{
 use crate::connection::{Transport, Wire};
 use crate::error::{transport, Result, WireError};
 use crate::messages::{
-    Control, Credits, DemoModelHeader, Message, Progress, QueryRequest, QueryResponse,
-    TransitionBatch, WeightsHeader, MAX_ACTORS, MAX_NODES, TRANSITIONS_BUFFER,
+    Control, Credits, DemoModelHeader, Message, Progress, QueryHeader, QueryResponse,
+    TransitionHeader, WeightsHeader, MAX_ACTORS, MAX_NODES, TRANSITIONS_BUFFER,
+    TRANSITIONS_PER_BATCH,
 };
 use crate::ports::{
     DemoModelReceiver, DemoModelSender, QueryClient, QueryServer, Receiver, Sender,
-    WeightsReceiver, WeightsSender,
+    TransitionReceiver, TransitionSender, WeightsReceiver, WeightsSender,
 };
 use crate::wakeups::{Bell, Doorbell, Waiter};
 
@@ -106,6 +107,24 @@ pub const CONTROL: Channel = Channel {
 
 /// Every publish-subscribe channel of a run.
 pub const CHANNELS: [Channel; 6] = [TRANSITIONS, CREDITS, WEIGHTS, DEMO_MODEL, PROGRESS, CONTROL];
+
+/// Values of a full batch of steps with observations of `obs_dim` values and masks of `heads`.
+fn batch_values(obs_dim: usize, heads: usize) -> usize {
+    TRANSITIONS_PER_BATCH * (2 * obs_dim + heads)
+}
+
+/// Bytes of shared memory one actor's `transitions` publisher reserves for batches of
+/// observations of `obs_dim` values and masks of `heads` values: a sample for every place a
+/// subscriber may hold one (iceoryx2 reserves the worst case up front: each subscriber's buffer
+/// and borrowed samples, and the publisher's own loans).
+pub fn transitions_bytes(obs_dim: usize, heads: usize) -> u64 {
+    const BORROWED_PER_SUBSCRIBER: usize = 2;
+    const LOANS: usize = 2;
+    let samples = TRANSITIONS.subscribers * (TRANSITIONS.buffer + BORROWED_PER_SUBSCRIBER) + LOANS;
+    let sample = batch_values(obs_dim, heads) * std::mem::size_of::<f32>()
+        + std::mem::size_of::<TransitionHeader>();
+    (samples as u64).saturating_mul(sample as u64)
+}
 
 /// How long a process keeps opening a service that another process is still creating. iceoryx2
 /// gives up after its `creation_timeout` (1 s) with `HangsInCreation`; a creator slowed down, or
@@ -195,10 +214,10 @@ impl Wire {
             .enable_safe_overflow(c.safe_overflow)
     }
 
-    fn transitions_service(&self) -> Result<PubSubFactory<TransitionBatch, ()>> {
+    fn transitions_service(&self) -> Result<PubSubFactory<[f32], TransitionHeader>> {
         let name = self.service_name(TRANSITIONS.name)?;
         patiently(&name, || {
-            self.pubsub::<TransitionBatch, ()>(&name, &TRANSITIONS)
+            self.pubsub::<[f32], TransitionHeader>(&name, &TRANSITIONS)
                 .open_or_create()
         })
         .map_err(transport("open", name.to_string()))
@@ -235,8 +254,8 @@ impl Wire {
     ) -> Result<
         iceoryx2::service::port_factory::request_response::PortFactory<
             Transport,
-            QueryRequest,
-            (),
+            [f32],
+            QueryHeader,
             QueryResponse,
             (),
         >,
@@ -245,7 +264,8 @@ impl Wire {
         patiently(&name, || {
             self.node
                 .service_builder(&name)
-                .request_response::<QueryRequest, QueryResponse>()
+                .request_response::<[f32], QueryResponse>()
+                .request_user_header::<QueryHeader>()
                 .max_servers(4)
                 .max_clients(2 * MAX_ACTORS + 4)
                 .max_nodes(MAX_NODES)
@@ -307,26 +327,33 @@ impl Wire {
         Receiver { wire: self, port }
     }
 
-    /// Actor side of `transitions`.
-    pub fn transitions_sender(&self) -> Result<Sender<'_, TransitionBatch>> {
+    /// Actor side of `transitions`, its samples sized for batches of observations of `obs_dim`
+    /// values and masks of `heads` (a larger batch makes it allocate anew, a power of two).
+    pub fn transitions_sender(&self, obs_dim: usize, heads: usize) -> Result<TransitionSender<'_>> {
         let port = self
             .transitions_service()?
             .publisher_builder()
+            .initial_max_slice_len(batch_values(obs_dim, heads).max(1))
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
             .map_err(transport("create a publisher on", "transitions"))?;
-        Ok(self.sender(port))
+        Ok(TransitionSender {
+            wire: self,
+            port,
+            seq: 0,
+        })
     }
 
     /// Learner side of `transitions`.
-    pub fn transitions_receiver(&self) -> Result<Receiver<'_, TransitionBatch>> {
+    pub fn transitions_receiver(&self) -> Result<TransitionReceiver<'_>> {
         let port = self
             .transitions_service()?
             .subscriber_builder()
             .buffer_size(TRANSITIONS_BUFFER)
             .create()
             .map_err(transport("create a subscriber on", "transitions"))?;
-        Ok(self.receiver(port))
+        Ok(TransitionReceiver { wire: self, port })
     }
 
     /// Learner side of `credits`.
@@ -404,11 +431,14 @@ impl Wire {
         Ok(DemoModelReceiver { wire: self, port })
     }
 
-    /// Actor side of `query`.
-    pub fn query_client(&self) -> Result<QueryClient<'_>> {
+    /// Actor side of `query`, its requests sized for states of `obs_dim` values (a larger one
+    /// makes it allocate anew, a power of two).
+    pub fn query_client(&self, obs_dim: usize) -> Result<QueryClient<'_>> {
         let port = self
             .query_service()?
             .client_builder()
+            .initial_max_slice_len(obs_dim.max(1))
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .map_err(transport("create a client on", "query"))?;
         Ok(QueryClient {

@@ -110,7 +110,13 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     }
     cfg.check_multi_process()
         .map_err(|e| usage(e.to_string()))?;
-    let env_spec = env_spec(&cfg)?;
+    // With --listen, remote hosts may bring actors up to the run's limit.
+    let publishers = if args.listen.is_some() {
+        MAX_ACTORS
+    } else {
+        args.actors
+    };
+    let env_spec = env_spec(&cfg, publishers)?;
     let prior = prior_demos(&cfg, env_spec.as_ref())?;
     let listen = args
         .listen
@@ -183,13 +189,14 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
 
 /// The sizes of a Gymnasium environment, probed once in Python now (a wrong space is refused
 /// before anything starts; its sizes go to runtime.toml for the learner and the expert), or
-/// `None` for a native one; either way checked against the wire's limits.
+/// `None` for a native one; either way checked against the shared memory `actors` actors take.
 fn env_spec(
     cfg: &alfd_common::config::ExperimentConfig,
+    actors: usize,
 ) -> anyhow::Result<Option<alfd_harness::python::EnvSpec>> {
     if cfg.env.name.is_remote() {
         let spec = alfd_harness::python::probe_env(&cfg.env)?;
-        alfd_harness::check_wire_limits(spec.obs_dim, cfg.agent.heads())
+        alfd_harness::check_wire_limits(spec.obs_dim, cfg.agent.heads(), actors)
             .map_err(|e| usage(e.to_string()))?;
         Ok(Some(spec))
     } else {
@@ -199,7 +206,7 @@ fn env_spec(
                 cfg.env.name
             ))
         })?;
-        alfd_harness::check_wire_limits(env.observation_dim(), cfg.agent.heads())
+        alfd_harness::check_wire_limits(env.observation_dim(), cfg.agent.heads(), actors)
             .map_err(|e| usage(e.to_string()))?;
         Ok(None)
     }

@@ -89,10 +89,6 @@ pub(crate) fn start(cfg: &ExperimentConfig, out: &std::path::Path) -> anyhow::Re
         )?);
         let env = AdapterEnv::open(adapter.clone(), &cfg.env, &run_id, me, SCHEMA_VERSION)?;
         let eval_env = AdapterEnv::open(adapter, &cfg.env, &run_id, me, SCHEMA_VERSION)?;
-        alfd_harness::check_wire_limits(
-            alfd_common::env::Env::observation_dim(&env),
-            cfg.agent.heads(),
-        )?;
         Some(NeuralEnvs {
             env: Box::new(env),
             eval_env: Box::new(eval_env),

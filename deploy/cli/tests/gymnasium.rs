@@ -160,14 +160,15 @@ fn a_gymnasium_environment_with_a_wrong_space_is_refused_naming_it() {
             "the action space Box(-2.0, 2.0, (1,), float32) is not Discrete",
         ),
         (
-            "CliffWalking-v1",
+            "Taxi-v4",
             "{}",
-            "the observation space Discrete(48) is not a one-dimensional Box",
+            "the observation space Discrete(500) has 500 states; one-hot, the wire carries 1 to \
+             MAX_OBS_DIM = 64",
         ),
         (
             "alfd_examples:AlfdCorridor-v0",
-            "{width = 12}",
-            "has 12 values; the wire carries 1 to MAX_OBS_DIM = 8",
+            "{width = 70}",
+            "has 70 values; the wire carries 1 to MAX_OBS_DIM = 64",
         ),
     ] {
         let o = alfd()
@@ -500,12 +501,13 @@ fn an_adapter_killed_with_sigkill_takes_its_actor_down_and_both_are_restarted() 
 fn a_gymnasium_run_with_no_budget_needs_no_expert_and_one_with_a_budget_does() {
     let _time = timed!();
     let out = tmp("gym-no-expert");
-    let config = out.join("acrobot.toml");
-    // No expert named: the default one is CartPole's, which cannot play Acrobot.
+    let config = out.join("frozenlake.toml");
+    // No expert named: the default one is CartPole's, which cannot play FrozenLake. Its 16
+    // states reach the agent one-hot, 16 values, and the agent has 12 heads.
     std::fs::write(
         &config,
-        "seed = 3\nepisodes = 3\n[env]\nname = \"gymnasium\"\nid = \"Acrobot-v1\"\n\
-         max_episode_steps = 40\n[agent]\nkind = \"bdqn\"\nbatch_size = 16\n\
+        "seed = 3\nepisodes = 3\n[env]\nname = \"gymnasium\"\nid = \"FrozenLake-v1\"\n\
+         max_episode_steps = 40\n[agent]\nkind = \"bdqn\"\nheads = 12\nbatch_size = 16\n\
          [query]\nrule = \"never\"\n[budget]\ntotal = 0\n",
     )
     .unwrap();

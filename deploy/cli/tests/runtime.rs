@@ -308,6 +308,7 @@ fn lockstep_equivalence_holds_with_every_learner_option_evaluation_and_a_step_bu
             "agent.tau=0.05",
             "agent.target_update_every=1",
             "agent.max_grad_norm=10",
+            "agent.heads=12",
         ],
     );
     let single = std::fs::read_to_string(local.join("episodes.csv")).unwrap();

@@ -38,7 +38,7 @@ import numpy as np
 class Corridor(gym.Env):
     """A corridor of `width` cells: start in the first, reach the last (action 1 moves right,
     0 left); -1 per step. The observation is the position one-hot (`width` values), so `width`
-    above alfd's MAX_OBS_DIM (8) is refused at start-up."""
+    above alfd's MAX_OBS_DIM (64) is refused at start-up."""
 
     def __init__(self, width=5):
         self.width = int(width)

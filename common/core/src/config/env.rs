@@ -141,6 +141,9 @@ pub const DEFAULT_DEEPSEA_SIZE: usize = 10;
 /// The largest DeepSea N a config may ask for (a grid of N² cells).
 pub const MAX_DEEPSEA_SIZE: usize = 100;
 
+/// Largest K, for Q-tables and networks alike (Osband et al. use up to 20 heads on DeepSea).
+pub const MAX_HEADS: usize = 20;
+
 fn default_p_success() -> f64 {
     0.9
 }

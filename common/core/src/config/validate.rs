@@ -140,8 +140,7 @@ impl ExperimentConfig {
         if a.heads() == 0 {
             return Err(invalid("agent.heads", "K must be at least 1"));
         }
-        // The neural agents' heads travel on the wire (8 at most); Q-tables stay in one process.
-        let most = if a.kind.is_tabular() { 20 } else { 8 };
+        let most = crate::config::MAX_HEADS;
         if a.heads() > most {
             return Err(invalid(
                 "agent.heads",

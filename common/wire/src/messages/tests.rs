@@ -5,6 +5,7 @@ use crate::*;
 
 #[test]
 fn a_batch_refuses_what_it_cannot_carry() {
+    assert!(TransitionBatch::new(0, 1, 2500, 20, 0).is_ok());
     assert!(matches!(
         TransitionBatch::new(0, 1, MAX_OBS_DIM + 1, 2, 0),
         Err(WireError::TooLarge {
@@ -77,28 +78,20 @@ mod fuzz {
     use proptest::prelude::*;
 
     fn record() -> impl Strategy<Value = TransitionRecord> {
-        (
-            any::<[f32; MAX_OBS_DIM]>(),
-            any::<[f32; MAX_HEADS]>(),
-            any::<u32>(),
-            any::<u32>(),
-            any::<f32>(),
-        )
-            .prop_map(|(state, mask, action, flags, reward)| TransitionRecord {
-                state,
-                next_state: state,
-                mask,
+        (any::<u32>(), any::<u32>(), any::<f32>()).prop_map(|(action, flags, reward)| {
+            TransitionRecord {
                 action,
                 reward,
                 flags,
-            })
+            }
+        })
     }
 
     /// A batch as another process may have filled it: any field, any record.
     fn any_batch() -> impl Strategy<Value = TransitionBatch> {
         (
             (any::<u32>(), 0u32..4),
-            (any::<u16>(), any::<u16>(), 0u16..=MAX_OBS_DIM as u16 + 1),
+            (any::<u16>(), any::<u16>(), 0u16..=10),
             (any::<u64>(), any::<u64>(), 0u64..4),
             (
                 any::<u32>(),
@@ -106,6 +99,7 @@ mod fuzz {
                 any::<u32>(),
             ),
             proptest::collection::vec(record(), 4),
+            (proptest::collection::vec(any::<f32>(), 0..64), any::<u8>()),
         )
             .prop_map(
                 |(
@@ -114,15 +108,12 @@ mod fuzz {
                     (inc, seq, inc_small),
                     (len, len_small, blocked),
                     recs,
+                    (values, repeat),
                 )| {
                     let mut b = TransitionBatch {
                         actor: if a == 0 { actor } else { a - 1 },
                         obs_dim: if od % 2 == 0 { od } else { od_small },
-                        heads: if hd % 2 == 0 {
-                            hd
-                        } else {
-                            hd % (MAX_HEADS as u16 + 2)
-                        },
+                        heads: if hd % 2 == 0 { hd } else { hd % 22 },
                         incarnation: if inc % 2 == 0 { inc } else { inc_small },
                         first_seq: if seq % 3 == 0 { seq } else { seq % 100 },
                         len: if len % 4 == 0 { len } else { len_small },
@@ -132,6 +123,16 @@ mod fuzz {
                     for (i, r) in b.records.iter_mut().enumerate() {
                         *r = recs[i % recs.len()];
                     }
+                    // As many values as the steps need, or any other number.
+                    let want = b
+                        .len()
+                        .min(TRANSITIONS_PER_BATCH)
+                        .saturating_mul(b.stride());
+                    b.values = if repeat % 2 == 0 && want <= 1 << 16 {
+                        values.iter().copied().cycle().take(want).collect()
+                    } else {
+                        values
+                    };
                     b
                 },
             )
@@ -145,13 +146,15 @@ mod fuzz {
             let ts: Vec<Transition> = b.transitions().collect();
             prop_assert!(ts.len() <= TRANSITIONS_PER_BATCH && ts.len() <= b.len());
             for t in &ts {
-                prop_assert!(t.state.len() <= MAX_OBS_DIM && t.mask.len() <= MAX_HEADS);
+                prop_assert_eq!(t.state.len(), usize::from(b.obs_dim));
+                prop_assert_eq!(t.mask.len(), usize::from(b.heads));
             }
             prop_assert_eq!(b.transition(i).is_some(), i < ts.len());
             prop_assert!(b.end_seq() >= b.first_seq);
             let ok = b.check(usize::from(b.obs_dim), usize::from(b.heads), 3).is_ok();
             if ok {
                 prop_assert_eq!(ts.len(), b.len());
+                prop_assert_eq!(b.values.len(), b.len() * b.stride());
                 prop_assert!(b.first_seq.checked_add(u64::from(b.len)).is_some());
             }
         }
@@ -159,8 +162,8 @@ mod fuzz {
         /// What `push` builds, the receiver reads back step for step.
         #[test]
         fn fuzz_transition_batch_round_trip(
-            obs_dim in 0usize..=MAX_OBS_DIM,
-            heads in 0usize..=MAX_HEADS,
+            obs_dim in 0usize..=40,
+            heads in 0usize..=20,
             n in 0usize..=TRANSITIONS_PER_BATCH,
             seed in any::<f32>(),
             action in 0u32..3,
@@ -185,7 +188,9 @@ mod fuzz {
             let got: Vec<Transition> = b.transitions().collect();
             prop_assert_eq!(got.len(), sent.len());
             for (g, s) in got.iter().zip(&sent) {
-                prop_assert_eq!(g.state.len(), s.state.len());
+                prop_assert_eq!(&g.state, &s.state);
+                prop_assert_eq!(&g.next_state, &s.next_state);
+                prop_assert_eq!(&g.mask, &s.mask);
                 prop_assert_eq!(g.action, s.action);
                 prop_assert_eq!((g.terminated, g.demo), (s.terminated, s.demo));
                 prop_assert_eq!(g.horizon, s.horizon);
@@ -194,12 +199,14 @@ mod fuzz {
 
         #[test]
         fn fuzz_query_request(
-            obs_dim in prop_oneof![any::<u32>(), 0u32..=MAX_OBS_DIM as u32 + 1],
-            state in any::<[f32; MAX_OBS_DIM]>(),
-            expected in 0usize..=MAX_OBS_DIM + 1,
+            obs_dim in prop_oneof![any::<u32>(), 0u32..=10],
+            state in proptest::collection::vec(any::<f32>(), 0..10),
+            expected in 0usize..=10,
         ) {
             let q = QueryRequest { obs_dim, state, ..QueryRequest::default() };
-            prop_assert!(q.state().len() <= MAX_OBS_DIM);
+            prop_assert!(q.state().len() <= q.state.len());
+            let back = QueryRequest::from_wire(&q.wire_header(), &q.state);
+            prop_assert_eq!(back.state(), q.state());
             if let Ok(s) = q.checked_state(expected) {
                 prop_assert_eq!(s.len(), expected);
                 prop_assert!(s.iter().all(|x| x.is_finite()));
@@ -267,8 +274,13 @@ mod fuzz {
             ..TransitionBatch::default()
         };
         assert_eq!(b.transition(TRANSITIONS_PER_BATCH), None);
-        assert_eq!(b.transitions().count(), TRANSITIONS_PER_BATCH);
+        assert_eq!(b.transitions().count(), 0, "no values, no steps");
         assert_eq!(b.end_seq(), u64::MAX);
+        let short = TransitionBatch::from_wire(&b.wire_header(), &[1.0; 10]);
+        assert_eq!(short.transitions().count(), 0);
+        assert!(short
+            .check(usize::from(b.obs_dim), usize::from(b.heads), 2)
+            .is_err());
         assert!(matches!(b.check(4, 2, 2), Err(WireError::TooLarge { .. })));
         let c = Credits {
             env_steps: u64::MAX,

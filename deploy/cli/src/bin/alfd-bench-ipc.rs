@@ -247,7 +247,7 @@ fn percentiles(mut ns: Vec<u64>) -> serde_json::Value {
 /// Query round trips: send, wait for the answer (busy-polling, or blocking on the actors'
 /// doorbell after ringing the expert's, as the actor process does).
 fn query(me: &Wire, n: usize, block: bool) -> anyhow::Result<serde_json::Value> {
-    let mut client = me.query_client()?;
+    let mut client = me.query_client(4)?;
     let expert = me.bell(Doorbell::Expert)?;
     let waiter = me.waiter(Doorbell::Actor(0))?;
     let state = [0.01f32, -0.02, 0.03, -0.04];
@@ -255,7 +255,7 @@ fn query(me: &Wire, n: usize, block: bool) -> anyhow::Result<serde_json::Value> 
     let mut ns = Vec::with_capacity(n);
     for i in 0..n + warmup {
         let t = Instant::now();
-        let mut pending = client.ask(QueryRequest::new(0, 1, i as u64, &state)?)?;
+        let mut pending = client.ask(&QueryRequest::new(0, 1, i as u64, &state)?)?;
         anyhow::ensure!(pending.servers() == 1, "no server");
         if block {
             expert.ring()?;
@@ -430,7 +430,7 @@ fn send_transitions(
     n: usize,
     ring: bool,
 ) -> anyhow::Result<()> {
-    let mut tx = me.transitions_sender()?;
+    let mut tx = me.transitions_sender(4, 2)?;
     let credits = me.credits_receiver()?;
     let learner = me.bell(Doorbell::Learner)?;
     side.ready()?;
@@ -456,7 +456,7 @@ fn send_transitions(
             for _ in 0..TRANSITIONS_PER_BATCH {
                 b.push(&t)?;
             }
-            tx.send(b)?;
+            tx.send(&b)?;
             if ring {
                 learner.ring()?;
             }
