@@ -86,7 +86,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let source = if name == cfg.expert.name && !cfg.needs_expert() {
         Source::BuiltIn(Box::new(alfd_common::agent::NoExpert))
     } else {
-        source(args, cfg.env.name, &name, me, schema, actions)?
+        source(args, cfg, &name, me, schema, actions)?
     };
     let wire = args.process.connect(me, schema)?;
     let session = Session::join(&wire, Doorbell::Expert, runtime.handshake_timeout())?;
@@ -236,7 +236,7 @@ fn read_demos(
 /// stops with this process), or a person. Budget, demos.jsonl and the model stay here either way.
 fn source(
     args: &Args,
-    env: alfd_common::config::EnvName,
+    cfg: &alfd_common::config::ExperimentConfig,
     name: &str,
     me: Process,
     schema: u32,
@@ -246,7 +246,7 @@ fn source(
         return Ok(Source::Person);
     }
     let Some(policy) = registry::external_policy(name) else {
-        return Ok(Source::BuiltIn(registry::for_env(env, name)?));
+        return Ok(Source::BuiltIn(registry::for_config(cfg, name)?));
     };
     let adapter_name = format!("expert-{}", args.generation);
     let log = args

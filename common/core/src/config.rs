@@ -630,6 +630,12 @@ impl ExperimentConfig {
         self.budget.total as u32
     }
 
+    /// DeepSea's mapping seed: `env.mapping_seed`, or else the run's seed (its low 32 bits), so
+    /// that each seed of a sweep plays its own instance.
+    pub fn deepsea_mapping_seed(&self) -> u32 {
+        self.env.mapping_seed.unwrap_or(self.seed as u32)
+    }
+
     /// Whether the run ever consults an expert: a budget to ask it, several experts, or the
     /// `oracle` gate. Without, no expert need exist for the environment (B = 0 anywhere).
     pub fn needs_expert(&self) -> bool {
@@ -887,8 +893,9 @@ model = "krr"
             assert!(
                 tabular.contains("agent.kind")
                     && tabular.contains(&format!("does not run on {name}"))
-                    && tabular
-                        .contains("neural ones on cartpole, mountaincar, acrobot and gymnasium"),
+                    && tabular.contains(
+                        "neural ones on cartpole, mountaincar, acrobot, deepsea and gymnasium"
+                    ),
                 "{tabular}"
             );
             let map = err(&[&format!("env.name={name}"), "env.map=m.txt"]);

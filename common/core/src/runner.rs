@@ -297,8 +297,8 @@ pub fn run_neural_checkpointed(
     save: impl FnMut(&NeuralRunState) -> ControlFlow<()>,
     on_episode: impl FnMut(&EpisodeRecord, &Mlp) -> ControlFlow<()>,
 ) -> Result<NeuralRun, StateMismatch> {
-    let env = vector_env(&cfg.env).expect("a neural agent runs on a vector environment");
-    let eval_env = vector_env(&cfg.env).expect("the same environment");
+    let env = vector_env(cfg).expect("a neural agent runs on a vector environment");
+    let eval_env = vector_env(cfg).expect("the same environment");
     let envs = NeuralEnvs {
         env,
         eval_env,

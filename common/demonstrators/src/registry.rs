@@ -265,6 +265,45 @@ pub fn deepsea(
     }
 }
 
+/// The DeepSea instance's right moves for its one-hot observations (the neural agents' view):
+/// at the all-zero observation after the last row, any action (0) is as good.
+#[derive(Debug, Clone)]
+struct DeepSeaGrid(alfd_common::env::DeepSea);
+
+impl Demonstrator<[f32]> for DeepSeaGrid {
+    fn act(&mut self, s: &[f32]) -> usize {
+        self.0.optimal_action_for(s).unwrap_or(0)
+    }
+}
+
+/// The demonstrator `name` for the environment of `cfg` with vector observations: as
+/// [`for_env`], and DeepSea's for the instance the config names (`env.size`, its mapping
+/// seed), acting on its one-hot grid.
+pub fn for_config(
+    cfg: &alfd_common::config::ExperimentConfig,
+    name: &str,
+) -> Result<Box<dyn Demonstrator<[f32]> + Send>, BadInput> {
+    if cfg.env.name != EnvName::Deepsea {
+        return for_env(cfg.env.name, name);
+    }
+    let e = entry(name, "deepsea").map_err(BadInput::from)?;
+    let grid = alfd_common::env::DeepSea::new(cfg.env.deepsea_size(), cfg.deepsea_mapping_seed())
+        .map_err(|err| BadInput(err.to_string()))?;
+    match e.kind.as_str() {
+        "deepsea-optimal" => Ok(Box::new(DeepSeaGrid(grid))),
+        "deepsea-noisy" => Ok(Box::new(crate::scripted::Noisy::new(
+            DeepSeaGrid(grid),
+            0.1,
+            2,
+            name,
+        ))),
+        other => Err(BadInput::from(RegistryError::Corrupt {
+            name: name.to_owned(),
+            reason: format!("kind `{other}` is not a deepsea kind"),
+        })),
+    }
+}
+
 /// A CliffWalk demonstrator by name, for `env` (the optimal one is computed for its map).
 pub fn cliffwalk(
     name: &str,

@@ -131,7 +131,7 @@ impl Setup {
 
     /// The config's built-in environment, checked against what the wire carries.
     pub fn vector_env(&self) -> Result<Box<VectorEnv>> {
-        let env = vector_env(&self.config.env).ok_or_else(|| {
+        let env = vector_env(&self.config).ok_or_else(|| {
             BadInput(format!(
                 "{:?} has no vector observations; the multi-process runtime runs neural agents",
                 self.config.env.name

@@ -240,7 +240,7 @@ impl Pieces {
     pub(crate) fn of(cfg: &ExperimentConfig) -> anyhow::Result<Self> {
         let prior = read_prior(cfg)?;
         Ok(match cfg.env.name {
-            EnvName::Cliffwalk | EnvName::Deepsea => {
+            _ if cfg.agent.kind.is_tabular() => {
                 let env = TabularEnvs::of(cfg)?;
                 Self::Tabular {
                     demonstrator: env.demonstrator(&cfg.expert.name)?,
@@ -577,7 +577,7 @@ fn run_neural(
 
 /// The config's built-in environment, to train on and to evaluate on.
 fn builtin_envs(cfg: &ExperimentConfig) -> anyhow::Result<NeuralEnvs> {
-    let env = || alfd_common::env::vector_env(&cfg.env).context("a vector environment");
+    let env = || alfd_common::env::vector_env(cfg).context("a vector environment");
     Ok(NeuralEnvs {
         env: env()?,
         eval_env: env()?,

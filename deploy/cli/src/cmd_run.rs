@@ -200,7 +200,7 @@ fn env_spec(
             .map_err(|e| usage(e.to_string()))?;
         Ok(Some(spec))
     } else {
-        let env = alfd_common::env::vector_env(&cfg.env).ok_or_else(|| {
+        let env = alfd_common::env::vector_env(cfg).ok_or_else(|| {
             usage(format!(
                 "`alfd run` needs an environment with vector observations, not {:?}",
                 cfg.env.name
@@ -225,7 +225,7 @@ fn prior_demos(
     let (obs_dim, actions) = match spec {
         Some(s) => (s.obs_dim, s.num_actions),
         None => {
-            let env = alfd_common::env::vector_env(&cfg.env)
+            let env = alfd_common::env::vector_env(cfg)
                 .ok_or_else(|| anyhow::anyhow!("no vector environment"))?;
             (env.observation_dim(), env.num_actions())
         }

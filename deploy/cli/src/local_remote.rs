@@ -105,7 +105,7 @@ pub(crate) fn start(cfg: &ExperimentConfig, out: &std::path::Path) -> anyhow::Re
                 let adapter = Adapter::expert(policy, &run_id, "expert-1", SCHEMA_VERSION, &log)?;
                 let actions = match &envs {
                     Some(e) => e.env.num_actions(),
-                    None => alfd_common::env::vector_env(&cfg.env)
+                    None => alfd_common::env::vector_env(cfg)
                         .map(|e| e.num_actions())
                         .unwrap_or(0),
                 };

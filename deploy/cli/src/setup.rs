@@ -149,10 +149,9 @@ pub fn cliffwalk(cfg: &ExperimentConfig) -> anyhow::Result<CliffWalk> {
 /// or else the run's seed (its low 32 bits).
 pub fn deepsea(cfg: &ExperimentConfig) -> anyhow::Result<alfd_common::env::DeepSeaCells> {
     anyhow::ensure!(cfg.env.name == EnvName::Deepsea, "not a deepsea config");
-    let mapping_seed = cfg.env.mapping_seed.unwrap_or(cfg.seed as u32);
     let sea = alfd_common::env::DeepSea::with_max_episode_steps(
         cfg.env.deepsea_size(),
-        mapping_seed,
+        cfg.deepsea_mapping_seed(),
         cfg.env.max_episode_steps(),
     )
     .map_err(|e| usage(e.to_string()))?;
@@ -209,7 +208,7 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
     }
     if !cfg.needs_expert() {
         // No expert to check; a map is still read now, so that a bad one is refused first.
-        if cfg.env.name.is_tabular() {
+        if cfg.agent.kind.is_tabular() {
             TabularEnvs::of(cfg)?;
         }
         return Ok(());
@@ -223,7 +222,7 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
             &cfg.expert.name,
         )?);
     }
-    if cfg.env.name.is_tabular() {
+    if cfg.agent.kind.is_tabular() {
         return TabularEnvs::of(cfg)?
             .demonstrator(&cfg.expert.name)
             .map(|_| ());
@@ -249,7 +248,7 @@ pub fn panel(
                 )));
             }
             let built = |name: &str| {
-                alfd_demonstrators::registry::for_env(cfg.env.name, name)
+                alfd_demonstrators::registry::for_config(cfg, name)
                     .map_err(|err| usage(format!("[[experts]]: {err}")))
             };
             let first = built(&e.name)?;
@@ -276,8 +275,8 @@ pub fn neural_demonstrator(
              swap-expert` only: its page is served by the expert process",
         ));
     }
-    Ok(alfd_demonstrators::registry::for_env(
-        cfg.env.name,
+    Ok(alfd_demonstrators::registry::for_config(
+        cfg,
         &cfg.expert.name,
     )?)
 }

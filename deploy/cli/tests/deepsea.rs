@@ -203,3 +203,44 @@ fn gate_oracle_is_refused_by_alfd_run_with_exit_code_2() {
         text(&o)
     );
 }
+
+#[test]
+fn a_network_of_20_heads_plays_deepsea_50_in_alfd_run_as_in_alfd_local_to_the_byte() {
+    let _time = timed!();
+    let dir = tmp("deepsea-neural");
+    // DeepSea(50)'s one-hot grid is 2,500 values a state, 5,020 a step with 20 heads' mask.
+    let config = dir.join("deepsea50.toml");
+    std::fs::write(
+        &config,
+        "seed = 3\nepisodes = 20\n[env]\nname = \"deepsea\"\nsize = 50\n\
+         [agent]\nkind = \"bdqn\"\nheads = 20\nbatch_size = 16\n\
+         [query]\nrule = \"first\"\n[budget]\ntotal = 100\n[expert]\nname = \"deepsea-optimal\"\n",
+    )
+    .unwrap();
+    let (local, lockstep, two) = (dir.join("local"), dir.join("lockstep"), dir.join("two"));
+    for (out, how) in [
+        (&local, &["local"][..]),
+        (&lockstep, &["run", "--actors=1", "--window=1"][..]),
+        (&two, &["run", "--actors=2"][..]),
+    ] {
+        let o = alfd()
+            .args(how)
+            .args(["--quiet", "--out", out.to_str().unwrap()])
+            .arg(format!("--config={}", config.display()))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{how:?}: {}", text(&o));
+    }
+    let episodes = |dir: &Path| std::fs::read_to_string(dir.join("episodes.csv")).unwrap();
+    assert_eq!(episodes(&lockstep), episodes(&local));
+    assert_eq!(episodes(&two).lines().count(), 21);
+    let demos = alfd_demonstrators::demo_log::read(&two.join("demos.jsonl")).unwrap();
+    assert_eq!(demos.len(), 100);
+    // Each demonstration is a cell of the grid, answered with the move right there.
+    let sea = alfd_common::env::DeepSea::new(50, 3).unwrap();
+    for d in &demos {
+        assert_eq!(d.state.len(), 2500);
+        let state: Vec<f32> = d.state.iter().map(|&v| v as f32).collect();
+        assert_eq!(Some(d.action), sea.optimal_action_for(&state));
+    }
+}

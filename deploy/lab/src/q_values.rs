@@ -51,7 +51,7 @@ fn check_with(
     seed: u64,
 ) -> Result<Checked> {
     let name = cfg.env.name;
-    let (Some(rewards), Some(mut env)) = (name.reward_range(), vector_env(&cfg.env)) else {
+    let (Some(rewards), Some(mut env)) = (name.reward_range(), vector_env(cfg)) else {
         return Err(usage(format!(
             "{}: environment `{name}`; q-range knows the reward range of cartpole, mountaincar \
              and acrobot",

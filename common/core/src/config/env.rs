@@ -19,7 +19,8 @@ pub enum EnvName {
     /// Any Gymnasium environment (`env.id`), served by a Python adapter in another process.
     Gymnasium,
     /// bsuite's DeepSea(N) (`env.size`, `env.mapping_seed`): deterministic, the treasure at the
-    /// bottom right behind N moves right that each cost 0.01/N; the tabular agents see the cell.
+    /// bottom right behind N moves right that each cost 0.01/N; the tabular agents see the cell,
+    /// the neural ones bsuite's one-hot grid of N² values (in `alfd run` too).
     Deepsea,
 }
 
@@ -181,10 +182,15 @@ mod tests {
             "seed = 1\nepisodes = 3\n[env]\nname = \"deepsea\"\nsize = 101\n[agent]\nkind = \"qlearning\"\n"
         )
         .contains("1..=100"));
-        // 20 heads for Q-tables; the neural agents' heads travel on the wire (8 at most).
+        // K up to 20, for Q-tables and networks alike; networks play DeepSea's one-hot grid.
         assert!(err(
             "seed = 1\nepisodes = 3\n[env]\nname = \"deepsea\"\n[agent]\nkind = \"bootstrapped-q\"\nheads = 21\n"
         )
         .contains("at most 20"));
+        let neural = parse(
+            "seed = 1\nepisodes = 3\n[env]\nname = \"deepsea\"\n[agent]\nkind = \"bdqn\"\nheads = 20\n",
+        )
+        .unwrap();
+        assert_eq!(neural.agent.heads(), 20);
     }
 }

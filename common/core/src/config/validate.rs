@@ -164,10 +164,11 @@ impl ExperimentConfig {
                 ),
             ));
         }
-        if a.kind.is_tabular() != e.name.is_tabular() {
+        // DeepSea takes both: Q-tables on its cells, networks on its one-hot grid.
+        if e.name != EnvName::Deepsea && a.kind.is_tabular() != e.name.is_tabular() {
             return Err(invalid(
                 "agent.kind",
-                format!("{:?} does not run on {}: tabular agents run on cliffwalk and deepsea, neural ones on cartpole, mountaincar, acrobot and gymnasium", a.kind, e.name),
+                format!("{:?} does not run on {}: tabular agents run on cliffwalk and deepsea, neural ones on cartpole, mountaincar, acrobot, deepsea and gymnasium", a.kind, e.name),
             ));
         }
         if !(a.gamma >= 0.0 && a.gamma <= 1.0) {

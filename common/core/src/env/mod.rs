@@ -141,13 +141,24 @@ where
 }
 
 /// The environment of a config for the neural agents (the names `EnvName` lists with vector
-/// observations); `None` for an environment whose states are ids (CliffWalk: tabular agents).
-pub fn vector_env(cfg: &crate::config::EnvConfig) -> Option<Box<VectorEnv>> {
-    vector_env_named(cfg.name, cfg.max_episode_steps())
+/// observations, and DeepSea's one-hot grid); `None` for CliffWalk (tabular agents only) and
+/// Gymnasium's (served by another process, see `alfd-wire`).
+pub fn vector_env(cfg: &crate::config::ExperimentConfig) -> Option<Box<VectorEnv>> {
+    let env = &cfg.env;
+    if env.name == crate::config::EnvName::Deepsea {
+        let sea = DeepSea::with_max_episode_steps(
+            env.deepsea_size(),
+            cfg.deepsea_mapping_seed(),
+            env.max_episode_steps(),
+        );
+        return sea.ok().map(|sea| Box::new(sea) as Box<VectorEnv>);
+    }
+    vector_env_named(env.name, env.max_episode_steps())
 }
 
 /// The environment `name` with vector observations, truncated after `max_episode_steps` steps;
-/// `None` for CliffWalk and for Gymnasium's (served by another process, see `alfd-wire`).
+/// `None` for CliffWalk, for DeepSea (its instance is the config's: [`vector_env`]) and for
+/// Gymnasium's (served by another process, see `alfd-wire`).
 pub fn vector_env_named(
     name: crate::config::EnvName,
     max_episode_steps: usize,
