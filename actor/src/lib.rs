@@ -109,12 +109,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         env.as_mut(),
         &mut actor,
         &mut expert,
-        Schedule {
-            env_seed: build::env_seed(cfg, me.id, me.incarnation),
-            episodes: quota,
-            steps: None,
-            actor_id: me.id,
-        },
+        schedule(cfg, me, quota),
         start,
         |e| {
             // Actor 0 evaluates, with the weights it acts on (as the single-process run does).
@@ -139,6 +134,21 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         stay_until_stop(&session)?;
     }
     Ok(())
+}
+
+/// This actor's episodes: its own seed stream, up to `quota` episodes (none: until the run
+/// stops), no step limit of its own.
+fn schedule(
+    cfg: &alfd_common::config::ExperimentConfig,
+    me: Identity,
+    quota: Option<u32>,
+) -> Schedule {
+    Schedule {
+        env_seed: build::env_seed(cfg, me.id, me.incarnation),
+        episodes: quota,
+        steps: None,
+        actor_id: me.id,
+    }
 }
 
 /// Waits for the learner's first weights; `false` when the run's end overtook a restarted actor

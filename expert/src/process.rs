@@ -92,13 +92,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let session = Session::join(&wire, Doorbell::Expert, runtime.handshake_timeout())?;
     let core = expert_core(args, cfg, obs_dim, actions)?;
     let page = match source {
-        Source::Person => Some(start_page(
-            args,
-            runtime.human_port,
-            cfg.env.name.as_str(),
-            actions,
-            &core,
-        )?),
+        Source::Person => Some(start_page(args, runtime.human_port, cfg, actions, &core)?),
         _ => None,
     };
     let mut machine = ExpertMachine::new(
@@ -136,9 +130,15 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let stop_reason = serve(&session, &mut machine, &mut shell)?;
     let stop = machine.stop();
     shell.apply(&mut machine, stop)?;
+    log_counts(&machine, stop_reason);
+    Ok(())
+}
+
+/// What the expert did, in its log as it stops.
+fn log_counts(machine: &Machine<'_>, reason: &str) {
     let c = machine.counts();
     info!(
-        reason = stop_reason,
+        reason,
         answered = c.answered,
         refused = c.refused,
         abandoned = c.abandoned,
@@ -146,7 +146,6 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         demos = machine.core().budget().used(),
         "expert stopping"
     );
-    Ok(())
 }
 
 /// The expert's side of the config, with the run's prior demonstrations (`demos.prior`) in its
@@ -267,10 +266,11 @@ fn source(
 fn start_page(
     args: &Args,
     port: u16,
-    env: &str,
+    cfg: &alfd_common::config::ExperimentConfig,
     actions: usize,
     core: &ExpertCore,
 ) -> alfd_harness::Result<HumanPage> {
+    let env = cfg.env.name.as_str();
     let page = HumanPage::start(
         port,
         PageState {
@@ -473,19 +473,7 @@ impl<'w> Shell<'w> {
             match action {
                 Action::Exit(reason) => return Ok(Some(reason)),
                 Action::LoadDemos => {
-                    // A file that went bad meanwhile is bad input too (exit code 2, the reason
-                    // in the launcher's message).
-                    let records = read_demos(&self.demos_path, self.obs_dim, self.actions)?;
-                    let n = records.len();
-                    let next = m
-                        .activate(records)
-                        .what(|| "cannot refit the demonstration model on demos.jsonl".into())?;
-                    let log =
-                        DemoLog::open(&self.demos_path).what(|| "the demonstration log".into())?;
-                    self.log = Some(log);
-                    let left = m.core().budget().remaining();
-                    info!(demos = n, budget_left = left, "active: answering queries");
-                    if let Some(reason) = self.apply(m, next)? {
+                    if let Some(reason) = self.load_demos(m)? {
                         return Ok(Some(reason));
                     }
                 }
@@ -528,21 +516,7 @@ impl<'w> Shell<'w> {
                     state,
                     step,
                 } => {
-                    if self.disk_full_until.is_some_and(|t| self.now() < t) {
-                        debug!(
-                            actor,
-                            "the disk was full a moment ago; query left unanswered"
-                        );
-                        continue;
-                    }
-                    if !self.delay.is_zero() {
-                        std::thread::sleep(self.delay);
-                    }
-                    let Some(action) = self.ask(actor, &state)? else {
-                        continue;
-                    };
-                    let next = m.demonstrated(query, actor, &state, step, action);
-                    if let Some(reason) = self.apply(m, next)? {
+                    if let Some(reason) = self.demonstrate(m, (query, actor), &state, step)? {
                         return Ok(Some(reason));
                     }
                 }
@@ -554,6 +528,47 @@ impl<'w> Shell<'w> {
             }
         }
         Ok(None)
+    }
+
+    /// Becomes the active expert: reads `demos.jsonl` back (a file that went bad meanwhile is
+    /// bad input too, exit code 2), refits on it, opens the log and carries out what follows.
+    fn load_demos(&mut self, m: &mut Machine<'w>) -> alfd_harness::Result<Option<&'static str>> {
+        let records = read_demos(&self.demos_path, self.obs_dim, self.actions)?;
+        let n = records.len();
+        let next = m
+            .activate(records)
+            .what(|| "cannot refit the demonstration model on demos.jsonl".into())?;
+        let log = DemoLog::open(&self.demos_path).what(|| "the demonstration log".into())?;
+        self.log = Some(log);
+        let left = m.core().budget().remaining();
+        info!(demos = n, budget_left = left, "active: answering queries");
+        self.apply(m, next)
+    }
+
+    /// Asks the demonstrator for `state` (none while the disk was full a moment ago, or when an
+    /// external one failed) and carries out what the answer leads to.
+    fn demonstrate(
+        &mut self,
+        m: &mut Machine<'w>,
+        (query, actor): (IncomingQuery<'w>, u32),
+        state: &[f32],
+        step: u64,
+    ) -> alfd_harness::Result<Option<&'static str>> {
+        if self.disk_full_until.is_some_and(|t| self.now() < t) {
+            debug!(
+                actor,
+                "the disk was full a moment ago; query left unanswered"
+            );
+            return Ok(None);
+        }
+        if !self.delay.is_zero() {
+            std::thread::sleep(self.delay);
+        }
+        let Some(action) = self.ask(actor, state)? else {
+            return Ok(None);
+        };
+        let next = m.demonstrated(query, actor, state, step, action);
+        self.apply(m, next)
     }
 
     /// The demonstrator's action for `state`, or `None` when an external one failed (the actor

@@ -599,36 +599,9 @@ impl<'w, 'a> Forwarder<'w, 'a> {
             return Ok(());
         }
         let sent = match f {
-            Frame::Transitions(batch) => {
-                let tx = match self.transitions.entry(batch.actor) {
-                    Entry::Occupied(o) => o.into_mut(),
-                    Entry::Vacant(v) => v.insert(self.wire.transitions_sender(
-                        usize::from(batch.obs_dim),
-                        usize::from(batch.heads),
-                    )?),
-                };
-                tx.forward(&batch).map(|_| self.learner.ring())
-            }
+            Frame::Transitions(batch) => self.transitions(&batch),
             Frame::Progress(p) => self.progress.forward(p).map(|_| self.launcher.ring()),
-            Frame::Query(q) => {
-                let client = match self.clients.entry(q.actor) {
-                    Entry::Occupied(o) => o.into_mut(),
-                    Entry::Vacant(v) => v.insert(self.wire.query_client(q.state.len())?),
-                };
-                let ask = client.ask(&q)?;
-                // A newer query of the same actor replaces the older one (it gave up): an answer
-                // to that one already here is late.
-                if let Some((mut old, ..)) = self
-                    .pending
-                    .insert(q.actor, (ask, q.header.seq, Instant::now()))
-                {
-                    if old.poll()?.is_some_and(|r| r.outcome == outcome::ANSWERED) {
-                        self.late += 1;
-                        self.count();
-                    }
-                }
-                Ok(self.expert.ring())
-            }
+            Frame::Query(q) => self.query(&q),
             Frame::DemoModel(h, b) => match self.desk.model(h, b) {
                 Some((h, b)) => self.publish_model(h, &b).map(|()| Ok(0)),
                 None => return Ok(()),
@@ -672,6 +645,45 @@ impl<'w, 'a> Forwarder<'w, 'a> {
             rang?;
         }
         Ok(())
+    }
+
+    /// A remote actor's batch into this host's `transitions`, through a publisher of its own
+    /// (sized by its first batch), the learner rung.
+    fn transitions(
+        &mut self,
+        batch: &alfd_wire::TransitionBatch,
+    ) -> alfd_wire::Result<alfd_wire::Result<usize>> {
+        let tx = match self.transitions.entry(batch.actor) {
+            Entry::Occupied(o) => o.into_mut(),
+            Entry::Vacant(v) => v.insert(
+                self.wire
+                    .transitions_sender(usize::from(batch.obs_dim), usize::from(batch.heads))?,
+            ),
+        };
+        tx.forward(batch).map(|_| self.learner.ring())
+    }
+
+    /// A remote actor's query to this host's expert, the expert rung. A newer query of the same
+    /// actor replaces the older one (it gave up): an answer to that one already here is late.
+    fn query(
+        &mut self,
+        q: &alfd_wire::QueryRequest,
+    ) -> alfd_wire::Result<alfd_wire::Result<usize>> {
+        let client = match self.clients.entry(q.actor) {
+            Entry::Occupied(o) => o.into_mut(),
+            Entry::Vacant(v) => v.insert(self.wire.query_client(q.state.len())?),
+        };
+        let ask = client.ask(q)?;
+        if let Some((mut old, ..)) = self
+            .pending
+            .insert(q.actor, (ask, q.header.seq, Instant::now()))
+        {
+            if old.poll()?.is_some_and(|r| r.outcome == outcome::ANSWERED) {
+                self.late += 1;
+                self.count();
+            }
+        }
+        Ok(self.expert.ring())
     }
 
     fn publish_model(

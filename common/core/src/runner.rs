@@ -350,6 +350,80 @@ pub enum RunError {
     NoOracle,
 }
 
+/// The in-process expert of a neural run: `demonstrator`, or the `panel` of `[[experts]]`.
+fn local_expert<'d>(
+    cfg: &ExperimentConfig,
+    core: ExpertCore,
+    demonstrator: &'d mut dyn Demonstrator<[f32]>,
+    panel: Vec<Box<dyn Demonstrator<[f32]> + Send>>,
+) -> LocalExpert<'d, [f32]> {
+    let expert = LocalExpert::new(core, demonstrator, &cfg.expert.name, cfg.shaping_enabled());
+    if panel.is_empty() {
+        return expert;
+    }
+    let members = panel
+        .into_iter()
+        .map(|d| d as Box<dyn Demonstrator<[f32]>>)
+        .collect();
+    expert.with_panel(PanelAsk::new(cfg, members))
+}
+
+/// Where a neural run starts: its agent, expert and records, fresh (the `prior`
+/// demonstrations in the replay buffer) or as the checkpoint `from` left them.
+struct NeuralStart {
+    learner: crate::agent::NeuralLearner,
+    core: crate::agent::NeuralActor,
+    expert_core: ExpertCore,
+    records: Vec<EpisodeRecord>,
+    progress: Progress,
+}
+
+/// The agent, expert and records of a neural run on `env` (restored into `from`'s state if
+/// given), the `prior` demonstrations in its demonstration model.
+fn neural_start(
+    cfg: &ExperimentConfig,
+    env: &mut VectorEnv,
+    oracle: Option<crate::query::Oracle<[f32]>>,
+    prior: &[PriorDemo],
+    from: Option<&NeuralRunState>,
+) -> Result<NeuralStart, RunError> {
+    let (obs_dim, actions) = (env.observation_dim(), env.num_actions());
+    let mut learner = build::neural_learner(cfg, obs_dim, actions);
+    let mut core = build::neural_actor(cfg, obs_dim, actions, 0, 1);
+    if core.needs_oracle() {
+        core.set_oracle(oracle.ok_or(RunError::NoOracle)?);
+    }
+    let mut expert_core = ExpertCore::for_config(cfg, actions);
+    if !prior.is_empty() {
+        let records = prior.iter().enumerate().map(|(i, p)| p.record(i)).collect();
+        expert_core.set_prior(records).map_err(RunError::Prior)?;
+    }
+    let Some(s) = from else {
+        for p in prior {
+            learner.insert(&p.transition(cfg.agent.heads()));
+        }
+        return Ok(NeuralStart {
+            learner,
+            core,
+            expert_core,
+            records: Vec::new(),
+            progress: Progress::default(),
+        });
+    };
+    learner.restore(&s.learner)?;
+    core.restore(&s.actor)?;
+    env.restore(&s.env)
+        .map_err(|e| StateMismatch(e.to_string()))?;
+    expert_core.restore_snapshot(&s.expert)?;
+    Ok(NeuralStart {
+        learner,
+        core,
+        expert_core,
+        records: s.records.clone(),
+        progress: s.progress,
+    })
+}
+
 /// [`run_neural_checkpointed`] on the environments `envs` (the config's environment, made by
 /// the caller), starting from the `prior` demonstrations (in the demonstration model, and in
 /// the replay buffer of a run from scratch: a restored one holds them already); an environment
@@ -369,48 +443,16 @@ pub fn run_neural_on(
         oracle,
         panel,
     } = envs;
-    let (obs_dim, actions) = (env.observation_dim(), env.num_actions());
-    let mut learner = build::neural_learner(cfg, obs_dim, actions);
-    let mut core = build::neural_actor(cfg, obs_dim, actions, 0, 1);
-    if core.needs_oracle() {
-        core.set_oracle(oracle.ok_or(RunError::NoOracle)?);
-    }
-    let mut expert_core = ExpertCore::for_config(cfg, actions);
-    if !prior.is_empty() {
-        let records = prior.iter().enumerate().map(|(i, p)| p.record(i)).collect();
-        expert_core.set_prior(records).map_err(RunError::Prior)?;
-    }
-    let mut records = Vec::new();
-    let mut progress = Progress::default();
-    if checkpoints.from.is_none() {
-        for p in prior {
-            learner.insert(&p.transition(cfg.agent.heads()));
-        }
-    }
-    if let Some(s) = checkpoints.from {
-        learner.restore(&s.learner)?;
-        core.restore(&s.actor)?;
-        env.restore(&s.env)
-            .map_err(|e| StateMismatch(e.to_string()))?;
-        expert_core.restore_snapshot(&s.expert)?;
-        records.clone_from(&s.records);
-        progress = s.progress;
-    }
+    let NeuralStart {
+        learner,
+        core,
+        expert_core,
+        mut records,
+        progress,
+    } = neural_start(cfg, env.as_mut(), oracle, prior, checkpoints.from)?;
     let handle = LearnerHandle::new(learner);
     let mut actor = GenericActor::new(core, handle.adder(), handle.variables());
-    let mut expert = LocalExpert::new(
-        expert_core,
-        demonstrator,
-        &cfg.expert.name,
-        cfg.shaping_enabled(),
-    );
-    if !panel.is_empty() {
-        let members = panel
-            .into_iter()
-            .map(|d| d as Box<dyn Demonstrator<[f32]>>)
-            .collect();
-        expert = expert.with_panel(PanelAsk::new(cfg, members));
-    }
+    let mut expert = local_expert(cfg, expert_core, demonstrator, panel);
     let eval_seed = build::eval_seed(cfg);
     let limit = cfg.episode_limit();
     let end = environment_loop::run_from(

@@ -236,6 +236,33 @@ impl fmt::Debug for RemoteClient {
     }
 }
 
+/// Waits up to `wait` until `served` (the adapter of `service` serves); `gone` says why it never
+/// will (it exited).
+fn wait_for_server(
+    service: &str,
+    wait: Duration,
+    gone: &mut dyn FnMut() -> Option<String>,
+    served: impl Fn() -> bool,
+) -> Result<()> {
+    let deadline = Instant::now() + wait;
+    while !served() {
+        if let Some(why) = gone() {
+            return Err(WireError::Remote {
+                service: service.to_owned(),
+                message: why,
+            });
+        }
+        if Instant::now() >= deadline {
+            return Err(WireError::NoAnswer {
+                service: service.to_owned(),
+                waited_ms: wait.as_millis() as u64,
+            });
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(())
+}
+
 impl RemoteClient {
     /// Connects to adapter `name` of run `run_id` as `me`, waiting up to `wait` for it to serve;
     /// `gone` is asked while waiting and returns why the adapter will never come (it exited).
@@ -296,22 +323,9 @@ impl RemoteClient {
             .client_builder()
             .create()
             .map_err(transport("create a client on", service.clone()))?;
-        let deadline = Instant::now() + wait;
-        while rr.dynamic_config().number_of_servers() == 0 {
-            if let Some(why) = gone() {
-                return Err(WireError::Remote {
-                    service,
-                    message: why,
-                });
-            }
-            if Instant::now() >= deadline {
-                return Err(WireError::NoAnswer {
-                    service,
-                    waited_ms: wait.as_millis() as u64,
-                });
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        wait_for_server(&service, wait, gone, || {
+            rr.dynamic_config().number_of_servers() > 0
+        })?;
         Ok(Self {
             client,
             request_bell,

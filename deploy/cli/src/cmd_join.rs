@@ -9,7 +9,7 @@
 //! `--max-restarts` times), as the launcher restarts its own.
 
 use std::os::unix::process::CommandExt as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -63,21 +63,7 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
         );
     }
     let pid = std::process::id();
-    let request = join_request(&args, actors);
-    let schema = alfd_harness::schema_version_from_env().map_err(usage)?;
-    let remote = alfd_bridge::join(
-        &endpoint,
-        request,
-        Duration::from_secs(args.wait_s.max(1)),
-        schema,
-    )
-    .map_err(|e| {
-        if e.is_bad_input() {
-            usage(e.to_string())
-        } else {
-            anyhow::Error::new(e)
-        }
-    })?;
+    let remote = join_hub(&args, &endpoint, actors)?;
     let joined = remote.joined.clone();
     let dir = args
         .dir
@@ -89,64 +75,111 @@ pub fn run(args: JoinArgs) -> anyhow::Result<()> {
     let secs = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
-    let (mirror_id, expert_host_id) = (format!("j{secs}-{pid}"), format!("k{secs}-{pid}"));
-    write_join_files(&args, &endpoint, &joined, &dir, &mirror_id, &expert_host_id)?;
-    let result = {
-        let expert_host = match &args.expert {
-            Some(_) => Some(
-                alfd_bridge::ExpertHost::start(&remote, &expert_host_id, &dir, actors == 0)
-                    .context("cannot start this host's copy of the run for its expert")?,
-            ),
-            None => None,
-        };
-        // The actors' mirror (it announces this host); without actors, the connection stays.
-        let (mirror, _remote) = if actors > 0 {
-            let m = alfd_bridge::Mirror::start(remote, &mirror_id)
-                .context("cannot start this host's mirror of the run")?;
-            (Some(m), None)
-        } else {
-            (None, Some(remote))
-        };
-        let wire = Wire::connect(
-            if actors > 0 {
-                &mirror_id
-            } else {
-                &expert_host_id
-            },
-            Process::new(Role::Tool, 0),
-            SCHEMA_VERSION,
-        )
-        .context("cannot create this host's iceoryx2 node")?;
-        let host = Host {
-            mirror: mirror.as_ref(),
-            expert_host: expert_host.as_ref(),
-            wire: &wire,
-            joined: &joined,
-            dir: &dir,
-            bin_dir: &bin_dir,
-            mirror_id: &mirror_id,
-            expert_host_id: &expert_host_id,
-        };
-        let r = host.run();
-        drop(wire);
-        if let Some(e) = expert_host {
-            if let Err(e) = e.stop() {
-                warn!("the expert host: {e}");
-            }
-        }
-        if let Some(m) = mirror {
-            if let Err(e) = m.stop() {
-                warn!("the mirror: {e}");
-            }
-        }
-        r
+    let ids = CopyIds {
+        mirror: format!("j{secs}-{pid}"),
+        expert_host: format!("k{secs}-{pid}"),
     };
-    for id in [&mirror_id, &expert_host_id] {
+    write_join_files(
+        &args,
+        &endpoint,
+        &joined,
+        &dir,
+        &ids.mirror,
+        &ids.expert_host,
+    )?;
+    let result = serve(&args, remote, actors, &ids, (&dir, &bin_dir));
+    for id in [&ids.mirror, &ids.expert_host] {
         if let Err(e) = alfd_wire::close_run(id) {
             warn!("cannot close this host's iceoryx2 resources: {e}");
         }
     }
     result
+}
+
+/// The run ids of this host's copies of the run: the actors' mirror's and the expert's.
+struct CopyIds {
+    mirror: String,
+    expert_host: String,
+}
+
+/// Asks the learner's host to take this one in; a refusal of what was asked is bad input.
+fn join_hub(
+    args: &JoinArgs,
+    endpoint: &alfd_bridge::Endpoint,
+    actors: usize,
+) -> anyhow::Result<alfd_bridge::Remote> {
+    let request = join_request(args, actors);
+    let schema = alfd_harness::schema_version_from_env().map_err(usage)?;
+    alfd_bridge::join(
+        endpoint,
+        request,
+        Duration::from_secs(args.wait_s.max(1)),
+        schema,
+    )
+    .map_err(|e| {
+        if e.is_bad_input() {
+            usage(e.to_string())
+        } else {
+            anyhow::Error::new(e)
+        }
+    })
+}
+
+/// Runs this host's part of the run until it ends: the expert's copy (with `--expert`), the
+/// actors' mirror (with actors), and the host's processes; both copies stopped after.
+fn serve(
+    args: &JoinArgs,
+    remote: alfd_bridge::Remote,
+    actors: usize,
+    ids: &CopyIds,
+    (dir, bin_dir): (&Path, &Path),
+) -> anyhow::Result<()> {
+    let joined = remote.joined.clone();
+    let expert_host = match &args.expert {
+        Some(_) => Some(
+            alfd_bridge::ExpertHost::start(&remote, &ids.expert_host, dir, actors == 0)
+                .context("cannot start this host's copy of the run for its expert")?,
+        ),
+        None => None,
+    };
+    // The actors' mirror (it announces this host); without actors, the connection stays.
+    let (mirror, _remote) = if actors > 0 {
+        let m = alfd_bridge::Mirror::start(remote, &ids.mirror)
+            .context("cannot start this host's mirror of the run")?;
+        (Some(m), None)
+    } else {
+        (None, Some(remote))
+    };
+    let own = if actors > 0 {
+        &ids.mirror
+    } else {
+        &ids.expert_host
+    };
+    let wire = Wire::connect(own, Process::new(Role::Tool, 0), SCHEMA_VERSION)
+        .context("cannot create this host's iceoryx2 node")?;
+    let host = Host {
+        mirror: mirror.as_ref(),
+        expert_host: expert_host.as_ref(),
+        wire: &wire,
+        joined: &joined,
+        dir,
+        bin_dir,
+        mirror_id: &ids.mirror,
+        expert_host_id: &ids.expert_host,
+    };
+    let r = host.run();
+    drop(wire);
+    if let Some(e) = expert_host {
+        if let Err(e) = e.stop() {
+            warn!("the expert host: {e}");
+        }
+    }
+    if let Some(m) = mirror {
+        if let Err(e) = m.stop() {
+            warn!("the mirror: {e}");
+        }
+    }
+    r
 }
 
 /// The endpoint and the number of actors `args` ask for, checked.

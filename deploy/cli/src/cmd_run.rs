@@ -118,36 +118,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     };
     let env_spec = env_spec(&cfg, publishers)?;
     let prior = prior_demos(&cfg, env_spec.as_ref())?;
-    let listen = args
-        .listen
-        .as_deref()
-        .map(|text| args.link.endpoint("--listen", text))
-        .transpose()?;
-    let least = usize::from(listen.is_none());
-    if !(least..=MAX_ACTORS).contains(&args.actors) {
-        return Err(usage(format!(
-            "--actors must be in {least}..={MAX_ACTORS}{}, got {}",
-            if listen.is_none() {
-                " (0 only with --listen)"
-            } else {
-                ""
-            },
-            args.actors
-        )));
-    }
+    let listen = listen_and_actors(&args)?;
     let runtime = runtime_config(&args, listen.is_some(), env_spec)?;
     // Fail before starting anything if the expert is unknown.
     setup::check_demonstrator(&cfg)?;
-    if cfg.expert.name == alfd_expert::human::HUMAN && args.human_port != 0 {
-        // The page's port, taken by something else: said now, not by the expert at start-up.
-        std::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, args.human_port)).map_err(
-            |e| {
-                usage(format!(
-                    "--human-port {}: cannot serve the human expert's page on 127.0.0.1:{}: {e}",
-                    args.human_port, args.human_port
-                ))
-            },
-        )?;
+    if cfg.expert.name == alfd_expert::human::HUMAN {
+        check_human_port(args.human_port)?;
     }
     let run_id = launcher::new_run_id();
     let run_dir = args
@@ -185,6 +161,43 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         listen,
     };
     finish(&plan, output)
+}
+
+/// The endpoint of `--listen` (if given), with `--actors` checked against it: at least one
+/// actor on this host unless other hosts bring them.
+fn listen_and_actors(args: &RunArgs) -> anyhow::Result<Option<alfd_bridge::Endpoint>> {
+    let listen = args
+        .listen
+        .as_deref()
+        .map(|text| args.link.endpoint("--listen", text))
+        .transpose()?;
+    let least = usize::from(listen.is_none());
+    if !(least..=MAX_ACTORS).contains(&args.actors) {
+        return Err(usage(format!(
+            "--actors must be in {least}..={MAX_ACTORS}{}, got {}",
+            if listen.is_none() {
+                " (0 only with --listen)"
+            } else {
+                ""
+            },
+            args.actors
+        )));
+    }
+    Ok(listen)
+}
+
+/// The human expert's page port (0: any free one), refused now if something else holds it
+/// rather than by the expert at start-up.
+fn check_human_port(port: u16) -> anyhow::Result<()> {
+    if port == 0 {
+        return Ok(());
+    }
+    std::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, port)).map_err(|e| {
+        usage(format!(
+            "--human-port {port}: cannot serve the human expert's page on 127.0.0.1:{port}: {e}"
+        ))
+    })?;
+    Ok(())
 }
 
 /// The sizes of a Gymnasium environment, probed once in Python now (a wrong space is refused

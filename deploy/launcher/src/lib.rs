@@ -43,7 +43,7 @@ mod remote;
 use std::collections::{HashMap, VecDeque};
 use std::os::unix::process::CommandExt as _;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use alfd_common::config::ExperimentConfig;
@@ -781,78 +781,93 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 continue;
             };
             let proc = self.procs.remove(i);
-            let how = describe(status);
             // What it said before it exited counts (its last episodes).
             self.drain_progress()?;
             // The dead process's iceoryx2 node goes before its successor comes.
             self.cleanup_dead_nodes();
             match proc.kind {
                 Kind::Actor { id, incarnation } => {
-                    let done = self.episodes_left(id) == Some(0);
-                    match self
-                        .restarts
-                        .ended(&Supervised::Actor(id), Ended::of(status.code(), done))
-                    {
-                        Verdict::Done => {
-                            info!(process = %proc.name, "played its share of the episodes");
-                        }
-                        Verdict::Restart { .. } => {
-                            warn!(process = %proc.name, "{how}");
-                            self.spawn(Kind::Actor {
-                                id,
-                                incarnation: incarnation + 1,
-                            })?;
-                        }
-                        Verdict::GiveUp(why) => bail!(
-                            "alfd-actor {} {how}, and {why}; see {}",
-                            proc.name,
-                            self.log_of(&proc.name)
-                        ),
-                    }
+                    self.actor_ended(&proc.name, (id, incarnation), status)?
                 }
-                Kind::Expert { generation, .. } => {
-                    let reason = last_error(&self.plan.run_dir.join(format!("{}.log", proc.name)));
-                    let exit = Exit {
-                        how: how.clone(),
-                        code: status.code(),
-                        reason,
-                    };
-                    let who = proc_binary(&proc.kind, &proc.name);
-                    if generation == self.experts.active() {
-                        warn!("{who} {}", exit.how);
-                    } else {
-                        info!("{who} {}", exit.how);
-                    }
-                    let actions = self.experts.exited(generation, &exit, Instant::now());
-                    self.apply(actions)?;
-                }
+                Kind::Expert { generation, .. } => self.expert_ended(&proc, generation, status)?,
                 Kind::Learner { incarnation } => {
-                    let reason = last_error(&self.plan.run_dir.join("learner.log"));
-                    let how_ended = Ended::of(status.code(), false);
-                    if let Verdict::GiveUp(why) =
-                        self.restarts.ended(&Supervised::Learner, how_ended)
-                    {
-                        bail!(
-                            "alfd-learner {how}{}, and {why}; the episodes so far are in {}, its \
-                             last checkpoint in {}; see {}",
-                            reason.map(|r| format!(" ({r})")).unwrap_or_default(),
-                            self.plan.run_dir.join("episodes.csv").display(),
-                            self.plan.run_dir.join("learner.ckpt").display(),
-                            self.log_of(&proc.name)
-                        );
-                    }
-                    warn!(
-                        "alfd-learner {how}; restarting it from its last checkpoint (the actors \
-                         wait meanwhile)"
-                    );
-                    self.rate.reset();
-                    self.spawn(Kind::Learner {
-                        incarnation: incarnation + 1,
-                    })?;
+                    self.learner_ended(&proc.name, incarnation, status)?
                 }
             }
         }
         Ok(())
+    }
+
+    /// Actor `id` (of `incarnation`) exited: done with its share, restarted, or the run given up.
+    fn actor_ended(
+        &mut self,
+        name: &str,
+        (id, incarnation): (u16, u64),
+        status: ExitStatus,
+    ) -> Result<()> {
+        let how = describe(status);
+        let done = self.episodes_left(id) == Some(0);
+        match self
+            .restarts
+            .ended(&Supervised::Actor(id), Ended::of(status.code(), done))
+        {
+            Verdict::Done => info!(process = %name, "played its share of the episodes"),
+            Verdict::Restart { .. } => {
+                warn!(process = %name, "{how}");
+                self.spawn(Kind::Actor {
+                    id,
+                    incarnation: incarnation + 1,
+                })?;
+            }
+            Verdict::GiveUp(why) => bail!(
+                "alfd-actor {name} {how}, and {why}; see {}",
+                self.log_of(name)
+            ),
+        }
+        Ok(())
+    }
+
+    /// An expert exited: its lifecycle decides what follows.
+    fn expert_ended(&mut self, proc: &Proc, generation: u16, status: ExitStatus) -> Result<()> {
+        let reason = last_error(&self.plan.run_dir.join(format!("{}.log", proc.name)));
+        let exit = Exit {
+            how: describe(status),
+            code: status.code(),
+            reason,
+        };
+        let who = proc_binary(&proc.kind, &proc.name);
+        if generation == self.experts.active() {
+            warn!("{who} {}", exit.how);
+        } else {
+            info!("{who} {}", exit.how);
+        }
+        let actions = self.experts.exited(generation, &exit, Instant::now());
+        self.apply(actions)
+    }
+
+    /// The learner exited: restarted from its last checkpoint, or the run given up.
+    fn learner_ended(&mut self, name: &str, incarnation: u32, status: ExitStatus) -> Result<()> {
+        let how = describe(status);
+        let reason = last_error(&self.plan.run_dir.join("learner.log"));
+        let how_ended = Ended::of(status.code(), false);
+        if let Verdict::GiveUp(why) = self.restarts.ended(&Supervised::Learner, how_ended) {
+            bail!(
+                "alfd-learner {how}{}, and {why}; the episodes so far are in {}, its last \
+                 checkpoint in {}; see {}",
+                reason.map(|r| format!(" ({r})")).unwrap_or_default(),
+                self.plan.run_dir.join("episodes.csv").display(),
+                self.plan.run_dir.join("learner.ckpt").display(),
+                self.log_of(name)
+            );
+        }
+        warn!(
+            "alfd-learner {how}; restarting it from its last checkpoint (the actors wait \
+             meanwhile)"
+        );
+        self.rate.reset();
+        self.spawn(Kind::Learner {
+            incarnation: incarnation + 1,
+        })
     }
 
     fn cleanup_dead_nodes(&self) {

@@ -9,7 +9,7 @@
 //! here with sorted keys so that the same network always gives the same bytes; reading goes
 //! through the `safetensors` crate, which validates the container.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 use safetensors::{Dtype, SafeTensors};
 use serde::Serialize;
@@ -86,55 +86,18 @@ impl Mlp {
         let (_, header) = SafeTensors::read_metadata(bytes)?;
         let file = SafeTensors::deserialize(bytes)?;
         let meta = header.metadata().as_ref();
-        let read_meta = |key: &str| -> Result<usize> {
-            let value = meta
-                .and_then(|m| m.get(key))
-                .ok_or_else(|| NnError::Metadata {
-                    key: key.to_string(),
-                    reason: "missing".to_string(),
-                })?;
-            value.parse::<usize>().map_err(|e| NnError::Metadata {
-                key: key.to_string(),
-                reason: format!("`{value}` is not a non-negative integer: {e}"),
-            })
-        };
-        let version =
-            meta.and_then(|m| m.get("format_version"))
-                .ok_or_else(|| NnError::Metadata {
-                    key: "format_version".to_string(),
-                    reason: "missing".to_string(),
-                })?;
-        if version != FORMAT_VERSION {
-            return Err(NnError::Metadata {
-                key: "format_version".to_string(),
-                reason: format!("version `{version}` is not supported (expected {FORMAT_VERSION})"),
-            });
-        }
-        let heads = read_meta("heads")?;
-        let actions = read_meta("actions")?;
+        check_format_version(meta)?;
+        let heads = read_count(meta, "heads")?;
+        let actions = read_count(meta, "actions")?;
         let prior = read_prior(meta)?;
 
         if let Some(name) = file.names().into_iter().find(|n| !PARAM_NAMES.contains(n)) {
             return Err(NnError::UnexpectedTensor(name.to_string()));
         }
-        let mut data: Vec<(Vec<usize>, Vec<f32>)> = Vec::with_capacity(6);
-        for name in PARAM_NAMES {
-            let view = file
-                .tensor(name)
-                .map_err(|_| NnError::MissingTensor(name.to_string()))?;
-            if view.dtype() != Dtype::F32 {
-                return Err(NnError::Dtype {
-                    name: name.to_string(),
-                    found: format!("{:?}", view.dtype()),
-                });
-            }
-            let values = view
-                .data()
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect();
-            data.push((view.shape().to_vec(), values));
-        }
+        let data = PARAM_NAMES
+            .iter()
+            .map(|name| read_f32_tensor(&file, name))
+            .collect::<Result<Vec<_>>>()?;
         // torso.0.weight is [hidden, obs_dim]; every other shape follows from it and K * A.
         let (hidden, obs_dim) = match data[0].0[..] {
             [h, d] => (h, d),
@@ -179,10 +142,58 @@ impl Mlp {
     }
 }
 
+/// The file's `format_version`, refused unless it is [`FORMAT_VERSION`].
+fn check_format_version(meta: Option<&HashMap<String, String>>) -> Result<()> {
+    let version = meta
+        .and_then(|m| m.get("format_version"))
+        .ok_or_else(|| NnError::Metadata {
+            key: "format_version".to_string(),
+            reason: "missing".to_string(),
+        })?;
+    if version != FORMAT_VERSION {
+        return Err(NnError::Metadata {
+            key: "format_version".to_string(),
+            reason: format!("version `{version}` is not supported (expected {FORMAT_VERSION})"),
+        });
+    }
+    Ok(())
+}
+
+/// The metadata `key` as a count (a non-negative integer).
+fn read_count(meta: Option<&HashMap<String, String>>, key: &str) -> Result<usize> {
+    let value = meta
+        .and_then(|m| m.get(key))
+        .ok_or_else(|| NnError::Metadata {
+            key: key.to_string(),
+            reason: "missing".to_string(),
+        })?;
+    value.parse::<usize>().map_err(|e| NnError::Metadata {
+        key: key.to_string(),
+        reason: format!("`{value}` is not a non-negative integer: {e}"),
+    })
+}
+
+/// The shape and values of the F32 tensor `name` of `file`.
+fn read_f32_tensor(file: &SafeTensors<'_>, name: &str) -> Result<(Vec<usize>, Vec<f32>)> {
+    let view = file
+        .tensor(name)
+        .map_err(|_| NnError::MissingTensor(name.to_string()))?;
+    if view.dtype() != Dtype::F32 {
+        return Err(NnError::Dtype {
+            name: name.to_string(),
+            found: format!("{:?}", view.dtype()),
+        });
+    }
+    let values = view
+        .data()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    Ok((view.shape().to_vec(), values))
+}
+
 /// `prior_scale` and `prior_seed`, both or neither.
-fn read_prior(
-    meta: Option<&std::collections::HashMap<String, String>>,
-) -> Result<Option<(f32, u64)>> {
+fn read_prior(meta: Option<&HashMap<String, String>>) -> Result<Option<(f32, u64)>> {
     let get = |key: &str| meta.and_then(|m| m.get(key));
     let bad = |key: &str, reason: String| NnError::Metadata {
         key: key.to_owned(),

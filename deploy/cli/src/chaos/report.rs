@@ -73,21 +73,7 @@ pub(super) fn report(chaos: &Chaos<'_>, ended: Result<(), String>) -> anyhow::Re
         "chaos.md",
         markdown(&report, &summary_of(dir)).as_bytes(),
     )?;
-    eprintln!(
-        "chaos: {} faults in {:.0} s ({counts:?}), {} launches; {}",
-        chaos.events.len(),
-        chaos.start.elapsed().as_secs_f64(),
-        chaos.launches,
-        dir.join("chaos.md").display()
-    );
-    for v in &verdicts {
-        eprintln!(
-            "  {} {:<15} {}",
-            if v.ok { "ok  " } else { "FAIL" },
-            v.name,
-            v.detail
-        );
-    }
+    print_verdicts(chaos, &counts, &verdicts);
     let failed: Vec<&str> = verdicts.iter().filter(|v| !v.ok).map(|v| v.name).collect();
     anyhow::ensure!(
         failed.is_empty(),
@@ -95,6 +81,25 @@ pub(super) fn report(chaos: &Chaos<'_>, ended: Result<(), String>) -> anyhow::Re
         failed.join(", ")
     );
     Ok(())
+}
+
+/// The faults carried out and every invariant's verdict, on stderr.
+fn print_verdicts(chaos: &Chaos<'_>, counts: &BTreeMap<&str, usize>, verdicts: &[Verdict]) {
+    eprintln!(
+        "chaos: {} faults in {:.0} s ({counts:?}), {} launches; {}",
+        chaos.events.len(),
+        chaos.start.elapsed().as_secs_f64(),
+        chaos.launches,
+        chaos.args.out.join("chaos.md").display()
+    );
+    for v in verdicts {
+        eprintln!(
+            "  {} {:<15} {}",
+            if v.ok { "ok  " } else { "FAIL" },
+            v.name,
+            v.detail
+        );
+    }
 }
 
 /// `alfd chaos --summarize`: `chaos.md` re-made from `chaos.json`.

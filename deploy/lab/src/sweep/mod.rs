@@ -125,44 +125,14 @@ pub fn run(args: SweepArgs, trainer: &dyn Trainer) -> crate::Result<()> {
             exp.kind
         )));
     }
-    let jobs = match args.jobs {
-        Some(0) => return Err(usage("--jobs must be at least 1")),
-        Some(j) if j > MAX_JOBS => {
-            return Err(usage(format!(
-                "--jobs {j}: at most {MAX_JOBS} runs at a time (one thread each)"
-            )))
-        }
-        Some(j) => j,
-        None => std::thread::available_parallelism().map_or(1, usize::from),
-    };
+    let jobs = jobs(args.jobs)?;
     // A collect creates its output directory itself, once every shard has been checked: a
     // refused one leaves nothing behind.
     if !matches!(mode, Mode::Collect) {
         std::fs::create_dir_all(&args.out)
             .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
     }
-    let mut command = format!(
-        "alfd sweep --config {} --seeds {} --jobs {jobs}",
-        args.config.display(),
-        exp.seeds
-    );
-    if exp.first_seed != 0 {
-        write!(command, " --first-seed {}", exp.first_seed)?;
-    }
-    if let Some(e) = args.episodes {
-        write!(command, " --episodes {e}")?;
-    }
-    match mode {
-        Mode::Whole => {}
-        Mode::Shard(s) => write!(command, " --shard {s}")?,
-        Mode::Collect => {
-            command.push_str(" --collect");
-            for d in &args.collect {
-                write!(command, " {}", d.display())?;
-            }
-        }
-    }
-    write!(command, " --out {}", args.out.display())?;
+    let command = command_line(&args, &exp, jobs, mode)?;
     match mode {
         Mode::Whole => {}
         Mode::Shard(s) => shard::begin(&exp, s, &args.out)?,
@@ -187,6 +157,50 @@ pub fn run(args: SweepArgs, trainer: &dyn Trainer) -> crate::Result<()> {
         ExperimentKind::Training => run_training(&ctx),
         ExperimentKind::DemoModelPolicy => run_policy(&ctx),
     }
+}
+
+/// `--jobs`, checked: runs at a time (by default one per core).
+fn jobs(asked: Option<usize>) -> crate::Result<usize> {
+    match asked {
+        Some(0) => Err(usage("--jobs must be at least 1")),
+        Some(j) if j > MAX_JOBS => Err(usage(format!(
+            "--jobs {j}: at most {MAX_JOBS} runs at a time (one thread each)"
+        ))),
+        Some(j) => Ok(j),
+        None => Ok(std::thread::available_parallelism().map_or(1, usize::from)),
+    }
+}
+
+/// The command that makes this sweep's output, as its files record it.
+fn command_line(
+    args: &SweepArgs,
+    exp: &Experiment,
+    jobs: usize,
+    mode: Mode,
+) -> crate::Result<String> {
+    let mut command = format!(
+        "alfd sweep --config {} --seeds {} --jobs {jobs}",
+        args.config.display(),
+        exp.seeds
+    );
+    if exp.first_seed != 0 {
+        write!(command, " --first-seed {}", exp.first_seed)?;
+    }
+    if let Some(e) = args.episodes {
+        write!(command, " --episodes {e}")?;
+    }
+    match mode {
+        Mode::Whole => {}
+        Mode::Shard(s) => write!(command, " --shard {s}")?,
+        Mode::Collect => {
+            command.push_str(" --collect");
+            for d in &args.collect {
+                write!(command, " {}", d.display())?;
+            }
+        }
+    }
+    write!(command, " --out {}", args.out.display())?;
+    Ok(command)
 }
 
 struct Ctx<'a> {

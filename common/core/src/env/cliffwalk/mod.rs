@@ -212,6 +212,34 @@ pub struct CliffMap {
     goal: usize,
 }
 
+/// Notes where the map's one start or goal (`tile`) is, at `(line, column)`; a second one is
+/// refused, naming both places.
+fn note_once(
+    slot: &mut Option<(usize, usize)>,
+    tile: Tile,
+    (line, column): (usize, usize),
+) -> Result<(), MapError> {
+    let Some((first_line, first_column)) = *slot else {
+        *slot = Some((line, column));
+        return Ok(());
+    };
+    Err(if tile == Tile::Start {
+        MapError::DuplicateStart {
+            line,
+            column,
+            first_line,
+            first_column,
+        }
+    } else {
+        MapError::DuplicateGoal {
+            line,
+            column,
+            first_line,
+            first_column,
+        }
+    })
+}
+
 impl CliffMap {
     /// Parses the text format (see the module documentation).
     pub fn parse(text: &str) -> Result<Self, MapError> {
@@ -249,30 +277,13 @@ impl CliffMap {
                     column,
                     found: c,
                 })?;
-                let seen = match tile {
-                    Tile::Start => Some((&mut start, true)),
-                    Tile::Goal => Some((&mut goal, false)),
+                let slot = match tile {
+                    Tile::Start => Some(&mut start),
+                    Tile::Goal => Some(&mut goal),
                     _ => None,
                 };
-                if let Some((slot, is_start)) = seen {
-                    if let Some((first_line, first_column)) = *slot {
-                        return Err(if is_start {
-                            MapError::DuplicateStart {
-                                line: line_no,
-                                column,
-                                first_line,
-                                first_column,
-                            }
-                        } else {
-                            MapError::DuplicateGoal {
-                                line: line_no,
-                                column,
-                                first_line,
-                                first_column,
-                            }
-                        });
-                    }
-                    *slot = Some((line_no, column));
+                if let Some(slot) = slot {
+                    note_once(slot, tile, (line_no, column))?;
                 }
                 tiles.push(tile);
             }
