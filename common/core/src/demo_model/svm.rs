@@ -47,6 +47,50 @@ pub struct Platt {
     pub b: f64,
 }
 
+/// Platt's objective: the cross-entropy of the sigmoid `(a, b)` against `targets`, computed
+/// without overflow.
+fn platt_objective(decision: &[f64], targets: &[f64], a: f64, b: f64) -> f64 {
+    decision
+        .iter()
+        .zip(targets)
+        .map(|(&f, &t)| {
+            let z = a * f + b;
+            if z >= 0.0 {
+                t * z + math::ln_1p(math::exp(-z))
+            } else {
+                (t - 1.0) * z + math::ln_1p(math::exp(z))
+            }
+        })
+        .sum()
+}
+
+/// A gradient `(g1, g2)` and a Hessian `(h11, h22, h21)`.
+type Derivatives = ((f64, f64), (f64, f64, f64));
+
+/// The gradient and Hessian (plus `sigma` on the diagonal) of [`platt_objective`] at `(a, b)`.
+fn platt_derivatives(decision: &[f64], targets: &[f64], a: f64, b: f64, sigma: f64) -> Derivatives {
+    let (mut h11, mut h22, mut h21) = (sigma, sigma, 0.0);
+    let (mut g1, mut g2) = (0.0, 0.0);
+    for (&f, &t) in decision.iter().zip(targets) {
+        let z = a * f + b;
+        let (p, q) = if z >= 0.0 {
+            let e = math::exp(-z);
+            (e / (1.0 + e), 1.0 / (1.0 + e))
+        } else {
+            let e = math::exp(z);
+            (1.0 / (1.0 + e), e / (1.0 + e))
+        };
+        let d2 = p * q;
+        h11 += f * f * d2;
+        h22 += d2;
+        h21 += f * d2;
+        let d1 = t - p;
+        g1 += f * d1;
+        g2 += d1;
+    }
+    ((g1, g2), (h11, h22, h21))
+}
+
 impl Platt {
     /// Fits `(a, b)` to decision values and labels (`true` = positive) by Newton's method with
     /// backtracking line search, minimising the cross-entropy against Platt's regularised targets
@@ -63,47 +107,14 @@ impl Platt {
         let lo = 1.0 / (n_neg + 2.0);
         let targets: Vec<f64> = positive.iter().map(|&p| if p { hi } else { lo }).collect();
 
-        // Cross-entropy of the sigmoid (a, b), computed without overflow.
-        let objective = |a: f64, b: f64| -> f64 {
-            decision
-                .iter()
-                .zip(&targets)
-                .map(|(&f, &t)| {
-                    let z = a * f + b;
-                    if z >= 0.0 {
-                        t * z + math::ln_1p(math::exp(-z))
-                    } else {
-                        (t - 1.0) * z + math::ln_1p(math::exp(z))
-                    }
-                })
-                .sum()
-        };
+        let objective = |a: f64, b: f64| platt_objective(decision, &targets, a, b);
 
         let mut a = 0.0;
         let mut b = math::ln((n_neg + 1.0) / (n_pos + 1.0));
         let mut fval = objective(a, b);
         let mut iter = 0;
         while iter < MAX_ITER {
-            // Gradient and Hessian (plus SIGMA I) of the objective.
-            let (mut h11, mut h22, mut h21) = (SIGMA, SIGMA, 0.0);
-            let (mut g1, mut g2) = (0.0, 0.0);
-            for (&f, &t) in decision.iter().zip(&targets) {
-                let z = a * f + b;
-                let (p, q) = if z >= 0.0 {
-                    let e = math::exp(-z);
-                    (e / (1.0 + e), 1.0 / (1.0 + e))
-                } else {
-                    let e = math::exp(z);
-                    (1.0 / (1.0 + e), e / (1.0 + e))
-                };
-                let d2 = p * q;
-                h11 += f * f * d2;
-                h22 += d2;
-                h21 += f * d2;
-                let d1 = t - p;
-                g1 += f * d1;
-                g2 += d1;
-            }
+            let ((g1, g2), (h11, h22, h21)) = platt_derivatives(decision, &targets, a, b, SIGMA);
             if g1.abs() < EPS && g2.abs() < EPS {
                 break;
             }

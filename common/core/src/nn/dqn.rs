@@ -336,38 +336,19 @@ fn td_loss(
             }
             // Sample i's entries of head k's columns.
             let at = |b: usize| i + (k * actions + b) * n;
-            let next = match q_online_next {
-                // Double DQN: the online head picks, the target head evaluates.
-                Some(qo) => {
-                    let best =
-                        (0..actions).fold(0, |m, b| if qo[at(b)] > qo[at(m)] { b } else { m });
-                    q_next[at(best)]
-                }
-                None => (0..actions).fold(f32::NEG_INFINITY, |m, b| m.max(q_next[at(b)])),
-            };
+            let next = next_value(q_next, q_online_next, actions, at);
             let y = batch.rewards[i] + bootstrap * next;
             let y = match cfg.target_bounds {
                 Some((lo, hi)) => y.clamp(lo, hi),
                 None => y,
             };
-            let td = q[at(a)] - y;
-            let (l, g) = match cfg.loss {
-                TdLoss::Huber => (
-                    huber_with(td, cfg.huber_delta),
-                    huber_grad(td, cfg.huber_delta),
-                ),
-                TdLoss::Mse => (td * td, 2.0 * td),
-            };
+            let (l, g) = loss_and_grad(q[at(a)] - y, cfg);
             loss += f64::from(mask * l);
             if with_grad {
                 dq[at(a)] += mask * g * inv_n;
             }
             if demo {
-                // Large margin: the demonstrated action must beat every other by `margin`.
-                let (best, value) = (0..actions)
-                    .map(|b| (b, q[at(b)] + if b == a { 0.0 } else { cfg.margin }))
-                    .fold((a, f32::NEG_INFINITY), |m, c| if c.1 > m.1 { c } else { m });
-                let j = value - q[at(a)];
+                let (best, j) = large_margin(q, a, actions, cfg.margin, at);
                 loss += f64::from(mask * cfg.margin_weight * j);
                 if with_grad && best != a {
                     let w = mask * cfg.margin_weight * inv_n;
@@ -378,6 +359,53 @@ fn td_loss(
         }
     }
     (loss / n as f64) as f32
+}
+
+/// The value of the next state for one sample and head (`at(b)`: the entry of action `b`): the
+/// target head's best, or with double DQN (`q_online_next`) the target head's value of the
+/// online head's pick.
+#[inline(always)]
+fn next_value(
+    q_next: &[f32],
+    q_online_next: Option<&[f32]>,
+    actions: usize,
+    at: impl Fn(usize) -> usize,
+) -> f32 {
+    match q_online_next {
+        Some(qo) => {
+            let best = (0..actions).fold(0, |m, b| if qo[at(b)] > qo[at(m)] { b } else { m });
+            q_next[at(best)]
+        }
+        None => (0..actions).fold(f32::NEG_INFINITY, |m, b| m.max(q_next[at(b)])),
+    }
+}
+
+/// The loss of a TD error and its derivative.
+#[inline(always)]
+fn loss_and_grad(td: f32, cfg: &TdConfig) -> (f32, f32) {
+    match cfg.loss {
+        TdLoss::Huber => (
+            huber_with(td, cfg.huber_delta),
+            huber_grad(td, cfg.huber_delta),
+        ),
+        TdLoss::Mse => (td * td, 2.0 * td),
+    }
+}
+
+/// The large-margin term of a demonstrated action `a` (the demonstrated action must beat every
+/// other by `margin`): the action that wins with the margin added, and by how much it beats `a`.
+#[inline(always)]
+fn large_margin(
+    q: &[f32],
+    a: usize,
+    actions: usize,
+    margin: f32,
+    at: impl Fn(usize) -> usize,
+) -> (usize, f32) {
+    let (best, value) = (0..actions)
+        .map(|b| (b, q[at(b)] + if b == a { 0.0 } else { margin }))
+        .fold((a, f32::NEG_INFINITY), |m, c| if c.1 > m.1 { c } else { m });
+    (best, value - q[at(a)])
 }
 
 /// `gamma^h` for an h-step transition, multiplied out in f64 (no libm: the same bits on every
