@@ -1,5 +1,6 @@
-//! Faults of a multi-process run, injected with real signals (issue "Runs you can trust"): the
-//! learner killed with SIGKILL is restarted from its checkpoint; the launcher killed with SIGKILL
+//! Faults of a multi-process run, injected with real signals: the learner killed with SIGKILL
+//! is restarted from its checkpoint, and with no restarts left (`--max-restarts 0`) a killed
+//! actor or learner ends the run naming the limit; the launcher killed with SIGKILL
 //! leaves no process and no iceoryx2 file, and `alfd resume` finishes the run; `episodes = N`
 //! with several actors plays and records exactly N episodes, and the run's files agree;
 //! `alfd clean` removes a dead run's files and leaves a live run alone.
@@ -11,7 +12,7 @@ use alfd_wire as wire;
 
 use crate::runtime::{
     check_run_dir, find_process, finished, interrupt, rows, run, run_id, signal, spawn_run,
-    summary, wait_rows, wait_until,
+    summary, wait_output, wait_rows, wait_until,
 };
 use crate::support::{alfd, text, timed, tmp, Background};
 
@@ -93,6 +94,34 @@ fn a_learner_killed_with_sigkill_is_restarted_from_its_checkpoint_and_the_run_co
     check_run_dir(&out, 1500);
     check_rows_and_demos(&out, 300);
     assert_eq!(wire::leftover_files(&id), Vec::<PathBuf>::new());
+}
+
+#[test]
+fn with_no_restarts_left_a_killed_actor_or_learner_ends_the_run_naming_the_limit() {
+    let _time = timed!();
+    for (bin, says) in [
+        ("alfd-actor", "alfd-actor actor-0 was killed by signal 9, and was restarted"),
+        ("alfd-learner", "alfd-learner was killed by signal 9"),
+    ] {
+        let out = tmp(&format!("give-up-{bin}"));
+        let sets = ["episodes=300", "env.max_episode_steps=200", "--max-restarts=0"];
+        let mut child = spawn_run(&out, 1, &sets);
+        wait_rows(&out, 5, &mut child);
+        let id = run_id(&out);
+        let pid = find_process(bin, &[&format!("--run-id={id}")]).expect(bin);
+        signal("KILL", pid);
+        let o = wait_output(child, Duration::from_secs(60));
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(o.status.code(), Some(1), "{bin}: {}", text(&o));
+        assert!(
+            err.contains(says) && err.contains("0 times already (--max-restarts 0)"),
+            "{bin}: {err}"
+        );
+        // The episodes so far are kept, and the run leaves nothing running or behind.
+        assert!(rows(&out).len() >= 5, "{bin}");
+        assert_eq!(processes_of(&id), Vec::new(), "{bin}");
+        assert_eq!(wire::leftover_files(&id), Vec::<PathBuf>::new(), "{bin}");
+    }
 }
 
 #[test]
