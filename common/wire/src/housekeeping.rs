@@ -240,6 +240,16 @@ pub fn clean_run(run_id: &str) -> Result<Cleaned> {
     if let Some(pid) = owner_alive(run_id) {
         return Ok(Cleaned::Live(vec![format!("its launcher, pid {pid}")]));
     }
+    close_dead_run(run_id)
+}
+
+/// What [`clean_run`] does once the run's launcher is gone, for the launcher itself as it ends
+/// (its children are gone, its own node dropped): unless a process of the run is alive, the
+/// dead nodes' resources, the node counter, and every other file of the run are removed. The
+/// last include what a process killed while it created its node leaves: a node monitor without
+/// the node's details, which iceoryx2's list of nodes does not report as dead.
+pub fn close_dead_run(run_id: &str) -> Result<Cleaned> {
+    validate_run_id(run_id)?;
     let alive = alive_nodes(run_id)?;
     if !alive.is_empty() {
         return Ok(Cleaned::Live(alive));
@@ -477,6 +487,34 @@ mod tests {
         close_run(&run_b).unwrap();
         assert_eq!(leftover_files(&run_a), Vec::<std::path::PathBuf>::new());
         assert_eq!(leftover_files(&run_b), Vec::<std::path::PathBuf>::new());
+    }
+
+    #[test]
+    fn a_finished_run_is_closed_with_what_a_node_killed_while_starting_left() {
+        let run = run_id("half-node");
+        drop(wire(&run, Role::Launcher, 0));
+        // What a process killed inside iceoryx2's node creation leaves: a node monitor and a
+        // port tag, without the node's details; the list of nodes reports no such node.
+        let nodes = std::path::Path::new("/tmp/iceoryx2/nodes");
+        std::fs::create_dir_all(nodes.join("4242")).unwrap();
+        let monitor = nodes.join(format!("{}4242.node_monitor", run_prefix(&run)));
+        let tag = nodes.join(format!("4242/{}77.port_tag", run_prefix(&run)));
+        std::fs::write(&monitor, b"").unwrap();
+        std::fs::write(&tag, b"").unwrap();
+        assert_eq!(alive_nodes(&run).unwrap(), Vec::<String>::new());
+        close_run(&run).unwrap();
+        assert!(monitor.exists() && tag.exists(), "close_run leaves them");
+        match close_dead_run(&run).unwrap() {
+            Cleaned::Removed(files) => assert!(files.contains(&monitor) && files.contains(&tag)),
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(leftover_files(&run), Vec::<PathBuf>::new());
+        // A run with a live process is left alone.
+        let live = run_id("half-node-live");
+        let _launcher = wire(&live, Role::Launcher, 0);
+        let before = leftover_files(&live);
+        assert!(matches!(close_dead_run(&live).unwrap(), Cleaned::Live(_)));
+        assert_eq!(leftover_files(&live), before);
     }
 
     #[test]

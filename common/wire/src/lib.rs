@@ -78,8 +78,8 @@ pub use connection::{quiet_transport_logs, run_prefix, validate_run_id, Wire};
 pub use control::{ControlWatch, CONTROL_PERIOD};
 pub use error::{Result, WireError};
 pub use housekeeping::{
-    alive_nodes, clean_run, cleanup_dead_nodes, close_run, is_alfd_run_id, is_launcher_run_id,
-    leftover_files, owner_alive, runs_with_files, wait_for_run_end, Cleaned,
+    alive_nodes, clean_run, cleanup_dead_nodes, close_dead_run, close_run, is_alfd_run_id,
+    is_launcher_run_id, leftover_files, owner_alive, runs_with_files, wait_for_run_end, Cleaned,
 };
 pub use messages::{
     command, flags, name_from_bytes, name_to_bytes, outcome, process_state, progress_kind, Control,

@@ -100,11 +100,18 @@ fn a_learner_killed_with_sigkill_is_restarted_from_its_checkpoint_and_the_run_co
 fn with_no_restarts_left_a_killed_actor_or_learner_ends_the_run_naming_the_limit() {
     let _time = timed!();
     for (bin, says) in [
-        ("alfd-actor", "alfd-actor actor-0 was killed by signal 9, and was restarted"),
+        (
+            "alfd-actor",
+            "alfd-actor actor-0 was killed by signal 9, and was restarted",
+        ),
         ("alfd-learner", "alfd-learner was killed by signal 9"),
     ] {
         let out = tmp(&format!("give-up-{bin}"));
-        let sets = ["episodes=300", "env.max_episode_steps=200", "--max-restarts=0"];
+        let sets = [
+            "episodes=300",
+            "env.max_episode_steps=200",
+            "--max-restarts=0",
+        ];
         let mut child = spawn_run(&out, 1, &sets);
         wait_rows(&out, 5, &mut child);
         let id = run_id(&out);

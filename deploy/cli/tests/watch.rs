@@ -125,13 +125,26 @@ fn in_chromium_the_watch_page_grows_while_the_run_goes() {
         crate::human::screenshot(&dir, "watch-1.png"),
         crate::human::screenshot(&dir, "watch-2.png"),
     );
-    let o = Command::new("node")
+    let node = Command::new("node")
         .arg(&driver)
         .arg(&url)
         .arg(&first)
         .arg(&second)
-        .output()
+        .arg("mark")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
         .expect("node runs");
+    // Once the first screenshot is taken, actor 0 is killed: its restart is marked on the page.
+    let start = std::time::Instant::now();
+    while !first.is_file() && start.elapsed() < std::time::Duration::from_secs(150) {
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let id = crate::runtime::run_id(&out);
+    let actor =
+        crate::runtime::find_process("alfd-actor", &[&format!("--run-id={id}"), "--actor-id=0"]);
+    crate::runtime::signal("KILL", actor.expect("actor 0"));
+    let o = node.wait_with_output().expect("node runs");
     // Stopped as Ctrl-C would stop it: the run ends cleanly, interrupted (exit code 130).
     let term = Command::new("kill")
         .args(["-TERM", &run.id().to_string()])
@@ -152,6 +165,11 @@ fn in_chromium_the_watch_page_grows_while_the_run_goes() {
         "{seen}"
     );
     assert!(b["paths"].as_u64().unwrap() >= 1, "{seen}");
+    assert_eq!(a["marks"], 0, "{seen}");
+    assert!(
+        b["marks"].as_u64().unwrap() >= 1,
+        "the restart is marked: {seen}"
+    );
     let (x, y) = (
         std::fs::read(&first).unwrap(),
         std::fs::read(&second).unwrap(),

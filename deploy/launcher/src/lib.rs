@@ -258,9 +258,12 @@ pub fn launch(plan: &Plan) -> Result<RunSummary> {
         launcher.stop_all();
         result
     };
-    // Every node of the run is gone: remove what iceoryx2 keeps per prefix.
-    if let Err(e) = wire::close_run(&plan.run_id) {
-        warn!("cannot close the run's iceoryx2 resources: {e}");
+    // Every process of the run is gone: remove what iceoryx2 keeps per prefix, and what a child
+    // killed while it created its node left.
+    match wire::close_dead_run(&plan.run_id) {
+        Ok(wire::Cleaned::Live(nodes)) => warn!(?nodes, "processes of the run are still alive"),
+        Ok(wire::Cleaned::Removed(_)) => {}
+        Err(e) => warn!("cannot close the run's iceoryx2 resources: {e}"),
     }
     let left = wire::leftover_files(&plan.run_id);
     if !left.is_empty() {
@@ -347,6 +350,8 @@ struct Launcher<'a, 'w> {
     explored: [u64; alfd_wire::MAX_ACTORS],
     /// The expert generations: swaps and restarts.
     experts: ExpertLifecycle,
+    /// The restarts and swaps last written to the TensorBoard file (see [`Launcher::mark_events`]).
+    marked: Option<[u32; 4]>,
     started: Instant,
     /// When the actors were started (rates are measured from here).
     running_since: Instant,
@@ -427,6 +432,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             hub_counts: (0, 0),
             incarnations: [0; alfd_wire::MAX_ACTORS],
             restarts: Restarts::new(plan.max_restarts),
+            marked: None,
             remote_restarts: 0,
             quota,
             recorded_by: [0; alfd_wire::MAX_ACTORS],
@@ -488,6 +494,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             }
             self.check_children()?;
             self.check_swap()?;
+            self.mark_events();
             if self.done() {
                 break false;
             }
@@ -495,6 +502,34 @@ impl<'a, 'w> Launcher<'a, 'w> {
         self.shutdown()?;
         self.bar.finish_and_clear();
         Ok(self.summary(interrupted))
+    }
+
+    /// The run's restarts and swaps as TensorBoard scalars (`run/actor_restarts`,
+    /// `run/learner_restarts`, `run/expert_restarts`, `run/expert_swaps`) at the global step,
+    /// written when one changes (and once at the start): the watch page marks them on its axes.
+    fn mark_events(&mut self) {
+        let counts = [
+            self.restarts.total() - self.restarts.of(&Supervised::Learner) + self.remote_restarts,
+            self.restarts.of(&Supervised::Learner),
+            self.experts.restarts(),
+            self.experts.swaps(),
+        ];
+        if self.marked == Some(counts) {
+            return;
+        }
+        self.marked = Some(counts);
+        let tags = [
+            "run/actor_restarts",
+            "run/learner_restarts",
+            "run/expert_restarts",
+            "run/expert_swaps",
+        ];
+        let values: Vec<(String, f32)> = tags
+            .iter()
+            .zip(counts)
+            .map(|(t, n)| ((*t).to_owned(), n as f32))
+            .collect();
+        self.board.scalars(self.seen.learner_env_steps, &values);
     }
 
     /// Waits for news (at most 100 ms), takes in progress, keeps the heartbeat going.

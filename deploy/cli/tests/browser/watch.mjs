@@ -1,10 +1,11 @@
 // Opens the watch page of a run in Debian's Chromium and takes two screenshots a few seconds
-// apart, once the page shows a first episode and again once it shows more. Prints one JSON line:
-// the episodes and the status text at each screenshot.
-//   node watch.mjs URL FIRST.png SECOND.png
+// apart, once the page shows a first episode and again once it shows more, and (with `mark`)
+// a restart or swap marked on its axes. Prints one JSON line: the episodes, the status text and
+// the marks at each screenshot.
+//   node watch.mjs URL FIRST.png SECOND.png [mark]
 import { chromium } from "playwright-core";
 
-const [url, first, second] = process.argv.slice(2);
+const [url, first, second, mark] = process.argv.slice(2);
 const browser = await chromium.launch({
   executablePath: process.env.ALFD_CHROMIUM || "/usr/bin/chromium",
   headless: true,
@@ -18,11 +19,13 @@ try {
     episodes: Number(document.body.dataset.episodes),
     status: document.getElementById("status").textContent,
     paths: document.querySelectorAll("#returns path").length,
+    marks: [...document.querySelectorAll("line.event")].length,
   }));
   await page.waitForFunction(() => Number(document.body.dataset.episodes) >= 2, null, WAIT);
   const a = await seen();
   await page.screenshot({ path: first });
-  await page.waitForFunction((n) => Number(document.body.dataset.episodes) >= n + 5, a.episodes, WAIT);
+  await page.waitForFunction(([n, mark]) => Number(document.body.dataset.episodes) >= n + 5 &&
+    (!mark || document.querySelectorAll("line.event").length > 0), [a.episodes, mark], WAIT);
   await page.waitForTimeout(1500);
   const b = await seen();
   await page.screenshot({ path: second });
