@@ -292,6 +292,17 @@ fn a_run_stopped_with_ctrl_c_is_resumed_to_its_end() {
     assert_eq!(summary(&out)["interrupted"], false);
     check_run_dir(&out, 1500);
     check_rows_and_demos(&out, 300);
+    // The TensorBoard scalars of both launches: one `demos/used` per episode, each at its
+    // episode's own step (the resumed launch goes on where the first stopped).
+    let tb = crate::tensorboard::read(&out.join("tb"));
+    let mut at: Vec<u64> = tb["demos/used"].iter().map(|p| p.0).collect();
+    let mut steps: Vec<u64> = crate::tensorboard::column(&out, "demos_used")
+        .iter()
+        .map(|c| c.0)
+        .collect();
+    at.sort_unstable();
+    steps.sort_unstable();
+    assert_eq!(at, steps);
 }
 
 /// One actor in lockstep, stopped with Ctrl-C after its checkpoints, then `alfd resume`: the

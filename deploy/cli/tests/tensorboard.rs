@@ -2,7 +2,7 @@
 //! package of the project's `.venv/`): `alfd local` and a 2-actor `alfd run` (the launcher's,
 //! the learner's and each actor's file under one `tb/`) write every tag the manual names, at the
 //! run's environment steps, with the values of `episodes.csv`; and `logging.tensorboard = false`
-//! writes none.
+//! writes none. (`faults` reads a resumed run's files with [`read`] too.)
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -15,7 +15,7 @@ const CONFIG: &str = "deploy/configs/cartpole-bdqn-krr.toml";
 type Scalars = BTreeMap<String, Vec<(u64, f64)>>;
 
 /// Every scalar under `logdir`, as TensorBoard reads it.
-fn read(logdir: &Path) -> Scalars {
+pub(crate) fn read(logdir: &Path) -> Scalars {
     let o = Command::new(crate::support::project_python())
         .arg(repo().join("deploy/cli/tests/tb_read.py"))
         .arg(logdir)
@@ -26,7 +26,7 @@ fn read(logdir: &Path) -> Scalars {
 }
 
 /// Column `name` of `episodes.csv` in `dir`, with `total_steps`.
-fn column(dir: &Path, name: &str) -> Vec<(u64, String)> {
+pub(crate) fn column(dir: &Path, name: &str) -> Vec<(u64, String)> {
     let csv = std::fs::read_to_string(dir.join("episodes.csv")).unwrap();
     let mut lines = csv.lines();
     let head: Vec<&str> = lines.next().unwrap().split(',').collect();
@@ -147,4 +147,18 @@ fn a_two_actor_alfd_run_shows_each_actor_and_the_learner() {
     assert!(s["learner/q_mean"].iter().all(|p| p.1.is_finite()));
     // Each actor's waits for the expert, in milliseconds: never negative.
     assert!(s["expert/answer_wait_ms"].iter().all(|p| p.1 >= 0.0));
+    // The launcher's counts of restarts and swaps: written at the start, none happened.
+    for tag in [
+        "run/actor_restarts",
+        "run/learner_restarts",
+        "run/expert_restarts",
+        "run/expert_swaps",
+    ] {
+        assert!(
+            s.get(tag)
+                .is_some_and(|v| !v.is_empty() && v.iter().all(|p| p.1 == 0.0)),
+            "{tag}: {:?}",
+            s.get(tag)
+        );
+    }
 }
