@@ -856,10 +856,20 @@ pub(crate) fn refusal(f: &Frame, from: &str, held: impl Fn(u16) -> bool) -> Opti
             header.schema
         ));
     }
-    match actor {
-        Some(a) if !u16::try_from(a).is_ok_and(&held) => Some(format!(
+    if let Some(a) = actor.filter(|&a| !u16::try_from(a).is_ok_and(&held)) {
+        return Some(format!(
             "a {service} message from host {from} for actor {a}, which it does not hold"
-        )),
+        ));
+    }
+    // A batch whose values do not fit its own sizes is refused before a publisher is sized
+    // for it (the learner checks the sizes against the run's).
+    match f {
+        Frame::Transitions(b) => b
+            .check(usize::from(b.obs_dim), usize::from(b.heads), usize::MAX)
+            .err()
+            .map(|e| {
+                format!("a transitions message from host {from} that does not hold together: {e}")
+            }),
         _ => None,
     }
 }
@@ -908,6 +918,13 @@ mod tests {
         assert!(refusal(&batch(9, SCHEMA_VERSION), "a", held).is_some());
         let old = refusal(&batch(3, SCHEMA_VERSION + 1), "a", held).unwrap();
         assert!(old.contains("schema version"), "{old}");
+        // A batch claiming a huge observation it does not carry.
+        let Frame::Transitions(mut huge) = batch(2, SCHEMA_VERSION) else {
+            unreachable!()
+        };
+        (huge.obs_dim, huge.heads, huge.len) = (u16::MAX, u16::MAX, 1);
+        let why = refusal(&Frame::Transitions(huge), "a", held).unwrap();
+        assert!(why.contains("does not hold together"), "{why}");
 
         let query = |actor: u32| {
             Frame::Query(alfd_wire::QueryRequest {

@@ -15,7 +15,19 @@ use crate::roster::{JoinReply, JoinRequest, RestartReply, RestartRequest};
 /// Valid frames of every kind a remote peer sends or receives.
 pub fn valid_frames() -> Vec<Vec<u8>> {
     let mut batch = TransitionBatch::new(1, 7, 4, 2, 100).unwrap();
-    batch.len = 3;
+    for k in 0..3 {
+        let step = alfd_common::replay::Transition {
+            state: vec![k as f32; 4],
+            action: 1,
+            reward: 1.0,
+            next_state: vec![k as f32 + 0.5; 4],
+            terminated: false,
+            mask: vec![1.0, 0.0],
+            demo: k == 0,
+            horizon: 1,
+        };
+        batch.push(&step).unwrap();
+    }
     // As the wire's port stamps it when an actor sends the batch.
     batch.header.schema = SCHEMA_VERSION;
     let query = QueryRequest::new(1, 7, 55, &[0.1, -0.2, 0.3, 0.4]).unwrap();
