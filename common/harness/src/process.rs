@@ -78,7 +78,7 @@ impl Setup {
                      writes it)"
                 ))
             })?;
-            check_wire_limits(spec.obs_dim, self.config.agent.heads(), 1)?;
+            check_wire_limits(&self.config, (spec.obs_dim, spec.num_actions), 1)?;
             return Ok((spec.obs_dim, spec.num_actions));
         }
         let env = self.vector_env()?;
@@ -137,7 +137,7 @@ impl Setup {
                 self.config.env.name
             ))
         })?;
-        check_wire_limits(env.observation_dim(), self.config.agent.heads(), 1)?;
+        check_wire_limits(&self.config, (env.observation_dim(), env.num_actions()), 1)?;
         Ok(env)
     }
 }
@@ -145,20 +145,44 @@ impl Setup {
 /// Where iceoryx2 keeps the shared memory of every run on this host.
 const SHM_DIR: &str = "/dev/shm";
 
-/// Refuses a run whose transitions the machine's shared memory cannot hold: `actors` actors,
-/// each publishing batches of observations of `obs_dim` values and masks of `heads` values
-/// ([`alfd_wire::transitions_bytes`] each), against what `/dev/shm` has free.
-pub fn check_wire_limits(obs_dim: usize, heads: usize, actors: usize) -> Result<(), BadInput> {
-    check_sizes(obs_dim, heads, actors, shm_free(Path::new(SHM_DIR)))
+/// Refuses a run whose transitions and weights the machine's shared memory cannot hold: `actors`
+/// actors, each publishing batches of the environment's observations (`obs_dim` values) and
+/// masks of the config's K ([`alfd_wire::transitions_bytes`] each), and the learner publishing
+/// its network ([`alfd_wire::weights_bytes`]), against what `/dev/shm` has free.
+pub fn check_wire_limits(
+    cfg: &ExperimentConfig,
+    (obs_dim, actions): (usize, usize),
+    actors: usize,
+) -> Result<(), BadInput> {
+    let heads = cfg.agent.heads();
+    let params =
+        alfd_common::nn::param_count(obs_dim, cfg.agent.hidden, heads.saturating_mul(actions));
+    let need = Need {
+        obs_dim,
+        heads,
+        actors,
+        params,
+    };
+    check_sizes(need, shm_free(Path::new(SHM_DIR)))
 }
 
-/// [`check_wire_limits`] with the free shared memory given (`None`: not known, not checked).
-fn check_sizes(
+/// What a run's services hold: its observations, heads, actors and network.
+#[derive(Debug, Clone, Copy)]
+struct Need {
     obs_dim: usize,
     heads: usize,
     actors: usize,
-    free: Option<u64>,
-) -> Result<(), BadInput> {
+    params: usize,
+}
+
+/// [`check_wire_limits`] with the free shared memory given (`None`: not known, not checked).
+fn check_sizes(n: Need, free: Option<u64>) -> Result<(), BadInput> {
+    let Need {
+        obs_dim,
+        heads,
+        actors,
+        params,
+    } = n;
     if obs_dim > MAX_OBS_DIM {
         return Err(BadInput(format!(
             "the environment's observations have {obs_dim} values; a message carries at most \
@@ -170,12 +194,14 @@ fn check_sizes(
             "the agent has {heads} heads; a message carries at most MAX_HEADS = {MAX_HEADS}"
         )));
     }
-    let need = alfd_wire::transitions_bytes(obs_dim, heads).saturating_mul(actors.max(1) as u64);
+    let need = alfd_wire::transitions_bytes(obs_dim, heads)
+        .saturating_mul(actors.max(1) as u64)
+        .saturating_add(alfd_wire::weights_bytes(params));
     match free {
         Some(free) if need > free => Err(BadInput(format!(
-            "{actors} actor(s) with observations of {obs_dim} values and {heads} heads need \
-             {} MiB of shared memory for their transitions; {SHM_DIR} has {} MiB free \
-             (fewer actors, a smaller observation or fewer heads fit)",
+            "{actors} actor(s) with observations of {obs_dim} values and {heads} heads, and a \
+             network of {params} parameters, need {} MiB of shared memory; {SHM_DIR} has {} MiB \
+             free (fewer actors, a smaller observation, fewer heads or hidden units fit)",
             need >> 20,
             free >> 20
         ))),
@@ -240,33 +266,51 @@ mod tests {
 
     #[test]
     fn limits_name_both_numbers_and_bad_input_exits_2() {
-        assert!(check_sizes(MAX_OBS_DIM, MAX_HEADS, 1, None).is_ok());
-        let e = check_sizes(MAX_OBS_DIM + 2, 1, 1, None)
+        let need = |obs_dim, heads, actors, params| Need {
+            obs_dim,
+            heads,
+            actors,
+            params,
+        };
+        assert!(check_sizes(need(MAX_OBS_DIM, MAX_HEADS, 1, 1), None).is_ok());
+        let e = check_sizes(need(MAX_OBS_DIM + 2, 1, 1, 1), None)
             .unwrap_err()
             .to_string();
         assert!(
             e.contains("have 65537 values") && e.contains("MAX_OBS_DIM = 65535"),
             "{e}"
         );
-        let e = check_sizes(4, MAX_HEADS + 1, 1, None)
+        let e = check_sizes(need(4, MAX_HEADS + 1, 1, 1), None)
             .unwrap_err()
             .to_string();
         assert!(
             e.contains("65536 heads") && e.contains("MAX_HEADS = 65535"),
             "{e}"
         );
-        // DeepSea(50)'s grid, 20 heads, 2 actors: 2 × 266 samples of 32 × 5,020 values.
+        // DeepSea(50)'s grid, 20 heads of 2 actions, 64 hidden units, 2 actors: 2 × 266 samples
+        // of 32 × 5,020 values, and 147 samples of the network's 166,824 parameters.
+        let params = alfd_common::nn::param_count(2500, 64, 40);
+        assert_eq!(params, 166_824);
+        let header = |n| n as u64;
         let one = alfd_wire::transitions_bytes(2500, 20);
         assert_eq!(
             one,
-            266 * (32 * 5020 * 4 + std::mem::size_of::<alfd_wire::TransitionHeader>() as u64)
+            266 * (32 * 5020 * 4 + header(std::mem::size_of::<alfd_wire::TransitionHeader>()))
         );
-        assert!(check_sizes(2500, 20, 2, Some(2 * one)).is_ok());
-        let e = check_sizes(2500, 20, 2, Some(2 * one - 1))
+        let weights = alfd_wire::weights_bytes(params);
+        assert_eq!(
+            weights,
+            147 * (166_824 * 4 + header(std::mem::size_of::<alfd_wire::WeightsHeader>()))
+        );
+        let deepsea = need(2500, 20, 2, params);
+        assert!(check_sizes(deepsea, Some(2 * one + weights)).is_ok());
+        let e = check_sizes(deepsea, Some(2 * one + weights - 1))
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("2 actor(s)") && e.contains("/dev/shm has 326 MiB free"),
+            e.contains("2 actor(s)")
+                && e.contains("need 419 MiB")
+                && e.contains("/dev/shm has 419 MiB free"),
             "{e}"
         );
         assert!(shm_free(Path::new(SHM_DIR)).is_some_and(|b| b > 0));

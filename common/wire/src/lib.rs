@@ -97,7 +97,7 @@ pub use remote::{
     RemoteEnv, RemoteRequest, RemoteResponse, RemoteSpec, MAX_REMOTE_VALUES, REMOTE_MESSAGE_LEN,
 };
 pub use services::{
-    transitions_bytes, Channel, CHANNELS, CONTROL, CREDITS, DEMO_MODEL, PROGRESS, TRANSITIONS,
-    WEIGHTS,
+    transitions_bytes, weights_bytes, Channel, CHANNELS, CONTROL, CREDITS, DEMO_MODEL, PROGRESS,
+    TRANSITIONS, WEIGHTS,
 };
 pub use wakeups::{ActorBells, Bell, Doorbell, Waiter, Wake};

@@ -126,6 +126,17 @@ pub fn transitions_bytes(obs_dim: usize, heads: usize) -> u64 {
     (samples as u64).saturating_mul(sample as u64)
 }
 
+/// Bytes of shared memory the learner's `weights` publisher reserves for a network of `params`
+/// parameters: a sample for every place a subscriber may hold one, its history and its loans.
+pub fn weights_bytes(params: usize) -> u64 {
+    const BORROWED_PER_SUBSCRIBER: usize = 2;
+    const LOANS: usize = 2;
+    let samples =
+        WEIGHTS.subscribers * (WEIGHTS.buffer + BORROWED_PER_SUBSCRIBER) + WEIGHTS.history + LOANS;
+    let sample = params * std::mem::size_of::<f32>() + std::mem::size_of::<WeightsHeader>();
+    (samples as u64).saturating_mul(sample as u64)
+}
+
 /// How long a process keeps opening a service that another process is still creating. iceoryx2
 /// gives up after its `creation_timeout` (1 s) with `HangsInCreation`; a creator slowed down, or
 /// stopped (SIGSTOP) in the middle of creating it, can take longer, and the service is whole

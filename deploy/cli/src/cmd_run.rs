@@ -209,7 +209,7 @@ fn env_spec(
 ) -> anyhow::Result<Option<alfd_harness::python::EnvSpec>> {
     if cfg.env.name.is_remote() {
         let spec = alfd_harness::python::probe_env(&cfg.env)?;
-        alfd_harness::check_wire_limits(spec.obs_dim, cfg.agent.heads(), actors)
+        alfd_harness::check_wire_limits(cfg, (spec.obs_dim, spec.num_actions), actors)
             .map_err(|e| usage(e.to_string()))?;
         Ok(Some(spec))
     } else {
@@ -219,7 +219,7 @@ fn env_spec(
                 cfg.env.name
             ))
         })?;
-        alfd_harness::check_wire_limits(env.observation_dim(), cfg.agent.heads(), actors)
+        alfd_harness::check_wire_limits(cfg, (env.observation_dim(), env.num_actions()), actors)
             .map_err(|e| usage(e.to_string()))?;
         Ok(None)
     }

@@ -175,6 +175,15 @@ impl Params {
     }
 }
 
+/// The parameters of a network with `obs_dim` inputs, `hidden` units in each of its two hidden
+/// layers and `outputs` outputs (K · A): what its weights publish.
+pub fn param_count(obs_dim: usize, hidden: usize, outputs: usize) -> usize {
+    torch_shapes(obs_dim, hidden, outputs)
+        .iter()
+        .map(|s| s.iter().product::<usize>())
+        .sum()
+}
+
 /// The PyTorch shapes of the six tensors, in the order of [`PARAM_NAMES`].
 pub(crate) fn torch_shapes(obs_dim: usize, hidden: usize, outputs: usize) -> [Vec<usize>; 6] {
     [
