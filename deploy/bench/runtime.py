@@ -154,6 +154,25 @@ def write(r, out):
         f.write("\n".join(L))
 
 
+def flat(prefix, value):
+    """(name, number) for every number under `value`, names joined with `/`."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            yield from flat(f"{prefix}/{k}" if prefix else k, v)
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        yield prefix, value
+
+
+def write_runs(r, out):
+    """runs.csv: one row per round, transport and measured number (what the medians come from)."""
+    with open(os.path.join(out, "runs.csv"), "w") as f:
+        f.write("round,part,measure,value\n")
+        for part in ("shm", "zenoh", "python"):
+            for i, rnd in enumerate(r[part]):
+                for name, v in flat("", rnd):
+                    f.write(f"{i + 1},{part},{name},{v!r}\n")
+
+
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("--bin", required=True, help="the release directory with the bench binaries")
@@ -163,11 +182,13 @@ def main():
     p.add_argument("--scale", type=float, default=0.3, help="ALFD_BENCH_SCALE of alfd-bench-ipc")
     p.add_argument("--python-steps", type=int, default=20000)
     p.add_argument("--summary-only", action="store_true",
-                   help="rewrite summary.md from results.json")
+                   help="rewrite summary.md and runs.csv from results.json")
     a = p.parse_args()
     if a.summary_only:
         with open(os.path.join(a.out, "results.json")) as f:
-            write(json.load(f), a.out)
+            r = json.load(f)
+        write(r, a.out)
+        write_runs(r, a.out)
         return
     os.makedirs(a.out, exist_ok=True)
     load = os.getloadavg()[0]
@@ -183,6 +204,7 @@ def main():
         r["zenoh"].append(ipc(a.bin, a.scale, zenoh=True))
         r["python"].append(python_steps(a.bin, a.python, a.python_steps))
     write(r, a.out)
+    write_runs(r, a.out)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,9 @@
 query round trips and transitions throughput of each, as medians over the rounds (the range in
 parentheses), and the ratio of the second to the first.
 
-    python3 deploy/bench/wire_ab.py OLD_BIN_DIR NEW_BIN_DIR [ROUNDS] > wire-ab.md
+    python3 deploy/bench/wire_ab.py OLD_BIN_DIR NEW_BIN_DIR [ROUNDS [RUNS_CSV]] > wire-ab.md
+
+RUNS_CSV, if given, gets one row per round, build and measure: what the medians come from.
 """
 
 import json
@@ -35,6 +37,13 @@ def main():
         for name, d in (("old", old), ("new", new)) if i % 2 == 0 else (("new", new), ("old", old)):
             got[name].append(one(d))
             print(f"wire_ab: round {i + 1}/{rounds} {name}", file=sys.stderr)
+    if len(sys.argv) > 4:
+        with open(sys.argv[4], "w") as f:
+            f.write("round,build,measure,value\n")
+            for name in ("old", "new"):
+                for i, r in enumerate(got[name]):
+                    for label, fn in METRICS:
+                        f.write(f'{i + 1},{name},"{label}",{fn(r)!r}\n')
     print(f"{rounds} interleaved rounds, `ALFD_BENCH_SCALE=0.3`; medians, the range in parentheses.\n")
     print("| what | fixed-size messages | slices sized per run | ratio |")
     print("|---|---:|---:|---:|")
