@@ -99,7 +99,7 @@ impl<'s, 'w> WireAdder<'s, 'w> {
     /// Sends the batch (flagged `blocked` if asked, even empty) and starts the next one.
     fn flush(&mut self, blocked: bool) -> Result<()> {
         if blocked || !self.batch.is_empty() {
-            self.batch.blocked = u32::from(blocked);
+            self.batch.head.blocked = u32::from(blocked);
             self.tx.send(&self.batch).map_err(LoopError::link)?;
             self.learner.ring().map_err(LoopError::link)?;
         }

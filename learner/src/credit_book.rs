@@ -91,7 +91,7 @@ impl CreditBook {
 
     /// Takes in a batch, appending its steps to `queue`; returns how many it appended.
     pub fn accept(&mut self, b: &TransitionBatch, queue: &mut VecDeque<Queued>) -> usize {
-        let a = b.actor as usize;
+        let a = b.head.actor as usize;
         if a >= MAX_ACTORS {
             warn!(
                 actor = a,
@@ -110,27 +110,27 @@ impl CreditBook {
             return 0;
         }
         let book = &mut self.actors[a];
-        let current = b.incarnation >= book.incarnation;
-        if b.incarnation > book.incarnation {
+        let current = b.head.incarnation >= book.incarnation;
+        if b.head.incarnation > book.incarnation {
             if book.incarnation != 0 {
                 info!(
                     actor = a,
                     old = book.incarnation,
-                    new = b.incarnation,
+                    new = b.head.incarnation,
                     "actor restarted"
                 );
             }
             // An incarnation's first batch sets its baseline: a learner restored from a
             // checkpoint meets actors in the middle of their sequence, which is no loss.
             *book = ActorBook {
-                incarnation: b.incarnation,
-                received: b.first_seq,
+                incarnation: b.head.incarnation,
+                received: b.head.first_seq,
                 ..ActorBook::default()
             };
         }
         if current {
-            if b.first_seq > book.received {
-                let gap = b.first_seq - book.received;
+            if b.head.first_seq > book.received {
+                let gap = b.head.first_seq - book.received;
                 warn!(
                     actor = a,
                     gap, "transitions lost on the way; counted as received"
@@ -139,15 +139,15 @@ impl CreditBook {
             }
             book.received = book.received.max(b.end_seq());
             book.queued = book.queued.saturating_add(b.len() as u64);
-            if b.blocked != 0 {
+            if b.head.blocked != 0 {
                 book.blocked_until = Some(b.end_seq());
             }
         }
         let n = b.len();
         for (i, transition) in b.transitions().enumerate() {
             queue.push_back(Queued {
-                actor: b.actor as u16,
-                incarnation: b.incarnation,
+                actor: b.head.actor as u16,
+                incarnation: b.head.incarnation,
                 last_of_batch: i + 1 == n,
                 episode_end: b.ends_episode(i),
                 transition,
@@ -301,7 +301,7 @@ mod tests {
         assert_eq!(book.wake_after(), 2);
         let mut q = VecDeque::new();
         let mut b = batch(1, 1, 0, 4);
-        b.blocked = 1; // sent steps 0..4 with a grant of 4: blocked
+        b.head.blocked = 1; // sent steps 0..4 with a grant of 4: blocked
         book.accept(&b, &mut q);
         book.accept(&batch(0, 1, 0, 2), &mut q);
         assert!(book.any_blocked());
@@ -332,7 +332,7 @@ mod tests {
         // Actor 0 uses its grant of 4, then blocks with nothing batched: an empty flagged batch.
         book.accept(&batch(0, 1, 2, 2), &mut q);
         let mut empty = batch(0, 1, 4, 0);
-        empty.blocked = 1;
+        empty.head.blocked = 1;
         book.accept(&empty, &mut q);
         assert_eq!(
             book.grant(3).1,
@@ -346,7 +346,7 @@ mod tests {
         assert_eq!(book.grant(8).1, vec![0]);
         // One that blocked on stale news (its grant is already beyond) is woken at once.
         let mut stale = batch(0, 1, 4, 1);
-        stale.blocked = 1;
+        stale.head.blocked = 1;
         book.accept(&stale, &mut q);
         assert!(book.any_wake_due());
         assert_eq!(book.grant(8).1, vec![0]);
@@ -358,7 +358,7 @@ mod tests {
         assert_eq!(book.wake_after(), 1);
         let mut q = VecDeque::new();
         let mut b = batch(0, 1, 0, 1);
-        b.blocked = 1;
+        b.head.blocked = 1;
         book.accept(&b, &mut q);
         assert_eq!(book.grant(0).1, Vec::<u16>::new());
         let s = q.pop_front().unwrap();
@@ -398,7 +398,7 @@ mod tests {
         assert_eq!(book.credits(0).granted_for(0, 1), Some(7 + 4));
         let mut q2 = VecDeque::new();
         let mut out_of_range = batch(0, 1, 0, 1);
-        out_of_range.actor = MAX_ACTORS as u32;
+        out_of_range.head.actor = MAX_ACTORS as u32;
         assert_eq!(book.accept(&out_of_range, &mut q2), 0);
     }
 
@@ -409,7 +409,7 @@ mod tests {
         let mut q = VecDeque::new();
         // Actor 0 had sent 37 steps to the learner that died; it resends its blocked flag.
         let mut blocked = batch(0, 3, 37, 0);
-        blocked.blocked = 1;
+        blocked.head.blocked = 1;
         book.accept(&blocked, &mut q);
         assert_eq!(book.lost(0), 0);
         let (credits, wake) = book.grant(0);
@@ -449,19 +449,19 @@ mod tests {
         let mut q = VecDeque::new();
         let mut cases = Vec::new();
         let mut b = batch(0, 1, 0, 2);
-        b.len = TRANSITIONS_PER_BATCH as u32 + 1;
+        b.head.len = TRANSITIONS_PER_BATCH as u32 + 1;
         cases.push(b);
         let mut b = batch(0, 1, u64::MAX - 1, 2);
-        b.blocked = 1;
+        b.head.blocked = 1;
         cases.push(b);
         let mut b = batch(0, 1, 0, 2);
-        b.obs_dim = 9;
+        b.head.obs_dim = 9;
         cases.push(b);
         let mut b = batch(0, 1, 0, 2);
-        b.heads = 3;
+        b.head.heads = 3;
         cases.push(b);
         let mut b = batch(0, 1, 0, 2);
-        b.records[1].action = 2;
+        b.head.records[1].action = 2;
         cases.push(b);
         for (i, b) in cases.iter().enumerate() {
             assert_eq!(book.accept(b, &mut q), 0, "case {i}");
@@ -551,11 +551,11 @@ mod tests {
                     match op {
                         Op::Accept { actor, incarnation, first_seq, len, blocked, obs_dim, action } => {
                             let mut b = batch(0, incarnation, first_seq, 2);
-                            b.actor = actor;
-                            b.len = len;
-                            b.blocked = blocked;
-                            b.obs_dim = obs_dim;
-                            b.records[0].action = action;
+                            b.head.actor = actor;
+                            b.head.len = len;
+                            b.head.blocked = blocked;
+                            b.head.obs_dim = obs_dim;
+                            b.head.records[0].action = action;
                             let n = book.accept(&b, &mut q);
                             prop_assert!(n <= TRANSITIONS_PER_BATCH);
                             total += n as u64;

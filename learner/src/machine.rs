@@ -350,7 +350,7 @@ mod tests {
     fn a_blocked_actor_gets_credits_at_once() {
         let mut m = machine(1000, 0, 0);
         let mut b = batch(3, 1, 0, 4, &[]);
-        b.blocked = 1;
+        b.head.blocked = 1;
         m.accept(&b);
         // Blocked at 4 on stale news: the grant, 4 received - 4 queued + 16, is there.
         assert!(m.book().any_blocked() && m.any_wake_due());

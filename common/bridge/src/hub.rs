@@ -653,12 +653,12 @@ impl<'w, 'a> Forwarder<'w, 'a> {
         &mut self,
         batch: &alfd_wire::TransitionBatch,
     ) -> alfd_wire::Result<alfd_wire::Result<usize>> {
-        let tx = match self.transitions.entry(batch.actor) {
+        let tx = match self.transitions.entry(batch.head.actor) {
             Entry::Occupied(o) => o.into_mut(),
-            Entry::Vacant(v) => v.insert(
-                self.wire
-                    .transitions_sender(usize::from(batch.obs_dim), usize::from(batch.heads))?,
-            ),
+            Entry::Vacant(v) => v.insert(self.wire.transitions_sender(
+                usize::from(batch.head.obs_dim),
+                usize::from(batch.head.heads),
+            )?),
         };
         tx.forward(batch).map(|_| self.learner.ring())
     }
@@ -841,7 +841,7 @@ impl<'w, 'a> Forwarder<'w, 'a> {
 /// actors the run gave it.
 pub(crate) fn refusal(f: &Frame, from: &str, held: impl Fn(u16) -> bool) -> Option<String> {
     let (service, header, actor) = match f {
-        Frame::Transitions(b) => ("transitions", b.header, Some(b.actor)),
+        Frame::Transitions(b) => ("transitions", b.head.header, Some(b.head.actor)),
         Frame::Query(q) => ("query", q.header, Some(q.actor)),
         Frame::Progress(p) => (
             "progress",
@@ -865,7 +865,11 @@ pub(crate) fn refusal(f: &Frame, from: &str, held: impl Fn(u16) -> bool) -> Opti
     // for it (the learner checks the sizes against the run's).
     match f {
         Frame::Transitions(b) => b
-            .check(usize::from(b.obs_dim), usize::from(b.heads), usize::MAX)
+            .check(
+                usize::from(b.head.obs_dim),
+                usize::from(b.head.heads),
+                usize::MAX,
+            )
             .err()
             .map(|e| {
                 format!("a transitions message from host {from} that does not hold together: {e}")
@@ -900,7 +904,7 @@ mod tests {
         let held = |id: u16| holder(id) == Some("a");
         let batch = |actor: u32, schema: u32| {
             let mut b = alfd_wire::TransitionBatch::new(actor as u16, 1, 4, 2, 0).unwrap();
-            b.header = header(Role::Actor, actor as u16, schema);
+            b.head.header = header(Role::Actor, actor as u16, schema);
             Frame::Transitions(b)
         };
         assert_eq!(refusal(&batch(2, SCHEMA_VERSION), "a", held), None);
@@ -922,7 +926,7 @@ mod tests {
         let Frame::Transitions(mut huge) = batch(2, SCHEMA_VERSION) else {
             unreachable!()
         };
-        (huge.obs_dim, huge.heads, huge.len) = (u16::MAX, u16::MAX, 1);
+        (huge.head.obs_dim, huge.head.heads, huge.head.len) = (u16::MAX, u16::MAX, 1);
         let why = refusal(&Frame::Transitions(huge), "a", held).unwrap();
         assert!(why.contains("does not hold together"), "{why}");
 

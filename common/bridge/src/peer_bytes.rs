@@ -29,7 +29,7 @@ pub fn valid_frames() -> Vec<Vec<u8>> {
         batch.push(&step).unwrap();
     }
     // As the wire's port stamps it when an actor sends the batch.
-    batch.header.schema = SCHEMA_VERSION;
+    batch.head.header.schema = SCHEMA_VERSION;
     let query = QueryRequest::new(1, 7, 55, &[0.1, -0.2, 0.3, 0.4]).unwrap();
     let progress = Progress {
         header: Header {

@@ -223,22 +223,6 @@ pub struct TransitionHeader {
     pub actor: u32,
     pub obs_dim: u16,
     pub heads: u16,
-    pub incarnation: u64,
-    pub first_seq: u64,
-    pub len: u32,
-    pub blocked: u32,
-    pub records: [TransitionRecord; TRANSITIONS_PER_BATCH],
-}
-
-/// Up to [`TRANSITIONS_PER_BATCH`] consecutive steps of one actor. Its observations and masks
-/// are as long as the run's (`obs_dim`, `heads`): the `transitions` service carries them as a
-/// slice sized by each actor for its run.
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct TransitionBatch {
-    pub header: Header,
-    pub actor: u32,
-    pub obs_dim: u16,
-    pub heads: u16,
     /// Differs for every process that plays this actor id (a restarted actor is a new incarnation).
     pub incarnation: u64,
     /// Sequence number of `records[0]` among all steps this incarnation sent (the credit count).
@@ -248,6 +232,14 @@ pub struct TransitionBatch {
     /// new ones (the learner then rings its doorbell); 0 otherwise.
     pub blocked: u32,
     pub records: [TransitionRecord; TRANSITIONS_PER_BATCH],
+}
+
+/// Up to [`TRANSITIONS_PER_BATCH`] consecutive steps of one actor: the header as the wire
+/// carries it, and the steps' observations and masks, as long as the run's (`obs_dim`, `heads`):
+/// the `transitions` service carries them as a slice sized by each actor for its run.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TransitionBatch {
+    pub head: TransitionHeader,
     /// Per step, one after another: `state`, `next_state` (`obs_dim` values each) and the
     /// bootstrap mask (`heads` values); [`TransitionBatch::stride`] values a step.
     pub values: Vec<f32>,
@@ -264,62 +256,41 @@ impl TransitionBatch {
     ) -> Result<Self> {
         check_sizes(obs_dim, heads)?;
         Ok(Self {
-            actor: u32::from(actor),
-            obs_dim: obs_dim as u16,
-            heads: heads as u16,
-            incarnation,
-            first_seq,
+            head: TransitionHeader {
+                actor: u32::from(actor),
+                obs_dim: obs_dim as u16,
+                heads: heads as u16,
+                incarnation,
+                first_seq,
+                ..TransitionHeader::default()
+            },
             values: Vec::with_capacity(TRANSITIONS_PER_BATCH * stride(obs_dim, heads)),
-            ..Self::default()
         })
     }
 
     /// Values one step takes: two observations and a mask.
     pub fn stride(&self) -> usize {
-        stride(usize::from(self.obs_dim), usize::from(self.heads))
-    }
-
-    /// The batch's header on the wire (all but its values).
-    pub fn wire_header(&self) -> TransitionHeader {
-        TransitionHeader {
-            header: self.header,
-            actor: self.actor,
-            obs_dim: self.obs_dim,
-            heads: self.heads,
-            incarnation: self.incarnation,
-            first_seq: self.first_seq,
-            len: self.len,
-            blocked: self.blocked,
-            records: self.records,
-        }
+        stride(usize::from(self.head.obs_dim), usize::from(self.head.heads))
     }
 
     /// A batch as received: its header and the values of its sample (the values of `len`
     /// steps and no more are kept; [`TransitionBatch::check`] refuses a batch short of them).
-    pub fn from_wire(h: &TransitionHeader, values: &[f32]) -> Self {
-        let used = (h.len as usize)
+    pub fn from_wire(head: &TransitionHeader, values: &[f32]) -> Self {
+        let used = (head.len as usize)
             .min(TRANSITIONS_PER_BATCH)
-            .saturating_mul(stride(usize::from(h.obs_dim), usize::from(h.heads)));
+            .saturating_mul(stride(usize::from(head.obs_dim), usize::from(head.heads)));
         Self {
-            header: h.header,
-            actor: h.actor,
-            obs_dim: h.obs_dim,
-            heads: h.heads,
-            incarnation: h.incarnation,
-            first_seq: h.first_seq,
-            len: h.len,
-            blocked: h.blocked,
-            records: h.records,
+            head: *head,
             values: values[..used.min(values.len())].to_vec(),
         }
     }
 
     pub fn len(&self) -> usize {
-        self.len as usize
+        self.head.len as usize
     }
 
     pub fn is_empty(&self) -> bool {
-        self.len == 0
+        self.head.len == 0
     }
 
     pub fn is_full(&self) -> bool {
@@ -330,7 +301,7 @@ impl TransitionBatch {
     /// another process may carry any `first_seq`; [`TransitionBatch::check`] refuses one whose
     /// end does not fit).
     pub fn end_seq(&self) -> u64 {
-        self.first_seq.saturating_add(u64::from(self.len))
+        self.head.first_seq.saturating_add(u64::from(self.head.len))
     }
 
     /// Checks a received batch against what its receiver expects: at most
@@ -352,17 +323,17 @@ impl TransitionBatch {
                 expected,
             })
         };
-        if usize::from(self.obs_dim) != obs_dim {
+        if usize::from(self.head.obs_dim) != obs_dim {
             return range(
                 "transition batch obs_dim",
-                u64::from(self.obs_dim),
+                u64::from(self.head.obs_dim),
                 "the environment's observation size",
             );
         }
-        if usize::from(self.heads) != heads {
+        if usize::from(self.head.heads) != heads {
             return range(
                 "transition batch heads",
-                u64::from(self.heads),
+                u64::from(self.head.heads),
                 "the config's K",
             );
         }
@@ -373,14 +344,19 @@ impl TransitionBatch {
                 "len × (2 obs_dim + heads)",
             );
         }
-        if self.first_seq.checked_add(u64::from(self.len)).is_none() {
+        if self
+            .head
+            .first_seq
+            .checked_add(u64::from(self.head.len))
+            .is_none()
+        {
             return range(
                 "transition batch first_seq",
-                self.first_seq,
+                self.head.first_seq,
                 "first_seq + len must fit in 64 bits",
             );
         }
-        let records = &self.records[..self.len()];
+        let records = &self.head.records[..self.len()];
         if let Some(r) = records.iter().find(|r| r.action as usize >= actions) {
             return range(
                 "transition action",
@@ -410,8 +386,8 @@ impl TransitionBatch {
                 max: TRANSITIONS_PER_BATCH,
             });
         }
-        let d = usize::from(self.obs_dim);
-        let h = usize::from(self.heads);
+        let d = usize::from(self.head.obs_dim);
+        let h = usize::from(self.head.heads);
         if t.state.len() != d || t.next_state.len() != d {
             return Err(WireError::TooLarge {
                 what: "transition state (batch obs_dim differs)",
@@ -430,14 +406,14 @@ impl TransitionBatch {
         self.values.extend_from_slice(&t.state);
         self.values.extend_from_slice(&t.next_state);
         self.values.extend_from_slice(&t.mask);
-        self.records[self.len()] = TransitionRecord {
+        self.head.records[self.len()] = TransitionRecord {
             action: t.action,
             reward: t.reward,
             flags: (if t.terminated { flags::TERMINATED } else { 0 })
                 | (if t.demo { flags::DEMO } else { 0 })
                 | (u32::from(t.horizon.max(1) - 1) << flags::HORIZON_SHIFT),
         };
-        self.len += 1;
+        self.head.len += 1;
         Ok(())
     }
 
@@ -448,10 +424,10 @@ impl TransitionBatch {
         if i >= self.len().min(TRANSITIONS_PER_BATCH) {
             return None;
         }
-        let d = usize::from(self.obs_dim);
+        let d = usize::from(self.head.obs_dim);
         let start = i.checked_mul(self.stride())?;
         let v = self.values.get(start..start.checked_add(self.stride())?)?;
-        let r = &self.records[i];
+        let r = &self.head.records[i];
         Some(Transition {
             state: v[..d].to_vec(),
             action: r.action,
@@ -467,7 +443,7 @@ impl TransitionBatch {
     /// Flags the last step pushed as the end of its episode.
     pub fn mark_episode_end(&mut self) {
         if let Some(i) = self.len().checked_sub(1) {
-            if let Some(r) = self.records.get_mut(i) {
+            if let Some(r) = self.head.records.get_mut(i) {
                 r.flags |= flags::EPISODE_END;
             }
         }
@@ -475,7 +451,8 @@ impl TransitionBatch {
 
     /// Whether step `i` of the batch ended its episode.
     pub fn ends_episode(&self, i: usize) -> bool {
-        self.records
+        self.head
+            .records
             .get(i)
             .is_some_and(|r| r.flags & flags::EPISODE_END != 0)
     }

@@ -122,7 +122,7 @@ impl TransitionSender<'_> {
     /// Sends `batch`, stamped with this process's header; returns the sequence number it got.
     pub fn send(&mut self, batch: &TransitionBatch) -> Result<u64> {
         let seq = self.seq;
-        let mut header = batch.wire_header();
+        let mut header = batch.head;
         header.header = self.wire.header(seq);
         self.put(header, &batch.values)?;
         self.seq += 1;
@@ -132,8 +132,8 @@ impl TransitionSender<'_> {
     /// Sends `batch` under its own header (a bridge passes on what another process sent). The
     /// schema version is checked like a received message's.
     pub fn forward(&mut self, batch: &TransitionBatch) -> Result<()> {
-        self.wire.check("transitions", &batch.header)?;
-        self.put(batch.wire_header(), &batch.values)
+        self.wire.check("transitions", &batch.head.header)?;
+        self.put(batch.head, &batch.values)
     }
 
     /// Sends `values` under `header` (an empty batch as one value: iceoryx2 loans no empty
@@ -618,16 +618,19 @@ mod tests {
             );
 
             let got = rx.receive().unwrap().expect("a batch");
-            assert_eq!(got.header.schema, SCHEMA_VERSION);
-            assert_eq!(got.header.sender(), "actor-3");
-            assert_eq!(got.header.seq, 0);
-            assert_eq!((got.actor, got.incarnation, got.first_seq), (3, 77, 10));
+            assert_eq!(got.head.header.schema, SCHEMA_VERSION);
+            assert_eq!(got.head.header.sender(), "actor-3");
+            assert_eq!(got.head.header.seq, 0);
+            assert_eq!(
+                (got.head.actor, got.head.incarnation, got.head.first_seq),
+                (3, 77, 10)
+            );
             let back: Vec<Transition> = got.transitions().collect();
             assert_eq!(back, sent);
-            assert_eq!(got.records[1].flags, flags::DEMO);
-            assert_eq!(got.records[2].flags, flags::TERMINATED);
+            assert_eq!(got.head.records[1].flags, flags::DEMO);
+            assert_eq!(got.head.records[2].flags, flags::TERMINATED);
             let second = rx.receive().unwrap().expect("the empty batch");
-            assert_eq!(second.header.seq, 1);
+            assert_eq!(second.head.header.seq, 1);
             assert!(second.is_empty());
             assert!(rx.receive().unwrap().is_none());
         });

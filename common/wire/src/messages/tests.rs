@@ -30,7 +30,7 @@ fn a_batch_refuses_what_it_cannot_carry() {
     let flagged = {
         let mut b = TransitionBatch::new(0, 1, 4, 2, 0).unwrap();
         b.push(&transition(1.0, true, true)).unwrap();
-        b.records[0].flags
+        b.head.records[0].flags
     };
     assert_eq!(flagged, flags::TERMINATED | flags::DEMO);
     assert!(QueryRequest::new(0, 1, 0, &[0.0; MAX_OBS_DIM + 1]).is_err());
@@ -111,16 +111,19 @@ mod fuzz {
                     (values, repeat),
                 )| {
                     let mut b = TransitionBatch {
-                        actor: if a == 0 { actor } else { a - 1 },
-                        obs_dim: if od % 2 == 0 { od } else { od_small },
-                        heads: if hd % 2 == 0 { hd } else { hd % 22 },
-                        incarnation: if inc % 2 == 0 { inc } else { inc_small },
-                        first_seq: if seq % 3 == 0 { seq } else { seq % 100 },
-                        len: if len % 4 == 0 { len } else { len_small },
-                        blocked,
-                        ..TransitionBatch::default()
+                        head: TransitionHeader {
+                            actor: if a == 0 { actor } else { a - 1 },
+                            obs_dim: if od % 2 == 0 { od } else { od_small },
+                            heads: if hd % 2 == 0 { hd } else { hd % 22 },
+                            incarnation: if inc % 2 == 0 { inc } else { inc_small },
+                            first_seq: if seq % 3 == 0 { seq } else { seq % 100 },
+                            len: if len % 4 == 0 { len } else { len_small },
+                            blocked,
+                            ..TransitionHeader::default()
+                        },
+                        values: Vec::new(),
                     };
-                    for (i, r) in b.records.iter_mut().enumerate() {
+                    for (i, r) in b.head.records.iter_mut().enumerate() {
                         *r = recs[i % recs.len()];
                     }
                     // As many values as the steps need, or any other number.
@@ -146,16 +149,16 @@ mod fuzz {
             let ts: Vec<Transition> = b.transitions().collect();
             prop_assert!(ts.len() <= TRANSITIONS_PER_BATCH && ts.len() <= b.len());
             for t in &ts {
-                prop_assert_eq!(t.state.len(), usize::from(b.obs_dim));
-                prop_assert_eq!(t.mask.len(), usize::from(b.heads));
+                prop_assert_eq!(t.state.len(), usize::from(b.head.obs_dim));
+                prop_assert_eq!(t.mask.len(), usize::from(b.head.heads));
             }
             prop_assert_eq!(b.transition(i).is_some(), i < ts.len());
-            prop_assert!(b.end_seq() >= b.first_seq);
-            let ok = b.check(usize::from(b.obs_dim), usize::from(b.heads), 3).is_ok();
+            prop_assert!(b.end_seq() >= b.head.first_seq);
+            let ok = b.check(usize::from(b.head.obs_dim), usize::from(b.head.heads), 3).is_ok();
             if ok {
                 prop_assert_eq!(ts.len(), b.len());
                 prop_assert_eq!(b.values.len(), b.len() * b.stride());
-                prop_assert!(b.first_seq.checked_add(u64::from(b.len)).is_some());
+                prop_assert!(b.head.first_seq.checked_add(u64::from(b.head.len)).is_some());
             }
         }
 
@@ -267,19 +270,22 @@ mod fuzz {
     #[test]
     fn out_of_range_fields_do_not_panic() {
         let b = TransitionBatch {
-            len: u32::MAX,
-            first_seq: u64::MAX,
-            obs_dim: u16::MAX,
-            heads: u16::MAX,
-            ..TransitionBatch::default()
+            head: TransitionHeader {
+                len: u32::MAX,
+                first_seq: u64::MAX,
+                obs_dim: u16::MAX,
+                heads: u16::MAX,
+                ..TransitionHeader::default()
+            },
+            values: Vec::new(),
         };
         assert_eq!(b.transition(TRANSITIONS_PER_BATCH), None);
         assert_eq!(b.transitions().count(), 0, "no values, no steps");
         assert_eq!(b.end_seq(), u64::MAX);
-        let short = TransitionBatch::from_wire(&b.wire_header(), &[1.0; 10]);
+        let short = TransitionBatch::from_wire(&b.head, &[1.0; 10]);
         assert_eq!(short.transitions().count(), 0);
         assert!(short
-            .check(usize::from(b.obs_dim), usize::from(b.heads), 2)
+            .check(usize::from(b.head.obs_dim), usize::from(b.head.heads), 2)
             .is_err());
         assert!(matches!(b.check(4, 2, 2), Err(WireError::TooLarge { .. })));
         let c = Credits {
