@@ -14,7 +14,9 @@ mod query;
 pub mod reference;
 mod validate;
 
-pub use validate::{MAX_BATCH_SIZE, MAX_HIDDEN, MAX_N_STEP, MAX_QUEUE_LEN, MAX_REPLAY_CAPACITY};
+pub use validate::{
+    MAX_BATCH_SIZE, MAX_HIDDEN, MAX_N_STEP, MAX_QUEUE_LEN, MAX_REPLAY_CAPACITY, MAX_SEPARATE_WIDTH,
+};
 
 /// A config that cannot be used, with the field (or TOML line) at fault.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -247,9 +249,17 @@ pub struct AgentConfig {
     /// Neural: updates per environment step (the replay ratio U; ≥ 1).
     #[serde(default = "default_updates_per_step")]
     pub updates_per_step: u32,
-    /// Neural: width of the two hidden layers (1 to [`MAX_HIDDEN`]).
+    /// Neural: width of the two hidden layers (1 to [`MAX_HIDDEN`]); of each head's own when the
+    /// torsos are separate.
     #[serde(default = "default_hidden")]
     pub hidden: usize,
+    /// Neural: the K heads share one torso (the paper's Bootstrapped DQN); `false` gives each head
+    /// its own two hidden layers, K networks that share nothing (Osband et al.'s ensemble on
+    /// DeepSea), at K times the arithmetic of the second hidden layer. `heads × hidden` is then at
+    /// most [`MAX_SEPARATE_WIDTH`].
+    #[serde(default = "default_true", skip_serializing_if = "is_true")]
+    #[schemars(extend("default" = true))]
+    pub shared_torso: bool,
     /// Neural: the loss on TD errors, `huber` (SmoothL1, the paper's) or `mse`.
     #[serde(default)]
     pub loss: LossKind,
@@ -321,6 +331,14 @@ fn is_zero_f64(v: &f64) -> bool {
 fn default_n_step() -> u32 {
     1
 }
+fn default_true() -> bool {
+    true
+}
+
+fn is_true(v: &bool) -> bool {
+    *v
+}
+
 fn is_one_u32(v: &u32) -> bool {
     *v == 1
 }
@@ -431,6 +449,16 @@ impl AgentConfig {
         })
     }
 
+    /// The width of the network's hidden layers: `hidden`, or `heads × hidden` with separate
+    /// torsos (held block-diagonally, see [`crate::nn::Mlp`]).
+    pub fn network_width(&self) -> usize {
+        if self.shared_torso {
+            self.hidden
+        } else {
+            self.hidden * self.heads()
+        }
+    }
+
     /// A freshly initialised Q-network of this agent (weights drawn from `rng`), with its
     /// randomized prior function when `prior_scale` > 0: actors, learner and target networks of
     /// one run all carry the same prior.
@@ -440,7 +468,12 @@ impl AgentConfig {
         actions: usize,
         rng: &mut crate::rng::Rng,
     ) -> crate::nn::Mlp {
-        let net = crate::nn::Mlp::new(obs_dim, self.hidden, self.heads(), actions, rng);
+        let (h, k) = (self.hidden, self.heads());
+        let net = if self.shared_torso {
+            crate::nn::Mlp::new(obs_dim, h, k, actions, rng)
+        } else {
+            crate::nn::Mlp::separate(obs_dim, h, k, actions, rng)
+        };
         net.with_prior(self.prior_scale as f32, self.prior_seed.unwrap_or(0))
     }
 

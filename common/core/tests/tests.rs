@@ -14,4 +14,5 @@ mod mlp_reference;
 mod nn_checkpoint;
 mod resume;
 mod runner;
+mod separate_torsos;
 mod tidy;

@@ -155,8 +155,11 @@ pub fn check_wire_limits(
     actors: usize,
 ) -> Result<(), BadInput> {
     let heads = cfg.agent.heads();
-    let params =
-        alfd_common::nn::param_count(obs_dim, cfg.agent.hidden, heads.saturating_mul(actions));
+    let params = alfd_common::nn::param_count(
+        obs_dim,
+        cfg.agent.network_width(),
+        heads.saturating_mul(actions),
+    );
     let need = Need {
         obs_dim,
         heads,

@@ -1,7 +1,9 @@
 //! [`ExperimentConfig::validate`]: every value of a config checked, the error naming the field;
 //! sizes (buffers, layers, queues) have upper limits so that no config asks for absurd memory.
 
-use super::{invalid, AgentKind, DemoModelChoice, EnvName, ExperimentConfig, Result, RuleKind};
+use super::{
+    invalid, AgentConfig, AgentKind, DemoModelChoice, EnvName, ExperimentConfig, Result, RuleKind,
+};
 use crate::demo_model::nystrom::MAX_APPROX_DEMOS;
 use crate::demo_model::MAX_DEMOS;
 
@@ -11,6 +13,9 @@ pub const MAX_REPLAY_CAPACITY: usize = 1_000_000;
 pub const MAX_BATCH_SIZE: usize = 8192;
 /// The largest `agent.hidden` (the width of the two hidden layers; the paper's is 64).
 pub const MAX_HIDDEN: usize = 1024;
+
+/// The largest `heads × hidden` of a network with separate torsos (its hidden layers' width).
+pub const MAX_SEPARATE_WIDTH: usize = 2048;
 /// The largest `query.queue_len` (L_q; the paper's is 1000).
 pub const MAX_QUEUE_LEN: usize = 100_000;
 /// The longest n-step return `agent.n_step` may ask for.
@@ -25,6 +30,30 @@ fn in_range(field: &'static str, value: usize, max: usize) -> Result<()> {
         return Err(invalid(
             field,
             format!("must be at most {max}, got {value}"),
+        ));
+    }
+    Ok(())
+}
+
+/// `agent.shared_torso = false` only for networks, and no wider than [`MAX_SEPARATE_WIDTH`].
+fn check_torsos(a: &AgentConfig) -> Result<()> {
+    if a.shared_torso {
+        return Ok(());
+    }
+    if a.kind.is_tabular() {
+        return Err(invalid(
+            "agent.shared_torso",
+            "applies to neural agents only (Q-tables have no torso)",
+        ));
+    }
+    let width = a.hidden * a.heads();
+    if width > MAX_SEPARATE_WIDTH {
+        return Err(invalid(
+            "agent.shared_torso",
+            format!(
+                "false makes the hidden layers heads × hidden = {width} wide, at most \
+                 {MAX_SEPARATE_WIDTH}: use fewer heads or a smaller agent.hidden"
+            ),
         ));
     }
     Ok(())
@@ -240,6 +269,7 @@ impl ExperimentConfig {
         if a.target_update_every == 0 {
             return Err(invalid("agent.target_update_every", "must be at least 1"));
         }
+        check_torsos(a)?;
         if !a.kind.is_tabular() {
             if a.replay_capacity < a.batch_size {
                 return Err(invalid(
@@ -499,6 +529,28 @@ mod tests {
                 "{v}: {e}"
             );
         }
+    }
+
+    #[test]
+    fn separate_torsos_are_for_networks_and_bounded_in_width() {
+        assert!(check(NEURAL, &["agent.shared_torso=false", "agent.heads=20"]).is_ok());
+        let e = error(
+            NEURAL,
+            &[
+                "agent.shared_torso=false",
+                "agent.heads=20",
+                "agent.hidden=200",
+            ],
+        );
+        assert!(
+            e.contains("`agent.shared_torso`") && e.contains("4000"),
+            "{e}"
+        );
+        let e = error(TABULAR, &["agent.shared_torso=false"]);
+        assert!(
+            e.contains("`agent.shared_torso`") && e.contains("neural"),
+            "{e}"
+        );
     }
 
     #[test]

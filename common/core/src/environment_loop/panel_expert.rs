@@ -34,15 +34,23 @@ pub struct PanelLog {
 impl PanelLog {
     /// `experts.csv`: `step,expert,answers,quality,low,high`, one row per answer.
     pub fn csv(&self) -> String {
-        let mut out = "step,expert,answers,quality,low,high\n".to_owned();
+        let mut out = Self::CSV_HEADER.to_owned();
         for r in &self.rows {
-            let q = r.quality;
-            out.push_str(&format!(
-                "{},{},{},{},{},{}\n",
-                r.step, self.names[r.expert], q.answers, q.quality, q.low, q.high
-            ));
+            out.push_str(&self.csv_line(r));
         }
         out
+    }
+
+    /// The header line of `experts.csv`.
+    pub const CSV_HEADER: &'static str = "step,expert,answers,quality,low,high\n";
+
+    /// One row of `experts.csv`, its line ending included.
+    pub fn csv_line(&self, r: &QualityRow) -> String {
+        let q = r.quality;
+        format!(
+            "{},{},{},{},{},{}\n",
+            r.step, self.names[r.expert], q.answers, q.quality, q.low, q.high
+        )
     }
 }
 
@@ -88,6 +96,11 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
                 ..PanelLog::default()
             },
         }
+    }
+
+    /// What the experts did so far (its `spent` is set by [`PanelAsk::into_log`]).
+    pub fn log(&self) -> &PanelLog {
+        &self.log
     }
 
     pub fn into_log(mut self) -> PanelLog {

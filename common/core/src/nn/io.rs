@@ -5,7 +5,8 @@
 //! The file holds the six tensors of [`PARAM_NAMES`] as F32 with their PyTorch shapes, and the
 //! metadata `heads`, `actions` and `format_version` (decimal strings); a network with a
 //! randomized prior function adds `prior_scale` and `prior_seed`, from which the prior is drawn
-//! again on reading (a PyTorch reader gets the trained part only). The header is written
+//! again on reading (a PyTorch reader gets the trained part only); a network whose heads have
+//! separate torsos adds `torsos` (K), its `torso.1` and `heads` weights block-diagonal. The header is written
 //! here with sorted keys so that the same network always gives the same bytes; reading goes
 //! through the `safetensors` crate, which validates the container.
 
@@ -45,6 +46,9 @@ impl Mlp {
             ("actions", self.actions().to_string()),
             ("format_version", FORMAT_VERSION.to_string()),
         ]);
+        if self.torsos() > 1 {
+            metadata.insert("torsos", self.torsos().to_string());
+        }
         if let Some(prior) = self.prior() {
             metadata.insert("prior_scale", prior.scale().to_string());
             metadata.insert("prior_seed", prior.seed().to_string());
@@ -134,7 +138,16 @@ impl Mlp {
         for (dst, (_, src)) in params.tensors_mut().into_iter().zip(&data) {
             dst.copy_from_slice(src);
         }
-        let net = Mlp::from_params(params, heads, actions)?;
+        let torsos = match meta.and_then(|m| m.get("torsos")) {
+            Some(_) => read_count(meta, "torsos")?,
+            None => 1,
+        };
+        let net = Mlp::from_params(params, heads, actions)?
+            .with_torsos(torsos)
+            .map_err(|e| NnError::Metadata {
+                key: "torsos".to_string(),
+                reason: e.to_string(),
+            })?;
         Ok(match prior {
             Some((scale, seed)) => net.with_prior(scale, seed),
             None => net,
@@ -240,5 +253,22 @@ mod tests {
         let plain = Mlp::new(4, 8, 2, 2, &mut crate::rng::seeded(3));
         let back = Mlp::from_safetensors_bytes(&plain.to_safetensors_bytes()).unwrap();
         assert!(back.prior().is_none());
+    }
+
+    #[test]
+    fn separate_torsos_are_stored_as_their_count_and_read_back() {
+        let net = Mlp::separate(4, 8, 3, 2, &mut crate::rng::seeded(3)).with_prior(2.0, 7);
+        let bytes = net.to_safetensors_bytes();
+        let back = Mlp::from_safetensors_bytes(&bytes).unwrap();
+        assert_eq!(back, net);
+        assert_eq!((back.torsos(), back.hidden()), (3, 24));
+        assert_eq!(back.prior().unwrap().network().torsos(), 3);
+        // A count that does not fit the heads is refused, naming the key.
+        let mut bad = bytes.clone();
+        let key = b"\"torsos\":\"3\"";
+        let at = bad.windows(key.len()).position(|w| w == key).unwrap();
+        bad[at + key.len() - 2] = b'5';
+        let err = Mlp::from_safetensors_bytes(&bad).unwrap_err();
+        assert!(err.to_string().contains("torsos"), "{err}");
     }
 }

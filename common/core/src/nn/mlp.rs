@@ -22,10 +22,19 @@ use crate::rng::Rng;
 const STACK_HIDDEN: usize = 256;
 
 /// The network `obs_dim -> hidden -> hidden -> K*A` with ReLU; output `k * A + a` is `Q_k(s, a)`.
+///
+/// With separate torsos ([`Mlp::separate`]) the K heads share nothing: the network is K
+/// networks `obs_dim -> h -> h -> A` side by side, held as one of width `hidden = K * h` whose
+/// `torso.1` and `heads` weights are block-diagonal (hidden units `k*h .. (k+1)*h` are head k's and
+/// feed only its outputs). The off-block weights are zero from the start and their gradients are
+/// zeroed in every backward pass, so Adam never moves them: the forward pass, the gradients and
+/// the updates are those of the K networks apart, at K times the arithmetic of `torso.1`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Mlp {
     heads: usize,
     actions: usize,
+    /// 1: one torso shared by the heads; K: each head its own (block-diagonal, see above).
+    torsos: usize,
     pub(crate) params: Params,
     /// A randomized prior function added to every output (absent: none).
     prior: Option<Box<Prior>>,
@@ -108,17 +117,79 @@ impl Mlp {
         Self {
             heads,
             actions,
+            torsos: 1,
             params,
             prior: None,
         }
+    }
+
+    /// A freshly initialised network whose K heads each have their own torso of `hidden` units
+    /// (Osband et al.'s ensemble on DeepSea), held block-diagonally in one network of width
+    /// `K * hidden` (see [`Mlp`]). Each layer is drawn as [`Mlp::new`] draws it, with the fan-in of
+    /// one torso (`hidden` for `torso.1` and `heads`), and the off-block weights then set to zero.
+    ///
+    /// Panics if a dimension is zero.
+    pub fn separate(
+        obs_dim: usize,
+        hidden: usize,
+        heads: usize,
+        actions: usize,
+        rng: &mut Rng,
+    ) -> Self {
+        assert!(
+            obs_dim > 0 && hidden > 0 && heads > 0 && actions > 0,
+            "network dimensions must be positive: obs_dim {obs_dim}, hidden {hidden}, heads {heads}, actions {actions}"
+        );
+        let width = hidden * heads;
+        let mut params = Params::zeros(obs_dim, width, heads * actions);
+        let p = &mut params;
+        init_linear_fan(p.w0.as_mut_slice(), p.b0.as_mut_slice(), obs_dim, rng);
+        init_linear_fan(p.w1.as_mut_slice(), p.b1.as_mut_slice(), hidden, rng);
+        init_linear_fan(p.wh.as_mut_slice(), p.bh.as_mut_slice(), hidden, rng);
+        mask_blocks(&mut params, heads, actions);
+        Self {
+            heads,
+            actions,
+            torsos: heads,
+            params,
+            prior: None,
+        }
+    }
+
+    /// The number of torsos: 1 (shared by the heads) or K (one each, [`Mlp::separate`]).
+    pub fn torsos(&self) -> usize {
+        self.torsos
+    }
+
+    /// The network as K separate torsos (`torsos = K`) or one shared (`torsos = 1`); the weights
+    /// off the blocks are set to zero. An error if `torsos` is neither, or does not divide the
+    /// hidden width.
+    pub fn with_torsos(mut self, torsos: usize) -> Result<Self> {
+        if torsos != 1 && (torsos != self.heads || self.hidden() % torsos != 0) {
+            return Err(NnError::Dims(format!(
+                "{torsos} torsos for {} heads and a hidden width of {}: torsos must be 1 or the \
+                 number of heads, dividing the width",
+                self.heads,
+                self.hidden()
+            )));
+        }
+        self.torsos = torsos;
+        mask_blocks(&mut self.params, torsos, self.actions);
+        Ok(self)
     }
 
     /// The network with a randomized prior function of scale `scale` drawn from `seed` (see
     /// [`Prior`]); scale 0 gives the network without one.
     pub fn with_prior(mut self, scale: f32, seed: u64) -> Self {
         self.prior = (scale != 0.0).then(|| {
-            let (d, h) = (self.obs_dim(), self.hidden());
-            Box::new(Prior::new(d, h, self.heads, self.actions, scale, seed))
+            let (d, h) = (self.obs_dim(), self.hidden() / self.torsos);
+            let separate = self.torsos > 1;
+            Box::new(Prior::new(
+                (d, h, self.heads, self.actions),
+                separate,
+                scale,
+                seed,
+            ))
         });
         self
     }
@@ -161,6 +232,7 @@ impl Mlp {
         Ok(Self {
             heads,
             actions,
+            torsos: 1,
             params,
             prior: None,
         })
@@ -239,7 +311,9 @@ impl Mlp {
     /// Copies the parameters of `other` (same dimensions) without allocating: the target
     /// network's update.
     pub fn copy_params_from(&mut self, other: &Mlp) -> Result<()> {
-        if self.params.dims() != other.params.dims() || self.heads != other.heads {
+        if self.params.dims() != other.params.dims()
+            || (self.heads, self.torsos) != (other.heads, other.torsos)
+        {
             return Err(NnError::Dims(format!(
                 "cannot copy a network of shapes {:?} ({} heads) into one of shapes {:?} ({} heads)",
                 other.params.shapes(),
@@ -265,7 +339,9 @@ impl Mlp {
         if tau >= 1.0 {
             return self.copy_params_from(other);
         }
-        if self.params.dims() != other.params.dims() || self.heads != other.heads {
+        if self.params.dims() != other.params.dims()
+            || (self.heads, self.torsos) != (other.heads, other.torsos)
+        {
             return Err(NnError::Dims(
                 "cannot average networks of different shapes".to_owned(),
             ));
@@ -419,17 +495,45 @@ impl Mlp {
                 layer_grads((&mut grads.w0, &mut grads.b0), &c.x, &c.dz0, &mut c.pack);
             },
         );
+        mask_blocks(grads, self.torsos, self.actions);
     }
 }
 
 /// PyTorch's `nn.Linear` default initialisation of one layer; `w` is row-major `[out, in]`, so
 /// `fan_in = w.len() / b.len()`.
 fn init_linear(w: &mut [f32], b: &mut [f32], rng: &mut Rng) {
-    let fan_in = w.len() / b.len();
+    init_linear_fan(w, b, w.len() / b.len(), rng);
+}
+
+/// [`init_linear`] with a given fan-in (that of one torso, in a block-diagonal layer).
+fn init_linear_fan(w: &mut [f32], b: &mut [f32], fan_in: usize, rng: &mut Rng) {
     let bound = 1.0 / (fan_in as f32).sqrt();
     for v in w.iter_mut().chain(b.iter_mut()) {
         *v = rng.random_range(-bound..bound);
     }
+}
+
+/// Zeroes what lies off the blocks of `torsos` torsos in `torso.1` and `heads` (weights or their
+/// gradients, `actions` outputs a head); nothing with one torso.
+fn mask_blocks(p: &mut Params, torsos: usize, actions: usize) {
+    if torsos == 1 {
+        return;
+    }
+    let width = p.hidden();
+    let h = width / torsos;
+    // Column j of an `(in, out)` matrix holds output j's weights from every input.
+    for (j, col) in p.w1.as_mut_slice().chunks_exact_mut(width).enumerate() {
+        zero_outside(col, (j / h) * h, h);
+    }
+    for (j, col) in p.wh.as_mut_slice().chunks_exact_mut(width).enumerate() {
+        zero_outside(col, (j / actions) * h, h);
+    }
+}
+
+/// Sets every value of `col` to zero but those at `start .. start + len`.
+fn zero_outside(col: &mut [f32], start: usize, len: usize) {
+    col[..start].fill(0.0);
+    col[start + len..].fill(0.0);
 }
 
 fn ensure_shape(m: &mut DMatrix<f32>, rows: usize, cols: usize) {

@@ -6,7 +6,8 @@
 //! The prior network has the trained network's shape, PyTorch's default initialisation, and is
 //! drawn from its own seed, so every process of a run (actors, learner, expert) builds the same
 //! one from the config alone: it is never sent over the wire nor stored as tensors. Its heads
-//! differ through their own output columns on one shared random torso, as the trained heads do.
+//! differ through their own output columns on one shared random torso, as the trained heads do,
+//! or each has its own torso when the network's heads do.
 //!
 //! A prior adds a term that does not depend on θ: the gradients of the trained weights are those
 //! of the plain network at the same activations, and the TD targets (computed with the target
@@ -26,21 +27,21 @@ pub struct Prior {
 }
 
 impl Prior {
-    /// The prior of a network of these dimensions, drawn from `seed`.
+    /// The prior of a network of dimensions `(obs_dim, hidden, heads, actions)` (`hidden` per
+    /// torso), drawn from `seed`; with `separate` torsos as the network's are.
     pub fn new(
-        obs_dim: usize,
-        hidden: usize,
-        heads: usize,
-        actions: usize,
+        (obs_dim, hidden, heads, actions): (usize, usize, usize, usize),
+        separate: bool,
         scale: f32,
         seed: u64,
     ) -> Self {
         let mut rng = crate::rng::seeded(crate::rng::derive_seed(seed, "prior"));
-        Self {
-            scale,
-            seed,
-            net: Mlp::new(obs_dim, hidden, heads, actions, &mut rng),
-        }
+        let net = if separate {
+            Mlp::separate(obs_dim, hidden, heads, actions, &mut rng)
+        } else {
+            Mlp::new(obs_dim, hidden, heads, actions, &mut rng)
+        };
+        Self { scale, seed, net }
     }
 
     /// β.
