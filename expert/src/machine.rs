@@ -23,6 +23,7 @@ use std::time::Duration;
 
 use alfd_common::agent::{DemoRecord, Demonstrator, ExpertCore, RefitJob, Refitted};
 use alfd_common::demo_model::DemoModelError;
+use alfd_common::environment_loop::panel_expert::PanelAsk;
 use alfd_wire::{name_to_bytes, outcome, process_state, QueryResponse};
 
 use crate::human::ShownQuery;
@@ -46,6 +47,9 @@ pub enum Action<Q> {
     CloseLog,
     /// Append this demonstration to `demos.jsonl`.
     Record(DemoRecord),
+    /// With several experts: append this demonstration to `demos.jsonl` with what it cost and
+    /// whether its state was asked twice, and its expert's quality row to `experts.csv`.
+    RecordOf(DemoRecord, PanelNote),
     /// Publish the current demonstration model ([`ExpertMachine::core`]).
     PublishModel,
     /// Take the refit the model owes ([`ExpertMachine::take_refit_job`]), run it off the query
@@ -73,6 +77,15 @@ pub enum Action<Q> {
     RingLauncher,
     /// Stop the process's loop, for this reason.
     Exit(&'static str),
+}
+
+/// What a run with several experts records beside a demonstration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PanelNote {
+    pub cost: f64,
+    pub double_asked: bool,
+    /// The answering expert's line of `experts.csv` after this answer.
+    pub quality_line: String,
 }
 
 /// What arrived with a query: its actor, step, whether its actor still waits, and its state
@@ -303,38 +316,101 @@ impl<Q> ExpertMachine<Q> {
                     .last()
                     .expect("an answer records a demonstration")
                     .clone();
-                self.counts.answered += 1;
-                let response = QueryResponse {
-                    outcome: outcome::ANSWERED,
-                    action: action as u32,
-                    demo_index: record.index,
-                    budget_left: self.core.budget().remaining(),
-                    ..self.response()
-                };
-                let reply = Action::Reply {
-                    query,
-                    actor,
-                    response,
-                };
-                let mut out = if self.core.refits_deferred() {
-                    let mut out = vec![Action::Record(record), reply];
-                    out.extend(self.next_refit());
-                    out
-                } else {
-                    vec![Action::Record(record), Action::PublishModel, reply]
-                };
-                // The last of the budget: nothing more to ask the person, the rest act on their
-                // own now.
-                if self.core.budget().is_exhausted() {
-                    let waiting: Vec<_> = self.waiting.drain(..).collect();
-                    for (shown, query) in waiting {
-                        out.push(self.refuse(query, shown.actor));
-                    }
-                }
-                out
+                self.answered(query, actor, action, vec![Action::Record(record)])
             }
             None => vec![self.refuse(query, actor)],
         }
+    }
+
+    /// With several experts (`[[experts]]`): `panel` routes the query to one of them (and on a
+    /// double ask a second expert answers the same state); each answer is a demonstration
+    /// recorded with its cost and its expert's quality, the first one's action the reply. An
+    /// expert that fails drops the query, spending nothing.
+    pub fn panel_demonstrated(
+        &mut self,
+        (query, actor): (Q, u32),
+        state: &[f32],
+        step: u64,
+        panel: &mut PanelAsk<'_, [f32]>,
+    ) -> Vec<Action<Q>> {
+        if self.mode == Mode::Standby {
+            return vec![Action::Drop {
+                actor,
+                why: "standing by".into(),
+            }];
+        }
+        let step = step.max(self.core.last_demo_step());
+        let (demos, rows) = (self.core.demos().len(), panel.log().rows.len());
+        let x: Vec<f64> = state.iter().map(|&v| f64::from(v)).collect();
+        let action = match panel.ask(&mut self.core, state, &x, step) {
+            Ok(Some(action)) => action,
+            Ok(None) => return vec![self.refuse(query, actor)],
+            Err(e) => {
+                return vec![Action::Drop {
+                    actor,
+                    why: e.to_string(),
+                }]
+            }
+        };
+        let log = panel.log();
+        let records = self.core.demos()[demos..]
+            .iter()
+            .zip(&log.rows[rows..])
+            .zip(&log.answers[rows..])
+            .map(|((record, row), &(cost, double_asked))| {
+                let note = PanelNote {
+                    cost,
+                    double_asked,
+                    quality_line: log.csv_line(row),
+                };
+                Action::RecordOf(record.clone(), note)
+            })
+            .collect();
+        self.answered(query, actor, action, records)
+    }
+
+    /// A query answered with `action`, its demonstrations recorded by `records` (the first the
+    /// answer's): record, publish (or refit), reply, and once the budget is spent refuse the
+    /// queries still waiting.
+    fn answered(
+        &mut self,
+        query: Q,
+        actor: u32,
+        action: usize,
+        records: Vec<Action<Q>>,
+    ) -> Vec<Action<Q>> {
+        let index = match records.first() {
+            Some(Action::Record(r) | Action::RecordOf(r, _)) => r.index,
+            _ => unreachable!("an answer records a demonstration"),
+        };
+        self.counts.answered += records.len() as u64;
+        let response = QueryResponse {
+            outcome: outcome::ANSWERED,
+            action: action as u32,
+            demo_index: index,
+            budget_left: self.core.budget().remaining(),
+            ..self.response()
+        };
+        let reply = Action::Reply {
+            query,
+            actor,
+            response,
+        };
+        let mut out = records;
+        if self.core.refits_deferred() {
+            out.push(reply);
+            out.extend(self.next_refit());
+        } else {
+            out.extend([Action::PublishModel, reply]);
+        }
+        // The last of the budget: nothing more to ask the person, the rest act on their own now.
+        if self.core.budget().is_exhausted() {
+            let waiting: Vec<_> = self.waiting.drain(..).collect();
+            for (shown, query) in waiting {
+                out.push(self.refuse(query, shown.actor));
+            }
+        }
+        out
     }
 
     /// The person's decision on the waiting query `id`: an action, or `None` (declined: the actor
@@ -792,5 +868,80 @@ mod tests {
             &out[1..],
             &[Action::Status(process_state::EXITING), Action::RingLauncher]
         );
+    }
+
+    /// A built-in expert that always answers its action.
+    struct Always(usize);
+
+    impl Demonstrator<[f32]> for Always {
+        fn act(&mut self, _: &[f32]) -> usize {
+            self.0
+        }
+    }
+
+    /// Three experts answering 2, 1 and 0 at costs 10, 2 and 1, asked in turn, every state asked
+    /// of a second expert too.
+    fn panel() -> PanelAsk<'static, [f32]> {
+        let cfg = alfd_common::config::ExperimentConfig::from_toml(
+            "seed = 1\nepisodes = 3\n[env]\nname = \"mountaincar\"\n[agent]\nkind = \"bdqn\"\n\
+             [expert]\nroute = \"round-robin\"\ndouble_ask = 1.0\n\
+             [[experts]]\nname = \"mountaincar-energy\"\ncost = 10\n\
+             [[experts]]\nname = \"mountaincar-fair\"\ncost = 2\n\
+             [[experts]]\nname = \"mountaincar-poor\"\ncost = 1\n",
+        )
+        .unwrap();
+        let members: Vec<Box<dyn Demonstrator<[f32]>>> = vec![
+            Box::new(Always(2)),
+            Box::new(Always(1)),
+            Box::new(Always(0)),
+        ];
+        PanelAsk::new(&cfg, members)
+    }
+
+    #[test]
+    fn several_experts_record_each_answer_with_its_cost_then_reply_with_the_first() {
+        let mut m = active(3, false, 0);
+        let mut p = panel();
+        let out = m.panel_demonstrated((1, 7), &[0.25, -1.0], 30, &mut p);
+        let [Action::RecordOf(first, a), Action::RecordOf(second, b), Action::PublishModel, Action::Reply {
+            query: 1,
+            actor: 7,
+            response,
+        }] = out.as_slice()
+        else {
+            panic!("expected two records, a publication and a reply: {out:?}");
+        };
+        // Round-robin starts with energy (2); fair, the least answered other, is asked too.
+        assert_eq!(
+            (first.expert.as_str(), first.action),
+            ("mountaincar-energy", 2)
+        );
+        assert_eq!(
+            (second.expert.as_str(), second.action),
+            ("mountaincar-fair", 1)
+        );
+        assert_eq!((a.cost, a.double_asked, b.cost), (10.0, true, 2.0));
+        assert!(
+            a.quality_line.starts_with("30,mountaincar-energy,1,"),
+            "{}",
+            a.quality_line
+        );
+        assert_eq!((response.action, response.demo_index), (2, 0));
+        assert_eq!((response.budget_left, m.counts().answered), (1, 2));
+        // The last of the budget: one answer recorded, its double ask not; then refused.
+        let out = m.panel_demonstrated((2, 7), &[0.25, -1.0], 40, &mut p);
+        assert_eq!(
+            out.iter()
+                .filter(|a| matches!(a, Action::RecordOf(..)))
+                .count(),
+            1
+        );
+        let out = m.panel_demonstrated((3, 7), &[0.25, -1.0], 50, &mut p);
+        assert_eq!(replies(&out), [(3, outcome::BUDGET_EXHAUSTED)]);
+        // A standby expert asks nobody.
+        let mut standby = machine(3, false);
+        let out = standby.panel_demonstrated((4, 7), &[0.25, -1.0], 60, &mut p);
+        assert!(matches!(out.as_slice(), [Action::Drop { actor: 7, .. }]));
+        assert!(standby.core().demos().is_empty());
     }
 }

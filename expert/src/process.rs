@@ -17,6 +17,7 @@ use std::time::{Duration, Instant};
 
 use alfd_common::agent::{Demonstrator, ExpertCore, Refitted};
 use alfd_common::demo_model::lanes::SharedLanes;
+use alfd_common::environment_loop::panel_expert::{PanelAsk, PanelLog};
 use alfd_harness::python::Adapter;
 use alfd_harness::{BadInput, ProcessArgs, Refit, Session};
 use alfd_harness::{HarnessError, What as _};
@@ -27,7 +28,7 @@ use alfd_wire::{
 use tracing::{debug, info};
 
 use crate::human::{self, HumanPage, PageState, HUMAN};
-use crate::machine::{Action, ExpertMachine, Mode, QueryIn};
+use crate::machine::{Action, ExpertMachine, Mode, PanelNote, QueryIn};
 use alfd_demonstrators::demo_log::{self, DemoLog};
 use alfd_demonstrators::registry;
 
@@ -59,6 +60,8 @@ enum Source {
         remote: Box<RemoteDemonstrator>,
     },
     Person,
+    /// Several built-in experts (`[[experts]]`), a query routed to one of them.
+    Panel(Box<PanelAsk<'static, [f32]>>),
 }
 
 type Machine<'w> = ExpertMachine<IncomingQuery<'w>>;
@@ -71,10 +74,9 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let setup = args.process.load()?;
     let (cfg, runtime) = (&setup.config, &setup.runtime);
     let (obs_dim, actions) = setup.env_dims()?;
-    let name = args
-        .expert
-        .clone()
-        .unwrap_or_else(|| cfg.expert.name.clone());
+    let name = args.expert.clone().unwrap_or_else(|| cfg.run_expert_name());
+    // Several experts answer in this process when it is started under their joined name.
+    let panel = !cfg.experts.is_empty() && name == cfg.run_expert_name();
     let demos_path = args.process.run_dir.join("demos.jsonl");
     // Read the demonstrations now, to refuse a bad file before the run depends on us; they are
     // read again when this expert becomes active (its predecessor may have added some).
@@ -83,7 +85,9 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let me = Process::new(Role::Expert, args.generation);
     // A run that never asks (B = 0) needs no expert for its environment: its own (the config's)
     // is not built; one swapped in by name is.
-    let source = if name == cfg.expert.name && !cfg.needs_expert() {
+    let source = if panel {
+        panel_source(cfg)?
+    } else if name == cfg.expert.name && !cfg.needs_expert() {
         Source::BuiltIn(Box::new(alfd_common::agent::NoExpert))
     } else {
         source(args, cfg, &name, me, schema, actions)?
@@ -113,6 +117,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         log: None,
         source,
         page,
+        experts_path: args.process.run_dir.join("experts.csv"),
         demos_path,
         obs_dim,
         actions,
@@ -261,6 +266,19 @@ fn source(
     })
 }
 
+/// The experts of `[[experts]]`, each a built-in one of the config's environment, and the panel
+/// that routes the queries among them.
+fn panel_source(cfg: &alfd_common::config::ExperimentConfig) -> alfd_harness::Result<Source> {
+    let members = cfg
+        .experts
+        .iter()
+        .map(|e| -> alfd_harness::Result<Box<dyn Demonstrator<[f32]>>> {
+            Ok(registry::for_config(cfg, &e.name)?)
+        })
+        .collect::<alfd_harness::Result<Vec<_>>>()?;
+    Ok(Source::Panel(Box::new(PanelAsk::new(cfg, members))))
+}
+
 /// A person as the expert: the page is up from the start (standing by until active); its
 /// address with the token goes to the run directory's private file.
 fn start_page(
@@ -316,6 +334,8 @@ struct Shell<'w> {
     source: Source,
     page: Option<HumanPage>,
     demos_path: PathBuf,
+    /// Several experts' quality as the run sees it, a row per answer.
+    experts_path: PathBuf,
     obs_dim: usize,
     actions: usize,
     query_timeout: Duration,
@@ -482,7 +502,15 @@ impl<'w> Shell<'w> {
                     self.log = None;
                 }
                 Action::Record(record) => {
-                    if !self.record(&record)? {
+                    if !self.record(&record, None)? {
+                        // Not on disk, so not given: the query goes unanswered (the actor acts
+                        // on its own), and the budget and the model go back to what
+                        // demos.jsonl holds, as a restarted expert's would.
+                        return self.apply(m, vec![Action::LoadDemos]);
+                    }
+                }
+                Action::RecordOf(record, note) => {
+                    if !self.record(&record, Some(&note))? {
                         // Not on disk, so not given: the query goes unanswered (the actor acts
                         // on its own), and the budget and the model go back to what
                         // demos.jsonl holds, as a restarted expert's would.
@@ -564,6 +592,10 @@ impl<'w> Shell<'w> {
         if !self.delay.is_zero() {
             std::thread::sleep(self.delay);
         }
+        if let Source::Panel(panel) = &mut self.source {
+            let next = m.panel_demonstrated((query, actor), state, step, panel);
+            return self.apply(m, next);
+        }
         let Some(action) = self.ask(actor, state)? else {
             return Ok(None);
         };
@@ -575,11 +607,19 @@ impl<'w> Shell<'w> {
     /// acts on its own after its timeout; no budget is spent).
     /// Appends a demonstration to `demos.jsonl`; `false` when a full disk refused it (then no
     /// query is asked for [`DISK_FULL_PAUSE`]).
-    fn record(&mut self, record: &alfd_common::agent::DemoRecord) -> alfd_harness::Result<bool> {
+    fn record(
+        &mut self,
+        record: &alfd_common::agent::DemoRecord,
+        panel: Option<&PanelNote>,
+    ) -> alfd_harness::Result<bool> {
         let Some(log) = self.log.as_mut() else {
             return Err(HarnessError::Run("a demonstration with no log open".into()));
         };
-        if let Err(e) = log.append(record) {
+        let appended = match panel {
+            Some(n) => log.append_of(record, n.cost, n.double_asked),
+            None => log.append(record),
+        };
+        if let Err(e) = appended {
             if !e.is_disk_full() {
                 return Err(e).what(|| "the demonstration log".into());
             }
@@ -604,6 +644,9 @@ impl<'w> Shell<'w> {
             action = record.action,
             "demonstration"
         );
+        if let Some(note) = panel {
+            append_quality(&self.experts_path, &note.quality_line)?;
+        }
         Ok(true)
     }
 
@@ -622,6 +665,7 @@ impl<'w> Shell<'w> {
                 }
             },
             Source::Person => unreachable!("the machine asks a person on the page"),
+            Source::Panel(_) => unreachable!("a panel's experts are asked by the machine"),
         }
     }
 
@@ -641,6 +685,24 @@ impl<'w> Shell<'w> {
 
 /// Rings the doorbell of the actor that asked (an id beyond `u16` has none: it is not truncated
 /// onto another actor's).
+/// Appends one row to `experts.csv`, its header first when the file is new or empty.
+fn append_quality(path: &std::path::Path, line: &str) -> alfd_harness::Result<()> {
+    use std::io::Write as _;
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .what(|| format!("cannot open {}", path.display()))?;
+    let new = file.metadata().map(|m| m.len() == 0).unwrap_or(true);
+    let text = if new {
+        format!("{}{line}", PanelLog::CSV_HEADER)
+    } else {
+        line.to_owned()
+    };
+    file.write_all(text.as_bytes())
+        .what(|| format!("cannot write {}", path.display()))
+}
+
 fn ring_actor(actors: &mut ActorBells<'_>, actor: u32) -> alfd_harness::Result<()> {
     if let Ok(id) = u16::try_from(actor) {
         actors.ring(id)?;

@@ -70,8 +70,8 @@ pub struct ExperimentConfig {
     #[serde(default, skip_serializing_if = "DemosConfig::is_default")]
     pub demos: DemosConfig,
     /// Several experts at once (`[[experts]]`, one table each), asked as `expert.route` says;
-    /// `[expert]` keeps what is the run's (the demonstration model). In one process only
-    /// (`alfd local`, `alfd sweep`), neural agents only. Empty: the one expert `expert.name`.
+    /// `[expert]` keeps what is the run's (the demonstration model). Neural agents only; in
+    /// `alfd run` the expert process hosts them all. Empty: the one expert `expert.name`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub experts: Vec<PanelEntry>,
     #[serde(default, skip_serializing_if = "LoggingConfig::is_default")]
@@ -604,13 +604,6 @@ impl ExperimentConfig {
                 "the multi-process runtime runs neural agents (dqn, bdqn); run tabular configs with `alfd local`",
             ));
         }
-        if !self.experts.is_empty() {
-            return Err(invalid(
-                "experts",
-                "several experts run in one process (`alfd local`, `alfd sweep`); `alfd run` \
-                 takes one expert, `expert.name`",
-            ));
-        }
         if self.query.gate == Some(crate::query::GateKind::Oracle) {
             return Err(invalid(
                 "query.gate",
@@ -667,6 +660,16 @@ impl ExperimentConfig {
     /// that each seed of a sweep plays its own instance.
     pub fn deepsea_mapping_seed(&self) -> u32 {
         self.env.mapping_seed.unwrap_or(self.seed as u32)
+    }
+
+    /// The name the run's expert answers under: `expert.name`, or with several experts
+    /// (`[[experts]]`) theirs joined by `+` (the expert process that hosts them all).
+    pub fn run_expert_name(&self) -> String {
+        if self.experts.is_empty() {
+            return self.expert.name.clone();
+        }
+        let names: Vec<&str> = self.experts.iter().map(|e| e.name.as_str()).collect();
+        names.join("+")
     }
 
     /// Whether the run ever consults an expert: a budget to ask it, several experts, or the

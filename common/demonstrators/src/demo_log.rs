@@ -114,6 +114,29 @@ pub fn check_fits(
     Ok(())
 }
 
+/// One line of `demos.jsonl`, its newline included: the record, and with several experts
+/// (`panel`: the answer's cost and whether its state was asked twice) `cost` and `double_asked`.
+pub fn line(record: &DemoRecord, panel: Option<(f64, bool)>) -> Vec<u8> {
+    #[derive(serde::Serialize)]
+    struct Line<'a> {
+        #[serde(flatten)]
+        record: &'a DemoRecord,
+        cost: f64,
+        double_asked: bool,
+    }
+    let mut out = match panel {
+        Some((cost, double_asked)) => serde_json::to_vec(&Line {
+            record,
+            cost,
+            double_asked,
+        }),
+        None => serde_json::to_vec(record),
+    }
+    .expect("a DemoRecord always serialises");
+    out.push(b'\n');
+    out
+}
+
 /// `demos.jsonl`, open for appending.
 #[derive(Debug)]
 pub struct DemoLog {
@@ -142,8 +165,21 @@ impl DemoLog {
     /// (a full disk) takes back what it wrote of the line, so the file stays whole lines and the
     /// next expert reads it.
     pub fn append(&mut self, record: &DemoRecord) -> Result<(), DemoLogError> {
-        let mut line = serde_json::to_vec(record).expect("a DemoRecord always serialises");
-        line.push(b'\n');
+        self.append_line(line(record, None))
+    }
+
+    /// [`DemoLog::append`] for a run with several experts: the line also says what the answer
+    /// cost and whether its state was asked of two experts.
+    pub fn append_of(
+        &mut self,
+        record: &DemoRecord,
+        cost: f64,
+        double_asked: bool,
+    ) -> Result<(), DemoLogError> {
+        self.append_line(line(record, Some((cost, double_asked))))
+    }
+
+    fn append_line(&mut self, line: Vec<u8>) -> Result<(), DemoLogError> {
         alfd_harness::append_whole(&mut self.file, &line, true).map_err(|io| DemoLogError::Write {
             path: self.path.clone(),
             io,

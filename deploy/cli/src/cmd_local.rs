@@ -194,27 +194,10 @@ fn demos_jsonl_with(
     demos: &[DemoRecord],
     panel: Option<&[(f64, bool)]>,
 ) -> anyhow::Result<Vec<u8>> {
-    #[derive(serde::Serialize)]
-    struct Line<'a> {
-        #[serde(flatten)]
-        record: &'a DemoRecord,
-        cost: f64,
-        double_asked: bool,
-    }
     let mut jsonl = Vec::new();
     for (i, d) in demos.iter().enumerate() {
-        match panel.and_then(|p| p.get(i)) {
-            Some(&(cost, double_asked)) => {
-                let line = Line {
-                    record: d,
-                    cost,
-                    double_asked,
-                };
-                serde_json::to_writer(&mut jsonl, &line)?;
-            }
-            None => serde_json::to_writer(&mut jsonl, d)?,
-        }
-        jsonl.push(b'\n');
+        let note = panel.and_then(|p| p.get(i)).copied();
+        jsonl.extend(alfd_demonstrators::demo_log::line(d, note));
     }
     Ok(jsonl)
 }

@@ -106,6 +106,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         None => setup::parse_config(DEFAULT_CONFIG, &args.set, "the default config")?,
     };
     if let Some(expert) = &args.expert {
+        if !cfg.experts.is_empty() {
+            return Err(usage(format!(
+                "--expert {expert}: the config lists several experts (`[[experts]]`), who all \
+                 answer; leave --expert out, or list {expert} among them"
+            )));
+        }
         cfg.expert.name = expert.clone();
     }
     cfg.check_multi_process()
@@ -328,7 +334,12 @@ pub fn swap(args: SwapArgs) -> anyhow::Result<()> {
     let _swap_lock = run_dir::lock_swaps(&args.run)?;
     // The new expert must exist for the run's environment.
     let mut cfg = setup::load_config(&args.run.join("config.toml"), &[])?;
-    cfg.expert.name = args.expert.clone();
+    // In a run with several experts, their joined name brings them all back; any other name
+    // replaces them with that one expert.
+    if args.expert != cfg.run_expert_name() {
+        cfg.experts.clear();
+        cfg.expert.name = args.expert.clone();
+    }
     setup::check_demonstrator(&cfg)?;
     if !PathBuf::from(format!("/proc/{}", info.launcher_pid)).exists() {
         return Err(usage(format!(

@@ -456,7 +456,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
         self.spawn(Kind::Learner { incarnation: 1 })?;
         let first = self
             .experts
-            .start(&self.plan.cfg.expert.name, Instant::now());
+            .start(&self.plan.cfg.run_expert_name(), Instant::now());
         self.apply(first)?;
         // The learner and the expert are up (the expert active) before the first actor asks
         // anything.
