@@ -5,7 +5,8 @@
 //! within the budget and as counted, every checkpoint loads, nothing is left running. Two more
 //! variants: Python environment adapters among the targets, a joined host (`alfd join` on
 //! 127.0.0.1) among them, and the expert on a joined host behind a link slowed below what the
-//! actors wait (its `demos.jsonl` must end as the start of the run's).
+//! actors wait (its `demos.jsonl` must end as the start of the run's), and three experts in one
+//! expert process under kills, pauses and swaps.
 
 use std::path::{Path, PathBuf};
 use std::process::Output;
@@ -217,4 +218,72 @@ fn a_seeded_chaos_run_with_its_expert_behind_a_slow_link_loses_no_demonstration(
         .filter(|d| d.expert == "cartpole-200")
         .count();
     assert!(remote >= 50, "{remote} demonstrations of the remote expert");
+}
+
+/// Three experts in one expert process (`[[experts]]`), its process killed, paused and swapped
+/// (for one of them alone, and back to all three) while the budget is spent across the run: every
+/// invariant holds, and every answer the panel gave is in `demos.jsonl` with its cost and in
+/// `experts.csv`.
+#[test]
+fn a_seeded_chaos_run_with_several_experts_keeps_every_invariant() {
+    let _time = timed!();
+    let dir = tmp("chaos-experts");
+    let config = dir.join("three.toml");
+    let three = "mountaincar-energy+mountaincar-fair+mountaincar-poor";
+    std::fs::write(
+        &config,
+        "seed = 2\nsteps = 150000\n[env]\nname = \"mountaincar\"\n\
+         [agent]\nkind = \"bdqn\"\nheads = 2\n\
+         [query]\nallowance = \"spread\"\ngate = \"chance\"\nhorizon = 150000\n\
+         [budget]\ntotal = 150\n[expert]\nmodel = \"krr\"\nroute = \"round-robin\"\ndouble_ask = 0.2\n\
+         [[experts]]\nname = \"mountaincar-energy\"\ncost = 10\n\
+         [[experts]]\nname = \"mountaincar-fair\"\ncost = 2\n\
+         [[experts]]\nname = \"mountaincar-poor\"\ncost = 1\n",
+    )
+    .unwrap();
+    let experts = format!("{three},mountaincar-poor");
+    let args = [
+        "--config",
+        config.to_str().unwrap(),
+        "--duration",
+        "30",
+        "--every",
+        "0.8",
+        "--faults",
+        "kill=3,pause=2,swap=1,launcher=1",
+        "--experts",
+        &experts,
+    ];
+    let (out, o) = chaos(&dir, "6", 100_000, &args);
+    let report = held(&out, &o);
+    let events = report["events"].as_array().unwrap();
+    let expert_hit = events
+        .iter()
+        .filter(|e| e["carried_out"] == true)
+        .filter(|e| e["fault"].to_string().contains("expert"))
+        .count();
+    assert!(
+        expert_hit >= 1,
+        "the experts' process was never hit: {events:#?}"
+    );
+    let lines: Vec<serde_json::Value> = std::fs::read_to_string(out.join("demos.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let by_panel = lines.iter().filter(|l| l.get("cost").is_some()).count();
+    let csv = std::fs::read_to_string(out.join("experts.csv")).unwrap();
+    assert_eq!(
+        csv.lines().count(),
+        by_panel + 1,
+        "a quality row per panel answer"
+    );
+    for name in ["mountaincar-energy", "mountaincar-fair", "mountaincar-poor"] {
+        assert!(
+            lines
+                .iter()
+                .any(|l| l["expert"] == name && l.get("cost").is_some()),
+            "{name} never answered in the panel"
+        );
+    }
 }

@@ -165,7 +165,7 @@ impl Mlp {
     /// off the blocks are set to zero. An error if `torsos` is neither, or does not divide the
     /// hidden width.
     pub fn with_torsos(mut self, torsos: usize) -> Result<Self> {
-        if torsos != 1 && (torsos != self.heads || self.hidden() % torsos != 0) {
+        if torsos != 1 && (torsos != self.heads || !self.hidden().is_multiple_of(torsos)) {
             return Err(NnError::Dims(format!(
                 "{torsos} torsos for {} heads and a hidden width of {}: torsos must be 1 or the \
                  number of heads, dividing the width",
