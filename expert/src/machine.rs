@@ -325,7 +325,8 @@ impl<Q> ExpertMachine<Q> {
     /// With several experts (`[[experts]]`): `panel` routes the query to one of them (and on a
     /// double ask a second expert answers the same state); each answer is a demonstration
     /// recorded with its cost and its expert's quality, the first one's action the reply. An
-    /// expert that fails drops the query, spending nothing.
+    /// expert that fails is marked down and the state goes to another; when every expert is
+    /// down the query is dropped, spending nothing.
     pub fn panel_demonstrated(
         &mut self,
         (query, actor): (Q, u32),

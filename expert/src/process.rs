@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use alfd_common::agent::{Demonstrator, ExpertCore, Refitted};
 use alfd_common::demo_model::lanes::SharedLanes;
 use alfd_common::environment_loop::panel_expert::{PanelAsk, PanelLog};
-use alfd_harness::python::Adapter;
+use alfd_harness::python::{Adapter, AdapterDemonstrator};
 use alfd_harness::{BadInput, ProcessArgs, Refit, Session};
 use alfd_harness::{HarnessError, What as _};
 use alfd_wire::{
@@ -86,7 +86,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     // A run that never asks (B = 0) needs no expert for its environment: its own (the config's)
     // is not built; one swapped in by name is.
     let source = if panel {
-        panel_source(cfg)?
+        panel_source(args, cfg, (me, schema), actions, runtime.query_timeout())?
     } else if name == cfg.expert.name && !cfg.needs_expert() {
         Source::BuiltIn(Box::new(alfd_common::agent::NoExpert))
     } else {
@@ -266,16 +266,26 @@ fn source(
     })
 }
 
-/// The experts of `[[experts]]`, each a built-in one of the config's environment, and the panel
-/// that routes the queries among them.
-fn panel_source(cfg: &alfd_common::config::ExperimentConfig) -> alfd_harness::Result<Source> {
-    let members = cfg
-        .experts
-        .iter()
-        .map(|e| -> alfd_harness::Result<Box<dyn Demonstrator<[f32]>>> {
-            Ok(registry::for_config(cfg, &e.name)?)
-        })
-        .collect::<alfd_harness::Result<Vec<_>>>()?;
+/// The experts of `[[experts]]` and the panel that routes the queries among them: built-in
+/// ones in this process, each external one (`python:`, `sb3:`) from an adapter of its own
+/// (`remote/expert-<generation>-<i>`, its log RUN_DIR/adapter-expert-<generation>-<i>.log),
+/// which stops with this process. An external expert that does not answer within `timeout` is
+/// asked no more; its queries go to the others.
+fn panel_source(
+    args: &Args,
+    cfg: &alfd_common::config::ExperimentConfig,
+    (me, schema): (Process, u32),
+    actions: usize,
+    timeout: Duration,
+) -> alfd_harness::Result<Source> {
+    let run_dir = &args.process.run_dir;
+    let members = registry::panel(cfg, |i, policy| {
+        let name = format!("expert-{}-{i}", args.generation);
+        let log = run_dir.join(format!("adapter-{name}.log"));
+        let id = (args.process.run_id.as_str(), name.as_str());
+        let external = AdapterDemonstrator::start(policy, id, me, schema, actions, &log, timeout)?;
+        Ok(Box::new(external))
+    })?;
     Ok(Source::Panel(Box::new(PanelAsk::new(cfg, members))))
 }
 

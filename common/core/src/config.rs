@@ -12,8 +12,10 @@ mod logging;
 mod normalize;
 mod query;
 pub mod reference;
+mod shaping;
 mod validate;
 
+pub use shaping::ShapingConfig;
 pub use validate::{
     MAX_BATCH_SIZE, MAX_HIDDEN, MAX_N_STEP, MAX_QUEUE_LEN, MAX_REPLAY_CAPACITY, MAX_SEPARATE_WIDTH,
 };
@@ -505,59 +507,6 @@ pub enum DemoModelChoice {
     /// KRR on the first 512 demonstrations as Nyström landmarks (α = 0.1, RBF γ = 0.1): for
     /// budgets beyond the exact models' 10,000, up to 1,000,000.
     Nystrom,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct ShapingConfig {
-    /// λ of eq. 4 (and of the potential), ≥ 0.
-    #[serde(default = "default_lambda")]
-    pub lambda: f64,
-    /// Shaping starts once this many demonstrations exist.
-    #[serde(default = "default_min_demos")]
-    pub min_demos: usize,
-    /// Shaping stops at this multiple of the global step of the last demonstration, ≥ 0 (`paper`
-    /// shaping only).
-    #[serde(default = "default_stop_multiple")]
-    pub stop_multiple: f64,
-    /// `paper`: eq. 4, `r + λ[1 − (p(a|s) − π(a|s))²]`, for a while. `potential`: the
-    /// demonstration model as a potential over state-action pairs, `F = γΦ(s',a') − Φ(s,a)` with
-    /// `Φ(s,a) = λ p(a|s)` (look-ahead advice, Wiewiora et al. 2003), which does not change the
-    /// optimal policy and stays on for the whole run.
-    #[serde(default)]
-    pub kind: ShapingKind,
-}
-
-fn default_lambda() -> f64 {
-    0.75
-}
-fn default_min_demos() -> usize {
-    10
-}
-fn default_stop_multiple() -> f64 {
-    2.0
-}
-
-impl Default for ShapingConfig {
-    fn default() -> Self {
-        Self {
-            lambda: default_lambda(),
-            min_demos: default_min_demos(),
-            stop_multiple: default_stop_multiple(),
-            kind: ShapingKind::Paper,
-        }
-    }
-}
-
-impl ShapingConfig {
-    pub fn schedule(&self) -> crate::shaping::ShapingSchedule {
-        crate::shaping::ShapingSchedule {
-            lambda: self.lambda,
-            min_demos: self.min_demos,
-            stop_multiple: self.stop_multiple,
-            kind: self.kind,
-        }
-    }
 }
 
 impl ExperimentConfig {

@@ -15,6 +15,10 @@
 //! interval can still hold the best quality (its upper end at least every other expert's lower
 //! end, IEThresh's rule); `upper-per-cost` the expert whose interval's upper end per unit of cost
 //! is highest (optimism under uncertainty, paid for).
+//!
+//! An expert that fails to answer (its process gone, no answer in time) is marked down: no
+//! route asks it again in this panel's life, and the query goes to the others. `best-known`
+//! with its expert down asks the cheapest expert up.
 
 use std::collections::VecDeque;
 
@@ -73,6 +77,7 @@ pub struct Panel {
     window: usize,
     answers: Vec<u64>,
     rewards: Vec<VecDeque<f64>>,
+    up: Vec<bool>,
     next: usize,
     spent: f64,
 }
@@ -98,6 +103,7 @@ impl Panel {
             window: window.max(2),
             answers: vec![0; n],
             rewards: vec![VecDeque::new(); n],
+            up: vec![true; n],
             next: 0,
             spent: 0.0,
         }
@@ -112,31 +118,56 @@ impl Panel {
         self.spent
     }
 
-    /// Whom to ask about the next state.
-    pub fn route(&mut self, rng: &mut Rng) -> Ask {
+    /// Marks expert `i` down: no route asks it again.
+    pub fn set_down(&mut self, i: usize) {
+        self.up[i] = false;
+    }
+
+    /// Whether expert `i` is still asked.
+    pub fn is_up(&self, i: usize) -> bool {
+        self.up[i]
+    }
+
+    /// Whom to ask about the next state; `None` when every expert is down.
+    pub fn route(&mut self, rng: &mut Rng) -> Option<Ask> {
+        if !self.up.contains(&true) {
+            return None;
+        }
         let first = match self.route {
-            Route::BestKnown => self.best_known,
-            Route::Cheapest => self.cheapest(|_| true),
-            Route::RoundRobin => {
-                let i = self.next % self.members.len();
-                self.next = i + 1;
-                i
-            }
+            Route::BestKnown if self.up[self.best_known] => self.best_known,
+            Route::BestKnown | Route::Cheapest => self.cheapest(|_| true),
+            Route::RoundRobin => self.next_in_turn(),
             Route::Interval => {
                 let q: Vec<Quality> = (0..self.members.len()).map(|i| self.quality(i)).collect();
-                let best_low = q.iter().map(|q| q.low).fold(0.0, f64::max);
+                let best_low = (0..q.len())
+                    .filter(|&i| self.up[i])
+                    .map(|i| q[i].low)
+                    .fold(0.0, f64::max);
                 self.cheapest(|i| q[i].high >= best_low)
             }
             Route::UpperPerCost => {
                 let value = |i: usize| self.quality(i).high / self.members[i].cost.max(1e-12);
                 (0..self.members.len())
+                    .filter(|&i| self.up[i])
                     .max_by(|&a, &b| value(a).total_cmp(&value(b)).then(b.cmp(&a)))
-                    .expect("a panel has an expert")
+                    .expect("an expert is up")
             }
         };
         let second = (self.members.len() > 1 && rng.random::<f64>() < self.double_ask)
-            .then(|| self.least_answered_but(first));
-        Ask { first, second }
+            .then(|| self.least_answered_but(first))
+            .flatten();
+        Some(Ask { first, second })
+    }
+
+    /// The next expert up in turn.
+    fn next_in_turn(&mut self) -> usize {
+        loop {
+            let i = self.next % self.members.len();
+            self.next = i + 1;
+            if self.up[i] {
+                return i;
+            }
+        }
     }
 
     /// Expert `expert` answered; `agreed` of the `opinions` other opinions on the state agree
@@ -177,25 +208,24 @@ impl Panel {
         }
     }
 
-    /// The cheapest expert among those `ok` keeps (the first of equal costs); the cheapest of
-    /// all when `ok` keeps none.
+    /// The cheapest expert up among those `ok` keeps (the first of equal costs); the cheapest
+    /// up when `ok` keeps none.
     fn cheapest(&self, ok: impl Fn(usize) -> bool) -> usize {
         let pick = |keep: &dyn Fn(usize) -> bool| {
             (0..self.members.len())
-                .filter(|&i| keep(i))
+                .filter(|&i| self.up[i] && keep(i))
                 .min_by(|&a, &b| self.members[a].cost.total_cmp(&self.members[b].cost))
         };
         pick(&ok)
             .or_else(|| pick(&|_| true))
-            .expect("a panel has an expert")
+            .expect("an expert is up")
     }
 
-    /// The expert other than `first` with the fewest answers (the first of equals).
-    fn least_answered_but(&self, first: usize) -> usize {
+    /// The expert up other than `first` with the fewest answers (the first of equals).
+    fn least_answered_but(&self, first: usize) -> Option<usize> {
         (0..self.members.len())
-            .filter(|&i| i != first)
+            .filter(|&i| i != first && self.up[i])
             .min_by_key(|&i| self.answers[i])
-            .expect("a panel of two or more")
     }
 }
 
@@ -223,16 +253,16 @@ mod tests {
         let mut rng = seeded(1);
         let mut p = panel(Route::BestKnown, 0.0);
         assert_eq!(
-            p.route(&mut rng),
+            p.route(&mut rng).unwrap(),
             Ask {
                 first: 0,
                 second: None
             }
         );
         let mut p = panel(Route::Cheapest, 0.0);
-        assert_eq!(p.route(&mut rng).first, 2);
+        assert_eq!(p.route(&mut rng).unwrap().first, 2);
         let mut p = panel(Route::RoundRobin, 0.0);
-        let firsts: Vec<usize> = (0..4).map(|_| p.route(&mut rng).first).collect();
+        let firsts: Vec<usize> = (0..4).map(|_| p.route(&mut rng).unwrap().first).collect();
         assert_eq!(firsts, [0, 1, 2, 0]);
     }
 
@@ -257,7 +287,7 @@ mod tests {
         let mut rng = seeded(2);
         let mut p = panel(Route::Interval, 0.0);
         // Nothing known: every interval is [0, 1], so the cheapest.
-        assert_eq!(p.route(&mut rng).first, 2);
+        assert_eq!(p.route(&mut rng).unwrap().first, 2);
         // The poor one disagrees always, the fair one half the time, the good one never.
         for _ in 0..20 {
             p.answered(2, 0, 1);
@@ -267,10 +297,10 @@ mod tests {
         }
         // poor: [0, 0]; fair: 0.5 ± 1.96 * 0.5064 / sqrt 40 = [0.343, 0.657]; good: [1, 1].
         // Only the good one's upper end reaches the best lower end (1).
-        assert_eq!(p.route(&mut rng).first, 0);
+        assert_eq!(p.route(&mut rng).unwrap().first, 0);
         // Value per cost: good 1/10, fair 0.657/2, poor 0/1: the fair one.
         p.route = Route::UpperPerCost;
-        assert_eq!(p.route(&mut rng).first, 1);
+        assert_eq!(p.route(&mut rng).unwrap().first, 1);
     }
 
     #[test]
@@ -279,7 +309,7 @@ mod tests {
         let mut p = panel(Route::Cheapest, 0.25);
         let mut doubles = 0;
         for _ in 0..4000 {
-            let ask = p.route(&mut rng);
+            let ask = p.route(&mut rng).unwrap();
             if let Some(s) = ask.second {
                 assert_ne!(s, ask.first);
                 doubles += 1;
@@ -308,5 +338,46 @@ mod tests {
             0.0,
             "the window holds the last 50 only"
         );
+    }
+
+    #[test]
+    fn an_expert_down_is_asked_no_more_and_every_route_goes_on_with_the_others() {
+        let mut rng = seeded(4);
+        let mut p = panel(Route::RoundRobin, 1.0);
+        p.set_down(1);
+        assert!(!p.is_up(1) && p.is_up(0));
+        let asks: Vec<Ask> = (0..4).map(|_| p.route(&mut rng).unwrap()).collect();
+        // In turn without `fair`; the second ask goes to the one other expert up.
+        let firsts: Vec<usize> = asks.iter().map(|a| a.first).collect();
+        assert_eq!(firsts, [0, 2, 0, 2]);
+        assert!(asks.iter().all(|a| a.second == Some(2 - a.first)));
+        let mut p = panel(Route::BestKnown, 0.0);
+        p.set_down(0);
+        assert_eq!(p.route(&mut rng).unwrap().first, 2, "the cheapest up");
+        let mut p = panel(Route::Cheapest, 1.0);
+        p.set_down(2);
+        assert_eq!(
+            p.route(&mut rng).unwrap(),
+            Ask {
+                first: 1,
+                second: Some(0)
+            }
+        );
+        let mut p = panel(Route::UpperPerCost, 0.0);
+        p.set_down(2);
+        assert_eq!(p.route(&mut rng).unwrap().first, 1, "1/2 beats 1/10");
+        let mut p = panel(Route::Interval, 1.0);
+        p.set_down(1);
+        p.set_down(2);
+        // One expert up: it answers alone, with no second ask.
+        assert_eq!(
+            p.route(&mut rng).unwrap(),
+            Ask {
+                first: 0,
+                second: None
+            }
+        );
+        p.set_down(0);
+        assert_eq!(p.route(&mut rng), None, "every expert down");
     }
 }

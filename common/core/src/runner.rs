@@ -331,7 +331,7 @@ pub struct NeuralEnvs {
     /// The expert gate `oracle` consults (needed by that gate only).
     pub oracle: Option<crate::query::Oracle<[f32]>>,
     /// The demonstrators of `[[experts]]`, in order (empty: the one expert answers).
-    pub panel: Vec<Box<dyn Demonstrator<[f32]> + Send>>,
+    pub panel: Vec<Box<dyn Demonstrator<[f32]>>>,
 }
 
 /// Why a run on environments of [`NeuralEnvs`] stopped short.
@@ -355,17 +355,13 @@ fn local_expert<'d>(
     cfg: &ExperimentConfig,
     core: ExpertCore,
     demonstrator: &'d mut dyn Demonstrator<[f32]>,
-    panel: Vec<Box<dyn Demonstrator<[f32]> + Send>>,
+    panel: Vec<Box<dyn Demonstrator<[f32]>>>,
 ) -> LocalExpert<'d, [f32]> {
     let expert = LocalExpert::new(core, demonstrator, &cfg.expert.name, cfg.shaping_enabled());
     if panel.is_empty() {
         return expert;
     }
-    let members = panel
-        .into_iter()
-        .map(|d| d as Box<dyn Demonstrator<[f32]>>)
-        .collect();
-    expert.with_panel(PanelAsk::new(cfg, members))
+    expert.with_panel(PanelAsk::new(cfg, panel))
 }
 
 /// Where a neural run starts: its agent, expert and records, fresh (the `prior`

@@ -2,7 +2,9 @@
 //! binaries (no file to find at run time), scripted ones are built from [`crate::scripted`];
 //! `manifest.json` there records how each was made and its measured quality.
 
-use alfd_common::agent::{BalancingController, Demonstrator, NetworkDemonstrator, TablePolicy};
+use alfd_common::agent::{
+    BalancingController, Becomes, Demonstrator, NetworkDemonstrator, TablePolicy,
+};
 use alfd_common::config::EnvName;
 use alfd_common::env::cliffwalk::{value_iteration, CliffWalk};
 use alfd_common::env::{DeepSeaCells, TabularEnv as _};
@@ -302,6 +304,41 @@ pub fn for_config(
             reason: format!("kind `{other}` is not a deepsea kind"),
         })),
     }
+}
+
+/// The demonstrators of `[[experts]]`, in order: a built-in one of the config's environment
+/// (with `becomes`, one for its first `after` answers and another from then on), or an external
+/// one as `external(i, name)` starts it (`i` its place in the list). A person is refused: the
+/// human page serves a run with one expert.
+pub fn panel(
+    cfg: &alfd_common::config::ExperimentConfig,
+    mut external: impl FnMut(usize, &str) -> alfd_harness::Result<Box<dyn Demonstrator<[f32]>>>,
+) -> alfd_harness::Result<Vec<Box<dyn Demonstrator<[f32]>>>> {
+    let refuse = |name: &str, why: &str| BadInput(format!("[[experts]]: `{name}` {why}"));
+    let built =
+        |name: &str| for_config(cfg, name).map_err(|e| BadInput(format!("[[experts]]: {}", e.0)));
+    let mut members: Vec<Box<dyn Demonstrator<[f32]>>> = Vec::new();
+    for (i, e) in cfg.experts.iter().enumerate() {
+        if e.name == alfd_harness::HUMAN_EXPERT {
+            return Err(refuse(&e.name, "(a person) answers in a run with one expert").into());
+        }
+        if external_policy(&e.name).is_some() {
+            if e.becomes.is_some() {
+                return Err(
+                    refuse(&e.name, "is external: `becomes` takes built-in experts").into(),
+                );
+            }
+            check_external(&e.name)?;
+            members.push(external(i, &e.name)?);
+            continue;
+        }
+        let first = built(&e.name)?;
+        members.push(match (&e.becomes, e.after) {
+            (Some(then), Some(after)) => Box::new(Becomes::new(first, built(then)?, after)),
+            _ => first,
+        });
+    }
+    Ok(members)
 }
 
 /// A CliffWalk demonstrator by name, for `env` (the optimal one is computed for its map).

@@ -8,9 +8,10 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use alfd_common::agent::Demonstrator;
 use alfd_common::config::EnvConfig;
 use alfd_common::env::{Env, EnvError, EnvState, Step};
-use alfd_wire::{Process, RemoteClient, RemoteEnv};
+use alfd_wire::{Process, RemoteClient, RemoteDemonstrator, RemoteEnv};
 use serde::{Deserialize, Serialize};
 
 use crate::bad_input::{BadInput, HarnessError, Result, What as _};
@@ -217,6 +218,58 @@ impl Drop for Adapter {
             let _ = child.kill();
         }
         let _ = child.wait();
+    }
+}
+
+/// An external demonstrator (`python:`, `sb3:`) answering from its adapter process:
+/// [`Demonstrator::try_act`] asks it, waiting at most its timeout, and fails at once once the
+/// adapter has exited; `act` gives action 0 when that fails.
+#[derive(Debug)]
+pub struct AdapterDemonstrator {
+    remote: RemoteDemonstrator,
+    adapter: Adapter,
+    timeout: Duration,
+}
+
+impl AdapterDemonstrator {
+    /// Starts the adapter of `policy` as `remote/<name>` (logging to `log`) and connects to it.
+    pub fn start(
+        policy: &str,
+        (run_id, name): (&str, &str),
+        me: Process,
+        schema: u32,
+        actions: usize,
+        log: &Path,
+        timeout: Duration,
+    ) -> Result<Self> {
+        let adapter = Adapter::expert(policy, run_id, name, schema, log)?;
+        let remote = RemoteDemonstrator::new(adapter.connect(run_id, me, schema)?, actions);
+        Ok(Self {
+            remote,
+            adapter,
+            timeout,
+        })
+    }
+}
+
+impl Demonstrator<[f32]> for AdapterDemonstrator {
+    fn act(&mut self, s: &[f32]) -> usize {
+        self.try_act(s).unwrap_or_else(|e| {
+            tracing::error!("{e}");
+            0
+        })
+    }
+
+    fn try_act(&mut self, s: &[f32]) -> std::result::Result<usize, String> {
+        if let Some(why) = self.adapter.gone() {
+            return Err(why);
+        }
+        self.remote
+            .act(s, self.timeout)
+            .map_err(|e| match self.adapter.gone() {
+                Some(why) => format!("{e}: {why}"),
+                None => e.to_string(),
+            })
     }
 }
 

@@ -231,19 +231,13 @@ impl Pieces {
                     env,
                 }
             }
-            _ if crate::local_remote::needed(cfg) && !cfg.experts.is_empty() => {
-                return Err(usage(
-                    "several experts (`[[experts]]`) answer in runs of the built-in \
-                     environments, each a built-in expert",
-                ))
-            }
             // Python pieces start with the run (their logs go to its directory).
             _ if crate::local_remote::needed(cfg) => {
                 setup::check_demonstrator(cfg)?;
                 Self::Remote { prior }
             }
             _ => Self::Neural {
-                prior: prior_demos(cfg, prior.as_ref(), &builtin_envs(cfg)?)?,
+                prior: prior_demos(cfg, prior.as_ref(), &builtin_envs(cfg, Vec::new())?)?,
                 demonstrator: setup::neural_demonstrator(cfg)?,
             },
         })
@@ -500,10 +494,14 @@ fn run_tabular(
 /// `local_remote`), and writes its weights; `None` when it stopped before its end.
 fn run_remote(watch: &Watch<'_>, prior: Option<&Dataset>) -> anyhow::Result<Option<Produced>> {
     let cfg = watch.cfg;
-    let (_adapters, envs, mut demonstrator) = crate::local_remote::start(cfg, watch.out)?;
-    let envs = match envs {
-        Some(envs) => envs,
-        None => builtin_envs(cfg)?,
+    let started = crate::local_remote::start(cfg, watch.out)?;
+    let (_adapters, mut demonstrator) = (started.guard, started.demonstrator);
+    let envs = match started.envs {
+        Some(envs) => NeuralEnvs {
+            panel: started.panel,
+            ..envs
+        },
+        None => builtin_envs(cfg, started.panel)?,
     };
     let prior = prior_demos(cfg, prior, &envs)?;
     let checkpoints = watch.resumable.checkpoints(RunState::neural, "neural")?;
@@ -535,7 +533,7 @@ fn run_neural(
     demonstrator: &mut dyn Demonstrator<[f32]>,
     prior: &[PriorDemo],
 ) -> anyhow::Result<Option<Produced>> {
-    let envs = builtin_envs(watch.cfg)?;
+    let envs = builtin_envs(watch.cfg, setup::panel(watch.cfg)?)?;
     let checkpoints = watch.resumable.checkpoints(RunState::neural, "neural")?;
     let run = run_neural_on(
         watch.cfg,
@@ -558,14 +556,18 @@ fn run_neural(
     neural_outputs(watch.out, run).map(Some)
 }
 
-/// The config's built-in environment, to train on and to evaluate on.
-fn builtin_envs(cfg: &ExperimentConfig) -> anyhow::Result<NeuralEnvs> {
+/// The config's built-in environment, to train on and to evaluate on, with the demonstrators of
+/// `[[experts]]` in `panel`.
+fn builtin_envs(
+    cfg: &ExperimentConfig,
+    panel: Vec<Box<dyn alfd_common::agent::Demonstrator<[f32]>>>,
+) -> anyhow::Result<NeuralEnvs> {
     let env = || alfd_common::env::vector_env(cfg).context("a vector environment");
     Ok(NeuralEnvs {
         env: env()?,
         eval_env: env()?,
         oracle: setup::oracle(cfg, || setup::neural_demonstrator(cfg))?,
-        panel: setup::panel(cfg)?,
+        panel,
     })
 }
 

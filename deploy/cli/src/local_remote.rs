@@ -9,16 +9,18 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 use alfd_common::agent::Demonstrator;
 use alfd_common::config::ExperimentConfig;
 use alfd_common::runner::NeuralEnvs;
-use alfd_harness::python::{Adapter, AdapterEnv};
-use alfd_wire::{Process, RemoteDemonstrator, Role, SCHEMA_VERSION};
+use alfd_harness::python::{Adapter, AdapterDemonstrator, AdapterEnv};
+use alfd_wire::{Process, Role, SCHEMA_VERSION};
 
 /// How long the in-process run waits for an external expert's answer.
 const EXPERT_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// Whether `cfg` needs Python pieces in `alfd local`.
 pub(crate) fn needed(cfg: &ExperimentConfig) -> bool {
+    let external = |name: &str| alfd_demonstrators::registry::external_policy(name).is_some();
     cfg.env.name.is_remote()
-        || alfd_demonstrators::registry::external_policy(&cfg.expert.name).is_some()
+        || external(&cfg.expert.name)
+        || cfg.experts.iter().any(|e| external(&e.name))
 }
 
 /// The adapters of one single-process run; dropping it stops them and removes the run id's
@@ -35,38 +37,14 @@ impl Drop for LocalRemote {
     }
 }
 
-/// An external demonstrator for the in-process expert: [`Demonstrator::try_act`] asks the
-/// adapter (the in-process expert calls only that); `act` gives action 0 when it fails.
-struct External {
-    remote: RemoteDemonstrator,
-    adapter: Adapter,
-}
-
-impl Demonstrator<[f32]> for External {
-    fn act(&mut self, s: &[f32]) -> usize {
-        self.try_act(s).unwrap_or_else(|e| {
-            tracing::error!("{e}");
-            0
-        })
-    }
-
-    fn try_act(&mut self, s: &[f32]) -> Result<usize, String> {
-        self.remote
-            .act(s, EXPERT_TIMEOUT)
-            .map_err(|e| match self.adapter.gone() {
-                Some(why) => format!("{e}: {why}"),
-                None => e.to_string(),
-            })
-    }
-}
-
 /// What [`start`] gives: the guard (keep it until the run ends), the environments when the
-/// environment is a Gymnasium one, and the demonstrator.
-pub(crate) type Started = (
-    LocalRemote,
-    Option<NeuralEnvs>,
-    Box<dyn Demonstrator<[f32]>>,
-);
+/// environment is a Gymnasium one, the demonstrator, and the demonstrators of `[[experts]]`.
+pub(crate) struct Started {
+    pub guard: LocalRemote,
+    pub envs: Option<NeuralEnvs>,
+    pub demonstrator: Box<dyn Demonstrator<[f32]>>,
+    pub panel: Vec<Box<dyn Demonstrator<[f32]>>>,
+}
 
 /// Starts the adapters `cfg` needs, logging into `out`.
 pub(crate) fn start(cfg: &ExperimentConfig, out: &std::path::Path) -> anyhow::Result<Started> {
@@ -98,22 +76,40 @@ pub(crate) fn start(cfg: &ExperimentConfig, out: &std::path::Path) -> anyhow::Re
     } else {
         None
     };
+    let actions = match &envs {
+        Some(e) => e.env.num_actions(),
+        None => alfd_common::env::vector_env(cfg)
+            .map(|e| e.num_actions())
+            .unwrap_or(0),
+    };
+    // External experts answer from adapters of their own: `expert-1` the one expert,
+    // `expert-1-I` the I-th of `[[experts]]`.
+    let adapter = |policy: &str, name: &str| {
+        let log = out.join(format!("adapter-{name}.log"));
+        let id = (run_id.as_str(), name);
+        AdapterDemonstrator::start(
+            policy,
+            id,
+            me,
+            SCHEMA_VERSION,
+            actions,
+            &log,
+            EXPERT_TIMEOUT,
+        )
+    };
     let demonstrator: Box<dyn Demonstrator<[f32]>> =
         match alfd_demonstrators::registry::external_policy(&cfg.expert.name) {
-            Some(policy) => {
-                let log = out.join("adapter-expert-1.log");
-                let adapter = Adapter::expert(policy, &run_id, "expert-1", SCHEMA_VERSION, &log)?;
-                let actions = match &envs {
-                    Some(e) => e.env.num_actions(),
-                    None => alfd_common::env::vector_env(cfg)
-                        .map(|e| e.num_actions())
-                        .unwrap_or(0),
-                };
-                let remote =
-                    RemoteDemonstrator::new(adapter.connect(&run_id, me, SCHEMA_VERSION)?, actions);
-                Box::new(External { remote, adapter })
-            }
-            None => crate::setup::neural_demonstrator(cfg)?,
+            Some(policy) => Box::new(adapter(policy, "expert-1")?),
+            None if cfg.experts.is_empty() => crate::setup::neural_demonstrator(cfg)?,
+            None => Box::new(alfd_common::agent::NoExpert),
         };
-    Ok((guard, envs, demonstrator))
+    let panel = alfd_demonstrators::registry::panel(cfg, |i, policy| {
+        Ok(Box::new(adapter(policy, &format!("expert-1-{i}"))?))
+    })?;
+    Ok(Started {
+        guard,
+        envs,
+        demonstrator,
+        panel,
+    })
 }

@@ -204,7 +204,7 @@ pub fn oracle<S: ?Sized + 'static>(
 /// expert process starts.
 pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
     if !cfg.experts.is_empty() {
-        return panel(cfg).map(|_| ());
+        return check_panel(cfg);
     }
     if !cfg.needs_expert() {
         // No expert to check; a map is still read now, so that a bad one is refused first.
@@ -230,36 +230,24 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
     neural_demonstrator(cfg).map(|_| ())
 }
 
-/// The demonstrators of `[[experts]]`, in order, each a built-in one of the config's
-/// environment (none without `[[experts]]`).
+/// The demonstrators of `[[experts]]`, in order, when each is a built-in one of the config's
+/// environment (none without `[[experts]]`); external ones are started by `local_remote`.
 pub fn panel(
     cfg: &ExperimentConfig,
-) -> anyhow::Result<Vec<Box<dyn alfd_common::agent::Demonstrator<[f32]> + Send>>> {
-    cfg.experts
-        .iter()
-        .map(|e| {
-            if e.name == alfd_expert::human::HUMAN
-                || alfd_demonstrators::registry::external_policy(&e.name).is_some()
-            {
-                return Err(usage(format!(
-                    "[[experts]]: `{}` is not a built-in expert; several experts are built-in \
-                     ones (`alfd expert list`)",
-                    e.name
-                )));
-            }
-            let built = |name: &str| {
-                alfd_demonstrators::registry::for_config(cfg, name)
-                    .map_err(|err| usage(format!("[[experts]]: {err}")))
-            };
-            let first = built(&e.name)?;
-            Ok(match (&e.becomes, e.after) {
-                (Some(then), Some(after)) => {
-                    Box::new(alfd_common::agent::Becomes::new(first, built(then)?, after))
-                }
-                _ => first,
-            })
-        })
-        .collect()
+) -> anyhow::Result<Vec<Box<dyn alfd_common::agent::Demonstrator<[f32]>>>> {
+    Ok(alfd_demonstrators::registry::panel(cfg, |_, name| {
+        Err(alfd_harness::BadInput(format!(
+            "[[experts]]: the external expert `{name}` is started with the run's adapters"
+        ))
+        .into())
+    })?)
+}
+
+/// Checks `[[experts]]` without starting anyone: each name known for the environment, each
+/// external name well formed.
+fn check_panel(cfg: &ExperimentConfig) -> anyhow::Result<()> {
+    alfd_demonstrators::registry::panel(cfg, |_, _| Ok(Box::new(alfd_common::agent::NoExpert)))?;
+    Ok(())
 }
 
 /// The demonstrator named by a neural config, for its environment.

@@ -3,6 +3,8 @@
 //! `experts.csv`; the same config twice gives the same files; `alfd run` hosts them in its expert
 //! process, one actor in lockstep giving `alfd local`'s files to the byte.
 
+use std::path::{Path, PathBuf};
+
 use serde_json::Value;
 
 use crate::support::{alfd, text, timed, tmp};
@@ -123,27 +125,29 @@ fn several_experts_are_refused_where_they_cannot_run() {
     assert!(!dir.join("both").exists(), "nothing written");
 }
 
-#[test]
-fn alfd_run_hosts_several_experts_as_alfd_local_does_to_the_byte() {
-    let _time = timed!();
-    let dir = tmp("experts-run");
-    let config = dir.join("three.toml");
-    std::fs::write(&config, CONFIG).unwrap();
-    let run = |name: &str, how: &[&str]| {
-        let out = dir.join(name);
-        let o = alfd()
-            .args(how)
-            .args(["--quiet", "--config"])
-            .arg(&config)
-            .arg("--out")
-            .arg(&out)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{how:?}: {}", text(&o));
-        out
-    };
-    let local = run("local", &["local"]);
-    let lockstep = run("lockstep", &["run", "--actors=1", "--window=1"]);
+/// Runs `alfd HOW --quiet --config CONFIG --out OUT`, which must succeed; `out`.
+fn run_quietly(out: &Path, config: &Path, how: &[&str]) -> PathBuf {
+    let o = alfd()
+        .args(how)
+        .args(["--quiet", "--config"])
+        .arg(config)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{how:?}: {}", text(&o));
+    out.to_path_buf()
+}
+
+/// `alfd local` and one actor of `alfd run` in lockstep on `config`, into `DIR/local` and
+/// `DIR/lockstep`: their `episodes.csv`, `demos.jsonl` and `experts.csv` are equal to the byte.
+fn local_equals_lockstep(dir: &Path, config: &Path) -> (PathBuf, PathBuf) {
+    let local = run_quietly(&dir.join("local"), config, &["local"]);
+    let lockstep = run_quietly(
+        &dir.join("lockstep"),
+        config,
+        &["run", "--actors=1", "--window=1"],
+    );
     for f in ["episodes.csv", "demos.jsonl", "experts.csv"] {
         assert_eq!(
             std::fs::read_to_string(lockstep.join(f)).unwrap(),
@@ -151,6 +155,17 @@ fn alfd_run_hosts_several_experts_as_alfd_local_does_to_the_byte() {
             "{f}"
         );
     }
+    (local, lockstep)
+}
+
+#[test]
+fn alfd_run_hosts_several_experts_as_alfd_local_does_to_the_byte() {
+    let _time = timed!();
+    let dir = tmp("experts-run");
+    let config = dir.join("three.toml");
+    std::fs::write(&config, CONFIG).unwrap();
+    let run = |name: &str, how: &[&str]| run_quietly(&dir.join(name), &config, how);
+    local_equals_lockstep(&dir, &config);
     // Two actors: the whole budget spent, by every expert at its cost, a quality row per answer.
     let two = run("two", &["run", "--actors=2"]);
     let lines: Vec<Value> = std::fs::read_to_string(two.join("demos.jsonl"))
@@ -174,4 +189,116 @@ fn alfd_run_hosts_several_experts_as_alfd_local_does_to_the_byte() {
     let csv = std::fs::read_to_string(two.join("experts.csv")).unwrap();
     assert_eq!(csv.lines().count(), 31, "one row per answer: {csv}");
     assert!(two.join("experts.svg").exists(), "the qualities are drawn");
+}
+
+/// Three Acrobot experts, the second one external (`alfd_examples.acrobot_pump`, from an
+/// adapter process of its own), round-robin, the budget spread over the run.
+fn with_external(steps: u32, budget: u32) -> String {
+    format!(
+        "seed = 4\nsteps = {steps}\n[env]\nname = \"acrobot\"\n\
+         [agent]\nkind = \"bdqn\"\nheads = 2\nbatch_size = 16\n\
+         [query]\nallowance = \"spread\"\ngate = \"chance\"\nhorizon = {steps}\n\
+         [budget]\ntotal = {budget}\n[expert]\nroute = \"round-robin\"\n\
+         [[experts]]\nname = \"acrobot-good\"\ncost = 10\n\
+         [[experts]]\nname = \"{PUMP}\"\ncost = 2\n\
+         [[experts]]\nname = \"acrobot-poor\"\ncost = 1\n"
+    )
+}
+
+const PUMP: &str = "python:alfd_examples:acrobot_pump";
+
+/// The pids of the adapters whose command line holds `needle`.
+fn adapters_with(needle: &str) -> Vec<u32> {
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .flatten()
+        .filter_map(|e| e.file_name().to_str()?.parse::<u32>().ok())
+        .filter(|pid| {
+            std::fs::read(format!("/proc/{pid}/cmdline")).is_ok_and(|c| {
+                let c = String::from_utf8_lossy(&c).replace('\0', " ");
+                c.contains("alfd_adapter.py") && c.contains(needle)
+            })
+        })
+        .collect()
+}
+
+#[test]
+fn an_external_expert_among_three_answers_as_in_alfd_local_and_once_killed_the_others_go_on() {
+    let _time = timed!();
+    let dir = tmp("experts-external");
+    // One actor in lockstep and `alfd local`: the same answers, the external ones included.
+    let config = dir.join("short.toml");
+    std::fs::write(&config, with_external(3000, 12)).unwrap();
+    let (local, lockstep) = local_equals_lockstep(&dir, &config);
+    let demos = alfd_demonstrators::demo_log::read(&local.join("demos.jsonl")).unwrap();
+    assert_eq!(demos.len(), 12);
+    let pumped: Vec<_> = demos.iter().filter(|d| d.expert == PUMP).collect();
+    assert_eq!(pumped.len(), 4, "round-robin: every third answer");
+    for d in pumped {
+        assert_eq!(d.action, if d.state[4] > 0.0 { 0 } else { 2 }, "{d:?}");
+    }
+    assert!(local.join("adapter-expert-1-1.log").is_file());
+    assert!(lockstep.join("adapter-expert-1-1.log").is_file());
+
+    // Two actors; the external expert's adapter killed once it has answered three times.
+    let config = dir.join("long.toml");
+    std::fs::write(&config, with_external(40_000, 60)).unwrap();
+    let out = dir.join("killed");
+    let mut bg = crate::support::Background(Some(
+        alfd()
+            .args([
+                "run",
+                "--quiet",
+                "--actors=2",
+                "--query-timeout-ms=2000",
+                "--config",
+            ])
+            .arg(&config)
+            .arg("--out")
+            .arg(&out)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
+    let log = || std::fs::read_to_string(out.join("demos.jsonl")).unwrap_or_default();
+    crate::runtime::wait_until(&mut bg, "three answers of the external expert", || {
+        log().matches(PUMP).count() >= 3
+    });
+    let id = crate::runtime::run_id(&out);
+    let pids = adapters_with(&format!("--run-id={id} --name=expert-1-1"));
+    assert_eq!(pids.len(), 1, "one adapter for the external expert");
+    let before = log();
+    assert!(std::process::Command::new("kill")
+        .args(["-KILL", &pids[0].to_string()])
+        .status()
+        .unwrap()
+        .success());
+    let o = crate::runtime::wait_output(bg, std::time::Duration::from_secs(180));
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    // Every answer written before the kill is kept, the budget is spent all the same, and after
+    // the kill (an answer in flight aside) the other two answer.
+    let after = log();
+    assert!(after.starts_with(&before), "the log was rewritten");
+    let demos = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
+    assert_eq!(demos.len(), 60, "the whole budget is spent");
+    let later = &after[before.len()..];
+    assert!(later.matches(PUMP).count() <= 1, "{later}");
+    for name in ["acrobot-good", "acrobot-poor"] {
+        assert!(later.contains(name), "{name} did not answer after the kill");
+    }
+    let expert_logs: String = std::fs::read_dir(&out)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with("expert"))
+        .map(|e| std::fs::read_to_string(e.path()).unwrap_or_default())
+        .collect();
+    assert!(
+        expert_logs.contains("its queries go to the other experts"),
+        "the expert's log says the external one is down"
+    );
+    assert_eq!(
+        alfd_wire::leftover_files(&id),
+        Vec::<std::path::PathBuf>::new()
+    );
 }

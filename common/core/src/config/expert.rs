@@ -88,7 +88,8 @@ fn is_default_window(w: &usize) -> bool {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PanelEntry {
-    /// The demonstrator, by name (`alfd expert list`).
+    /// The demonstrator, by name (`alfd expert list`), or an external one (`python:MODULE:FUNCTION`,
+    /// `sb3:ALGO:PATH.zip`) answering from an adapter process of its own.
     pub name: String,
     /// What one answer costs (> 0), in any unit the run's `budget.cost` shares.
     #[serde(default = "default_cost")]

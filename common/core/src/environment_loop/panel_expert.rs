@@ -22,13 +22,15 @@ pub struct QualityRow {
 }
 
 /// What a run with several experts leaves: per demonstration, in order, its cost and whether its
-/// state was asked twice; the quality rows; the experts' names and the cost spent.
+/// state was asked twice; the quality rows; the experts' names, the cost spent, and the experts
+/// marked down (failed to answer), in order.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct PanelLog {
     pub names: Vec<String>,
     pub answers: Vec<(f64, bool)>,
     pub rows: Vec<QualityRow>,
     pub spent: f64,
+    pub down: Vec<String>,
 }
 
 impl PanelLog {
@@ -122,7 +124,8 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
 
     /// Asks the state `obs` (features `x`) at global step `step`: the routed expert's action,
     /// recorded in `core` as a demonstration, and on a double ask a second expert's too; `None`
-    /// when the budget or the cost budget is spent.
+    /// when the budget or the cost budget is spent. An expert that fails to answer is marked
+    /// down and the state goes to another; an error only when every expert is down.
     pub fn ask(
         &mut self,
         core: &mut ExpertCore,
@@ -130,18 +133,46 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
         x: &[f64],
         step: u64,
     ) -> Result<Option<usize>> {
-        let ask = self.panel.route(&mut self.rng);
-        if core.budget().is_exhausted() || !self.affordable(ask.first) {
-            return Ok(None);
-        }
-        let first = self.act(ask.first, obs)?;
+        let mut failure = None;
+        let (ask, first) = loop {
+            let Some(ask) = self.panel.route(&mut self.rng) else {
+                return Err(failure.unwrap_or_else(|| LoopError::link("every expert is down")));
+            };
+            if core.budget().is_exhausted() || !self.affordable(ask.first) {
+                return Ok(None);
+            }
+            match self.act(ask.first, obs) {
+                Ok(action) => break (ask, action),
+                Err(e) => failure = Some(self.down(ask.first, e)),
+            }
+        };
         let second = match ask.second.filter(|&s| self.affordable(s)) {
-            Some(s) => Some((s, self.act(s, obs)?)),
+            Some(s) => match self.act(s, obs) {
+                Ok(action) => Some((s, action)),
+                Err(e) => {
+                    self.down(s, e);
+                    None
+                }
+            },
             None => None,
         };
+        self.record(core, x, step, (ask.first, first), second);
+        Ok(Some(first))
+    }
+
+    /// Records each answer on the state as a demonstration (while the budget lasts), rated
+    /// against the other answer and the demonstration model's.
+    fn record(
+        &mut self,
+        core: &mut ExpertCore,
+        x: &[f64],
+        step: u64,
+        first: (usize, usize),
+        second: Option<(usize, usize)>,
+    ) {
         let model = core.model().map(|m| argmax(&m.probs(x)));
         let double = second.is_some();
-        let mut answers = vec![(ask.first, first)];
+        let mut answers = vec![first];
         answers.extend(second);
         for (i, &(expert, action)) in answers.iter().enumerate() {
             let others = answers
@@ -165,7 +196,16 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
                 quality: self.panel.quality(expert),
             });
         }
-        Ok(Some(first))
+    }
+
+    /// Marks `expert` down after its failure `e`, which it gives back.
+    fn down(&mut self, expert: usize, e: LoopError) -> LoopError {
+        tracing::warn!("{e}; its queries go to the other experts from now on");
+        self.panel.set_down(expert);
+        self.log
+            .down
+            .push(self.panel.members()[expert].name.clone());
+        e
     }
 
     fn act(&mut self, expert: usize, obs: &S) -> Result<usize> {
