@@ -220,28 +220,34 @@ fn a_seeded_chaos_run_with_its_expert_behind_a_slow_link_loses_no_demonstration(
     assert!(remote >= 50, "{remote} demonstrations of the remote expert");
 }
 
-/// Three experts in one expert process (`[[experts]]`), its process killed, paused and swapped
-/// (for one of them alone, and back to all three) while the budget is spent across the run: every
-/// invariant holds, and every answer the panel gave is in `demos.jsonl` with its cost and in
-/// `experts.csv`.
+/// Three experts (`[[experts]]`), two built in the expert process and one from a Python adapter of
+/// its own; the expert process killed, paused and swapped (for one of them alone, and back to all
+/// three), the external expert's adapter killed and paused, while the budget is spent across the
+/// run: every invariant holds, and every answer the panel gave is in `demos.jsonl` with its cost
+/// and in `experts.csv`.
 #[test]
 fn a_seeded_chaos_run_with_several_experts_keeps_every_invariant() {
     let _time = timed!();
     let dir = tmp("chaos-experts");
     let config = dir.join("three.toml");
-    let three = "mountaincar-energy+mountaincar-fair+mountaincar-poor";
+    // The second expert answers from a Python adapter of its own: kills and pauses aim at it too.
+    let pump = "python:alfd_examples:acrobot_pump";
+    let three = format!("acrobot-good+{pump}+acrobot-poor");
     std::fs::write(
         &config,
-        "seed = 2\nsteps = 150000\n[env]\nname = \"mountaincar\"\n\
-         [agent]\nkind = \"bdqn\"\nheads = 2\n\
-         [query]\nallowance = \"spread\"\ngate = \"chance\"\nhorizon = 150000\n\
-         [budget]\ntotal = 150\n[expert]\nmodel = \"krr\"\nroute = \"round-robin\"\ndouble_ask = 0.2\n\
-         [[experts]]\nname = \"mountaincar-energy\"\ncost = 10\n\
-         [[experts]]\nname = \"mountaincar-fair\"\ncost = 2\n\
-         [[experts]]\nname = \"mountaincar-poor\"\ncost = 1\n",
+        format!(
+            "seed = 2\nsteps = 150000\n[env]\nname = \"acrobot\"\n\
+             [agent]\nkind = \"bdqn\"\nheads = 2\n\
+             [query]\nallowance = \"spread\"\ngate = \"chance\"\nhorizon = 150000\n\
+             [budget]\ntotal = 150\n[expert]\nmodel = \"krr\"\nroute = \"round-robin\"\n\
+             double_ask = 0.2\n\
+             [[experts]]\nname = \"acrobot-good\"\ncost = 10\n\
+             [[experts]]\nname = \"{pump}\"\ncost = 2\n\
+             [[experts]]\nname = \"acrobot-poor\"\ncost = 1\n"
+        ),
     )
     .unwrap();
-    let experts = format!("{three},mountaincar-poor");
+    let experts = format!("{three},acrobot-poor");
     let args = [
         "--config",
         config.to_str().unwrap(),
@@ -278,7 +284,7 @@ fn a_seeded_chaos_run_with_several_experts_keeps_every_invariant() {
         by_panel + 1,
         "a quality row per panel answer"
     );
-    for name in ["mountaincar-energy", "mountaincar-fair", "mountaincar-poor"] {
+    for name in ["acrobot-good", pump, "acrobot-poor"] {
         assert!(
             lines
                 .iter()
@@ -286,4 +292,13 @@ fn a_seeded_chaos_run_with_several_experts_keeps_every_invariant() {
             "{name} never answered in the panel"
         );
     }
+    let member_hit = events
+        .iter()
+        .filter(|e| e["carried_out"] == true)
+        .filter(|e| e["fault"].to_string().contains("member"))
+        .count();
+    assert!(
+        member_hit >= 1,
+        "the external expert's adapter was never hit: {events:#?}"
+    );
 }

@@ -18,6 +18,9 @@ pub enum Target {
     /// The joined host (`alfd join` on 127.0.0.1 with actors of its own); killed, it is started
     /// again.
     Host,
+    /// The adapter of an external expert among several (`[[experts]]`, by its place): killed or
+    /// paused, the panel asks the others.
+    Member(u16),
 }
 
 impl Target {
@@ -27,7 +30,7 @@ impl Target {
             Target::Actor(_) => "alfd-actor",
             Target::Learner => "alfd-learner",
             Target::Expert => "alfd-expert",
-            Target::Adapter(_) => "",
+            Target::Adapter(_) | Target::Member(_) => "",
             Target::Host => "alfd",
         }
     }
@@ -107,6 +110,7 @@ pub struct Injector {
     mix: Mix,
     adapters: bool,
     host: bool,
+    members: Vec<u16>,
     next: Duration,
 }
 
@@ -126,6 +130,7 @@ impl Injector {
             mix,
             adapters: false,
             host: false,
+            members: Vec::new(),
             next: Duration::ZERO,
         };
         injector.next = injector.draw_gap();
@@ -152,6 +157,14 @@ impl Injector {
     /// seed gives the schedule of a run without one).
     pub fn with_host(mut self, host: bool) -> Self {
         self.host = host;
+        self
+    }
+
+    /// Aims kills and pauses at the adapters of these external experts of `[[experts]]` (their
+    /// places) too, each as likely as the learner (none: a seed gives the schedule of a run
+    /// without them).
+    pub fn with_members(mut self, members: Vec<u16>) -> Self {
+        self.members = members;
         self
     }
 
@@ -204,18 +217,22 @@ impl Injector {
         unreachable!("the pick is below the total of the weights")
     }
 
-    /// An actor, the learner, the expert, (with adapters) an actor's adapter or (with a joined
-    /// host) the host, each as likely as the learner.
+    /// An actor, the learner, the expert, (with adapters) an actor's adapter, (with a joined
+    /// host) the host or (with members) an external expert's adapter, each as likely as the
+    /// learner.
     fn target(&mut self) -> Target {
         let actors = u32::from(self.actors);
         let adapters = if self.adapters { actors } else { 0 };
         let host = u32::from(self.host);
-        match self.rng.random_range(0..actors + adapters + 2 + host) {
+        let before_members = actors + adapters + 2 + host;
+        let all = before_members + self.members.len() as u32;
+        match self.rng.random_range(0..all) {
             0 => Target::Learner,
             1 => Target::Expert,
             a if a < actors + 2 => Target::Actor((a - 2) as u16),
             a if a < actors + adapters + 2 => Target::Adapter((a - 2 - actors) as u16),
-            _ => Target::Host,
+            a if a < before_members => Target::Host,
+            a => Target::Member(self.members[(a - before_members) as usize]),
         }
     }
 
@@ -279,6 +296,36 @@ mod tests {
             hit.iter().all(|&a| a < 2),
             "only the 2 actors' adapters: {hit:?}"
         );
+    }
+
+    #[test]
+    fn external_experts_are_aimed_at_only_when_named_and_a_seed_without_them_is_unchanged() {
+        let schedule = |members: Vec<u16>| {
+            let mut inj =
+                Injector::new(7, Duration::from_secs(1), 2, vec![], ALL).with_members(members);
+            (0..400)
+                .filter_map(|t| inj.due(Duration::from_millis(t * 100)))
+                .collect::<Vec<_>>()
+        };
+        let at_members = |faults: &[Fault]| {
+            faults
+                .iter()
+                .filter_map(|f| match f {
+                    Fault::Kill(Target::Member(m)) | Fault::Pause(Target::Member(m), _) => Some(*m),
+                    _ => None,
+                })
+                .collect::<Vec<_>>()
+        };
+        let without = schedule(vec![]);
+        assert!(at_members(&without).is_empty());
+        let plain = Injector::new(7, Duration::from_secs(1), 2, vec![], ALL);
+        let mut plain = plain;
+        let unchanged: Vec<Fault> = (0..400)
+            .filter_map(|t| plain.due(Duration::from_millis(t * 100)))
+            .collect();
+        assert_eq!(without, unchanged);
+        let hit = at_members(&schedule(vec![1]));
+        assert!(!hit.is_empty() && hit.iter().all(|&m| m == 1), "{hit:?}");
     }
 
     #[test]

@@ -193,6 +193,7 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
     } else {
         args.experts.clone()
     };
+    let members = external_members(cfg.as_ref());
     let actors = u16::try_from(args.actors).map_err(|_| usage("--actors is too large"))?;
     let gap = Duration::from_secs_f64(args.every);
     // A Gymnasium environment is served by Python adapters, which are targets too.
@@ -209,10 +210,41 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
     let mut injector = Injector::new(args.seed, gap, actors, experts, mix)
         .with_adapters(adapters)
         .with_host(chaos.joined.is_some())
-        .with_expert_host(chaos.expert_host.is_some());
+        .with_expert_host(chaos.expert_host.is_some())
+        .with_members(members);
     let ended = chaos.drive(&mut injector);
     chaos.settle();
     report::report(&chaos, ended)
+}
+
+/// The places in `[[experts]]` of the external experts (`python:`, `sb3:`), each answering from
+/// an adapter of its own.
+fn external_members(cfg: Option<&alfd_common::config::ExperimentConfig>) -> Vec<u16> {
+    let Some(cfg) = cfg else { return Vec::new() };
+    (0..cfg.experts.len())
+        .filter(|&i| alfd_demonstrators::registry::external_policy(&cfg.experts[i].name).is_some())
+        .filter_map(|i| u16::try_from(i).ok())
+        .collect()
+}
+
+/// The adapter name of `[[experts]]`' `i`-th expert in the newest expert process of the run in
+/// `out` (`expert-<generation>-<i>`, from its log's name), if one started.
+fn member_adapter(out: &std::path::Path, i: u16) -> Option<String> {
+    let suffix = format!("-{i}.log");
+    std::fs::read_dir(out)
+        .ok()?
+        .flatten()
+        .filter_map(|e| {
+            let file = e.file_name().to_string_lossy().into_owned();
+            let generation = file
+                .strip_prefix("adapter-expert-")?
+                .strip_suffix(&suffix)?
+                .parse::<u64>()
+                .ok()?;
+            Some((generation, format!("expert-{generation}-{i}")))
+        })
+        .max()
+        .map(|(_, name)| name)
 }
 
 /// `kill=4,pause` → the weights (a kind without one weighs 1); unknown kinds are refused.
@@ -426,6 +458,14 @@ impl Chaos<'_> {
     fn pid_of(&mut self, target: Target) -> Option<u32> {
         if target == Target::Host {
             return self.joined.as_ref()?.child.as_ref().map(Child::id);
+        }
+        if let Target::Member(i) = target {
+            let name = member_adapter(&self.args.out, i)?;
+            let args = [
+                format!("--run-id={}", self.run_id()?),
+                format!("--name={name}"),
+            ];
+            return alfd_launcher::find_process("", &[&args[0], &args[1]]);
         }
         let mut args = vec![format!("--run-id={}", self.run_id()?)];
         match target {
