@@ -72,11 +72,20 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     // Answering is the query path: woken by an actor, it runs before a busy learner or refit.
     alfd_harness::Sched::query_path().apply();
     let setup = args.process.load()?;
-    let (cfg, runtime) = (&setup.config, &setup.runtime);
+    let runtime = &setup.runtime;
     let (obs_dim, actions) = setup.env_dims()?;
-    let name = args.expert.clone().unwrap_or_else(|| cfg.run_expert_name());
-    // Several experts answer in this process when it is started under their joined name.
-    let panel = !cfg.experts.is_empty() && name == cfg.run_expert_name();
+    let name = args
+        .expert
+        .clone()
+        .unwrap_or_else(|| setup.config.run_expert_name());
+    // Several experts answer in this process when it is started under their joined name (the
+    // run's own, or one `alfd expert add|remove` made).
+    let added = alfd_demonstrators::added::read(&args.process.run_dir)?;
+    let cfg = &match name.as_str() {
+        HUMAN => setup.config.with_one_expert(HUMAN),
+        _ => setup.config.with_roster(&name, &added),
+    };
+    let panel = !cfg.experts.is_empty();
     let demos_path = args.process.run_dir.join("demos.jsonl");
     // Read the demonstrations now, to refuse a bad file before the run depends on us; they are
     // read again when this expert becomes active (its predecessor may have added some).
@@ -87,7 +96,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     // is not built; one swapped in by name is.
     let source = if panel {
         panel_source(args, cfg, (me, schema), actions, runtime.query_timeout())?
-    } else if name == cfg.expert.name && !cfg.needs_expert() {
+    } else if name == setup.config.expert.name && !cfg.needs_expert() {
         Source::BuiltIn(Box::new(alfd_common::agent::NoExpert))
     } else {
         source(args, cfg, &name, me, schema, actions)?

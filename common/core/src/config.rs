@@ -490,7 +490,7 @@ impl AgentConfig {
 pub use crate::query::RuleKind;
 pub use crate::shaping::ShapingKind;
 pub use env::{EnvConfig, EnvName, MAX_DEEPSEA_SIZE, MAX_HEADS};
-pub use expert::{BudgetConfig, ExpertConfig, PanelEntry};
+pub use expert::{changed_roster, BudgetConfig, ExpertConfig, PanelEntry, RosterChange};
 pub use logging::LoggingConfig;
 pub use query::QueryConfig;
 

@@ -8,7 +8,9 @@
 //! - `scripted`: the scripted experts of graded quality for MountainCar and Acrobot, and
 //!   DeepSea's noisy one.
 //! - `demo_log`: `demos.jsonl`, read and appended to (each line whole, fsync'd).
+//! - `added`: `experts-added.jsonl`, the experts `alfd expert add` gave a live run.
 
+pub mod added;
 pub mod demo_log;
 pub mod registry;
 pub mod scripted;

@@ -1,4 +1,4 @@
-//! `alfd expert list|eval` and `alfd train-experts`: the demonstrators of known quality.
+//! `alfd expert list|eval|add|remove` and `alfd train-experts`: the demonstrators of known quality.
 
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -36,6 +36,35 @@ pub enum ExpertCommand {
         #[arg(long, default_value_t = 12345)]
         seed: u64,
     },
+    /// Add an expert to a live run's experts (`[[experts]]`, or its one expert): a new expert
+    /// process hosts them all and takes over once up, as `alfd swap-expert` does.
+    Add {
+        /// The run directory of a live run.
+        #[arg(long)]
+        run: PathBuf,
+        /// The expert, by name (`alfd expert list`, or `python:MODULE:FUNCTION`, `sb3:ALGO:PATH`).
+        name: String,
+        /// What one of its answers costs (> 0).
+        #[arg(long, default_value_t = 1.0)]
+        cost: f64,
+        /// A name for tables and plots (default: its name).
+        #[arg(long)]
+        label: Option<String>,
+        /// Seconds to wait for the change to complete.
+        #[arg(long, default_value_t = 90)]
+        timeout: u64,
+    },
+    /// Remove an expert from a live run's experts; the others go on answering.
+    Remove {
+        /// The run directory of a live run.
+        #[arg(long)]
+        run: PathBuf,
+        /// The expert, by name.
+        name: String,
+        /// Seconds to wait for the change to complete.
+        #[arg(long, default_value_t = 90)]
+        timeout: u64,
+    },
 }
 
 /// The most episodes `alfd expert eval` plays (their returns are kept to compute the median).
@@ -43,6 +72,25 @@ const MAX_EVAL_EPISODES: usize = 1_000_000;
 
 pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
     match args.command {
+        ExpertCommand::Add {
+            run,
+            name,
+            cost,
+            label,
+            timeout,
+        } => {
+            let entry = alfd_common::config::PanelEntry {
+                name,
+                cost,
+                label,
+                becomes: None,
+                after: None,
+            };
+            crate::cmd_swap::add(&run, entry, timeout)
+        }
+        ExpertCommand::Remove { run, name, timeout } => {
+            crate::cmd_swap::remove(&run, name, timeout)
+        }
         ExpertCommand::List => {
             println!(
                 "{:<28} {:<12} {:<16} {:>9} {:>9}",

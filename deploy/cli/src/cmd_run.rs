@@ -2,7 +2,6 @@
 //! `alfd swap-expert`: replace the expert of a live run.
 
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
 
 use alfd_harness::RuntimeConfig;
 use alfd_wire::MAX_ACTORS;
@@ -11,9 +10,7 @@ use crate::setup;
 use crate::usage::usage;
 use alfd_harness::run_dir;
 use alfd_lab::report::{self, Output};
-use alfd_launcher::{
-    self as launcher, Plan, SwapRequest, SwapResponse, SWAP_REQUEST, SWAP_RESPONSE,
-};
+use alfd_launcher::{self as launcher, Plan};
 
 /// The default experiment: the recommended CartPole-1000 preset (Bootstrapped DQN with 300 active
 /// demonstrations of the 1000 expert, 50,000 steps).
@@ -312,68 +309,4 @@ pub fn finish(plan: &Plan, output: Output) -> anyhow::Result<()> {
         std::process::exit(130);
     }
     Ok(())
-}
-
-#[derive(Debug, clap::Args)]
-pub struct SwapArgs {
-    /// The run directory of a live run.
-    #[arg(long)]
-    pub run: PathBuf,
-    /// The new demonstrator, by name (`alfd expert list`).
-    #[arg(long)]
-    pub expert: String,
-    /// Seconds to wait for the swap to complete.
-    #[arg(long, default_value_t = 90)]
-    pub timeout: u64,
-}
-
-/// Asks the launcher of a live run to replace its expert, and waits for the outcome.
-pub fn swap(args: SwapArgs) -> anyhow::Result<()> {
-    let info = launcher::read_run_info(&args.run).map_err(|e| usage(alfd_harness::describe(&e)))?;
-    // One swap at a time: a second one is refused at once, not queued.
-    let _swap_lock = run_dir::lock_swaps(&args.run)?;
-    // The new expert must exist for the run's environment.
-    let mut cfg = setup::load_config(&args.run.join("config.toml"), &[])?;
-    // In a run with several experts, their joined name brings them all back; any other name
-    // replaces them with that one expert.
-    if args.expert != cfg.run_expert_name() {
-        cfg.experts.clear();
-        cfg.expert.name = args.expert.clone();
-    }
-    setup::check_demonstrator(&cfg)?;
-    if !PathBuf::from(format!("/proc/{}", info.launcher_pid)).exists() {
-        return Err(usage(format!(
-            "run {} is not live (its launcher, pid {}, has exited)",
-            info.run_id, info.launcher_pid
-        )));
-    }
-    let id = format!("{}-{}", std::process::id(), launcher::new_run_id());
-    let request = SwapRequest {
-        id: id.clone(),
-        expert: args.expert.clone(),
-    };
-    alfd_lab::output::write(
-        &args.run,
-        SWAP_REQUEST,
-        serde_json::to_string(&request)?.as_bytes(),
-    )?;
-    let start = Instant::now();
-    loop {
-        if let Ok(text) = std::fs::read_to_string(args.run.join(SWAP_RESPONSE)) {
-            if let Ok(r) = serde_json::from_str::<SwapResponse>(&text) {
-                if r.id == id {
-                    println!("{}", serde_json::to_string(&r)?);
-                    anyhow::ensure!(r.ok, "expert swap failed: {}", r.message);
-                    return Ok(());
-                }
-            }
-        }
-        anyhow::ensure!(
-            start.elapsed() < Duration::from_secs(args.timeout),
-            "no answer from the launcher of run {} within {} s",
-            info.run_id,
-            args.timeout
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
 }

@@ -17,6 +17,7 @@ mod cmd_local;
 mod cmd_q_range;
 mod cmd_resume;
 mod cmd_run;
+mod cmd_swap;
 mod cmd_sweep;
 mod cmd_watch;
 mod link_flags;
@@ -50,7 +51,7 @@ enum Command {
     /// Certificates for runs across hosts: the run's CA and one per host (mutual TLS).
     Certs(cmd_certs::CertsArgs),
     /// Replace the expert of a live run (make before break).
-    SwapExpert(cmd_run::SwapArgs),
+    SwapExpert(cmd_swap::SwapArgs),
     /// A multi-process run under faults drawn from a seed (kill -9, SIGSTOP, expert swaps, the
     /// launcher killed and resumed, a full disk), then its invariants checked.
     Chaos(chaos::ChaosArgs),
@@ -103,7 +104,7 @@ fn main() {
         Command::Run(a) => cmd_run::run(a),
         Command::Join(a) => cmd_join::run(a),
         Command::Certs(a) => cmd_certs::run(a),
-        Command::SwapExpert(a) => cmd_run::swap(a),
+        Command::SwapExpert(a) => cmd_swap::swap(a),
         Command::Chaos(a) => chaos::run(a),
         Command::Env(a) => cmd_env::run(a),
         Command::Expert(a) => cmd_expert::run(a),

@@ -191,6 +191,23 @@ fn alfd_run_hosts_several_experts_as_alfd_local_does_to_the_byte() {
     assert!(two.join("experts.svg").exists(), "the qualities are drawn");
 }
 
+/// `alfd run --actors=2` of `config` into `out` with `extra` arguments, in the background.
+fn two_actors(config: &Path, out: &Path, extra: &[&str]) -> crate::support::Background {
+    crate::support::Background(Some(
+        alfd()
+            .args(["run", "--quiet", "--actors=2"])
+            .args(extra)
+            .arg("--config")
+            .arg(config)
+            .arg("--out")
+            .arg(out)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ))
+}
+
 /// Three Acrobot experts, the second one external (`alfd_examples.acrobot_pump`, from an
 /// adapter process of its own), round-robin, the budget spread over the run.
 fn with_external(steps: u32, budget: u32) -> String {
@@ -244,23 +261,7 @@ fn an_external_expert_among_three_answers_as_in_alfd_local_and_once_killed_the_o
     let config = dir.join("long.toml");
     std::fs::write(&config, with_external(40_000, 60)).unwrap();
     let out = dir.join("killed");
-    let mut bg = crate::support::Background(Some(
-        alfd()
-            .args([
-                "run",
-                "--quiet",
-                "--actors=2",
-                "--query-timeout-ms=2000",
-                "--config",
-            ])
-            .arg(&config)
-            .arg("--out")
-            .arg(&out)
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap(),
-    ));
+    let mut bg = two_actors(&config, &out, &["--query-timeout-ms=2000"]);
     let log = || std::fs::read_to_string(out.join("demos.jsonl")).unwrap_or_default();
     crate::runtime::wait_until(&mut bg, "three answers of the external expert", || {
         log().matches(PUMP).count() >= 3
@@ -301,4 +302,90 @@ fn an_external_expert_among_three_answers_as_in_alfd_local_and_once_killed_the_o
         alfd_wire::leftover_files(&id),
         Vec::<std::path::PathBuf>::new()
     );
+}
+
+#[test]
+fn experts_added_to_and_removed_from_a_live_run_answer_from_then_on_at_their_costs() {
+    let _time = timed!();
+    let dir = tmp("experts-live");
+    let config = dir.join("three.toml");
+    let three = "seed = 6\nsteps = 2000000\n[env]\nname = \"acrobot\"\n\
+        [agent]\nkind = \"bdqn\"\nheads = 2\nbatch_size = 16\n\
+        [query]\nallowance = \"spread\"\ngate = \"chance\"\nhorizon = 1000000\n\
+        [budget]\ntotal = 100000\n[expert]\nroute = \"round-robin\"\n\
+        [[experts]]\nname = \"acrobot-good\"\ncost = 10\n\
+        [[experts]]\nname = \"acrobot-poor\"\ncost = 1\n";
+    std::fs::write(&config, three).unwrap();
+    let out = dir.join("run");
+    let mut bg = two_actors(&config, &out, &[]);
+    let log = || std::fs::read_to_string(out.join("demos.jsonl")).unwrap_or_default();
+    let lines_after = |before: usize| -> Vec<Value> {
+        log()
+            .lines()
+            .skip(before)
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect()
+    };
+    crate::runtime::wait_until(&mut bg, "answers of both experts", || {
+        log().contains("acrobot-good") && log().contains("acrobot-poor")
+    });
+    let expert = |how: &[&str]| {
+        let o = alfd()
+            .arg("expert")
+            .args(how)
+            .arg("--run")
+            .arg(&out)
+            .output()
+            .unwrap();
+        (o.status.code(), text(&o))
+    };
+    // Removed: from the answer after the swap on, only the good one answers, at its cost.
+    let (code, said) = expert(&["remove", "acrobot-poor"]);
+    assert_eq!(code, Some(0), "{said}");
+    assert!(said.contains("\"to\":\"acrobot-good\""), "{said}");
+    let at_removal = log().lines().count();
+    crate::runtime::wait_until(&mut bg, "answers after the removal", || {
+        lines_after(at_removal).len() >= 10
+    });
+    // Answers in flight at the swap aside, the poor one is gone.
+    assert!(lines_after(at_removal)[2..]
+        .iter()
+        .all(|l| l["expert"] == "acrobot-good" && l["cost"].as_f64() == Some(10.0)));
+    // Added, at its own cost; the same name again, or removing an absent one, is refused.
+    let (code, said) = expert(&["add", "acrobot-fair", "--cost", "3"]);
+    assert_eq!(code, Some(0), "{said}");
+    assert!(
+        said.contains("\"to\":\"acrobot-good+acrobot-fair\""),
+        "{said}"
+    );
+    let at_add = log().lines().count();
+    crate::runtime::wait_until(&mut bg, "answers of the added expert", || {
+        lines_after(at_add)
+            .iter()
+            .any(|l| l["expert"] == "acrobot-fair")
+    });
+    let fair: Vec<Value> = lines_after(at_add)
+        .into_iter()
+        .filter(|l| l["expert"] == "acrobot-fair")
+        .collect();
+    assert!(
+        fair.iter().all(|l| l["cost"].as_f64() == Some(3.0)),
+        "{fair:?}"
+    );
+    let (code, said) = expert(&["add", "acrobot-fair"]);
+    assert_eq!(code, Some(1), "{said}");
+    assert!(said.contains("already"), "{said}");
+    let (code, said) = expert(&["remove", "acrobot-poor"]);
+    assert_eq!(code, Some(1), "{said}");
+    assert!(said.contains("not one of the run's experts"), "{said}");
+    let (code, said) = expert(&["add", "nobody-at-all"]);
+    assert_eq!(code, Some(2), "{said}");
+    assert!(said.contains("nobody-at-all"), "{said}");
+    let o = crate::runtime::interrupt(bg);
+    assert_eq!(o.status.code(), Some(130), "{}", text(&o));
+    // Every answer of the run in `experts.csv`, each expert's rows under its name.
+    let csv = std::fs::read_to_string(out.join("experts.csv")).unwrap();
+    let rows = csv.lines().count() - 1;
+    assert_eq!(rows, log().lines().count(), "a quality row per answer");
+    assert!(csv.contains(",acrobot-fair,"));
 }

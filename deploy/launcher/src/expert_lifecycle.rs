@@ -20,14 +20,18 @@
 
 use std::time::{Duration, Instant};
 
+use alfd_common::config::{changed_roster, RosterChange};
 use alfd_common::restarts::{Ended, Restarts, Verdict};
 use serde::{Deserialize, Serialize};
 
-/// A request to swap the expert (`swap-expert.request.json`).
+/// A request to swap the expert (`swap-expert.request.json`): for `expert`, or with `change`
+/// for the run's experts with `expert` added or removed (`alfd expert add|remove`).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SwapRequest {
     pub id: String,
     pub expert: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub change: Option<RosterChange>,
 }
 
 /// How long a new expert may take to report `standby`.
@@ -335,6 +339,23 @@ impl ExpertLifecycle {
             return out;
         }
         let from = self.current_name().unwrap_or_default().to_owned();
+        let mut request = request;
+        if let Some(change) = request.change {
+            match changed_roster(&from, change, &request.expert) {
+                Ok(name) => request.expert = name,
+                Err(message) => {
+                    let generation = self.last_generation;
+                    out.push(Action::Respond {
+                        request,
+                        ok: false,
+                        message,
+                        from,
+                        generation,
+                    });
+                    return out;
+                }
+            }
+        }
         let name = request.expert.clone();
         self.spawn(&name, Why::Swap { request, from }, now, &mut out);
         out
@@ -531,6 +552,7 @@ mod tests {
         SwapRequest {
             id: format!("req-{expert}"),
             expert: expert.to_owned(),
+            change: None,
         }
     }
 
@@ -608,6 +630,48 @@ mod tests {
         );
         assert!(e.settled());
         assert_eq!((e.active(), e.current_name()), (2, Some("cartpole-1000")));
+    }
+
+    #[test]
+    fn an_expert_added_or_removed_starts_the_run_s_experts_changed_and_a_bad_change_is_refused() {
+        let t0 = Instant::now();
+        let mut e = ExpertLifecycle::new(5);
+        e.start("a+b", t0);
+        e.standby(1, t0);
+        e.running(1, t0);
+        let change = |expert: &str, change| SwapRequest {
+            id: "x".into(),
+            expert: expert.into(),
+            change: Some(change),
+        };
+        let a = e.swap(change("c", RosterChange::Add), t0);
+        assert_eq!(
+            a,
+            vec![Action::Spawn {
+                generation: 2,
+                name: "a+b+c".into()
+            }]
+        );
+        e.standby(2, t0);
+        e.exited(1, &killed(), t0);
+        e.running(2, t0);
+        assert_eq!(e.current_name(), Some("a+b+c"));
+        let a = e.swap(change("a", RosterChange::Remove), t0);
+        assert_eq!(spawned(&a), vec![3]);
+        assert!(matches!(&a[0], Action::Spawn { name, .. } if name == "b+c"));
+        // A swap is under way: a second change waits its turn; then a bad one is refused.
+        let busy = e.swap(change("c", RosterChange::Remove), t0);
+        assert!(matches!(&busy[0], Action::Respond { ok: false, .. }));
+        e.standby(3, t0);
+        e.exited(2, &killed(), t0);
+        e.running(3, t0);
+        let a = e.swap(change("a", RosterChange::Remove), t0);
+        match &a[..] {
+            [Action::Respond { ok, message, .. }] => {
+                assert!(!ok && message.contains("not one"), "{message}")
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

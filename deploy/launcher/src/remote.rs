@@ -80,6 +80,7 @@ impl Launcher<'_, '_> {
                         let request = SwapRequest {
                             id: format!("{JOIN_SWAP}{join_id}"),
                             expert: name,
+                            change: None,
                         };
                         let actions = self.experts.swap(request, Instant::now());
                         let r = self.apply(actions);

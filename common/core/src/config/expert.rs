@@ -249,6 +249,80 @@ impl ExperimentConfig {
     }
 }
 
+/// A change to a live run's experts (`alfd expert add|remove`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RosterChange {
+    Add,
+    Remove,
+}
+
+/// The experts' joined name after `change` of `expert` in a run whose experts are `current`
+/// (their names joined by `+`), or why the change cannot be made.
+pub fn changed_roster(current: &str, change: RosterChange, expert: &str) -> Result<String, String> {
+    let mut names: Vec<&str> = current.split('+').collect();
+    let listed = names.contains(&expert);
+    match change {
+        RosterChange::Add if listed => {
+            return Err(format!("`{expert}` is one of the run's experts already"))
+        }
+        RosterChange::Add => names.push(expert),
+        RosterChange::Remove if !listed => {
+            return Err(format!(
+                "`{expert}` is not one of the run's experts ({current})"
+            ))
+        }
+        RosterChange::Remove if names.len() == 1 => {
+            return Err(format!(
+                "`{expert}` is the run's only expert; `alfd swap-expert` replaces it"
+            ))
+        }
+        RosterChange::Remove => names.retain(|n| *n != expert),
+    }
+    Ok(names.join("+"))
+}
+
+impl ExperimentConfig {
+    /// The config of a live run whose expert is `name`. In a run with `[[experts]]`: its own
+    /// experts under their joined name, and for any other name the experts it joins (names
+    /// joined by `+`, or one), each the entry `added` gives it (the experts `alfd expert add`
+    /// gave the run, the newest entry of a name first), else that of `[[experts]]`, else cost 1,
+    /// so that every answer is counted at its cost. A name with `+` in a run of one expert is
+    /// read the same way; any other name is the run's one expert.
+    pub fn with_roster(&self, name: &str, added: &[PanelEntry]) -> Self {
+        if !self.experts.is_empty() && name == self.run_expert_name() {
+            return self.clone();
+        }
+        if self.experts.is_empty() && !name.contains('+') {
+            return self.with_one_expert(name);
+        }
+        let mut cfg = self.clone();
+        let entry = |part: &str| {
+            let newest = added.iter().rev().find(|e| e.name == part);
+            newest
+                .or_else(|| self.experts.iter().find(|e| e.name == part))
+                .cloned()
+                .unwrap_or_else(|| PanelEntry {
+                    name: part.to_owned(),
+                    cost: default_cost(),
+                    label: None,
+                    becomes: None,
+                    after: None,
+                })
+        };
+        cfg.experts = name.split('+').map(entry).collect();
+        cfg
+    }
+
+    /// The config with `name` as its one expert, without `[[experts]]`.
+    pub fn with_one_expert(&self, name: &str) -> Self {
+        let mut cfg = self.clone();
+        cfg.experts.clear();
+        cfg.expert.name = name.to_owned();
+        cfg
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use crate::config::ExperimentConfig;
@@ -311,5 +385,65 @@ mod tests {
             .contains("[0, 1]"));
         let multi = ExperimentConfig::for_multi_process(&format!("{BASE}{THREE}")).unwrap();
         assert_eq!(multi.experts.len(), 3);
+    }
+
+    #[test]
+    fn a_roster_changes_by_name_and_its_config_takes_each_entry_from_where_it_was_given() {
+        use super::{changed_roster, PanelEntry, RosterChange::*};
+        assert_eq!(changed_roster("a+b", Add, "c").unwrap(), "a+b+c");
+        assert_eq!(changed_roster("a", Add, "c").unwrap(), "a+c");
+        assert_eq!(changed_roster("a+b+c", Remove, "b").unwrap(), "a+c");
+        assert!(changed_roster("a+b", Add, "b")
+            .unwrap_err()
+            .contains("already"));
+        assert!(changed_roster("a+b", Remove, "c")
+            .unwrap_err()
+            .contains("not one"));
+        assert!(changed_roster("a", Remove, "a")
+            .unwrap_err()
+            .contains("swap-expert"));
+        let cfg = ExperimentConfig::from_toml(&format!("{BASE}{THREE}")).unwrap();
+        let joined = cfg.run_expert_name();
+        assert_eq!(cfg.with_roster(&joined, &[]), cfg);
+        // One of them alone still answers at its cost.
+        let one = cfg.with_roster("mountaincar-fair", &[]);
+        assert_eq!(one.experts, [cfg.experts[1].clone()]);
+        let single = parse("", &[]).unwrap();
+        let swapped = single.with_roster("mountaincar-fair", &[]);
+        assert!(swapped.experts.is_empty());
+        assert_eq!(swapped.expert.name, "mountaincar-fair");
+        assert_eq!(
+            single
+                .with_roster("mountaincar-fair+mountaincar-poor", &[])
+                .experts
+                .len(),
+            2
+        );
+        let added = |cost| PanelEntry {
+            name: "mountaincar-good".into(),
+            cost,
+            label: None,
+            becomes: None,
+            after: None,
+        };
+        let two = cfg.with_roster(
+            "mountaincar-poor+mountaincar-good+mountaincar-energy",
+            &[added(4.0), added(5.0)],
+        );
+        let got: Vec<(&str, f64)> = two
+            .experts
+            .iter()
+            .map(|e| (e.name.as_str(), e.cost))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                ("mountaincar-poor", cfg.experts[2].cost),
+                ("mountaincar-good", 5.0),
+                ("mountaincar-energy", cfg.experts[0].cost)
+            ]
+        );
+        let unknown = cfg.with_roster("mountaincar-poor+somebody", &[]);
+        assert_eq!(unknown.experts[1].cost, 1.0);
     }
 }
