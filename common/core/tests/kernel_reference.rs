@@ -221,3 +221,80 @@ fn contradictory_demonstrations_give_even_odds() {
         assert!((p[0] - 0.5).abs() < 1e-6, "{kind}: {p:?}");
     }
 }
+
+#[derive(Deserialize)]
+struct WeightedFixture {
+    cases: Vec<WeightedCase>,
+}
+
+#[derive(Deserialize)]
+struct WeightedCase {
+    train_states: Vec<Vec<f64>>,
+    train_actions: Vec<usize>,
+    weights: Vec<f64>,
+    num_actions: usize,
+    query_states: Vec<Vec<f64>>,
+    predictions: Vec<Vec<f64>>,
+}
+
+/// `data/weighted_krr.json` (deploy/python/fixtures/weighted_krr_fixtures.py): scikit-learn's
+/// KernelRidge fitted with `sample_weight`, 40 demonstrations (nalgebra's factor) and 600 (the
+/// blocked one), some weights 0.
+fn weighted_cases() -> Vec<WeightedCase> {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/weighted_krr.json");
+    let text = std::fs::read_to_string(path).expect("read weighted_krr.json");
+    let fixture: WeightedFixture = serde_json::from_str(&text).expect("parse weighted_krr.json");
+    assert_eq!(fixture.cases.len(), 2);
+    fixture.cases
+}
+
+#[test]
+fn krr_with_weights_matches_scikit_learn_fitted_or_grown() {
+    use alfd_common::demo_model::krr::KrrFactor;
+    use alfd_common::demo_model::lanes::Serial;
+    for (c, case) in weighted_cases().iter().enumerate() {
+        let (s, a, w, m) = (
+            &case.train_states,
+            &case.train_actions,
+            &case.weights,
+            case.num_actions,
+        );
+        assert!(w.contains(&0.0), "case {c} has a weight of 0");
+        let fitted = KrrFactor::fit_weighted(s, a, w, m, &Serial).unwrap();
+        let model = fitted.model();
+        let mut max_err: f64 = 0.0;
+        for (q, expected) in case.query_states.iter().zip(&case.predictions) {
+            for (r, e) in model.raw(q).iter().zip(expected) {
+                max_err = max_err.max((r - e).abs());
+            }
+        }
+        println!("weighted case {c}: {} demos, max abs error {max_err:.3e}", a.len());
+        assert!(max_err < 1e-8, "case {c}: max abs error {max_err:e}");
+        // Grown a demonstration at a time from a fit on the first ones: the same factor.
+        let k = a.len() - 5;
+        let mut grown = KrrFactor::fit_weighted(&s[..k], &a[..k], &w[..k], m, &Serial).unwrap();
+        for i in k..a.len() {
+            grown.push_weighted(&s[i], a[i], w[i], &Serial).unwrap();
+        }
+        assert!(grown == fitted, "case {c}: grown differs from fitted");
+    }
+}
+
+#[test]
+fn weights_of_one_give_the_unweighted_bits_and_a_bad_weight_is_refused() {
+    use alfd_common::demo_model::krr::KrrFactor;
+    use alfd_common::demo_model::lanes::Serial;
+    let case = &weighted_cases()[0];
+    let (s, a, m) = (&case.train_states, &case.train_actions, case.num_actions);
+    let ones = vec![1.0; a.len()];
+    let weighted = KrrFactor::fit_weighted(s, a, &ones, m, &Serial).unwrap();
+    assert!(weighted == KrrFactor::fit(s, a, m).unwrap());
+    for bad in [-0.5, f64::NAN, f64::INFINITY] {
+        let mut w = ones.clone();
+        w[3] = bad;
+        let e = KrrFactor::fit_weighted(s, a, &w, m, &Serial).unwrap_err();
+        assert!(matches!(e, DemoModelError::Weights(_)), "{e}");
+    }
+    let e = KrrFactor::fit_weighted(s, a, &ones[1..], m, &Serial).unwrap_err();
+    assert!(e.to_string().contains("weights for"), "{e}");
+}

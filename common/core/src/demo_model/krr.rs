@@ -124,13 +124,32 @@ impl KernelRidge {
     }
 }
 
+/// The square roots of `n` weights, each finite and ≥ 0.
+fn square_roots(weights: &[f64], n: usize) -> Result<Vec<f64>, DemoModelError> {
+    if weights.len() != n {
+        return Err(DemoModelError::Weights(format!(
+            "{} weights for {n} demonstrations",
+            weights.len()
+        )));
+    }
+    weights
+        .iter()
+        .map(|&w| match w.is_finite() && w >= 0.0 {
+            true => Ok(w.sqrt()),
+            false => Err(DemoModelError::Weights(format!(
+                "a demonstration's weight is {w}: weights are finite and >= 0"
+            ))),
+        })
+        .collect()
+}
+
 fn not_positive_definite() -> DemoModelError {
     DemoModelError::Solver("K + alpha I is not positive definite".to_string())
 }
 
-/// L of `K + alpha I` by nalgebra's Cholesky (below [`BLOCKED_FROM`] demonstrations), rows up
-/// to the diagonal.
-fn small_factor(flat: &[f64], state_dim: usize) -> Result<Vec<f64>, DemoModelError> {
+/// L of `S K S + alpha I` by nalgebra's Cholesky (below [`BLOCKED_FROM`] demonstrations), rows
+/// up to the diagonal; `S` the diagonal of `sw`, the square roots of the weights.
+fn small_factor(flat: &[f64], state_dim: usize, sw: &[f64]) -> Result<Vec<f64>, DemoModelError> {
     let n = flat.len() / state_dim;
     let row = |i: usize| &flat[i * state_dim..(i + 1) * state_dim];
     let mut k = DMatrix::<f64>::zeros(n, n);
@@ -138,6 +157,7 @@ fn small_factor(flat: &[f64], state_dim: usize) -> Result<Vec<f64>, DemoModelErr
     for i in 0..n {
         rbf_row(row(i), &flat[..(i + 1) * state_dim], &mut kx[..=i]);
         for (j, &v) in kx[..=i].iter().enumerate() {
+            let v = v * (sw[i] * sw[j]);
             k[(i, j)] = v;
             k[(j, i)] = v;
         }
@@ -150,12 +170,13 @@ fn small_factor(flat: &[f64], state_dim: usize) -> Result<Vec<f64>, DemoModelErr
         .collect())
 }
 
-/// L of `K + alpha I` by the blocked Cholesky, rows up to the diagonal: the kernel's lower
+/// L of `S K S + alpha I` by the blocked Cholesky, rows up to the diagonal: the kernel's lower
 /// triangle built column by column (columns dealt to the lanes in turn), factored, then turned
 /// into rows in the same buffer ([`rows_in_place`]), so that no second matrix is touched.
 fn large_factor(
     flat: &[f64],
     state_dim: usize,
+    sw: &[f64],
     lanes: &dyn Lanes,
 ) -> Result<Vec<f64>, DemoModelError> {
     let n = flat.len() / state_dim;
@@ -165,6 +186,9 @@ fn large_factor(
     share(&mut columns, lanes, |lane| {
         for (j, col) in lane.iter_mut() {
             rbf_row(row(*j), &flat[*j * state_dim..], &mut col[*j..]);
+            for (i, v) in col[*j..].iter_mut().enumerate() {
+                *v *= sw[*j + i] * sw[*j];
+            }
             col[*j] += ALPHA;
         }
     });
@@ -211,9 +235,11 @@ pub struct KrrFactor {
     actions: Vec<usize>,
     /// L row by row: row i holds its `i + 1` values up to the diagonal.
     l: Vec<f64>,
-    /// `L⁻¹ Y`, row-major `n × actions`, Y the one-hot actions: the forward half of the solve
+    /// `L⁻¹ S Y`, row-major `n × actions`, Y the one-hot actions: the forward half of the solve
     /// for the model, grown with L (a new row of it is O(n) per action).
     w: Vec<f64>,
+    /// The square roots of the demonstrations' weights (1 each unless weighted).
+    sw: Vec<f64>,
 }
 
 impl KrrFactor {
@@ -234,13 +260,28 @@ impl KrrFactor {
         num_actions: usize,
         lanes: &dyn Lanes,
     ) -> Result<KrrFactor, DemoModelError> {
+        KrrFactor::fit_weighted(states, actions, &vec![1.0; actions.len()], num_actions, lanes)
+    }
+
+    /// [`KrrFactor::fit_on`] with a weight ≥ 0 for each demonstration, as scikit-learn's
+    /// `KernelRidge.fit(X, y, sample_weight)`: `S K S + αI` factored, `S` the weights' square
+    /// roots, for dual coefficients `S (S K S + αI)⁻¹ S Y`. Weights of 1 give
+    /// [`KrrFactor::fit_on`]'s bits.
+    pub fn fit_weighted<S: AsRef<[f64]>>(
+        states: &[S],
+        actions: &[usize],
+        weights: &[f64],
+        num_actions: usize,
+        lanes: &dyn Lanes,
+    ) -> Result<KrrFactor, DemoModelError> {
         let (flat, state_dim) = validate(states, actions, num_actions)?;
+        let sw = square_roots(weights, actions.len())?;
         let n = actions.len();
         let lanes = if n < LANES_FROM { &Serial } else { lanes };
         let l = if n < BLOCKED_FROM {
-            small_factor(&flat, state_dim)?
+            small_factor(&flat, state_dim, &sw)?
         } else {
-            large_factor(&flat, state_dim, lanes)?
+            large_factor(&flat, state_dim, &sw, lanes)?
         };
         tracing::debug!(
             demos = n,
@@ -255,21 +296,24 @@ impl KrrFactor {
             actions: Vec::with_capacity(n),
             l,
             w: Vec::with_capacity(n * num_actions),
+            sw: Vec::with_capacity(n),
         };
-        for &a in actions {
+        for (&a, &s) in actions.iter().zip(&sw) {
+            f.sw.push(s);
             f.forward_row(a);
             f.actions.push(a);
         }
         Ok(f)
     }
 
-    /// Appends row `n` of `w = L⁻¹ Y` for the demonstration of `action` whose row of L is the
-    /// last: `w_n = (y_n − Σ_j l_nj w_j) / l_nn`, the products subtracted in order of j.
+    /// Appends row `n` of `w = L⁻¹ S Y` for the demonstration of `action` whose row of L and
+    /// weight are the last: `w_n = (s_n y_n − Σ_j l_nj w_j) / l_nn`, the products subtracted in
+    /// order of j.
     fn forward_row(&mut self, action: usize) {
         let (n, m) = (self.w.len() / self.num_actions, self.num_actions);
         let row = Rows(&self.l).row(n);
         for a in 0..m {
-            let mut v = if a == action { 1.0 } else { 0.0 };
+            let mut v = if a == action { self.sw[n] } else { 0.0 };
             for (l, w) in row[..n].iter().zip(self.w.iter().skip(a).step_by(m)) {
                 v -= l * w;
             }
@@ -305,15 +349,31 @@ impl KrrFactor {
         action: usize,
         lanes: &dyn Lanes,
     ) -> Result<(), DemoModelError> {
+        self.push_weighted(state, action, 1.0, lanes)
+    }
+
+    /// [`KrrFactor::push_on`] with the demonstration's weight (≥ 0; see
+    /// [`KrrFactor::fit_weighted`]): the same factor as fitting them all with their weights.
+    pub fn push_weighted(
+        &mut self,
+        state: &[f64],
+        action: usize,
+        weight: f64,
+        lanes: &dyn Lanes,
+    ) -> Result<(), DemoModelError> {
         let n = self.len();
         check_demo(n, state, action, self.state_dim, self.num_actions)?;
         if n + 1 > MAX_DEMOS {
             return Err(DemoModelError::TooManyDemos(n + 1));
         }
+        let s = square_roots(&[weight], 1)?[0];
         let mut kx = vec![0.0; n];
         rbf_row(state, &self.states, &mut kx);
+        for (k, &si) in kx.iter_mut().zip(&self.sw) {
+            *k *= si * s;
+        }
         let mut z = substitution::forward(Rows(&self.l), &kx, lanes);
-        let mut d = rbf(state, state) + ALPHA;
+        let mut d = rbf(state, state) * (s * s) + ALPHA;
         for zp in &z {
             d -= zp * zp;
         }
@@ -322,6 +382,7 @@ impl KrrFactor {
         }
         z.push(d.sqrt());
         self.l.extend_from_slice(&z);
+        self.sw.push(s);
         self.forward_row(action);
         self.states.extend_from_slice(state);
         self.actions.push(action);
@@ -345,7 +406,7 @@ impl KrrFactor {
         }
         let mut coef = vec![0.0; n * m];
         for (i, &a) in self.actions.iter().enumerate() {
-            coef[i * m + a] = 1.0;
+            coef[i * m + a] = self.sw[i];
         }
         let mut l = DMatrix::<f64>::zeros(n, n);
         for i in 0..n {
@@ -358,7 +419,7 @@ impl KrrFactor {
         l.ad_solve_lower_triangular_unchecked_mut(&mut y);
         for i in 0..n {
             for a in 0..m {
-                coef[i * m + a] = y[(i, a)];
+                coef[i * m + a] = y[(i, a)] * self.sw[i];
             }
         }
         self.with_coef(coef)
@@ -389,7 +450,7 @@ impl KrrFactor {
         let mut x = vec![0.0; n * m];
         for (a, col) in cols.chunks_exact(n).enumerate() {
             for (i, v) in col.iter().enumerate() {
-                x[i * m + a] = *v;
+                x[i * m + a] = *v * self.sw[i];
             }
         }
         x

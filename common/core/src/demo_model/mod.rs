@@ -121,6 +121,8 @@ pub enum DemoModelError {
     TooManyApproxDemos(usize),
     #[error("unsupported: {0}")]
     Unsupported(String),
+    #[error("{0}")]
+    Weights(String),
     #[error("the SVM solver failed: {0}")]
     Solver(String),
     #[error("unknown demonstration model kind {0:?} (expected \"krr\", \"svm\" or \"nystrom\")")]
