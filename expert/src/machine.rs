@@ -546,6 +546,7 @@ mod tests {
             action: (index % 2) as usize,
             step: u64::from(index) * 10,
             expert: "earlier".into(),
+            weight: 1.0,
         }
     }
 

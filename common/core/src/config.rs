@@ -92,6 +92,31 @@ pub struct DemosConfig {
     /// relative to the working directory.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prior: Option<String>,
+    /// With several experts (`[[experts]]`): `quality` weighs each demonstration in the KRR
+    /// model by its expert's estimated quality when it answered (as scikit-learn's
+    /// `sample_weight`; written to `demos.jsonl` as `weight`), `none` weighs them alike. The SVM
+    /// and Nyström models weigh every demonstration alike.
+    #[serde(default, skip_serializing_if = "Weighting::is_quality")]
+    pub weighting: Weighting,
+}
+
+/// How demonstrations of several experts are weighted in the demonstration model.
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Weighting {
+    /// By the estimated quality of the expert that answered.
+    #[default]
+    Quality,
+    /// Every demonstration alike.
+    None,
+}
+
+impl Weighting {
+    fn is_quality(&self) -> bool {
+        *self == Weighting::Quality
+    }
 }
 
 impl DemosConfig {

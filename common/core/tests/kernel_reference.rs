@@ -268,7 +268,10 @@ fn krr_with_weights_matches_scikit_learn_fitted_or_grown() {
                 max_err = max_err.max((r - e).abs());
             }
         }
-        println!("weighted case {c}: {} demos, max abs error {max_err:.3e}", a.len());
+        println!(
+            "weighted case {c}: {} demos, max abs error {max_err:.3e}",
+            a.len()
+        );
         assert!(max_err < 1e-8, "case {c}: max abs error {max_err:e}");
         // Grown a demonstration at a time from a fit on the first ones: the same factor.
         let k = a.len() - 5;

@@ -217,6 +217,7 @@ mod tests {
             action: (index % 2) as usize,
             step: 10 * u64::from(index),
             expert: "cartpole-perfect".to_owned(),
+            weight: 1.0,
         }
     }
 

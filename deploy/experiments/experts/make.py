@@ -51,6 +51,8 @@ def config(task):
         lines.append(line)
     head = [f"# The {task} preset with three experts at once.",
             "# Written by deploy/experiments/experts/make.py."]
+    # The study fits the demonstration model on every answer alike.
+    lines += ["[demos]", 'weighting = "none"', ""]
     for quality, cost in COSTS.items():
         lines += ["", "[[experts]]", f'name = "{prefix}-{quality}"', f"cost = {cost}"]
     (HERE / f"config-{task}.toml").write_text("\n".join(head + lines) + "\n")

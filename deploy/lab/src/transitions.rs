@@ -320,6 +320,7 @@ mod tests {
             action: 0,
             step,
             expert: "e".into(),
+            weight: 1.0,
         };
         let second = episodes[1].first_step;
         let ds = dataset(

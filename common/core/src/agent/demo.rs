@@ -17,6 +17,18 @@ pub struct DemoRecord {
     pub step: u64,
     /// The demonstrator that answered.
     pub expert: String,
+    /// Its weight in the demonstration model (KRR): with several experts and
+    /// `demos.weighting = "quality"`, its expert's estimated quality when it answered; else 1.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub weight: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn is_one(w: &f64) -> bool {
+    *w == 1.0
 }
 
 /// A step of an expert given before the run (`demos.prior`): a demonstration for the
@@ -40,6 +52,7 @@ impl PriorDemo {
             action: self.action,
             step: 0,
             expert: "prior".to_owned(),
+            weight: 1.0,
         }
     }
 

@@ -287,6 +287,19 @@ impl ExpertCore {
         step: u64,
         expert: &str,
     ) -> Option<&DemoRecord> {
+        self.record_weighted(state, action, step, expert, 1.0)
+    }
+
+    /// [`ExpertCore::record`] with the demonstration's weight in the model (KRR weighs it;
+    /// see [`DemoRecord::weight`]).
+    pub fn record_weighted(
+        &mut self,
+        state: &[f64],
+        action: usize,
+        step: u64,
+        expert: &str,
+        weight: f64,
+    ) -> Option<&DemoRecord> {
         if !self.budget.try_spend() {
             return None;
         }
@@ -296,6 +309,7 @@ impl ExpertCore {
             action,
             step,
             expert: expert.to_owned(),
+            weight,
         });
         if !self.deferred {
             if let Err(e) = self.refit() {
@@ -544,6 +558,7 @@ mod tests {
             action: i % 2,
             step: 0,
             expert: "prior".into(),
+            weight: 1.0,
         };
         let prior: Vec<DemoRecord> = (0..6).map(record).collect();
         for choice in [
@@ -609,5 +624,26 @@ mod tests {
             assert_eq!(grown, restored, "{choice:?}");
             assert_eq!(grown.num_demos(), n);
         }
+    }
+
+    #[test]
+    fn a_demonstration_s_weight_reaches_the_model_and_weight_zero_leaves_it_out() {
+        let schedule = crate::config::ShapingConfig::default().schedule();
+        let probs = |second_weight: f64| {
+            let mut core = ExpertCore::new(10, DemoModelChoice::Krr, 2, schedule);
+            core.record_weighted(&[0.0, 0.0], 0, 1, "a", 1.0).unwrap();
+            core.record_weighted(&[0.0, 0.0], 1, 2, "b", second_weight)
+                .unwrap();
+            core.model().unwrap().probs(&[0.0, 0.0])
+        };
+        // Contradicting answers at one state: even odds at equal weights; the zero-weight answer
+        // counts for nothing, as if only the first had been given.
+        let even = probs(1.0);
+        assert!((even[0] - even[1]).abs() < 1e-12, "{even:?}");
+        let mut alone = ExpertCore::new(10, DemoModelChoice::Krr, 2, schedule);
+        alone.record(&[0.0, 0.0], 0, 1, "a").unwrap();
+        assert_eq!(probs(0.0), alone.model().unwrap().probs(&[0.0, 0.0]));
+        let half = probs(0.5);
+        assert!(half[0] > half[1] && half[1] > 0.0, "{half:?}");
     }
 }

@@ -130,41 +130,42 @@ impl RefitJob {
                 DemoModel::Nystrom(grown(nystrom, set, m, lanes, solves)?.model()?)
             }
             DemoModelKind::Svm => {
-                let states: Vec<&[f64]> = set.iter().map(|d| d.state.as_slice()).collect();
-                let actions: Vec<usize> = set.iter().map(|d| d.action).collect();
+                let (states, actions) = columns(set);
                 DemoModel::fit_on(kind, &states, &actions, m, lanes)?
             }
         }))
     }
 }
 
-/// A model's state kept across demonstrations and grown by each: KRR's factor, the Nyström
-/// sums.
+/// A model's state kept across demonstrations and grown by each: KRR's factor (each
+/// demonstration at its weight), the Nyström sums (every demonstration alike).
 trait Grows: Sized {
     fn len(&self) -> usize;
-    fn push(
-        &mut self,
-        state: &[f64],
-        action: usize,
-        lanes: &dyn Lanes,
-    ) -> Result<(), DemoModelError>;
+    fn push(&mut self, demo: &DemoRecord, lanes: &dyn Lanes) -> Result<(), DemoModelError>;
     fn fit(
-        states: &[&[f64]],
-        actions: &[usize],
+        demos: &[&DemoRecord],
         num_actions: usize,
         lanes: &dyn Lanes,
     ) -> Result<Self, DemoModelError>;
+}
+
+/// The states and actions of `demos`.
+fn columns<'d>(demos: &[&'d DemoRecord]) -> (Vec<&'d [f64]>, Vec<usize>) {
+    let states = demos.iter().map(|d| d.state.as_slice()).collect();
+    (states, demos.iter().map(|d| d.action).collect())
 }
 
 impl Grows for KrrFactor {
     fn len(&self) -> usize {
         KrrFactor::len(self)
     }
-    fn push(&mut self, s: &[f64], a: usize, lanes: &dyn Lanes) -> Result<(), DemoModelError> {
-        KrrFactor::push_on(self, s, a, lanes)
+    fn push(&mut self, d: &DemoRecord, lanes: &dyn Lanes) -> Result<(), DemoModelError> {
+        KrrFactor::push_weighted(self, &d.state, d.action, d.weight, lanes)
     }
-    fn fit(s: &[&[f64]], a: &[usize], n: usize, lanes: &dyn Lanes) -> Result<Self, DemoModelError> {
-        KrrFactor::fit_on(s, a, n, lanes)
+    fn fit(demos: &[&DemoRecord], m: usize, lanes: &dyn Lanes) -> Result<Self, DemoModelError> {
+        let (states, actions) = columns(demos);
+        let weights: Vec<f64> = demos.iter().map(|d| d.weight).collect();
+        KrrFactor::fit_weighted(&states, &actions, &weights, m, lanes)
     }
 }
 
@@ -172,11 +173,12 @@ impl Grows for NystromFactor {
     fn len(&self) -> usize {
         NystromFactor::len(self)
     }
-    fn push(&mut self, s: &[f64], a: usize, _: &dyn Lanes) -> Result<(), DemoModelError> {
-        NystromFactor::push(self, s, a)
+    fn push(&mut self, d: &DemoRecord, _: &dyn Lanes) -> Result<(), DemoModelError> {
+        NystromFactor::push(self, &d.state, d.action)
     }
-    fn fit(s: &[&[f64]], a: &[usize], n: usize, _: &dyn Lanes) -> Result<Self, DemoModelError> {
-        NystromFactor::fit(s, a, n)
+    fn fit(demos: &[&DemoRecord], m: usize, _: &dyn Lanes) -> Result<Self, DemoModelError> {
+        let (states, actions) = columns(demos);
+        NystromFactor::fit(&states, &actions, m)
     }
 }
 
@@ -202,14 +204,12 @@ fn grown<'a, G: Grows>(
                 && (n - f.len() <= 1 || (n - f.len()) * GROW_AT_MOST_ONE_IN <= f.len()) =>
         {
             for d in &demos[f.len()..] {
-                f.push(&d.state, d.action, solves)?;
+                f.push(d, solves)?;
             }
         }
         _ => {
             *slot = None;
-            let states: Vec<&[f64]> = demos.iter().map(|d| d.state.as_slice()).collect();
-            let actions: Vec<usize> = demos.iter().map(|d| d.action).collect();
-            *slot = Some(G::fit(&states, &actions, num_actions, lanes)?);
+            *slot = Some(G::fit(demos, num_actions, lanes)?);
         }
     }
     Ok(slot.as_ref().expect("made above"))

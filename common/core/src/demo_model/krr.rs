@@ -260,7 +260,13 @@ impl KrrFactor {
         num_actions: usize,
         lanes: &dyn Lanes,
     ) -> Result<KrrFactor, DemoModelError> {
-        KrrFactor::fit_weighted(states, actions, &vec![1.0; actions.len()], num_actions, lanes)
+        KrrFactor::fit_weighted(
+            states,
+            actions,
+            &vec![1.0; actions.len()],
+            num_actions,
+            lanes,
+        )
     }
 
     /// [`KrrFactor::fit_on`] with a weight ≥ 0 for each demonstration, as scikit-learn's

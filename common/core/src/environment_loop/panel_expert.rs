@@ -6,7 +6,7 @@
 //! every expert's demonstrations).
 
 use crate::agent::{Demonstrator, ExpertCore};
-use crate::config::ExperimentConfig;
+use crate::config::{ExperimentConfig, Weighting};
 use crate::panel::{Member, Panel, Quality};
 use crate::policy::argmax;
 use crate::rng::{derive_seed, seeded, Rng};
@@ -62,6 +62,7 @@ pub struct PanelAsk<'d, S: ?Sized> {
     panel: Panel,
     rng: Rng,
     cost_budget: Option<f64>,
+    weighted: bool,
     log: PanelLog,
 }
 
@@ -93,6 +94,7 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
             ),
             rng: seeded(derive_seed(cfg.seed, "panel")),
             cost_budget: cfg.budget.cost,
+            weighted: cfg.demos.weighting == Weighting::Quality,
             log: PanelLog {
                 names: cfg.experts.iter().map(|e| e.name.clone()).collect(),
                 ..PanelLog::default()
@@ -184,7 +186,15 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
             let (agreed, opinions) =
                 others.fold((0, 0), |(g, n), a| (g + usize::from(a == action), n + 1));
             let name = self.panel.members()[expert].name.clone();
-            if core.record(x, action, step, &name).is_none() {
+            // Weighted by what the run knew of the expert before this answer.
+            let weight = match self.weighted {
+                true => self.panel.quality(expert).quality,
+                false => 1.0,
+            };
+            if core
+                .record_weighted(x, action, step, &name, weight)
+                .is_none()
+            {
                 break;
             }
             self.panel.answered(expert, agreed, opinions);
@@ -310,5 +320,30 @@ mod tests {
         assert!(!ask.can_pay());
         assert_eq!(ask.into_log().spent, 13.0);
         assert_eq!(core.demos().len(), 3);
+    }
+
+    #[test]
+    fn each_answer_weighs_its_expert_s_quality_before_it_unless_weighting_is_off() {
+        let x = [0.5f32, 0.0];
+        let (_, mut core, mut ask) = setup("[budget]\ntotal = 6\n");
+        for step in 0..3 {
+            ask.ask(&mut core, &x, &[0.5, 0.0], step).unwrap();
+        }
+        let log = ask.into_log();
+        let weights: Vec<f64> = core.demos().iter().map(|d| d.weight).collect();
+        // The quality an expert had before each of its answers: 0.5 before any rating.
+        let mut before = [0.5; 3];
+        let expected: Vec<f64> = log
+            .rows
+            .iter()
+            .map(|r| std::mem::replace(&mut before[r.expert], r.quality.quality))
+            .collect();
+        assert_eq!(weights, expected);
+        assert!(weights.iter().any(|&w| w != 0.5), "{weights:?}");
+        let (_, mut core, mut ask) = setup("[budget]\ntotal = 6\n[demos]\nweighting = \"none\"\n");
+        for step in 0..3 {
+            ask.ask(&mut core, &x, &[0.5, 0.0], step).unwrap();
+        }
+        assert!(core.demos().iter().all(|d| d.weight == 1.0));
     }
 }
