@@ -92,10 +92,9 @@ pub struct DemosConfig {
     /// relative to the working directory.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prior: Option<String>,
-    /// With several experts (`[[experts]]`): `quality` weighs each demonstration in the KRR
-    /// model by its expert's estimated quality when it answered (as scikit-learn's
-    /// `sample_weight`; written to `demos.jsonl` as `weight`), `none` weighs them alike. The SVM
-    /// and Nyström models weigh every demonstration alike.
+    /// With several experts: `quality` weighs each demonstration in the KRR model by its
+    /// expert's estimated quality when it answered (scikit-learn's `sample_weight`; `weight` in
+    /// `demos.jsonl`), `none` weighs them alike. SVM and Nyström weigh every one alike.
     #[serde(default, skip_serializing_if = "Weighting::is_quality")]
     pub weighting: Weighting,
 }

@@ -19,16 +19,13 @@ pub struct DemoRecord {
     pub expert: String,
     /// Its weight in the demonstration model (KRR): with several experts and
     /// `demos.weighting = "quality"`, its expert's estimated quality when it answered; else 1.
-    #[serde(default = "one", skip_serializing_if = "is_one")]
+    /// Always written: checkpoints store records in postcard, which has no optional fields.
+    #[serde(default = "one")]
     pub weight: f64,
 }
 
 fn one() -> f64 {
     1.0
-}
-
-fn is_one(w: &f64) -> bool {
-    *w == 1.0
 }
 
 /// A step of an expert given before the run (`demos.prior`): a demonstration for the
