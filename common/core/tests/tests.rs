@@ -16,3 +16,4 @@ mod resume;
 mod runner;
 mod separate_torsos;
 mod tidy;
+mod tidy_functions;

@@ -89,7 +89,7 @@ fn the_file_checks_walk_every_member_crate() {
 }
 
 /// Every `.rs` file of the workspace's crates.
-fn workspace_rust_files() -> Vec<PathBuf> {
+pub(crate) fn workspace_rust_files() -> Vec<PathBuf> {
     let mut files = Vec::new();
     for krate in workspace_members() {
         for sub in ["src", "tests", "benches"] {

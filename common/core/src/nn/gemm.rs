@@ -547,40 +547,25 @@ mod x86 {
         debug_assert!(MASKED || last == 8);
         debug_assert!(a.len() >= m * k && c.len() >= m * (j + W));
         let lanes: [i32; 8] = std::array::from_fn(|l| if l < last { -1 } else { 0 });
-        let mask = _mm256_loadu_si256(lanes.as_ptr().cast());
-        let load = |ptr: *const f32, v: usize| {
-            if MASKED && v + 1 == V {
-                _mm256_maskload_ps(ptr, mask)
-            } else {
-                _mm256_loadu_ps(ptr)
-            }
+        let t = Tile {
+            m,
+            i,
+            j,
+            mask: _mm256_loadu_si256(lanes.as_ptr().cast()),
         };
         let c = c.as_mut_ptr();
-        let at = |q: usize, v: usize| i + 8 * v + (j + q) * m;
-        let bias = |q: usize| match epi {
-            Epi::Bias(bias, _) => _mm256_broadcast_ss(&bias[j + q]),
-            _ => _mm256_setzero_ps(),
+        let mut acc = if FMA {
+            [[_mm256_setzero_ps(); V]; W]
+        } else {
+            t.start::<V, W, MASKED>(epi, c)
         };
-        let mut acc = [[_mm256_setzero_ps(); V]; W];
-        if !FMA {
-            // The sum starts at `c` or the bias.
-            for (q, acc) in acc.iter_mut().enumerate() {
-                for (v, x) in acc.iter_mut().enumerate() {
-                    *x = match epi {
-                        Epi::Add => load(c.add(at(q, v)), v),
-                        Epi::Bias(..) => bias(q),
-                        Epi::Set | Epi::Mask(_) => _mm256_setzero_ps(),
-                    };
-                }
-            }
-        }
         let a = a.as_ptr().add(i);
         let b_cols: [*const f32; W] = std::array::from_fn(|q| b.data.as_ptr().add((j + q) * b.cs));
         for p in 0..k {
             let col = a.add(p * m);
             let mut av = [_mm256_setzero_ps(); V];
             for (v, x) in av.iter_mut().enumerate() {
-                *x = load(col.add(8 * v), v);
+                *x = t.load::<V, MASKED>(col.add(8 * v), v);
             }
             for (acc, b_col) in acc.iter_mut().zip(b_cols) {
                 let bb = _mm256_broadcast_ss(&*b_col.add(p * b.rs));
@@ -593,33 +578,113 @@ mod x86 {
                 }
             }
         }
-        let zero = _mm256_setzero_ps();
-        for (q, acc) in acc.iter().enumerate() {
-            for (v, &x) in acc.iter().enumerate() {
-                let out = c.add(at(q, v));
-                let x = if FMA {
-                    match epi {
+        t.end::<V, W, MASKED, FMA>(&acc, epi, c);
+    }
+
+    /// Where a [`block`] sits in `c` (`m` rows, column-major): rows from `i`, columns from `j`;
+    /// `mask` the lanes of its last vector of rows that a `MASKED` block loads and stores.
+    #[derive(Clone, Copy)]
+    struct Tile {
+        m: usize,
+        i: usize,
+        j: usize,
+        mask: __m256i,
+    }
+
+    impl Tile {
+        /// The index in `c` of row vector `v` of column `j + q`.
+        fn at(self, q: usize, v: usize) -> usize {
+            self.i + 8 * v + (self.j + q) * self.m
+        }
+
+        /// Eight values from `ptr`, under the mask for the last vector `v` of a `MASKED` block.
+        ///
+        /// # Safety
+        /// The CPU has AVX2; `ptr` holds the eight values (the masked ones where masked).
+        #[target_feature(enable = "avx2,fma")]
+        #[inline]
+        unsafe fn load<const V: usize, const MASKED: bool>(
+            self,
+            ptr: *const f32,
+            v: usize,
+        ) -> __m256 {
+            if MASKED && v + 1 == V {
+                _mm256_maskload_ps(ptr, self.mask)
+            } else {
+                _mm256_loadu_ps(ptr)
+            }
+        }
+
+        /// Column `j + q`'s bias in every lane, or zeros without a bias.
+        ///
+        /// # Safety
+        /// The CPU has AVX2; a bias holds `j + q + 1` values.
+        #[target_feature(enable = "avx2,fma")]
+        #[inline]
+        unsafe fn bias(self, epi: Epi<'_>, q: usize) -> __m256 {
+            match epi {
+                Epi::Bias(bias, _) => _mm256_broadcast_ss(&bias[self.j + q]),
+                _ => _mm256_setzero_ps(),
+            }
+        }
+
+        /// The sums of a block without `FMA` as they start: at `c` or the bias ([`Epi::start`]).
+        ///
+        /// # Safety
+        /// As [`block`]'s.
+        #[target_feature(enable = "avx2,fma")]
+        #[inline]
+        unsafe fn start<const V: usize, const W: usize, const MASKED: bool>(
+            self,
+            epi: Epi<'_>,
+            c: *const f32,
+        ) -> [[__m256; V]; W] {
+            std::array::from_fn(|q| {
+                std::array::from_fn(|v| match epi {
+                    Epi::Add => self.load::<V, MASKED>(c.add(self.at(q, v)), v),
+                    Epi::Bias(..) => self.bias(epi, q),
+                    Epi::Set | Epi::Mask(_) => _mm256_setzero_ps(),
+                })
+            })
+        }
+
+        /// Ends a block's sums as [`Epi::fused`] (with `FMA`) or [`Epi::finish`] and stores them.
+        ///
+        /// # Safety
+        /// As [`block`]'s.
+        #[target_feature(enable = "avx2,fma")]
+        #[inline]
+        unsafe fn end<const V: usize, const W: usize, const MASKED: bool, const FMA: bool>(
+            self,
+            acc: &[[__m256; V]; W],
+            epi: Epi<'_>,
+            c: *mut f32,
+        ) {
+            let zero = _mm256_setzero_ps();
+            for (q, acc) in acc.iter().enumerate() {
+                for (v, &x) in acc.iter().enumerate() {
+                    let out = c.add(self.at(q, v));
+                    let x = match epi {
+                        _ if !FMA => x,
                         Epi::Set | Epi::Mask(_) => x,
-                        Epi::Add => _mm256_add_ps(x, load(out, v)),
-                        Epi::Bias(..) => _mm256_add_ps(x, bias(q)),
+                        Epi::Add => _mm256_add_ps(x, self.load::<V, MASKED>(out, v)),
+                        Epi::Bias(..) => _mm256_add_ps(x, self.bias(epi, q)),
+                    };
+                    let x = match epi {
+                        // `max` returns its second operand (0) for a NaN and for -0:
+                        // `f32::max(y, 0)` as it compiles on x86, and `Epi::finish`.
+                        Epi::Bias(_, true) => _mm256_max_ps(x, zero),
+                        Epi::Mask(h) => {
+                            let h = self.load::<V, MASKED>(h.as_ptr().add(self.at(q, v)), v);
+                            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(h, zero), x)
+                        }
+                        _ => x,
+                    };
+                    if MASKED && v + 1 == V {
+                        _mm256_maskstore_ps(out, self.mask, x);
+                    } else {
+                        _mm256_storeu_ps(out, x);
                     }
-                } else {
-                    x
-                };
-                let x = match epi {
-                    // `max` returns its second operand (0) for a NaN and for -0: `f32::max(y, 0)`
-                    // as it compiles on x86, and `Epi::finish`.
-                    Epi::Bias(_, true) => _mm256_max_ps(x, zero),
-                    Epi::Mask(h) => {
-                        let h = load(h.as_ptr().add(at(q, v)), v);
-                        _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(h, zero), x)
-                    }
-                    _ => x,
-                };
-                if MASKED && v + 1 == V {
-                    _mm256_maskstore_ps(out, mask, x);
-                } else {
-                    _mm256_storeu_ps(out, x);
                 }
             }
         }

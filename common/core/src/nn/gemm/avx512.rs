@@ -217,40 +217,25 @@ unsafe fn block<const V: usize, const W: usize, const MASKED: bool, const FMA: b
     debug_assert!((1..=16).contains(&last) && i + 16 * (V - 1) + last <= m);
     debug_assert!(MASKED || last == 16);
     debug_assert!(a.len() >= m * k && c.len() >= m * (j + W));
-    let mask: __mmask16 = ((1u32 << last) - 1) as u16;
-    let load = |ptr: *const f32, v: usize| {
-        if MASKED && v + 1 == V {
-            _mm512_maskz_loadu_ps(mask, ptr)
-        } else {
-            _mm512_loadu_ps(ptr)
-        }
+    let t = Tile {
+        m,
+        i,
+        j,
+        mask: ((1u32 << last) - 1) as u16,
     };
     let c = c.as_mut_ptr();
-    let at = |q: usize, v: usize| i + 16 * v + (j + q) * m;
-    let bias = |q: usize| match epi {
-        Epi::Bias(bias, _) => _mm512_set1_ps(bias[j + q]),
-        _ => _mm512_setzero_ps(),
+    let mut acc = if FMA {
+        [[_mm512_setzero_ps(); V]; W]
+    } else {
+        t.start::<V, W, MASKED>(epi, c)
     };
-    let mut acc = [[_mm512_setzero_ps(); V]; W];
-    if !FMA {
-        // The sum starts at `c` or the bias.
-        for (q, acc) in acc.iter_mut().enumerate() {
-            for (v, x) in acc.iter_mut().enumerate() {
-                *x = match epi {
-                    Epi::Add => load(c.add(at(q, v)), v),
-                    Epi::Bias(..) => bias(q),
-                    Epi::Set | Epi::Mask(_) => _mm512_setzero_ps(),
-                };
-            }
-        }
-    }
     let a = a.as_ptr().add(i);
     let b_cols: [*const f32; W] = std::array::from_fn(|q| b.data.as_ptr().add((j + q) * b.cs));
     for p in 0..k {
         let col = a.add(p * m);
         let mut av = [_mm512_setzero_ps(); V];
         for (v, x) in av.iter_mut().enumerate() {
-            *x = load(col.add(16 * v), v);
+            *x = t.load::<V, MASKED>(col.add(16 * v), v);
         }
         for (acc, b_col) in acc.iter_mut().zip(b_cols) {
             let b_at = b_col.add(p * b.rs);
@@ -266,33 +251,109 @@ unsafe fn block<const V: usize, const W: usize, const MASKED: bool, const FMA: b
             }
         }
     }
-    let zero = _mm512_setzero_ps();
-    for (q, acc) in acc.iter().enumerate() {
-        for (v, &x) in acc.iter().enumerate() {
-            let out = c.add(at(q, v));
-            let x = if FMA {
-                match epi {
+    t.end::<V, W, MASKED, FMA>(&acc, epi, c);
+}
+
+/// Where a [`block`] sits in `c` (`m` rows, column-major): rows from `i`, columns from `j`;
+/// `mask` the lanes of its last vector of rows that a `MASKED` block loads and stores.
+#[derive(Clone, Copy)]
+struct Tile {
+    m: usize,
+    i: usize,
+    j: usize,
+    mask: __mmask16,
+}
+
+impl Tile {
+    /// The index in `c` of row vector `v` of column `j + q`.
+    fn at(self, q: usize, v: usize) -> usize {
+        self.i + 16 * v + (self.j + q) * self.m
+    }
+
+    /// Sixteen values from `ptr`, under the mask for the last vector `v` of a `MASKED` block.
+    ///
+    /// # Safety
+    /// The CPU has AVX-512F; `ptr` holds the sixteen values (the masked ones where masked).
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    #[inline]
+    unsafe fn load<const V: usize, const MASKED: bool>(self, ptr: *const f32, v: usize) -> __m512 {
+        if MASKED && v + 1 == V {
+            _mm512_maskz_loadu_ps(self.mask, ptr)
+        } else {
+            _mm512_loadu_ps(ptr)
+        }
+    }
+
+    /// Column `j + q`'s bias in every lane, or zeros without a bias.
+    ///
+    /// # Safety
+    /// The CPU has AVX-512F; a bias holds `j + q + 1` values.
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    #[inline]
+    unsafe fn bias(self, epi: Epi<'_>, q: usize) -> __m512 {
+        match epi {
+            Epi::Bias(bias, _) => _mm512_set1_ps(bias[self.j + q]),
+            _ => _mm512_setzero_ps(),
+        }
+    }
+
+    /// The sums of a block without `FMA` as they start: at `c` or the bias ([`Epi::start`]).
+    ///
+    /// # Safety
+    /// As [`block`]'s.
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    #[inline]
+    unsafe fn start<const V: usize, const W: usize, const MASKED: bool>(
+        self,
+        epi: Epi<'_>,
+        c: *const f32,
+    ) -> [[__m512; V]; W] {
+        std::array::from_fn(|q| {
+            std::array::from_fn(|v| match epi {
+                Epi::Add => self.load::<V, MASKED>(c.add(self.at(q, v)), v),
+                Epi::Bias(..) => self.bias(epi, q),
+                Epi::Set | Epi::Mask(_) => _mm512_setzero_ps(),
+            })
+        })
+    }
+
+    /// Ends a block's sums as [`Epi::fused`] (with `FMA`) or [`Epi::finish`] and stores them.
+    ///
+    /// # Safety
+    /// As [`block`]'s.
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    #[inline]
+    unsafe fn end<const V: usize, const W: usize, const MASKED: bool, const FMA: bool>(
+        self,
+        acc: &[[__m512; V]; W],
+        epi: Epi<'_>,
+        c: *mut f32,
+    ) {
+        let zero = _mm512_setzero_ps();
+        for (q, acc) in acc.iter().enumerate() {
+            for (v, &x) in acc.iter().enumerate() {
+                let out = c.add(self.at(q, v));
+                let x = match epi {
+                    _ if !FMA => x,
                     Epi::Set | Epi::Mask(_) => x,
-                    Epi::Add => _mm512_add_ps(x, load(out, v)),
-                    Epi::Bias(..) => _mm512_add_ps(x, bias(q)),
+                    Epi::Add => _mm512_add_ps(x, self.load::<V, MASKED>(out, v)),
+                    Epi::Bias(..) => _mm512_add_ps(x, self.bias(epi, q)),
+                };
+                let x = match epi {
+                    // `max` returns its second operand (0) for a NaN and for -0, as the AVX2
+                    // block's `maxps` does.
+                    Epi::Bias(_, true) => _mm512_max_ps(x, zero),
+                    Epi::Mask(h) => {
+                        let h = self.load::<V, MASKED>(h.as_ptr().add(self.at(q, v)), v);
+                        _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(h, zero), x)
+                    }
+                    _ => x,
+                };
+                if MASKED && v + 1 == V {
+                    _mm512_mask_storeu_ps(out, self.mask, x);
+                } else {
+                    _mm512_storeu_ps(out, x);
                 }
-            } else {
-                x
-            };
-            let x = match epi {
-                // `max` returns its second operand (0) for a NaN and for -0, as the AVX2
-                // block's `maxps` does.
-                Epi::Bias(_, true) => _mm512_max_ps(x, zero),
-                Epi::Mask(h) => {
-                    let h = load(h.as_ptr().add(at(q, v)), v);
-                    _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(h, zero), x)
-                }
-                _ => x,
-            };
-            if MASKED && v + 1 == V {
-                _mm512_mask_storeu_ps(out, mask, x);
-            } else {
-                _mm512_storeu_ps(out, x);
             }
         }
     }
