@@ -28,6 +28,17 @@ pub fn run(args: CertsArgs) -> anyhow::Result<()> {
             args.days
         )));
     }
+    make(&args)
+}
+
+#[cfg(not(feature = "hosts"))]
+fn make(_: &CertsArgs) -> anyhow::Result<()> {
+    Err(crate::usage::without_hosts("alfd certs"))
+}
+
+/// The CA (made unless there) and each host's certificate and key.
+#[cfg(feature = "hosts")]
+fn make(args: &CertsArgs) -> anyhow::Result<()> {
     let bad = |e: alfd_bridge::BridgeError| usage(e.to_string());
     let dir = &args.dir;
     match alfd_bridge::make_ca(dir, args.days).map_err(bad)? {

@@ -168,11 +168,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
 
 /// The endpoint of `--listen` (if given), with `--actors` checked against it: at least one
 /// actor on this host unless other hosts bring them.
-fn listen_and_actors(args: &RunArgs) -> anyhow::Result<Option<alfd_bridge::Endpoint>> {
+fn listen_and_actors(args: &RunArgs) -> anyhow::Result<Option<alfd_launcher::Endpoint>> {
     let listen = args
         .listen
         .as_deref()
-        .map(|text| args.link.endpoint("--listen", text))
+        .map(|text| listen_on(args, text))
         .transpose()?;
     let least = usize::from(listen.is_none());
     if !(least..=MAX_ACTORS).contains(&args.actors) {
@@ -187,6 +187,17 @@ fn listen_and_actors(args: &RunArgs) -> anyhow::Result<Option<alfd_bridge::Endpo
         )));
     }
     Ok(listen)
+}
+
+#[cfg(feature = "hosts")]
+fn listen_on(args: &RunArgs, text: &str) -> anyhow::Result<alfd_launcher::Endpoint> {
+    args.link.endpoint("--listen", text)
+}
+
+/// `--listen` in a build without the `hosts` feature: exit 2, saying how to build it.
+#[cfg(not(feature = "hosts"))]
+fn listen_on(_: &RunArgs, text: &str) -> anyhow::Result<alfd_launcher::Endpoint> {
+    Err(crate::usage::without_hosts(&format!("--listen {text}")))
 }
 
 /// The human expert's page port (0: any free one), refused now if something else holds it

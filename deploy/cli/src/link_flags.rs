@@ -4,11 +4,15 @@
 
 use std::path::PathBuf;
 
+#[cfg(feature = "hosts")]
 use alfd_bridge::{Endpoint, Security, TlsFiles};
 
+#[cfg(feature = "hosts")]
 use crate::usage::usage;
 
+/// The flags; read only in a build with the `hosts` feature.
 #[derive(Debug, Clone, Default, clap::Args)]
+#[cfg_attr(not(feature = "hosts"), allow(dead_code))]
 pub struct LinkFlags {
     /// The run's CA certificate (PEM) for a quic/ endpoint (mutual TLS); `alfd certs DIR --host NAME` makes
     /// DIR/ca.pem, DIR/NAME.pem and DIR/NAME.key.
@@ -26,6 +30,7 @@ pub struct LinkFlags {
     pub insecure: bool,
 }
 
+#[cfg(feature = "hosts")]
 impl LinkFlags {
     /// `text` (the value of `flag`) as an endpoint with these flags' security; exit 2 naming
     /// what is missing or does not fit.
@@ -57,7 +62,7 @@ impl LinkFlags {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "hosts"))]
 mod tests {
     use super::*;
 

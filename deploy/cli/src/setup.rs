@@ -358,7 +358,11 @@ mod tls_refusals {
 
     /// The TLS reason in a QUIC connection error, or the whole text without zenoh's hint.
     pub(super) fn reason(text: &str) -> &str {
-        alfd_bridge::tls_reason(text).unwrap_or_else(|| text.trim_end_matches(HINT))
+        #[cfg(feature = "hosts")]
+        if let Some(reason) = alfd_bridge::tls_reason(text) {
+            return reason;
+        }
+        text.trim_end_matches(HINT)
     }
 
     struct Message(String);
@@ -371,7 +375,7 @@ mod tls_refusals {
         }
     }
 
-    #[cfg(test)]
+    #[cfg(all(test, feature = "hosts"))]
     mod tests {
         #[test]
         fn the_reason_is_taken_from_either_form_of_the_error() {

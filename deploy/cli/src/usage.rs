@@ -9,6 +9,17 @@ pub fn usage(msg: impl Into<String>) -> anyhow::Error {
     anyhow::Error::new(alfd_harness::BadInput(msg.into()))
 }
 
+/// A command or flag of runs across hosts in a build without the `hosts` feature (as
+/// `deploy/run.sh` builds the main job): exit 2, saying how to build it.
+#[cfg(not(feature = "hosts"))]
+pub fn without_hosts(what: &str) -> anyhow::Error {
+    usage(format!(
+        "{what} runs across hosts, and this alfd was built without them (the `hosts` \
+         feature; deploy/run.sh builds the main job so): build every feature with \
+         `cargo build --release --workspace`"
+    ))
+}
+
 /// Whether `err` is the user's to fix (exit code 2).
 #[cfg(test)]
 pub fn is_usage_error(err: &anyhow::Error) -> bool {

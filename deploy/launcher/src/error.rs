@@ -8,6 +8,7 @@ pub enum LaunchError {
     Harness(#[from] alfd_harness::HarnessError),
     #[error(transparent)]
     Wire(#[from] alfd_wire::WireError),
+    #[cfg(feature = "hosts")]
     #[error(transparent)]
     Bridge(#[from] alfd_bridge::BridgeError),
     #[error(transparent)]

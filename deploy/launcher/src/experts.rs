@@ -135,4 +135,14 @@ impl<'a, 'w> Launcher<'a, 'w> {
         }
         Ok(())
     }
+
+    /// The replacement of a lost expert cannot serve: the run goes on, the actors act on their
+    /// own (their queries cost nothing while no expert is active).
+    pub(super) fn no_expert(&self, generation: u16, message: &str) {
+        warn!(
+            "{message}; see {}. The run goes on without an expert: the actors act on their \
+             own (a host may offer one with `alfd join --expert`, or `alfd swap-expert`)",
+            self.log_of(&format!("expert-{generation}"))
+        );
+    }
 }

@@ -38,6 +38,10 @@ mod error;
 pub mod expert_lifecycle;
 mod experts;
 mod finish;
+#[cfg(feature = "hosts")]
+mod remote;
+#[cfg(not(feature = "hosts"))]
+#[path = "remote_off.rs"]
 mod remote;
 
 use std::collections::{HashMap, VecDeque};
@@ -64,6 +68,9 @@ use expert_lifecycle::{Action, Exit, ExpertLifecycle};
 
 pub use children::{describe as describe_status, find_process};
 pub use error::{LaunchError, Result};
+/// Where `--listen` takes other hosts' actors: `alfd_bridge::Endpoint`, or, in a build without
+/// the `hosts` feature, a type with no value (no run there listens).
+pub use remote::Endpoint;
 
 /// The launcher's own processes whose restarts it counts (the expert's are the lifecycle's).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -101,7 +108,7 @@ pub struct Plan {
     pub restore_actors: Vec<Option<u64>>,
     /// Take actors from other hosts too (`--listen`, see `alfd_bridge` and `remote.rs`); such a
     /// run has no per-actor episode shares: every actor plays to the run's limit.
-    pub listen: Option<alfd_bridge::Endpoint>,
+    pub listen: Option<Endpoint>,
 }
 
 impl Plan {
@@ -359,7 +366,7 @@ struct Launcher<'a, 'w> {
     bar: indicatif::ProgressBar,
     rate: RateMeter,
     /// The bridge to other hosts (`--listen`), once the learner is up.
-    hub: Option<alfd_bridge::Hub>,
+    hub: Option<remote::Hub>,
     /// Remote hosts that joined, and that left or dropped (their links).
     remote_joins: u32,
     remote_losses: u32,

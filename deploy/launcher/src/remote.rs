@@ -16,6 +16,8 @@ use alfd_wire::command;
 use super::{Launcher, SwapRequest};
 use crate::expert_lifecycle::Exit;
 
+pub use alfd_bridge::{Endpoint, Hub};
+
 /// The request id of a swap to a remote host's expert.
 const JOIN_SWAP: &str = "join:";
 
@@ -36,7 +38,7 @@ impl RemoteExperts {
 }
 
 impl Launcher<'_, '_> {
-    pub(super) fn start_hub(&self, endpoint: &alfd_bridge::Endpoint) -> Result<alfd_bridge::Hub> {
+    pub(super) fn start_hub(&self, endpoint: &Endpoint) -> Result<Hub> {
         let read = |name: &str| {
             std::fs::read_to_string(self.plan.run_dir.join(name))
                 .what(|| format!("cannot read {name} of the run"))
@@ -156,16 +158,6 @@ impl Launcher<'_, '_> {
         // Restarted here under the same name if it can be; else the run goes on without it.
         let actions = self.experts.lost(generation, &exit, Instant::now());
         self.apply(actions)
-    }
-
-    /// The replacement of a lost remote expert cannot serve here: the run goes on, the actors
-    /// act on their own (their queries cost nothing while no expert is active).
-    pub(super) fn no_expert(&self, generation: u16, message: &str) {
-        warn!(
-            "{message}; see {}. The run goes on without an expert: the actors act on their \
-             own (a host may offer one with `alfd join --expert`, or `alfd swap-expert`)",
-            self.log_of(&format!("expert-{generation}"))
-        );
     }
 
     /// A `Spawn` of the lifecycle while a remote host's offer is taken: the host starts it.

@@ -110,8 +110,9 @@ pub type Table = BTreeMap<String, BTreeMap<u32, Cell>>;
 pub fn cell(runs: &[Run], threshold: Option<f64>, stream: &str) -> Cell {
     let resamples = Resamples::new(runs.len(), stream);
     let scores: Vec<f64> = runs.iter().filter_map(final_score).collect();
-    let score = (scores.len() == runs.len() && !runs.is_empty())
-        .then(|| resamples.estimate(&scores, stats::mean));
+    let score = (scores.len() == runs.len() && !runs.is_empty()).then(|| {
+        Resamples::new(runs.len(), super::summary::FINAL_EVAL_STREAM).estimate(&scores, stats::mean)
+    });
     let (demos_to, reached) = match threshold {
         Some(t) if runs.iter().any(|r| r.episodes.eval_return.is_some()) => {
             let d: Vec<f64> = runs
@@ -283,6 +284,27 @@ mod tests {
         assert_eq!(demos_to_threshold(&e, -100.0), f64::INFINITY);
         // 20 demonstrations over 1000 steps.
         assert_eq!(expert_share(&e), 0.02);
+    }
+
+    #[test]
+    fn a_final_greedy_mean_has_one_interval_in_the_budget_table_and_the_summary() {
+        let runs: Vec<Run> = (0..12)
+            .map(|i| Run {
+                episodes: episodes(
+                    vec![f64::NAN, -200.0 + 7.0 * f64::from(i), f64::NAN],
+                    vec![1.0, 2.0, 3.0],
+                    vec![10.0, 20.0, 30.0],
+                ),
+                wall_clock_s: 1.0,
+                greedy_value: None,
+                optimal_value: None,
+                costs: None,
+            })
+            .collect();
+        let in_budget = cell(&runs, None, "some-method").score.unwrap();
+        let in_summary = super::super::summary::final_eval(&runs).unwrap().mean;
+        assert_eq!(in_budget, in_summary);
+        assert!(in_budget.ci.low < in_budget.value && in_budget.value < in_budget.ci.high);
     }
 
     #[test]

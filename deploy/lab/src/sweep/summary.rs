@@ -211,8 +211,13 @@ pub fn analyse<'a>(
     })
 }
 
+/// The bootstrap stream of the seeds' final greedy evaluations: every table that gives their
+/// mean (the summary's "final eval", the budget table's "final greedy") resamples them alike,
+/// so one mean has one interval.
+pub const FINAL_EVAL_STREAM: &str = "eval";
+
 /// The mean and IQM of the seeds' last evaluation returns (`None` when no seed has one).
-fn final_eval(runs: &[Run]) -> Option<EvalResult> {
+pub(super) fn final_eval(runs: &[Run]) -> Option<EvalResult> {
     let last: Vec<f64> = runs
         .iter()
         .filter_map(|r| {
@@ -228,7 +233,7 @@ fn final_eval(runs: &[Run]) -> Option<EvalResult> {
     if last.is_empty() {
         return None;
     }
-    let resamples = Resamples::new(last.len(), "eval");
+    let resamples = Resamples::new(last.len(), FINAL_EVAL_STREAM);
     Some(EvalResult {
         seeds: last.len(),
         mean: resamples.estimate(&last, stats::mean),
