@@ -16,4 +16,5 @@ mod resume;
 mod runner;
 mod separate_torsos;
 mod tidy;
+mod tidy_features;
 mod tidy_functions;

@@ -261,7 +261,7 @@ const FORBIDDEN_NAMES: &[(&str, &str)] = &[
 
 /// `text` without comments, string literals and character literals (each replaced by a space),
 /// so that what is left is code.
-fn code_only(text: &str) -> String {
+pub(crate) fn code_only(text: &str) -> String {
     let c: Vec<char> = text.chars().collect();
     let mut out = String::with_capacity(text.len());
     let mut i = 0;

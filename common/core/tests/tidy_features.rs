@@ -1,0 +1,73 @@
+//! The main job's build stays whole: `deploy/run.sh` builds `alfd` without the `hosts` feature
+//! (no zenoh bridge), so outside the bridge's own crate only the files listed here may name
+//! `alfd_bridge` in code, each behind the feature (a module declared under
+//! `#[cfg(feature = "hosts")]`, items or lines gated in the file, or a binary whose
+//! `required-features` has it). A new file that needs the bridge is gated and added here.
+
+use crate::tidy::{code_only, workspace, workspace_rust_files};
+
+/// The files outside `common/bridge` whose code names `alfd_bridge`, and how each is gated.
+const GATED: [(&str, &str); 7] = [
+    ("deploy/launcher/src/remote.rs", "the module, in lib.rs"),
+    ("deploy/launcher/src/error.rs", "the `Bridge` variant"),
+    (
+        "deploy/cli/src/cmd_join/host.rs",
+        "the module, in cmd_join.rs",
+    ),
+    ("deploy/cli/src/cmd_certs.rs", "`make`"),
+    (
+        "deploy/cli/src/link_flags.rs",
+        "the import and `impl LinkFlags`",
+    ),
+    ("deploy/cli/src/setup.rs", "the line in `reason`"),
+    ("deploy/cli/src/bin/alfd-bench-ipc.rs", "required-features"),
+];
+
+/// How many times `file`'s text gates something on the `hosts` feature.
+fn gates(text: &str) -> usize {
+    text.matches("feature = \"hosts\"").count()
+}
+
+#[test]
+fn outside_the_bridge_only_files_behind_the_hosts_feature_name_it() {
+    let mut naming = Vec::new();
+    for f in workspace_rust_files() {
+        let rel = f
+            .strip_prefix(workspace())
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        if rel.starts_with("common/bridge/") || rel.contains("/tests/") {
+            continue;
+        }
+        if code_only(&std::fs::read_to_string(&f).unwrap()).contains("alfd_bridge") {
+            naming.push(rel);
+        }
+    }
+    naming.sort();
+    let mut listed: Vec<String> = GATED.iter().map(|(f, _)| (*f).to_owned()).collect();
+    listed.sort();
+    assert_eq!(
+        naming, listed,
+        "files whose code names alfd_bridge: gate each behind the `hosts` feature and list it"
+    );
+    let read = |rel: &str| std::fs::read_to_string(workspace().join(rel)).unwrap();
+    let declared_gated = |parent: &str, module: &str| {
+        read(parent).contains(&format!("#[cfg(feature = \"hosts\")]\nmod {module};"))
+    };
+    assert!(declared_gated("deploy/launcher/src/lib.rs", "remote"));
+    assert!(declared_gated("deploy/cli/src/cmd_join.rs", "host"));
+    for file in [
+        "deploy/launcher/src/error.rs",
+        "deploy/cli/src/cmd_certs.rs",
+        "deploy/cli/src/link_flags.rs",
+        "deploy/cli/src/setup.rs",
+    ] {
+        assert!(gates(&read(file)) > 0, "{file} gates nothing on `hosts`");
+    }
+    let manifest = read("deploy/cli/Cargo.toml");
+    let bench = manifest
+        .split("[[bin]]")
+        .find(|b| b.contains("alfd-bench-ipc"));
+    assert!(bench.is_some_and(|b| b.contains("required-features = [\"hosts\"]")));
+}
