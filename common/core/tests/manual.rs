@@ -185,7 +185,7 @@ fn intervals(text: &str) -> Vec<[(f64, usize); 3]> {
 }
 
 /// `text` without its generated parts and code blocks.
-fn prose(text: &str) -> String {
+pub(crate) fn prose(text: &str) -> String {
     let mut out = String::new();
     let (mut generated, mut fenced) = (false, false);
     for line in text.lines() {

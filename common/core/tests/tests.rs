@@ -10,6 +10,7 @@ mod js_reference;
 mod kernel_reference;
 mod learner_options;
 mod manual;
+mod manual_numbers;
 mod mlp_reference;
 mod nn_checkpoint;
 mod resume;

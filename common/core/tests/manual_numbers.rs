@@ -1,0 +1,131 @@
+//! Numbers with two or more decimals quoted in the prose of README, EXPERIMENTS, BENCHMARKS and
+//! the manual come from committed results: each is found in a file under `results/`, rounded to
+//! the prose's decimals. Code spans (`beta2 = 0.999`) are settings, not results, and are skipped;
+//! so are the generated parts and code blocks, which `alfd docs --check` keeps equal to their
+//! sources.
+
+use std::collections::HashSet;
+use std::path::PathBuf;
+
+use crate::manual::{chapters, prose};
+use crate::tidy::workspace;
+
+/// The fewest decimals a quoted number needs to be checked: counts, years and settings such as
+/// "0.5" are not results.
+const DECIMALS: usize = 2;
+
+/// `text` without its inline code spans.
+fn without_code_spans(text: &str) -> String {
+    text.split('`').step_by(2).collect::<Vec<_>>().join(" ")
+}
+
+/// Every number of `text` with at least [`DECIMALS`] decimals, as prose writes it ("−0.015",
+/// "+4.497", "1,347.50"), normalised to `-0.015`, `4.497`, `1347.50`.
+fn decimals_in(text: &str) -> Vec<String> {
+    let chars: Vec<char> = text.chars().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < chars.len() {
+        let starts = chars[i].is_ascii_digit()
+            && (i == 0 || !(chars[i - 1].is_alphanumeric() || ".,_".contains(chars[i - 1])));
+        if !starts {
+            i += 1;
+            continue;
+        }
+        // A sign directly before, itself not after a word or number ("0.50-0.68" is a range).
+        let negative = i > 0
+            && "-−".contains(chars[i - 1])
+            && (i < 2 || !(chars[i - 2].is_alphanumeric() || chars[i - 2] == '.'));
+        let mut j = i;
+        while j < chars.len() && (chars[j].is_ascii_digit() || chars[j] == ',') {
+            j += 1;
+        }
+        if j >= chars.len() || chars[j] != '.' {
+            i = j;
+            continue;
+        }
+        let whole: String = chars[i..j].iter().filter(|c| **c != ',').collect();
+        let mut k = j + 1;
+        while k < chars.len() && chars[k].is_ascii_digit() {
+            k += 1;
+        }
+        let ends = k >= chars.len() || !(chars[k].is_alphanumeric() || chars[k] == '_');
+        let more_dots = k < chars.len()
+            && chars[k] == '.'
+            && chars.get(k + 1).is_some_and(char::is_ascii_digit);
+        if k - j > DECIMALS && ends && !more_dots {
+            let sign = if negative { "-" } else { "" };
+            out.push(format!(
+                "{sign}{whole}.{}",
+                chars[j + 1..k].iter().collect::<String>()
+            ));
+        }
+        i = k;
+    }
+    out
+}
+
+/// Every decimal number of the committed results, formatted with 2 to 6 decimals.
+fn results_values() -> HashSet<String> {
+    let mut values = HashSet::new();
+    let mut dirs = vec![workspace().join("results")];
+    while let Some(dir) = dirs.pop() {
+        for e in std::fs::read_dir(&dir).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                dirs.push(p);
+                continue;
+            }
+            let ext = p.extension().and_then(|x| x.to_str()).unwrap_or("");
+            if !["md", "csv", "txt", "json"].contains(&ext) {
+                continue;
+            }
+            let text = std::fs::read_to_string(&p).unwrap_or_default();
+            let tokens = text.split(|c: char| !(c.is_ascii_digit() || ".eE+-".contains(c)));
+            for v in tokens
+                .filter(|t| t.contains('.'))
+                .filter_map(|t| t.parse::<f64>().ok())
+            {
+                for d in DECIMALS..=6 {
+                    values.insert(format!("{v:.d$}"));
+                }
+            }
+        }
+    }
+    values
+}
+
+#[test]
+fn every_number_with_decimals_quoted_in_prose_is_in_a_committed_results_file() {
+    assert_eq!(
+        decimals_in("final −0.015 [+4.497, 1,347.50] at 0.5, v0.3.6, x1.25, 0.50-0.68, 12 345.67 and 12.345."),
+        ["-0.015", "4.497", "1347.50", "0.50", "0.68", "345.67", "12.345"]
+    );
+    assert_eq!(without_code_spans("a `beta2 = 0.999` b"), "a   b");
+    let found = results_values();
+    let mut docs: Vec<PathBuf> = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"]
+        .iter()
+        .map(|d| workspace().join(d))
+        .collect();
+    docs.extend(chapters());
+    let (mut quoted, mut missing) = (0, Vec::new());
+    for doc in &docs {
+        let text = without_code_spans(&prose(&std::fs::read_to_string(doc).unwrap()));
+        for number in decimals_in(&text) {
+            quoted += 1;
+            if !found.contains(&number) {
+                let name = doc.strip_prefix(workspace()).unwrap().display();
+                missing.push(format!("{name}: {number}"));
+            }
+        }
+    }
+    assert!(
+        quoted >= 200,
+        "only {quoted} numbers read: the reader is broken"
+    );
+    assert!(
+        missing.is_empty(),
+        "numbers in prose that no file under results/ holds (to the prose's decimals):\n{}",
+        missing.join("\n")
+    );
+}
