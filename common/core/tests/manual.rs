@@ -206,9 +206,9 @@ pub(crate) fn prose(text: &str) -> String {
     out
 }
 
-#[test]
-fn every_interval_quoted_in_prose_is_in_a_committed_results_file() {
-    let mut found: Vec<[f64; 3]> = Vec::new();
+/// The text of every Markdown, CSV, text and JSON file under `results/`.
+pub(crate) fn results_texts() -> Vec<String> {
+    let mut texts = Vec::new();
     let mut dirs = vec![workspace().join("results")];
     while let Some(dir) = dirs.pop() {
         for e in std::fs::read_dir(&dir).unwrap().flatten() {
@@ -219,11 +219,20 @@ fn every_interval_quoted_in_prose_is_in_a_committed_results_file() {
                 .extension()
                 .is_some_and(|x| ["md", "csv", "txt", "json"].contains(&x.to_str().unwrap()))
             {
-                let text = std::fs::read_to_string(&p).unwrap_or_default();
-                found.extend(intervals(&text).iter().map(|t| t.map(|(v, _)| v)));
+                texts.push(std::fs::read_to_string(&p).unwrap_or_default());
             }
         }
     }
+    texts
+}
+
+#[test]
+fn every_interval_quoted_in_prose_is_in_a_committed_results_file() {
+    let found: Vec<[f64; 3]> = results_texts()
+        .iter()
+        .flat_map(|text| intervals(text))
+        .map(|t| t.map(|(v, _)| v))
+        .collect();
     let mut docs: Vec<PathBuf> = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"]
         .iter()
         .map(|d| workspace().join(d))

@@ -7,7 +7,7 @@
 use std::collections::HashSet;
 use std::path::PathBuf;
 
-use crate::manual::{chapters, prose};
+use crate::manual::{chapters, prose, results_texts};
 use crate::tidy::workspace;
 
 /// The fewest decimals a quoted number needs to be checked: counts, years and settings such as
@@ -68,27 +68,14 @@ fn decimals_in(text: &str) -> Vec<String> {
 /// Every decimal number of the committed results, formatted with 2 to 6 decimals.
 fn results_values() -> HashSet<String> {
     let mut values = HashSet::new();
-    let mut dirs = vec![workspace().join("results")];
-    while let Some(dir) = dirs.pop() {
-        for e in std::fs::read_dir(&dir).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                dirs.push(p);
-                continue;
-            }
-            let ext = p.extension().and_then(|x| x.to_str()).unwrap_or("");
-            if !["md", "csv", "txt", "json"].contains(&ext) {
-                continue;
-            }
-            let text = std::fs::read_to_string(&p).unwrap_or_default();
-            let tokens = text.split(|c: char| !(c.is_ascii_digit() || ".eE+-".contains(c)));
-            for v in tokens
-                .filter(|t| t.contains('.'))
-                .filter_map(|t| t.parse::<f64>().ok())
-            {
-                for d in DECIMALS..=6 {
-                    values.insert(format!("{v:.d$}"));
-                }
+    for text in results_texts() {
+        let tokens = text.split(|c: char| !(c.is_ascii_digit() || ".eE+-".contains(c)));
+        for v in tokens
+            .filter(|t| t.contains('.'))
+            .filter_map(|t| t.parse::<f64>().ok())
+        {
+            for d in DECIMALS..=6 {
+                values.insert(format!("{v:.d$}"));
             }
         }
     }
