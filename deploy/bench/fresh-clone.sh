@@ -8,7 +8,11 @@
 # beside the clones, as CI has it.
 #
 #   bash deploy/bench/fresh-clone.sh
+#   bash deploy/bench/fresh-clone.sh --main-job-only   # the main job alone (about 4 minutes),
+#                                                      # to results/fresh-clone/main-job.md
 set -euo pipefail
+main_job_only=false
+[ "${1:-}" = "--main-job-only" ] && main_job_only=true
 repo="$(cd "$(dirname "$0")/../.." && pwd)"
 work="$(mktemp -d /tmp/alfd-fresh-clone-XXXXXX)"
 trap 'rm -rf "$work"' EXIT
@@ -28,9 +32,11 @@ timed() { # NAME DIR COMMAND...: runs COMMAND in DIR, prints its seconds, keeps 
   echo $((end - start))
 }
 
-git clone -q "$repo" "$work/ci"
-ci_s="$(timed ci "$work/ci" bash .ci/run)"
-tests="$(grep -o 'test result: ok. [0-9]* passed' "$work/ci.log" | awk '{s += $4} END {print s}')"
+if ! $main_job_only; then
+  git clone -q "$repo" "$work/ci"
+  ci_s="$(timed ci "$work/ci" bash .ci/run)"
+  tests="$(grep -o 'test result: ok. [0-9]* passed' "$work/ci.log" | awk '{s += $4} END {print s}')"
+fi
 git clone -q "$repo" "$work/main-job"
 job_s="$(timed main-job "$work/main-job" bash deploy/run.sh --quiet --json)"
 train_s="$(tail -n 1 "$work/main-job.log" | python3 -c 'import json,sys; print(json.loads(sys.stdin.read())["wall_clock_s"])')"
@@ -38,6 +44,21 @@ train_s="$(tail -n 1 "$work/main-job.log" | python3 -c 'import json,sys; print(j
 mmss() { printf '%d min %d s' $(($1 / 60)) $(($1 % 60)); }
 cpu="$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//')"
 mkdir -p "$repo/results/fresh-clone"
+if $main_job_only; then
+  cat >"$repo/results/fresh-clone/main-job.md" <<MD
+# The main job on a fresh clone
+
+Written by \`bash deploy/bench/fresh-clone.sh --main-job-only\`.
+
+## Times
+
+Measured $(date -u +%Y-%m-%d) on $cpu, $(nproc) cores, commit $commit, in a fresh clone with an
+empty target directory: \`bash deploy/run.sh\` (the main job) took $(mmss "$job_s"), of which
+training $(printf '%.0f' "$train_s") s and the build the rest.
+MD
+  echo "fresh-clone.sh: deploy/run.sh $(mmss "$job_s")"
+  exit 0
+fi
 cat >"$repo/results/fresh-clone/summary.md" <<MD
 # The README's two commands on a fresh clone
 
