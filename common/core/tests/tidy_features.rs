@@ -1,6 +1,6 @@
 //! The main job's build stays whole: `deploy/run.sh` builds `alfd` without the `hosts` feature
-//! (no zenoh bridge), so outside the bridge's own crate only the files listed here may name
-//! `alfd_bridge` in code, each behind the feature (a module declared under
+//! (no zenoh bridge) and without `minari` (no Arrow). Outside the bridge's own crate only the
+//! files listed here may name `alfd_bridge` in code, each behind the feature (a module declared under
 //! `#[cfg(feature = "hosts")]`, items or lines gated in the file, or a binary whose
 //! `required-features` has it). A new file that needs the bridge is gated and added here.
 
@@ -70,4 +70,29 @@ fn outside_the_bridge_only_files_behind_the_hosts_feature_name_it() {
         .split("[[bin]]")
         .find(|b| b.contains("alfd-bench-ipc"));
     assert!(bench.is_some_and(|b| b.contains("required-features = [\"hosts\"]")));
+}
+
+/// Arrow (Minari datasets) is read and written only in the lab's `minari/arrow_io.rs`, which
+/// the lab declares under its `minari` feature, as `deploy/run.sh` builds the main job without.
+#[test]
+fn only_the_gated_minari_module_names_arrow() {
+    let mut naming = Vec::new();
+    for f in workspace_rust_files() {
+        let rel = f
+            .strip_prefix(workspace())
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        let code = code_only(&std::fs::read_to_string(&f).unwrap());
+        if !rel.contains("/tests/")
+            && ["arrow_array", "arrow_schema", "arrow_ipc"]
+                .iter()
+                .any(|c| code.contains(c))
+        {
+            naming.push(rel);
+        }
+    }
+    assert_eq!(naming, ["deploy/lab/src/minari/arrow_io.rs"]);
+    let minari = std::fs::read_to_string(workspace().join("deploy/lab/src/minari.rs")).unwrap();
+    assert!(minari.contains("#[cfg(feature = \"minari\")]\nmod arrow_io;"));
 }
