@@ -23,28 +23,25 @@ const GATED: [(&str, &str); 7] = [
     ("deploy/cli/src/bin/alfd-bench-ipc.rs", "required-features"),
 ];
 
-/// How many times `file`'s text gates something on the `hosts` feature.
-fn gates(text: &str) -> usize {
-    text.matches("feature = \"hosts\"").count()
+/// The files outside `tests/` and outside `skip` (a path prefix) whose code names any of
+/// `names`, sorted.
+fn naming(skip: &str, names: &[&str]) -> Vec<String> {
+    let mut found: Vec<String> = workspace_rust_files()
+        .iter()
+        .filter_map(|f| {
+            let rel = f.strip_prefix(workspace()).unwrap().to_string_lossy();
+            let skipped = rel.contains("/tests/") || (!skip.is_empty() && rel.starts_with(skip));
+            let code = code_only(&std::fs::read_to_string(f).unwrap());
+            (!skipped && names.iter().any(|n| code.contains(n))).then(|| rel.into_owned())
+        })
+        .collect();
+    found.sort();
+    found
 }
 
 #[test]
 fn outside_the_bridge_only_files_behind_the_hosts_feature_name_it() {
-    let mut naming = Vec::new();
-    for f in workspace_rust_files() {
-        let rel = f
-            .strip_prefix(workspace())
-            .unwrap()
-            .to_string_lossy()
-            .into_owned();
-        if rel.starts_with("common/bridge/") || rel.contains("/tests/") {
-            continue;
-        }
-        if code_only(&std::fs::read_to_string(&f).unwrap()).contains("alfd_bridge") {
-            naming.push(rel);
-        }
-    }
-    naming.sort();
+    let naming = naming("common/bridge/", &["alfd_bridge"]);
     let mut listed: Vec<String> = GATED.iter().map(|(f, _)| (*f).to_owned()).collect();
     listed.sort();
     assert_eq!(
@@ -63,7 +60,8 @@ fn outside_the_bridge_only_files_behind_the_hosts_feature_name_it() {
         "deploy/cli/src/link_flags.rs",
         "deploy/cli/src/setup.rs",
     ] {
-        assert!(gates(&read(file)) > 0, "{file} gates nothing on `hosts`");
+        let gated = read(file).contains("feature = \"hosts\"");
+        assert!(gated, "{file} gates nothing on `hosts`");
     }
     let manifest = read("deploy/cli/Cargo.toml");
     let bench = manifest
@@ -76,22 +74,7 @@ fn outside_the_bridge_only_files_behind_the_hosts_feature_name_it() {
 /// the lab declares under its `minari` feature, as `deploy/run.sh` builds the main job without.
 #[test]
 fn only_the_gated_minari_module_names_arrow() {
-    let mut naming = Vec::new();
-    for f in workspace_rust_files() {
-        let rel = f
-            .strip_prefix(workspace())
-            .unwrap()
-            .to_string_lossy()
-            .into_owned();
-        let code = code_only(&std::fs::read_to_string(&f).unwrap());
-        if !rel.contains("/tests/")
-            && ["arrow_array", "arrow_schema", "arrow_ipc"]
-                .iter()
-                .any(|c| code.contains(c))
-        {
-            naming.push(rel);
-        }
-    }
+    let naming = naming("", &["arrow_array", "arrow_schema", "arrow_ipc"]);
     assert_eq!(naming, ["deploy/lab/src/minari/arrow_io.rs"]);
     let minari = std::fs::read_to_string(workspace().join("deploy/lab/src/minari.rs")).unwrap();
     assert!(minari.contains("#[cfg(feature = \"minari\")]\nmod arrow_io;"));
