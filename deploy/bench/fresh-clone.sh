@@ -3,7 +3,8 @@
 # other: `bash .ci/run` (the test command as CI runs it: build, the Python pieces, every test)
 # and `bash deploy/run.sh` (the main job: build and train), each in a clone of its own with an
 # empty target directory (crates already downloaded stay in ~/.cargo). Written to
-# results/fresh-clone/summary.md for README.md (`alfd docs` copies it). About 18 minutes on the
+# results/fresh-clone/summary.md for README.md (`alfd docs` copies it), and one row per command
+# to results/fresh-clone/runs.csv. About 18 minutes on the
 # 2-core machine; run it on an idle machine. A `../shared` beside this repository is linked
 # beside the clones, as CI has it.
 #
@@ -44,6 +45,13 @@ train_s="$(tail -n 1 "$work/main-job.log" | python3 -c 'import json,sys; print(j
 mmss() { printf '%d min %d s' $(($1 / 60)) $(($1 % 60)); }
 cpu="$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//')"
 mkdir -p "$repo/results/fresh-clone"
+# One row per measured command, appended (results/fresh-clone/runs.csv).
+runs="$repo/results/fresh-clone/runs.csv"
+[ -f "$runs" ] || echo "date,cpu,cores,commit,command,seconds,training_s,tests_passed,how" >"$runs"
+how="fresh-clone.sh${1:+ $1}"
+row() { echo "$(date -u +%Y-%m-%d),${cpu//,/ },$(nproc),$commit,$1,$2,$3,$4,$how" >>"$runs"; }
+$main_job_only || row "bash .ci/run" "$ci_s" "" "$tests"
+row "bash deploy/run.sh" "$job_s" "$(printf '%.0f' "$train_s")" ""
 if $main_job_only; then
   cat >"$repo/results/fresh-clone/main-job.md" <<MD
 # The main job on a fresh clone
