@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 use alfd_common::agent::NeuralActor;
 use alfd_common::demo_model::DemoModel;
 use alfd_common::environment_loop::{Adder, ExpertClient, LoopError, Result, Stop, VariableSource};
+use alfd_common::panel::EpisodeCount;
 use alfd_common::replay::Transition;
 use alfd_common::shaping::ShapingSchedule;
 use alfd_harness::{Session, What as _};
@@ -295,6 +296,8 @@ pub struct WireExpert<'s, 'w> {
     /// budget.
     prior_demos: usize,
     pub timeouts: u64,
+    /// The episodes this actor finished and the last one's return, told with each query.
+    episodes: EpisodeCount,
     /// How long each answered query waited for its answer, from asking to the answer in hand.
     pub answer_waits: Vec<Duration>,
 }
@@ -328,6 +331,7 @@ impl<'s, 'w> WireExpert<'s, 'w> {
             schedule,
             prior_demos: 0,
             timeouts: 0,
+            episodes: EpisodeCount::default(),
             answer_waits: Vec::new(),
         })
     }
@@ -440,7 +444,8 @@ impl<O: AsRef<[f32]>> ExpertClient<O> for WireExpert<'_, '_> {
 
     fn ask(&mut self, obs: &O, step: u64) -> Result<Option<usize>> {
         let request = QueryRequest::new(self.me.id, self.me.incarnation, step, obs.as_ref())
-            .map_err(LoopError::link)?;
+            .map_err(LoopError::link)?
+            .in_episode(self.episodes.finished, self.episodes.last_return);
         match self.query(request)? {
             Answer::Demo(r) => {
                 // With inline refits (`--refit inline`) the expert published the model refitted
@@ -479,5 +484,9 @@ impl<O: AsRef<[f32]>> ExpertClient<O> for WireExpert<'_, '_> {
 
     fn demos_used(&self) -> u32 {
         self.view.demos as u32
+    }
+
+    fn episode_ended(&mut self, ret: f64) {
+        self.episodes.ended(ret);
     }
 }

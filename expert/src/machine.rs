@@ -24,6 +24,7 @@ use std::time::Duration;
 use alfd_common::agent::{DemoRecord, Demonstrator, ExpertCore, RefitJob, Refitted};
 use alfd_common::demo_model::DemoModelError;
 use alfd_common::environment_loop::panel_expert::PanelAsk;
+use alfd_common::panel::Asker;
 use alfd_wire::{name_to_bytes, outcome, process_state, QueryResponse};
 
 use crate::human::ShownQuery;
@@ -65,7 +66,7 @@ pub enum Action<Q> {
     /// [`ExpertMachine::demonstrated`] (or drop the query if the demonstrator fails).
     Ask {
         query: Q,
-        actor: u32,
+        asker: Asker,
         state: Vec<f32>,
         step: u64,
     },
@@ -94,8 +95,22 @@ pub struct PanelNote {
 pub struct QueryIn {
     pub actor: u32,
     pub step: u64,
+    /// The actor's finished episodes, and the last one's return (none in its first).
+    pub episode: u64,
+    pub last_return: Option<f64>,
     pub connected: bool,
     pub state: Result<Vec<f32>, String>,
+}
+
+impl QueryIn {
+    /// Who asks, as several experts see it.
+    pub fn asker(&self) -> Asker {
+        Asker {
+            actor: self.actor,
+            episode: self.episode,
+            last_return: self.last_return,
+        }
+    }
 }
 
 /// The counts the expert logs when it stops.
@@ -284,7 +299,7 @@ impl<Q> ExpertMachine<Q> {
         }
         vec![Action::Ask {
             query,
-            actor: q.actor,
+            asker: q.asker(),
             state,
             step: q.step,
         }]
@@ -329,11 +344,12 @@ impl<Q> ExpertMachine<Q> {
     /// down the query is dropped, spending nothing.
     pub fn panel_demonstrated(
         &mut self,
-        (query, actor): (Q, u32),
+        (query, asker): (Q, Asker),
         state: &[f32],
         step: u64,
         panel: &mut PanelAsk<'_, [f32]>,
     ) -> Vec<Action<Q>> {
+        let actor = asker.actor;
         if self.mode == Mode::Standby {
             return vec![Action::Drop {
                 actor,
@@ -343,7 +359,7 @@ impl<Q> ExpertMachine<Q> {
         let step = step.max(self.core.last_demo_step());
         let (demos, rows) = (self.core.demos().len(), panel.log().rows.len());
         let x: Vec<f64> = state.iter().map(|&v| f64::from(v)).collect();
-        let action = match panel.ask(&mut self.core, state, &x, step) {
+        let action = match panel.ask(&mut self.core, (state, &x), step, asker) {
             Ok(Some(action)) => action,
             Ok(None) => return vec![self.refuse(query, actor)],
             Err(e) => {
@@ -561,6 +577,8 @@ mod tests {
         QueryIn {
             actor,
             step,
+            episode: 0,
+            last_return: None,
             connected: true,
             state: Ok(vec![0.25, -1.0]),
         }
@@ -584,14 +602,14 @@ mod tests {
         let asked = m.query(id, q(7, 100 + u64::from(id)));
         let [Action::Ask {
             query,
-            actor,
+            asker,
             state,
             step,
         }] = asked.as_slice()
         else {
             panic!("expected one Ask, got {asked:?}");
         };
-        m.demonstrated(*query, *actor, &state.clone(), *step, action)
+        m.demonstrated(*query, asker.actor, &state.clone(), *step, action)
     }
 
     #[test]
@@ -881,6 +899,15 @@ mod tests {
         }
     }
 
+    /// Actor `actor` in its first episode.
+    fn asker(actor: u32) -> Asker {
+        Asker {
+            actor,
+            episode: 0,
+            last_return: None,
+        }
+    }
+
     /// Three experts answering 2, 1 and 0 at costs 10, 2 and 1, asked in turn, every state asked
     /// of a second expert too.
     fn panel() -> PanelAsk<'static, [f32]> {
@@ -904,7 +931,7 @@ mod tests {
     fn several_experts_record_each_answer_with_its_cost_then_reply_with_the_first() {
         let mut m = active(3, false, 0);
         let mut p = panel();
-        let out = m.panel_demonstrated((1, 7), &[0.25, -1.0], 30, &mut p);
+        let out = m.panel_demonstrated((1, asker(7)), &[0.25, -1.0], 30, &mut p);
         let [Action::RecordOf(first, a), Action::RecordOf(second, b), Action::PublishModel, Action::Reply {
             query: 1,
             actor: 7,
@@ -931,18 +958,18 @@ mod tests {
         assert_eq!((response.action, response.demo_index), (2, 0));
         assert_eq!((response.budget_left, m.counts().answered), (1, 2));
         // The last of the budget: one answer recorded, its double ask not; then refused.
-        let out = m.panel_demonstrated((2, 7), &[0.25, -1.0], 40, &mut p);
+        let out = m.panel_demonstrated((2, asker(7)), &[0.25, -1.0], 40, &mut p);
         assert_eq!(
             out.iter()
                 .filter(|a| matches!(a, Action::RecordOf(..)))
                 .count(),
             1
         );
-        let out = m.panel_demonstrated((3, 7), &[0.25, -1.0], 50, &mut p);
+        let out = m.panel_demonstrated((3, asker(7)), &[0.25, -1.0], 50, &mut p);
         assert_eq!(replies(&out), [(3, outcome::BUDGET_EXHAUSTED)]);
         // A standby expert asks nobody.
         let mut standby = machine(3, false);
-        let out = standby.panel_demonstrated((4, 7), &[0.25, -1.0], 60, &mut p);
+        let out = standby.panel_demonstrated((4, asker(7)), &[0.25, -1.0], 60, &mut p);
         assert!(matches!(out.as_slice(), [Action::Drop { actor: 7, .. }]));
         assert!(standby.core().demos().is_empty());
     }

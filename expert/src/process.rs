@@ -18,6 +18,7 @@ use std::time::{Duration, Instant};
 use alfd_common::agent::{Demonstrator, ExpertCore, Refitted};
 use alfd_common::demo_model::lanes::SharedLanes;
 use alfd_common::environment_loop::panel_expert::{PanelAsk, PanelLog};
+use alfd_common::panel::Asker;
 use alfd_harness::python::{Adapter, AdapterDemonstrator};
 use alfd_harness::{BadInput, ProcessArgs, Refit, Session};
 use alfd_harness::{HarnessError, What as _};
@@ -459,6 +460,8 @@ impl<'w> Shell<'w> {
             let q = QueryIn {
                 actor: request.actor,
                 step: request.global_step,
+                episode: request.episode,
+                last_return: request.last_return(),
                 connected: query.is_connected(),
                 state: request
                     .checked_state(self.obs_dim)
@@ -559,11 +562,11 @@ impl<'w> Shell<'w> {
                 }
                 Action::Ask {
                     query,
-                    actor,
+                    asker,
                     state,
                     step,
                 } => {
-                    if let Some(reason) = self.demonstrate(m, (query, actor), &state, step)? {
+                    if let Some(reason) = self.demonstrate(m, (query, asker), &state, step)? {
                         return Ok(Some(reason));
                     }
                 }
@@ -597,10 +600,11 @@ impl<'w> Shell<'w> {
     fn demonstrate(
         &mut self,
         m: &mut Machine<'w>,
-        (query, actor): (IncomingQuery<'w>, u32),
+        (query, asker): (IncomingQuery<'w>, Asker),
         state: &[f32],
         step: u64,
     ) -> alfd_harness::Result<Option<&'static str>> {
+        let actor = asker.actor;
         if self.disk_full_until.is_some_and(|t| self.now() < t) {
             debug!(
                 actor,
@@ -612,7 +616,7 @@ impl<'w> Shell<'w> {
             std::thread::sleep(self.delay);
         }
         if let Source::Panel(panel) = &mut self.source {
-            let next = m.panel_demonstrated((query, actor), state, step, panel);
+            let next = m.panel_demonstrated((query, asker), state, step, panel);
             return self.apply(m, next);
         }
         let Some(action) = self.ask(actor, state)? else {

@@ -16,11 +16,16 @@
 //! end, IEThresh's rule); `upper-per-cost` the expert whose interval's upper end per unit of cost
 //! is highest (optimism under uncertainty, paid for).
 //!
+//! With `expert.quality_from_returns`, the returns of the episodes that followed each expert's
+//! advice are a third signal ([`Returns`]): when an episode in which experts answered ends, each
+//! of them earns the episode's percentile rank among the returns of the episodes before it (one
+//! reward per expert per episode, whatever its share of the episode's answers).
+//!
 //! An expert that fails to answer (its process gone, no answer in time) is marked down: no
 //! route asks it again in this panel's life, and the query goes to the others. `best-known`
 //! with its expert down asks the cheapest expert up.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 
 use rand::Rng as _;
 use serde::{Deserialize, Serialize};
@@ -184,6 +189,16 @@ impl Panel {
         }
     }
 
+    /// Expert `expert` earned `reward` (in [0, 1]) from a signal other than an answer of its
+    /// own (an episode's return): it enters its quality window like an answer's reward.
+    pub fn reward(&mut self, expert: usize, reward: f64) {
+        let r = &mut self.rewards[expert];
+        r.push_back(reward.clamp(0.0, 1.0));
+        if r.len() > self.window {
+            r.pop_front();
+        }
+    }
+
     /// Expert `i`'s quality and its interval.
     pub fn quality(&self, i: usize) -> Quality {
         let r = &self.rewards[i];
@@ -229,10 +244,161 @@ impl Panel {
     }
 }
 
+/// Where a query comes from: its actor, the actor's episode (its count of episodes finished),
+/// and the return of the actor's episode before it (`None` in its first).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Asker {
+    pub actor: u32,
+    pub episode: u64,
+    pub last_return: Option<f64>,
+}
+
+/// An actor's count of finished episodes and the last one's return: what its queries tell
+/// several experts ([`Asker`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EpisodeCount {
+    pub finished: u64,
+    pub last_return: Option<f64>,
+}
+
+impl EpisodeCount {
+    pub fn ended(&mut self, ret: f64) {
+        self.finished += 1;
+        self.last_return = Some(ret);
+    }
+
+    /// The asker `actor` is, with this count.
+    pub fn asker(&self, actor: u32) -> Asker {
+        Asker {
+            actor,
+            episode: self.finished,
+            last_return: self.last_return,
+        }
+    }
+}
+
+/// Which experts answered in each actor's current episode, and the returns of the episodes that
+/// ended since: when an actor's next episode asks, the episode before it is over and its return
+/// known, and each expert that answered in it earns the return's percentile rank among the last
+/// `window` such returns (the share of them below it, ties counting half; no reward for the
+/// first). An episode whose return never comes (the actor asked nothing in the episode after it,
+/// or restarted) earns nothing.
+#[derive(Debug, Clone)]
+pub struct Returns {
+    window: usize,
+    returns: VecDeque<f64>,
+    open: BTreeMap<u32, (u64, Vec<usize>)>,
+}
+
+impl Returns {
+    pub fn new(window: usize) -> Self {
+        Self {
+            window: window.max(1),
+            returns: VecDeque::new(),
+            open: BTreeMap::new(),
+        }
+    }
+
+    /// A query from `asker`: closes the actor's episode before it if experts answered there; the
+    /// rewards earned, as (expert, reward), each expert once.
+    pub fn asked(&mut self, asker: Asker) -> Vec<(usize, f64)> {
+        let open = self.open.get(&asker.actor).cloned();
+        let mut earned = Vec::new();
+        match open {
+            Some((episode, _)) if episode == asker.episode => return earned,
+            Some((episode, experts)) if episode + 1 == asker.episode => {
+                if let Some(ret) = asker.last_return.filter(|r| r.is_finite()) {
+                    if let Some(rank) = self.rank(ret) {
+                        earned = experts.into_iter().map(|e| (e, rank)).collect();
+                    }
+                    self.returns.push_back(ret);
+                    if self.returns.len() > self.window {
+                        self.returns.pop_front();
+                    }
+                }
+            }
+            _ => {}
+        }
+        self.open.insert(asker.actor, (asker.episode, Vec::new()));
+        earned
+    }
+
+    /// `expert` answered a query of `actor` in its current episode.
+    pub fn answered(&mut self, actor: u32, expert: usize) {
+        if let Some((_, experts)) = self.open.get_mut(&actor) {
+            if !experts.contains(&expert) {
+                experts.push(expert);
+            }
+        }
+    }
+
+    /// The percentile rank of `ret` among the returns kept; `None` with none kept.
+    fn rank(&self, ret: f64) -> Option<f64> {
+        let n = self.returns.len();
+        (n > 0).then(|| {
+            let below = self.returns.iter().filter(|&&r| r < ret).count();
+            let equal = self.returns.iter().filter(|&&r| r == ret).count();
+            (below as f64 + 0.5 * equal as f64) / n as f64
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::rng::seeded;
+
+    fn asker(actor: u32, episode: u64, last_return: Option<f64>) -> Asker {
+        Asker {
+            actor,
+            episode,
+            last_return,
+        }
+    }
+
+    #[test]
+    fn an_episode_s_return_rewards_each_expert_that_answered_in_it_with_its_rank() {
+        let mut r = Returns::new(3);
+        assert!(r.asked(asker(0, 0, None)).is_empty());
+        r.answered(0, 2);
+        r.answered(0, 2);
+        // The first return known: no earlier one to rank it against.
+        assert!(r.asked(asker(0, 1, Some(-200.0))).is_empty());
+        r.answered(0, 1);
+        r.answered(0, 2);
+        // A second query in the same episode closes nothing.
+        assert!(r.asked(asker(0, 1, Some(-200.0))).is_empty());
+        // -150 beats the one return kept (-200): rank 1, once for each of its two experts.
+        assert_eq!(r.asked(asker(0, 2, Some(-150.0))), [(1, 1.0), (2, 1.0)]);
+        r.answered(0, 0);
+        // -200 against [-200, -150]: half a tie of two: 0.25.
+        assert_eq!(r.asked(asker(0, 3, Some(-200.0))), [(0, 0.25)]);
+        // An episode with no query in between (3 asked, then 5): its return is not 4's.
+        r.answered(0, 0);
+        assert!(r.asked(asker(0, 5, Some(-100.0))).is_empty());
+        // Actors are apart: actor 1's episode 0 is its own; the window keeps the last 3.
+        assert!(r.asked(asker(1, 0, None)).is_empty());
+        r.answered(1, 0);
+        // Kept: [-200, -150, -200]; -160 is above two: 2/3.
+        let got = r.asked(asker(1, 1, Some(-160.0)));
+        assert_eq!(got.len(), 1);
+        assert!((got[0].1 - 2.0 / 3.0).abs() < 1e-12, "{got:?}");
+        // Kept now [-150, -200, -160]: a NaN return is no return.
+        r.answered(1, 1);
+        assert!(r.asked(asker(1, 2, Some(f64::NAN))).is_empty());
+    }
+
+    #[test]
+    fn a_reward_from_returns_enters_the_window_without_an_answer_or_a_cost() {
+        let mut p = panel(Route::Interval, 0.0);
+        p.reward(1, 1.0);
+        p.reward(1, 0.0);
+        p.reward(1, 7.0);
+        let q = p.quality(1);
+        assert_eq!(q.answers, 0);
+        assert!((q.quality - 2.0 / 3.0).abs() < 1e-12, "{q:?}");
+        assert_eq!(p.spent(), 0.0);
+    }
 
     fn panel(route: Route, double_ask: f64) -> Panel {
         let m = |name: &str, cost| Member {

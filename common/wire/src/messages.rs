@@ -12,7 +12,7 @@ use crate::error::{Result, WireError};
 /// The version of the messages below. Bump it whenever a message changes, or the zenoh keys the
 /// bridges send them on (`alfd_bridge`), so that a process or host of another build is refused
 /// by name.
-pub const SCHEMA_VERSION: u32 = 7;
+pub const SCHEMA_VERSION: u32 = 8;
 /// Actors per run (the credit table has one slot per actor id).
 pub const MAX_ACTORS: usize = 16;
 /// Largest observation a message may claim (a peer's bytes can make a receiver allocate no
@@ -566,6 +566,8 @@ pub struct QueryHeader {
     pub obs_dim: u32,
     pub incarnation: u64,
     pub global_step: u64,
+    pub episode: u64,
+    pub last_return: f64,
 }
 
 /// An actor asks the expert for the action at `state` (as long as the run's observations).
@@ -577,6 +579,11 @@ pub struct QueryRequest {
     pub incarnation: u64,
     /// The global step as the actor knows it.
     pub global_step: u64,
+    /// The episodes the actor finished before the one asking (several experts learn from
+    /// their returns).
+    pub episode: u64,
+    /// The return of the actor's episode before this one; NaN in its first.
+    pub last_return: f64,
     pub state: Vec<f32>,
 }
 
@@ -588,9 +595,25 @@ impl QueryRequest {
             obs_dim: state.len() as u32,
             incarnation,
             global_step,
+            last_return: f64::NAN,
             state: state.to_vec(),
             ..Self::default()
         })
+    }
+
+    /// The request as asked in the actor's episode `episode` (its count of finished episodes),
+    /// the episode before it having returned `last_return` (none: NaN).
+    pub fn in_episode(self, episode: u64, last_return: Option<f64>) -> Self {
+        Self {
+            episode,
+            last_return: last_return.unwrap_or(f64::NAN),
+            ..self
+        }
+    }
+
+    /// The return of the actor's episode before this one, if it told one.
+    pub fn last_return(&self) -> Option<f64> {
+        self.last_return.is_finite().then_some(self.last_return)
     }
 
     /// The request's header on the wire (all but its state).
@@ -601,6 +624,8 @@ impl QueryRequest {
             obs_dim: self.obs_dim,
             incarnation: self.incarnation,
             global_step: self.global_step,
+            episode: self.episode,
+            last_return: self.last_return,
         }
     }
 
@@ -614,6 +639,8 @@ impl QueryRequest {
             obs_dim: h.obs_dim,
             incarnation: h.incarnation,
             global_step: h.global_step,
+            episode: h.episode,
+            last_return: h.last_return,
             state: values[..used].to_vec(),
         }
     }

@@ -1,8 +1,10 @@
 //! `alfd demo-model`: fits a demonstration model (KRR or SVM) on demonstrations read from a file
 //! and prints its outputs for query states, to evaluate the model on its own as the paper does.
 //!
-//! The demos file holds JSON lines `{"state":[…],"action":a}`, the query file JSON lines
-//! `{"state":[…]}` (other fields are ignored, blank lines skipped). One JSON line
+//! The demos file holds JSON lines `{"state":[…],"action":a}` with an optional `"weight"` (≥ 0,
+//! default 1; KRR weighs each demonstration by it, as a run does, so a run's `demos.jsonl` gives
+//! the run's model), the query file JSON lines `{"state":[…]}` (other fields are ignored, blank
+//! lines skipped). One JSON line
 //! `{"raw":[…],"probs":[…]}` is printed per query.
 
 use std::io::Write;
@@ -42,7 +44,8 @@ pub struct DemoModelArgs {
     /// The demonstration model to fit.
     #[arg(long, value_enum)]
     pub kind: KindArg,
-    /// JSON lines of demonstrations, `{"state":[…],"action":a}`.
+    /// JSON lines of demonstrations, `{"state":[…],"action":a}`, each with an optional
+    /// `"weight"` ≥ 0 (default 1; KRR weighs by it as a run does, SVM and Nyström ignore it).
     #[arg(long)]
     pub demos: PathBuf,
     /// JSON lines of query states, `{"state":[…]}`.
@@ -61,6 +64,12 @@ pub struct DemoModelArgs {
 struct DemoLine {
     state: Vec<f64>,
     action: usize,
+    #[serde(default = "one")]
+    weight: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 #[derive(Deserialize)]
@@ -79,6 +88,8 @@ struct OutputLine<'a> {
 pub struct Demos {
     pub states: Vec<Vec<f64>>,
     pub actions: Vec<usize>,
+    /// Each demonstration's weight in a KRR model (1 where the line gives none).
+    pub weights: Vec<f64>,
     /// The 1-based line number of each demonstration in its file.
     pub lines: Vec<usize>,
 }
@@ -164,11 +175,19 @@ pub fn parse_demos(text: &str, file: &str, kind: DemoModelKind) -> Result<Demos,
     let mut demos = Demos {
         states: Vec::new(),
         actions: Vec::new(),
+        weights: Vec::new(),
         lines: Vec::new(),
     };
     for (line, d) in items {
+        if !(d.weight.is_finite() && d.weight >= 0.0) {
+            return Err(BadInput(format!(
+                "{file}:{line}: weight {} is not a finite number ≥ 0",
+                d.weight
+            )));
+        }
         demos.states.push(d.state);
         demos.actions.push(d.action);
+        demos.weights.push(d.weight);
         demos.lines.push(line);
     }
     Ok(demos)
@@ -243,7 +262,8 @@ pub fn run(args: DemoModelArgs) -> anyhow::Result<()> {
         .map_or_else(alfd_harness::Threads::machine, |t| {
             alfd_harness::Threads::new(usize::from(t))
         });
-    let model = match DemoModel::fit_on(kind, &demos.states, &demos.actions, num_actions, &lanes) {
+    let columns = (&demos.states[..], &demos.actions[..], &demos.weights[..]);
+    let model = match DemoModel::fit_weighted_on(kind, columns, num_actions, &lanes) {
         Ok(m) => m,
         Err(
             e @ (DemoModelError::Unsupported(_)

@@ -131,3 +131,35 @@ fn demo_model_refuses_an_absurd_number_of_actions_or_demonstrations() {
         "--demos 100000: a demonstration model is fitted on at most 10000 demonstrations",
     );
 }
+
+#[test]
+fn demo_model_weighs_each_demonstration_by_its_weight_as_a_run_does() {
+    let _time = timed!();
+    let dir = tmp("demo-model-weights");
+    let (demos, query) = (dir.join("demos.jsonl"), dir.join("query.jsonl"));
+    std::fs::write(&query, "{\"state\":[0,0]}\n").unwrap();
+    let (d, q) = (demos.to_str().unwrap(), query.to_str().unwrap());
+    let args = ["demo-model", "--kind", "krr", "--demos", d, "--query", q];
+    // Two answers at one state that contradict each other.
+    let probs = |second: &str| {
+        let lines = format!(
+            "{{\"state\":[0,0],\"action\":0}}\n{{\"state\":[0,0],\"action\":1{second}}}\n"
+        );
+        std::fs::write(&demos, lines).unwrap();
+        let o = alfd(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let line: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let p: Vec<f64> = serde_json::from_value(line["probs"].clone()).unwrap();
+        p
+    };
+    let even = probs("");
+    assert!((even[0] - even[1]).abs() < 1e-12, "no weight: 1 each, {even:?}");
+    assert_eq!(probs(",\"weight\":1.0"), even, "weight 1 is no weight");
+    // Weight 0 leaves the second answer out: the first one's action wins.
+    let first = probs(",\"weight\":0.0");
+    assert!(first[0] > first[1], "{first:?}");
+    let half = probs(",\"weight\":0.5");
+    assert!(first[0] > half[0] && half[0] > even[0], "{half:?}");
+    std::fs::write(&demos, "{\"state\":[0,0],\"action\":0,\"weight\":-1}\n").unwrap();
+    assert_usage_error(&args, &format!("{d}:1: weight -1 is not a finite number ≥ 0"));
+}

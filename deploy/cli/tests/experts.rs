@@ -12,7 +12,7 @@ use crate::support::{alfd, text, timed, tmp};
 const CONFIG: &str = "seed = 3\nsteps = 6000\n[env]\nname = \"mountaincar\"\n\
     [agent]\nkind = \"bdqn\"\nheads = 2\n[query]\nallowance = \"spread\"\ngate = \"chance\"\n\
     horizon = 6000\n[budget]\ntotal = 30\n[expert]\nroute = \"round-robin\"\ndouble_ask = 0.5\n\
-    [[experts]]\nname = \"mountaincar-energy\"\ncost = 10\n\
+    quality_from_returns = true\n[[experts]]\nname = \"mountaincar-energy\"\ncost = 10\n\
     [[experts]]\nname = \"mountaincar-fair\"\ncost = 2\n\
     [[experts]]\nname = \"mountaincar-poor\"\ncost = 1\n";
 
@@ -165,7 +165,12 @@ fn alfd_run_hosts_several_experts_as_alfd_local_does_to_the_byte() {
     let config = dir.join("three.toml");
     std::fs::write(&config, CONFIG).unwrap();
     let run = |name: &str, how: &[&str]| run_quietly(&dir.join(name), &config, how);
-    local_equals_lockstep(&dir, &config);
+    let (local, _) = local_equals_lockstep(&dir, &config);
+    // The episodes' returns reached the experts' qualities, over the wire as in one process.
+    let off = ["local", "--set", "expert.quality_from_returns=false"];
+    let without = run("without-returns", &off);
+    let csv = |d: &Path| std::fs::read_to_string(d.join("experts.csv")).unwrap();
+    assert_ne!(csv(&local), csv(&without), "returns change the qualities");
     // Two actors: the whole budget spent, by every expert at its cost, a quality row per answer.
     let two = run("two", &["run", "--actors=2"]);
     let lines: Vec<Value> = std::fs::read_to_string(two.join("demos.jsonl"))

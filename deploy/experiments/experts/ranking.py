@@ -56,7 +56,7 @@ def main():
     lines = ["method,seed,ranked_right,answers_good,answers_fair,answers_poor,recovered_after"]
     summary = []
     for method in sorted(p for p in (out / "runs").iterdir() if p.is_dir()):
-        right, seeds, recovered, turned = 0, 0, [], method.name == "good-turns-poor"
+        right, seeds, recovered, turned = 0, 0, [], method.name.startswith("good-turns-poor")
         for run in sorted(method.iterdir(), key=lambda p: int(p.name)):
             path = run / "experts.csv"
             if not path.is_file():

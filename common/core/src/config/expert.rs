@@ -63,6 +63,11 @@ pub struct ExpertConfig {
         skip_serializing_if = "is_default_window"
     )]
     pub quality_window: usize,
+    /// With several experts: the returns of the episodes that followed each expert's advice
+    /// count toward its quality too (each expert that answered in an episode earns the episode
+    /// return's percentile rank among the episodes before it).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub quality_from_returns: bool,
 }
 
 fn default_route() -> Route {
@@ -127,6 +132,7 @@ impl Default for ExpertConfig {
             best_known: None,
             double_ask: default_double_ask(),
             quality_window: default_quality_window(),
+            quality_from_returns: false,
         }
     }
 }

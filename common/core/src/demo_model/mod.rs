@@ -173,6 +173,23 @@ impl DemoModel {
         }
     }
 
+    /// [`DemoModel::fit_on`] with a weight ≥ 0 for each demonstration, as a run fits it: KRR
+    /// weighs them ([`KrrFactor::fit_weighted`]); the SVM and the Nyström model do not.
+    pub fn fit_weighted_on<S: AsRef<[f64]>>(
+        kind: DemoModelKind,
+        (states, actions, weights): (&[S], &[usize], &[f64]),
+        num_actions: usize,
+        lanes: &dyn Lanes,
+    ) -> Result<DemoModel, DemoModelError> {
+        match kind {
+            DemoModelKind::Krr => {
+                KrrFactor::fit_weighted(states, actions, weights, num_actions, lanes)
+                    .map(|f| DemoModel::Krr(f.model_on(lanes)))
+            }
+            _ => DemoModel::fit_on(kind, states, actions, num_actions, lanes),
+        }
+    }
+
     pub fn kind(&self) -> DemoModelKind {
         match self {
             DemoModel::Krr(_) => DemoModelKind::Krr,

@@ -9,6 +9,7 @@ use super::panel_expert::{PanelAsk, PanelLog};
 use super::{Adder, ExpertClient, LoopError, Result, VariableSource};
 use crate::agent::{Demonstrator, ExpertCore, NeuralActor, NeuralLearner};
 use crate::demo_model::DemoModel;
+use crate::panel::EpisodeCount;
 use crate::replay::Transition;
 
 /// An observation as the expert records it in `demos.jsonl` and fits its model on.
@@ -43,6 +44,8 @@ pub struct LocalExpert<'d, S: ?Sized> {
     shaping: bool,
     /// Several experts (`[[experts]]`): they answer instead of `demonstrator`.
     panel: Option<PanelAsk<'d, S>>,
+    /// The episodes this actor finished, and the last one's return, for the panel.
+    episodes: EpisodeCount,
 }
 
 impl<S: ?Sized> std::fmt::Debug for LocalExpert<'_, S> {
@@ -70,6 +73,7 @@ impl<'d, S: ?Sized> LocalExpert<'d, S> {
             name: name.to_owned(),
             shaping,
             panel: None,
+            episodes: EpisodeCount::default(),
         }
     }
 
@@ -92,7 +96,8 @@ impl<S: ?Sized, O: Borrow<S> + Features> ExpertClient<O> for LocalExpert<'_, S> 
 
     fn ask(&mut self, obs: &O, step: u64) -> Result<Option<usize>> {
         if let Some(panel) = &mut self.panel {
-            return panel.ask(&mut self.core, obs.borrow(), &obs.features(), step);
+            let asker = self.episodes.asker(0);
+            return panel.ask(&mut self.core, (obs.borrow(), &obs.features()), step, asker);
         }
         if self.core.budget().is_exhausted() {
             return Ok(None);
@@ -117,6 +122,10 @@ impl<S: ?Sized, O: Borrow<S> + Features> ExpertClient<O> for LocalExpert<'_, S> 
 
     fn demos_used(&self) -> u32 {
         self.core.budget().used()
+    }
+
+    fn episode_ended(&mut self, ret: f64) {
+        self.episodes.ended(ret);
     }
 }
 

@@ -93,6 +93,9 @@ pub trait ExpertClient<O: ?Sized> {
     fn shaping(&self, step: u64) -> Option<(&DemoModel, f64)>;
     /// Demonstrations used in the run so far, as far as this actor knows.
     fn demos_used(&self) -> u32;
+    /// This actor's episode ended with the (unshaped) return `ret`; with several experts, the
+    /// next query tells the experts (`expert.quality_from_returns`).
+    fn episode_ended(&mut self, _ret: f64) {}
 }
 
 /// An agent that acts in an environment (Acme's `Actor`: `select_action` / `observe` / `update`).
@@ -491,6 +494,7 @@ where
         }
     }
     actor.end_episode()?;
+    expert.episode_ended(ret);
     // The record counts every demonstration of the run known at the episode's end (another
     // actor's included, in a run of many).
     expert.update()?;

@@ -3,11 +3,12 @@
 //! a demonstration of its expert at its cost. An answer's reward for the panel's quality
 //! estimate is the share of the state's other opinions it agrees with: the second expert's
 //! answer on a double ask, and the greedy action of the demonstration model fitted so far (on
-//! every expert's demonstrations).
+//! every expert's demonstrations); with `expert.quality_from_returns`, also the rank of the
+//! return of each episode an expert answered in ([`Returns`]).
 
 use crate::agent::{Demonstrator, ExpertCore};
 use crate::config::{ExperimentConfig, Weighting};
-use crate::panel::{Member, Panel, Quality};
+use crate::panel::{Asker, Member, Panel, Quality, Returns};
 use crate::policy::argmax;
 use crate::rng::{derive_seed, seeded, Rng};
 
@@ -60,6 +61,7 @@ impl PanelLog {
 pub struct PanelAsk<'d, S: ?Sized> {
     members: Vec<Box<dyn Demonstrator<S> + 'd>>,
     panel: Panel,
+    returns: Option<Returns>,
     rng: Rng,
     cost_budget: Option<f64>,
     weighted: bool,
@@ -92,6 +94,7 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
                 e.double_ask,
                 e.quality_window,
             ),
+            returns: e.quality_from_returns.then(|| Returns::new(e.quality_window)),
             rng: seeded(derive_seed(cfg.seed, "panel")),
             cost_budget: cfg.budget.cost,
             weighted: cfg.demos.weighting == Weighting::Quality,
@@ -119,22 +122,32 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
             .is_none_or(|b| self.panel.spent() + cost <= b + 1e-9)
     }
 
+    /// Expert `i`'s quality as the run sees it now.
+    pub fn quality(&self, i: usize) -> Quality {
+        self.panel.quality(i)
+    }
+
     /// Whether any expert can still be paid.
     pub fn can_pay(&self) -> bool {
         (0..self.panel.members().len()).any(|i| self.affordable(i))
     }
 
-    /// Asks the state `obs` (features `x`) at global step `step`: the routed expert's action,
-    /// recorded in `core` as a demonstration, and on a double ask a second expert's too; `None`
-    /// when the budget or the cost budget is spent. An expert that fails to answer is marked
-    /// down and the state goes to another; an error only when every expert is down.
+    /// Asks the state `obs` (features `x`) at global step `step`, from `asker`: the routed
+    /// expert's action, recorded in `core` as a demonstration, and on a double ask a second
+    /// expert's too; `None` when the budget or the cost budget is spent. An expert that fails
+    /// to answer is marked down and the state goes to another; an error only when every expert
+    /// is down. First, the return of the asker's episode before this one rewards the experts
+    /// that answered in it (with `expert.quality_from_returns`).
     pub fn ask(
         &mut self,
         core: &mut ExpertCore,
-        obs: &S,
-        x: &[f64],
+        (obs, x): (&S, &[f64]),
         step: u64,
+        asker: Asker,
     ) -> Result<Option<usize>> {
+        for (expert, reward) in self.returns.as_mut().map_or(Vec::new(), |r| r.asked(asker)) {
+            self.panel.reward(expert, reward);
+        }
         let mut failure = None;
         let (ask, first) = loop {
             let Some(ask) = self.panel.route(&mut self.rng) else {
@@ -158,12 +171,16 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
             },
             None => None,
         };
-        self.record(core, x, step, (ask.first, first), second);
+        for expert in self.record(core, x, step, (ask.first, first), second) {
+            if let Some(r) = &mut self.returns {
+                r.answered(asker.actor, expert);
+            }
+        }
         Ok(Some(first))
     }
 
     /// Records each answer on the state as a demonstration (while the budget lasts), rated
-    /// against the other answer and the demonstration model's.
+    /// against the other answer and the demonstration model's; the experts recorded.
     fn record(
         &mut self,
         core: &mut ExpertCore,
@@ -171,7 +188,8 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
         step: u64,
         first: (usize, usize),
         second: Option<(usize, usize)>,
-    ) {
+    ) -> Vec<usize> {
+        let mut recorded = Vec::new();
         let model = core.model().map(|m| argmax(&m.probs(x)));
         let double = second.is_some();
         let mut answers = vec![first];
@@ -198,6 +216,7 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
                 break;
             }
             self.panel.answered(expert, agreed, opinions);
+            recorded.push(expert);
             let cost = self.panel.members()[expert].cost;
             self.log.answers.push((cost, double));
             self.log.rows.push(QualityRow {
@@ -206,6 +225,7 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
                 quality: self.panel.quality(expert),
             });
         }
+        recorded
     }
 
     /// Marks `expert` down after its failure `e`, which it gives back.
@@ -239,6 +259,13 @@ mod tests {
         }
     }
 
+    /// The one actor of these tests, in its first episode.
+    const ME: Asker = Asker {
+        actor: 0,
+        episode: 0,
+        last_return: None,
+    };
+
     fn setup(extra: &str) -> (ExperimentConfig, ExpertCore, PanelAsk<'static, [f32]>) {
         let cfg = ExperimentConfig::from_toml(&format!(
             "seed = 1\nepisodes = 3\n[env]\nname = \"mountaincar\"\n[agent]\nkind = \"bdqn\"\n\
@@ -264,9 +291,9 @@ mod tests {
         let x = [0.5f32, 0.0];
         // Round-robin: energy first; the second is the least answered other (fair, the first of
         // equals). Both say 2: each agrees with its one opinion.
-        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 7).unwrap(), Some(2));
+        assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 7, ME).unwrap(), Some(2));
         // Then fair, with poor asked too (fewest answers): 2 against 0, both disagree.
-        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 9).unwrap(), Some(2));
+        assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 9, ME).unwrap(), Some(2));
         let names: Vec<&str> = core.demos().iter().map(|d| d.expert.as_str()).collect();
         assert_eq!(
             names,
@@ -278,10 +305,10 @@ mod tests {
             ]
         );
         // The fifth answer is the budget's last: poor first, its second ask not recorded.
-        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 11).unwrap(), Some(0));
+        assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 11, ME).unwrap(), Some(0));
         assert_eq!(core.demos().len(), 5);
         assert_eq!(
-            ask.ask(&mut core, &x, &[0.5, 0.0], 12).unwrap(),
+            ask.ask(&mut core, (&x, &[0.5, 0.0]), 12, ME).unwrap(),
             None,
             "the budget is spent"
         );
@@ -311,12 +338,12 @@ mod tests {
         let (_, mut core, mut ask) = setup("[budget]\ntotal = 100\ncost = 13\n");
         let x = [0.5f32, 0.0];
         // energy (10) and fair (2): 12 spent, 1 left.
-        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 1).unwrap(), Some(2));
+        assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 1, ME).unwrap(), Some(2));
         assert!(ask.can_pay(), "poor costs 1");
         // fair (2) cannot be paid any more: no answer.
-        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 2).unwrap(), None);
+        assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 2, ME).unwrap(), None);
         // poor (1) can, but not its second expert.
-        assert_eq!(ask.ask(&mut core, &x, &[0.5, 0.0], 3).unwrap(), Some(0));
+        assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 3, ME).unwrap(), Some(0));
         assert!(!ask.can_pay());
         assert_eq!(ask.into_log().spent, 13.0);
         assert_eq!(core.demos().len(), 3);
@@ -327,7 +354,7 @@ mod tests {
         let x = [0.5f32, 0.0];
         let (_, mut core, mut ask) = setup("[budget]\ntotal = 6\n");
         for step in 0..3 {
-            ask.ask(&mut core, &x, &[0.5, 0.0], step).unwrap();
+            ask.ask(&mut core, (&x, &[0.5, 0.0]), step, ME).unwrap();
         }
         let log = ask.into_log();
         let weights: Vec<f64> = core.demos().iter().map(|d| d.weight).collect();
@@ -342,8 +369,42 @@ mod tests {
         assert!(weights.iter().any(|&w| w != 0.5), "{weights:?}");
         let (_, mut core, mut ask) = setup("[budget]\ntotal = 6\n[demos]\nweighting = \"none\"\n");
         for step in 0..3 {
-            ask.ask(&mut core, &x, &[0.5, 0.0], step).unwrap();
+            ask.ask(&mut core, (&x, &[0.5, 0.0]), step, ME).unwrap();
         }
         assert!(core.demos().iter().all(|d| d.weight == 1.0));
+    }
+
+    #[test]
+    fn with_returns_on_the_rank_of_an_episode_s_return_rewards_the_experts_that_answered_in_it() {
+        let cfg = ExperimentConfig::from_toml(
+            "seed = 1\nepisodes = 3\n[env]\nname = \"mountaincar\"\n[agent]\nkind = \"bdqn\"\n\
+             [expert]\nroute = \"round-robin\"\ndouble_ask = 0.0\nquality_from_returns = true\n\
+             [[experts]]\nname = \"mountaincar-energy\"\n[[experts]]\nname = \"mountaincar-fair\"\n\
+             [[experts]]\nname = \"mountaincar-poor\"\n",
+        )
+        .unwrap();
+        let mut core = ExpertCore::for_config(&cfg, 3);
+        let members: Vec<Box<dyn Demonstrator<[f32]>>> =
+            vec![Box::new(Always(2)), Box::new(Always(1)), Box::new(Always(0))];
+        let mut ask = PanelAsk::new(&cfg, members);
+        let x = [0.5f32, 0.0];
+        // No demonstration model and no double ask: answers alone earn no reward. In turn,
+        // one query per episode, with the return of the episode before.
+        let returns = [None, Some(-100.0), Some(-50.0), Some(-150.0)];
+        for (episode, last_return) in returns.into_iter().enumerate() {
+            let asker = Asker {
+                actor: 0,
+                episode: episode as u64,
+                last_return,
+            };
+            ask.ask(&mut core, (&x, &[0.5, 0.0]), episode as u64, asker)
+                .unwrap();
+        }
+        // Episode 0 (energy): the first return, nothing to rank it against. Episode 1 (fair):
+        // -50 above -100, rank 1. Episode 2 (poor): -150 below both, rank 0.
+        let q: Vec<(u64, f64)> = (0..3)
+            .map(|i| (ask.quality(i).answers, ask.quality(i).quality))
+            .collect();
+        assert_eq!(q, [(2, 0.5), (1, 1.0), (1, 0.0)]);
     }
 }
