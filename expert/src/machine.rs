@@ -260,6 +260,7 @@ impl<Q> ExpertMachine<Q> {
 
     /// A query from an actor.
     pub fn query(&mut self, query: Q, q: QueryIn) -> Vec<Action<Q>> {
+        let asker = q.asker();
         if self.mode == Mode::Standby {
             return vec![Action::Drop {
                 actor: q.actor,
@@ -299,7 +300,7 @@ impl<Q> ExpertMachine<Q> {
         }
         vec![Action::Ask {
             query,
-            asker: q.asker(),
+            asker,
             state,
             step: q.step,
         }]

@@ -90,7 +90,8 @@ fn numbers_in(chars: &[char]) -> Vec<(usize, usize, f64)> {
     let mut out = Vec::new();
     let mut i = 0;
     while i < chars.len() {
-        let after_word = |k: usize| k > 0 && (chars[k - 1].is_alphanumeric() || ".,_".contains(chars[k - 1]));
+        let after_word =
+            |k: usize| k > 0 && (chars[k - 1].is_alphanumeric() || ".,_".contains(chars[k - 1]));
         if !chars[i].is_ascii_digit() || after_word(i) {
             i += 1;
             continue;
@@ -116,11 +117,41 @@ fn numbers_in(chars: &[char]) -> Vec<(usize, usize, f64)> {
     out
 }
 
+/// README, EXPERIMENTS, BENCHMARKS and the manual's chapters: each one's name and its prose
+/// without code spans.
+fn documents() -> Vec<(String, String)> {
+    let mut docs: Vec<PathBuf> = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"]
+        .iter()
+        .map(|d| workspace().join(d))
+        .collect();
+    docs.extend(chapters());
+    docs.iter()
+        .map(|doc| {
+            let text = without_code_spans(&prose(&std::fs::read_to_string(doc).unwrap()));
+            let name = doc.strip_prefix(workspace()).unwrap().display().to_string();
+            (name, text)
+        })
+        .collect()
+}
+
+/// The text between two numbers, each run of white space (a line break included) one space.
+fn gap(chars: &[char]) -> String {
+    let text: String = chars.iter().collect();
+    let mut out = text.split_whitespace().collect::<Vec<_>>().join(" ");
+    if text.starts_with(char::is_whitespace) {
+        out.insert(0, ' ');
+    }
+    if text.ends_with(char::is_whitespace) && text.trim() != "" {
+        out.push(' ');
+    }
+    out
+}
+
 /// The whole-number intervals of `text` ("−136 [−147, −127]") and its counts ("15 of 30"), each
 /// number without decimals.
 fn whole_intervals_and_counts(text: &str) -> (Vec<[i64; 3]>, Vec<[i64; 2]>) {
     let chars: Vec<char> = text.chars().collect();
-    let between = |a: usize, b: usize| chars[a..b].iter().collect::<String>();
+    let between = |a: usize, b: usize| gap(&chars[a..b]);
     let whole = |(s, e, _): (usize, usize, f64)| !chars[s..e].contains(&'.');
     let n = numbers_in(&chars);
     let (mut intervals, mut counts) = (Vec::new(), Vec::new());
@@ -131,7 +162,7 @@ fn whole_intervals_and_counts(text: &str) -> (Vec<[i64; 3]>, Vec<[i64; 2]>) {
             && between(w[0].1, w[1].0) == " ["
             && between(w[1].1, w[2].0) == ", "
         {
-            intervals.push(w.map(|x| x.2 as i64));
+            intervals.push([w[0].2, w[1].2, w[2].2].map(|v| v as i64));
         }
     }
     for w in n.windows(2) {
@@ -148,12 +179,13 @@ fn results_intervals_and_counts() -> (HashSet<[i64; 3]>, HashSet<[i64; 2]>) {
     let (mut intervals, mut counts) = (HashSet::new(), HashSet::new());
     for text in results_texts() {
         let chars: Vec<char> = text.chars().collect();
-        let between = |a: usize, b: usize| chars[a..b].iter().collect::<String>();
+        let between = |a: usize, b: usize| gap(&chars[a..b]);
         let n = numbers_in(&chars);
         for w in n.windows(3) {
             if between(w[0].1, w[1].0) == " [" && between(w[1].1, w[2].0) == ", " {
-                intervals.insert(w.map(|x| x.2.round() as i64));
-                intervals.insert(w.map(|x| (x.2 + 0.5).floor() as i64));
+                let v = [w[0].2, w[1].2, w[2].2];
+                intervals.insert(v.map(|x| x.round() as i64));
+                intervals.insert(v.map(|x| (x + 0.5).floor() as i64));
             }
         }
         for w in n.windows(2) {
@@ -168,21 +200,15 @@ fn results_intervals_and_counts() -> (HashSet<[i64; 3]>, HashSet<[i64; 2]>) {
 #[test]
 fn every_whole_number_interval_and_count_quoted_in_prose_is_in_a_committed_results_file() {
     let (i, c) = whole_intervals_and_counts(
-        "at −136 [−147, −127] (15 of 30), 0.5 [0.25, 1] and +4 [3, 5] in 2,000 of 20,000 steps",
+        "at −136\n[−147, −127] (15 of\n30), 0.5 [0.25, 1] and +4 [3, 5] in 2,000 of 20,000 steps",
     );
     assert_eq!(i, [[-136, -147, -127], [4, 3, 5]]);
     assert_eq!(c, [[15, 30], [2000, 20000]]);
     let (found_intervals, found_counts) = results_intervals_and_counts();
-    let mut docs: Vec<PathBuf> = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"]
-        .iter()
-        .map(|d| workspace().join(d))
-        .collect();
-    docs.extend(chapters());
     let (mut quoted, mut missing) = (0, Vec::new());
-    for doc in &docs {
-        let text = without_code_spans(&prose(&std::fs::read_to_string(doc).unwrap()));
+    for (doc, text) in documents() {
         let (intervals, counts) = whole_intervals_and_counts(&text);
-        let name = doc.strip_prefix(workspace()).unwrap().display().to_string();
+        let name = &doc;
         for [x, l, h] in intervals {
             quoted += 1;
             if !found_intervals.contains(&[x, l, h]) {
@@ -212,19 +238,12 @@ fn every_number_with_decimals_quoted_in_prose_is_in_a_committed_results_file() {
     );
     assert_eq!(without_code_spans("a `beta2 = 0.999` b"), "a   b");
     let found = results_values();
-    let mut docs: Vec<PathBuf> = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"]
-        .iter()
-        .map(|d| workspace().join(d))
-        .collect();
-    docs.extend(chapters());
     let (mut quoted, mut missing) = (0, Vec::new());
-    for doc in &docs {
-        let text = without_code_spans(&prose(&std::fs::read_to_string(doc).unwrap()));
+    for (doc, text) in documents() {
         for number in decimals_in(&text) {
             quoted += 1;
             if !found.contains(&number) {
-                let name = doc.strip_prefix(workspace()).unwrap().display();
-                missing.push(format!("{name}: {number}"));
+                missing.push(format!("{doc}: {number}"));
             }
         }
     }

@@ -142,9 +142,8 @@ fn demo_model_weighs_each_demonstration_by_its_weight_as_a_run_does() {
     let args = ["demo-model", "--kind", "krr", "--demos", d, "--query", q];
     // Two answers at one state that contradict each other.
     let probs = |second: &str| {
-        let lines = format!(
-            "{{\"state\":[0,0],\"action\":0}}\n{{\"state\":[0,0],\"action\":1{second}}}\n"
-        );
+        let lines =
+            format!("{{\"state\":[0,0],\"action\":0}}\n{{\"state\":[0,0],\"action\":1{second}}}\n");
         std::fs::write(&demos, lines).unwrap();
         let o = alfd(&args);
         assert!(o.status.success(), "{}", stderr(&o));
@@ -153,7 +152,10 @@ fn demo_model_weighs_each_demonstration_by_its_weight_as_a_run_does() {
         p
     };
     let even = probs("");
-    assert!((even[0] - even[1]).abs() < 1e-12, "no weight: 1 each, {even:?}");
+    assert!(
+        (even[0] - even[1]).abs() < 1e-12,
+        "no weight: 1 each, {even:?}"
+    );
     assert_eq!(probs(",\"weight\":1.0"), even, "weight 1 is no weight");
     // Weight 0 leaves the second answer out: the first one's action wins.
     let first = probs(",\"weight\":0.0");
@@ -161,5 +163,8 @@ fn demo_model_weighs_each_demonstration_by_its_weight_as_a_run_does() {
     let half = probs(",\"weight\":0.5");
     assert!(first[0] > half[0] && half[0] > even[0], "{half:?}");
     std::fs::write(&demos, "{\"state\":[0,0],\"action\":0,\"weight\":-1}\n").unwrap();
-    assert_usage_error(&args, &format!("{d}:1: weight -1 is not a finite number ≥ 0"));
+    assert_usage_error(
+        &args,
+        &format!("{d}:1: weight -1 is not a finite number ≥ 0"),
+    );
 }

@@ -94,7 +94,9 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
                 e.double_ask,
                 e.quality_window,
             ),
-            returns: e.quality_from_returns.then(|| Returns::new(e.quality_window)),
+            returns: e
+                .quality_from_returns
+                .then(|| Returns::new(e.quality_window)),
             rng: seeded(derive_seed(cfg.seed, "panel")),
             cost_budget: cfg.budget.cost,
             weighted: cfg.demos.weighting == Weighting::Quality,
@@ -291,9 +293,15 @@ mod tests {
         let x = [0.5f32, 0.0];
         // Round-robin: energy first; the second is the least answered other (fair, the first of
         // equals). Both say 2: each agrees with its one opinion.
-        assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 7, ME).unwrap(), Some(2));
+        assert_eq!(
+            ask.ask(&mut core, (&x, &[0.5, 0.0]), 7, ME).unwrap(),
+            Some(2)
+        );
         // Then fair, with poor asked too (fewest answers): 2 against 0, both disagree.
-        assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 9, ME).unwrap(), Some(2));
+        assert_eq!(
+            ask.ask(&mut core, (&x, &[0.5, 0.0]), 9, ME).unwrap(),
+            Some(2)
+        );
         let names: Vec<&str> = core.demos().iter().map(|d| d.expert.as_str()).collect();
         assert_eq!(
             names,
@@ -305,7 +313,10 @@ mod tests {
             ]
         );
         // The fifth answer is the budget's last: poor first, its second ask not recorded.
-        assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 11, ME).unwrap(), Some(0));
+        assert_eq!(
+            ask.ask(&mut core, (&x, &[0.5, 0.0]), 11, ME).unwrap(),
+            Some(0)
+        );
         assert_eq!(core.demos().len(), 5);
         assert_eq!(
             ask.ask(&mut core, (&x, &[0.5, 0.0]), 12, ME).unwrap(),
@@ -338,12 +349,18 @@ mod tests {
         let (_, mut core, mut ask) = setup("[budget]\ntotal = 100\ncost = 13\n");
         let x = [0.5f32, 0.0];
         // energy (10) and fair (2): 12 spent, 1 left.
-        assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 1, ME).unwrap(), Some(2));
+        assert_eq!(
+            ask.ask(&mut core, (&x, &[0.5, 0.0]), 1, ME).unwrap(),
+            Some(2)
+        );
         assert!(ask.can_pay(), "poor costs 1");
         // fair (2) cannot be paid any more: no answer.
         assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 2, ME).unwrap(), None);
         // poor (1) can, but not its second expert.
-        assert_eq!(ask.ask(&mut core, (&x, &[0.5, 0.0]), 3, ME).unwrap(), Some(0));
+        assert_eq!(
+            ask.ask(&mut core, (&x, &[0.5, 0.0]), 3, ME).unwrap(),
+            Some(0)
+        );
         assert!(!ask.can_pay());
         assert_eq!(ask.into_log().spent, 13.0);
         assert_eq!(core.demos().len(), 3);
@@ -384,8 +401,11 @@ mod tests {
         )
         .unwrap();
         let mut core = ExpertCore::for_config(&cfg, 3);
-        let members: Vec<Box<dyn Demonstrator<[f32]>>> =
-            vec![Box::new(Always(2)), Box::new(Always(1)), Box::new(Always(0))];
+        let members: Vec<Box<dyn Demonstrator<[f32]>>> = vec![
+            Box::new(Always(2)),
+            Box::new(Always(1)),
+            Box::new(Always(0)),
+        ];
         let mut ask = PanelAsk::new(&cfg, members);
         let x = [0.5f32, 0.0];
         // No demonstration model and no double ask: answers alone earn no reward. In turn,
