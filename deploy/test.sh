@@ -16,9 +16,16 @@ tmp="${TMPDIR:-/tmp}"
 leftovers() { ls -A "$tmp" | grep '^alfd-' | sort || true; }
 before="$(leftovers)"
 
+setup_pid=""
 report() {
   local status=$?
   set +e
+  if [ -n "$setup_pid" ]; then
+    kill "$setup_pid" 2>/dev/null
+    wait "$setup_pid" 2>/dev/null
+    cat "$setup_log" 2>/dev/null
+    rm -f "$setup_log"
+  fi
   if [ -s "$ALFD_TEST_TIMES/times.txt" ]; then
     echo
     echo "slowest tests:"
@@ -40,22 +47,31 @@ report() {
 }
 trap report EXIT
 
+# The set-up that waits on the network and the disk more than on the processors runs in the
+# background while cargo builds, its messages shown once it is done:
+# - the Python side (the Gymnasium adapter's .venv/, deploy/python/requirements.txt), installed
+#   here the way alfd installs it on first use, so that no test waits on it (a no-op once
+#   installed);
+# - the human page's browser test: Debian's Chromium driven by Playwright
+#   (deploy/cli/tests/browser/package.json, pinned), installed with npm here as the test would.
+#   Chromium is installed from Debian's packages when absent and this runs as root; a browser
+#   test that still cannot run fails when CI is set (as .ci/run sets it) and says SKIPPED
+#   otherwise.
+setup_log="$tmp/test-setup.$$.log"
+(
+  set -e
+  bash deploy/python/setup-venv.sh >/dev/null
+  if [ ! -x /usr/bin/chromium ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "== installing Debian's chromium for the human page's browser test"
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) \
+      >/dev/null || echo "warning: apt-get install chromium failed"
+  fi
+  if [ -x /usr/bin/chromium ] && [ ! -d deploy/cli/tests/browser/node_modules/playwright-core ]; then
+    (cd deploy/cli/tests/browser && npm ci --no-audit --no-fund --silent)
+  fi
+) >"$setup_log" 2>&1 &
+setup_pid=$!
 cargo build --release --workspace --locked
-# The Python side (the Gymnasium adapter's .venv/, deploy/python/requirements.txt): installed here
-# the way alfd installs it on first use, so that no test waits on it (a no-op once installed).
-bash deploy/python/setup-venv.sh >/dev/null
-# The human page's browser test: Debian's Chromium driven by Playwright
-# (deploy/cli/tests/browser/package.json, pinned), installed with npm here as the test would. Chromium
-# is installed from Debian's packages when absent and this runs as root; a browser test that still
-# cannot run fails when CI is set (as .ci/run sets it) and says SKIPPED otherwise.
-if [ ! -x /usr/bin/chromium ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-  echo "== installing Debian's chromium for the human page's browser test"
-  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) >/dev/null ||
-    echo "warning: apt-get install chromium failed"
-fi
-if [ -x /usr/bin/chromium ] && [ ! -d deploy/cli/tests/browser/node_modules/playwright-core ]; then
-  (cd deploy/cli/tests/browser && npm ci --no-audit --no-fund --silent)
-fi
 # The manual (docs/, an mdBook): mdBook is built from crates.io into .tools/ on first use (its
 # own pinned lock file, without the server and search features, at a lower optimisation level so
 # that it builds in about a minute), then the book is built; the links are checked by a test.
@@ -69,6 +85,15 @@ fi
 book="$(.tools/bin/mdbook build docs 2>&1)" || { echo "$book"; exit 1; }
 if grep -E '\[(WARN|ERROR)\]' <<<"$book"; then
   echo "mdbook: the manual builds with the warnings above"
+  exit 1
+fi
+setup_status=0
+wait "$setup_pid" || setup_status=$?
+setup_pid=""
+cat "$setup_log"
+rm -f "$setup_log"
+if [ "$setup_status" != 0 ]; then
+  echo "the set-up above failed (exit code $setup_status)"
   exit 1
 fi
 cargo test --release --workspace --locked
