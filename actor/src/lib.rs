@@ -295,6 +295,11 @@ fn wire_expert<'s, 'w>(
         runtime.query_timeout(),
     )?
     .with_human_timeout(runtime.query_timeout_for(alfd_harness::HUMAN_EXPERT))
+    .with_person_among_experts(
+        cfg.experts
+            .iter()
+            .any(|e| e.name == alfd_harness::HUMAN_EXPERT),
+    )
     .with_prior_demos(prior))
 }
 

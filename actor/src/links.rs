@@ -290,6 +290,8 @@ pub struct WireExpert<'s, 'w> {
     /// The timeout while a person is the expert (the newest model's header names the expert).
     human_timeout: Duration,
     human_active: bool,
+    /// A person is among the run's several experts: every query may wait for them.
+    person_among_experts: bool,
     /// `Some` when the config shapes the reward.
     schedule: Option<ShapingSchedule>,
     /// The run's prior demonstrations (`demos.prior`): in every published model, not in the
@@ -328,6 +330,7 @@ impl<'s, 'w> WireExpert<'s, 'w> {
             timeout,
             human_timeout: timeout,
             human_active: false,
+            person_among_experts: false,
             schedule,
             prior_demos: 0,
             timeouts: 0,
@@ -339,6 +342,13 @@ impl<'s, 'w> WireExpert<'s, 'w> {
     /// The models it receives are fitted on `n` prior demonstrations too (shaping counts them).
     pub fn with_prior_demos(mut self, n: usize) -> Self {
         self.prior_demos = n;
+        self
+    }
+
+    /// A person is among the run's several experts (`[[experts]]`): every query waits the
+    /// person's timeout, since the panel may route it to them.
+    pub fn with_person_among_experts(mut self, person: bool) -> Self {
+        self.person_among_experts = person;
         self
     }
 
@@ -397,7 +407,7 @@ impl<'s, 'w> WireExpert<'s, 'w> {
         // The expert publishes its model (its name in the header) when it becomes active: a
         // person just swapped in gets the person's timeout from the first query on.
         self.take_model()?;
-        let timeout = if self.human_active {
+        let timeout = if self.human_active || self.person_among_experts {
             self.human_timeout
         } else {
             self.timeout

@@ -105,9 +105,10 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let wire = args.process.connect(me, schema)?;
     let session = Session::join(&wire, Doorbell::Expert, runtime.handshake_timeout())?;
     let core = expert_core(args, cfg, obs_dim, actions)?;
-    let page = match source {
-        Source::Person => Some(start_page(args, runtime.human_port, cfg, actions, &core)?),
-        _ => None,
+    // A person answers on the page: the expert, or one of several.
+    let page = match matches!(source, Source::Person) || person_in(cfg).is_some() {
+        true => Some(start_page(args, runtime.human_port, cfg, actions, &core)?),
+        false => None,
     };
     let mut machine = ExpertMachine::new(
         args.generation,
@@ -289,14 +290,23 @@ fn panel_source(
     timeout: Duration,
 ) -> alfd_harness::Result<Source> {
     let run_dir = &args.process.run_dir;
-    let members = registry::panel(cfg, |i, policy| {
+    let members = registry::panel(cfg, registry::People::Allowed, |i, policy| {
         let name = format!("expert-{}-{i}", args.generation);
         let log = run_dir.join(format!("adapter-{name}.log"));
         let id = (args.process.run_id.as_str(), name.as_str());
         let external = AdapterDemonstrator::start(policy, id, me, schema, actions, &log, timeout)?;
         Ok(Box::new(external))
     })?;
-    Ok(Source::Panel(Box::new(PanelAsk::new(cfg, members))))
+    let panel = PanelAsk::new(cfg, members);
+    Ok(Source::Panel(Box::new(match person_in(cfg) {
+        Some(i) => panel.with_person(i),
+        None => panel,
+    })))
+}
+
+/// Where a person (`human`) is among `cfg`'s several experts, if they are.
+fn person_in(cfg: &alfd_common::config::ExperimentConfig) -> Option<usize> {
+    cfg.experts.iter().position(|e| e.name == HUMAN)
 }
 
 /// A person as the expert: the page is up from the start (standing by until active); its
@@ -481,7 +491,11 @@ impl<'w> Shell<'w> {
         // The actors that gave up waiting (their timeout) are no longer shown, nor answered.
         m.prune(|q| q.is_connected());
         for d in decisions {
-            let answered = m.decision(d.id, d.action);
+            let panel = match &mut self.source {
+                Source::Panel(p) => Some(p.as_mut()),
+                _ => None,
+            };
+            let answered = m.decision(d.id, d.action, panel);
             // The first reply answers the decision (refusals of the rest may follow it).
             if let Some(Action::Reply {
                 actor, response, ..

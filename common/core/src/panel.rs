@@ -83,6 +83,9 @@ pub struct Panel {
     answers: Vec<u64>,
     rewards: Vec<VecDeque<f64>>,
     up: Vec<bool>,
+    /// Whether expert `i` may be the second of a double ask (a person is asked first or not
+    /// at all: a second ask would hold the first answer up).
+    second_ok: Vec<bool>,
     next: usize,
     spent: f64,
 }
@@ -109,6 +112,7 @@ impl Panel {
             answers: vec![0; n],
             rewards: vec![VecDeque::new(); n],
             up: vec![true; n],
+            second_ok: vec![true; n],
             next: 0,
             spent: 0.0,
         }
@@ -126,6 +130,11 @@ impl Panel {
     /// Marks expert `i` down: no route asks it again.
     pub fn set_down(&mut self, i: usize) {
         self.up[i] = false;
+    }
+
+    /// Expert `i` is never the second of a double ask.
+    pub fn never_second(&mut self, i: usize) {
+        self.second_ok[i] = false;
     }
 
     /// Whether expert `i` is still asked.
@@ -236,10 +245,11 @@ impl Panel {
             .expect("an expert is up")
     }
 
-    /// The expert up other than `first` with the fewest answers (the first of equals).
+    /// The expert up other than `first` with the fewest answers (the first of equals), among
+    /// those that may be a second.
     fn least_answered_but(&self, first: usize) -> Option<usize> {
         (0..self.members.len())
-            .filter(|&i| i != first && self.up[i])
+            .filter(|&i| i != first && self.up[i] && self.second_ok[i])
             .min_by_key(|&i| self.answers[i])
     }
 }
@@ -487,6 +497,23 @@ mod tests {
         // The second asks alternate between the two others as their answers even out.
         let (good, fair) = (p.quality(0).answers, p.quality(1).answers);
         assert!(good.abs_diff(fair) <= 1, "{good} {fair}");
+    }
+
+    #[test]
+    fn an_expert_that_is_never_second_is_asked_first_only() {
+        let mut rng = seeded(5);
+        let mut p = panel(Route::RoundRobin, 1.0);
+        p.never_second(0);
+        let asks: Vec<Ask> = (0..6).map(|_| p.route(&mut rng).unwrap()).collect();
+        assert!(asks.iter().all(|a| a.second != Some(0)), "{asks:?}");
+        assert_eq!(asks[0].first, 0, "asked first in its turn");
+        // With the other two down, it answers alone.
+        p.set_down(1);
+        p.set_down(2);
+        assert_eq!(
+            p.route(&mut rng).map(|a| (a.first, a.second)),
+            Some((0, None))
+        );
     }
 
     #[test]

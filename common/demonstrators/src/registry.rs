@@ -306,12 +306,36 @@ pub fn for_config(
     }
 }
 
+/// Whether a person (`human`) may be among `[[experts]]`: in `alfd run`, whose expert process
+/// serves their page; not in a run of one process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum People {
+    Allowed,
+    Refused,
+}
+
+/// Stands for a person among several experts: never asked as a demonstrator (the panel hands
+/// a state routed to them back, and their answer comes from the page).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PersonSlot;
+
+impl Demonstrator<[f32]> for PersonSlot {
+    fn act(&mut self, _: &[f32]) -> usize {
+        0
+    }
+
+    fn try_act(&mut self, _: &[f32]) -> std::result::Result<usize, String> {
+        Err("a person answers on the page, not as a demonstrator".to_owned())
+    }
+}
+
 /// The demonstrators of `[[experts]]`, in order: a built-in one of the config's environment
-/// (with `becomes`, one for its first `after` answers and another from then on), or an external
-/// one as `external(i, name)` starts it (`i` its place in the list). A person is refused: the
-/// human page serves a run with one expert.
+/// (with `becomes`, one for its first `after` answers and another from then on), an external
+/// one as `external(i, name)` starts it (`i` its place in the list), or for a person (at most
+/// one, where `people` allows) a [`PersonSlot`].
 pub fn panel(
     cfg: &alfd_common::config::ExperimentConfig,
+    people: People,
     mut external: impl FnMut(usize, &str) -> alfd_harness::Result<Box<dyn Demonstrator<[f32]>>>,
 ) -> alfd_harness::Result<Vec<Box<dyn Demonstrator<[f32]>>>> {
     let refuse = |name: &str, why: &str| BadInput(format!("[[experts]]: `{name}` {why}"));
@@ -320,7 +344,21 @@ pub fn panel(
     let mut members: Vec<Box<dyn Demonstrator<[f32]>>> = Vec::new();
     for (i, e) in cfg.experts.iter().enumerate() {
         if e.name == alfd_harness::HUMAN_EXPERT {
-            return Err(refuse(&e.name, "(a person) answers in a run with one expert").into());
+            if people == People::Refused {
+                return Err(refuse(
+                    &e.name,
+                    "(a person) answers among several experts in `alfd run` only, where its \
+                     expert process serves their page",
+                )
+                .into());
+            }
+            if e.becomes.is_some() {
+                return Err(
+                    refuse(&e.name, "is a person: `becomes` takes built-in experts").into(),
+                );
+            }
+            members.push(Box::new(PersonSlot));
+            continue;
         }
         if external_policy(&e.name).is_some() {
             if e.becomes.is_some() {

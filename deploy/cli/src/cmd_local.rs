@@ -65,6 +65,10 @@ pub fn run(args: LocalArgs) -> anyhow::Result<()> {
     let cfg = setup::load_config(&args.config, &args.set)?;
     // Every input is checked before the directory is claimed.
     let pieces = Pieces::of(&cfg)?;
+    if !cfg.experts.is_empty() {
+        // Each of several experts known here (and no person, who needs `alfd run`'s page).
+        setup::check_demonstrator(&cfg)?;
+    }
     if !cfg.experts.is_empty() && args.checkpoint_every.is_some() {
         return Err(usage(
             "--checkpoint-every: a run with several experts (`[[experts]]`) cannot be \

@@ -124,8 +124,13 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let listen = listen_and_actors(&args)?;
     let runtime = runtime_config(&args, listen.is_some(), env_spec)?;
     // Fail before starting anything if the expert is unknown.
-    setup::check_demonstrator(&cfg)?;
-    if cfg.expert.name == alfd_expert::human::HUMAN {
+    setup::check_run_demonstrator(&cfg)?;
+    let person = cfg.expert.name == alfd_expert::human::HUMAN
+        || cfg
+            .experts
+            .iter()
+            .any(|e| e.name == alfd_expert::human::HUMAN);
+    if person {
         check_human_port(args.human_port)?;
     }
     let run_id = launcher::new_run_id();

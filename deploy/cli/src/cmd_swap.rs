@@ -45,6 +45,12 @@ pub fn add(run: &Path, entry: PanelEntry, timeout: u64) -> anyhow::Result<()> {
     if !(entry.cost.is_finite() && entry.cost > 0.0) {
         return Err(usage(format!("--cost {} must be > 0", entry.cost)));
     }
+    if entry.name == alfd_harness::HUMAN_EXPERT {
+        return Err(usage(
+            "a person joins several experts in the run's config (`[[experts]]`), not live: the \
+             actors give every query the person's time only then",
+        ));
+    }
     let mut cfg = run_config(run)?;
     cfg.experts = vec![entry.clone()];
     setup::check_demonstrator(&cfg)?;

@@ -103,7 +103,8 @@ pub(crate) fn start(cfg: &ExperimentConfig, out: &std::path::Path) -> anyhow::Re
             None if cfg.experts.is_empty() => crate::setup::neural_demonstrator(cfg)?,
             None => Box::new(alfd_common::agent::NoExpert),
         };
-    let panel = alfd_demonstrators::registry::panel(cfg, |i, policy| {
+    let people = alfd_demonstrators::registry::People::Refused;
+    let panel = alfd_demonstrators::registry::panel(cfg, people, |i, policy| {
         Ok(Box::new(adapter(policy, &format!("expert-1-{i}"))?))
     })?;
     Ok(Started {

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use alfd_common::config::{ConfigError, EnvName, ExperimentConfig};
 use alfd_common::env::cliffwalk::{CliffMap, CliffWalk};
+use alfd_demonstrators::registry::People;
 use anyhow::Context as _;
 
 use crate::usage::usage;
@@ -203,8 +204,17 @@ pub fn oracle<S: ?Sized + 'static>(
 /// map), or a well-formed external one (`python:MODULE:FUNCTION`, `sb3:ALGO:PATH`), which the
 /// expert process starts.
 pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
+    check_demonstrator_where(cfg, People::Refused)
+}
+
+/// [`check_demonstrator`] for `alfd run`, where a person may be among several experts.
+pub fn check_run_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
+    check_demonstrator_where(cfg, People::Allowed)
+}
+
+fn check_demonstrator_where(cfg: &ExperimentConfig, people: People) -> anyhow::Result<()> {
     if !cfg.experts.is_empty() {
-        return check_panel(cfg);
+        return check_panel(cfg, people);
     }
     if !cfg.needs_expert() {
         // No expert to check; a map is still read now, so that a bad one is refused first.
@@ -235,18 +245,27 @@ pub fn check_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
 pub fn panel(
     cfg: &ExperimentConfig,
 ) -> anyhow::Result<Vec<Box<dyn alfd_common::agent::Demonstrator<[f32]>>>> {
-    Ok(alfd_demonstrators::registry::panel(cfg, |_, name| {
-        Err(alfd_harness::BadInput(format!(
-            "[[experts]]: the external expert `{name}` is started with the run's adapters"
-        ))
-        .into())
-    })?)
+    Ok(alfd_demonstrators::registry::panel(
+        cfg,
+        People::Refused,
+        |_, name| {
+            Err(alfd_harness::BadInput(format!(
+                "[[experts]]: the external expert `{name}` is started with the run's adapters"
+            ))
+            .into())
+        },
+    )?)
 }
 
 /// Checks `[[experts]]` without starting anyone: each name known for the environment, each
-/// external name well formed.
-fn check_panel(cfg: &ExperimentConfig) -> anyhow::Result<()> {
-    alfd_demonstrators::registry::panel(cfg, |_, _| Ok(Box::new(alfd_common::agent::NoExpert)))?;
+/// external name well formed, a person only where `people` allows.
+fn check_panel(cfg: &ExperimentConfig, people: People) -> anyhow::Result<()> {
+    let none = |_: usize,
+                _: &str|
+     -> alfd_harness::Result<Box<dyn alfd_common::agent::Demonstrator<[f32]>>> {
+        Ok(Box::new(alfd_common::agent::NoExpert))
+    };
+    alfd_demonstrators::registry::panel(cfg, people, none)?;
     Ok(())
 }
 

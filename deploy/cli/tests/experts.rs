@@ -111,18 +111,25 @@ fn several_experts_are_refused_where_they_cannot_run() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("several experts"), "{}", text(&o));
+    // `alfd local` refuses `toml` as a config with exit code 2, saying `says`, writing nothing.
+    let refused = |name: &str, toml: String, says: &str| {
+        std::fs::write(&config, toml).unwrap();
+        let o = alfd()
+            .args(["local", "--config"])
+            .arg(&config)
+            .arg("--out")
+            .arg(dir.join(name))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+        assert!(text(&o).contains(says), "{}", text(&o));
+        assert!(!dir.join(name).exists(), "nothing written");
+    };
     let both = CONFIG.replace("[expert]\n", "[expert]\nname = \"mountaincar-poor\"\n");
-    std::fs::write(&config, both).unwrap();
-    let o = alfd()
-        .args(["local", "--config"])
-        .arg(&config)
-        .arg("--out")
-        .arg(dir.join("both"))
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    assert!(text(&o).contains("leave `expert.name` out"), "{}", text(&o));
-    assert!(!dir.join("both").exists(), "nothing written");
+    refused("both", both, "leave `expert.name` out");
+    // A person answers on a page, which only `alfd run`'s expert process serves.
+    let person = CONFIG.replace("name = \"mountaincar-poor\"", "name = \"human\"");
+    refused("person", person, "in `alfd run` only");
 }
 
 /// Runs `alfd HOW --quiet --config CONFIG --out OUT`, which must succeed; `out`.
@@ -386,6 +393,9 @@ fn experts_added_to_and_removed_from_a_live_run_answer_from_then_on_at_their_cos
     let (code, said) = expert(&["add", "nobody-at-all"]);
     assert_eq!(code, Some(2), "{said}");
     assert!(said.contains("nobody-at-all"), "{said}");
+    let (code, said) = expert(&["add", "human"]);
+    assert_eq!(code, Some(2), "{said}");
+    assert!(said.contains("not live"), "{said}");
     let o = crate::runtime::interrupt(bg);
     assert_eq!(o.status.code(), Some(130), "{}", text(&o));
     // Every answer of the run in `experts.csv`, each expert's rows under its name.

@@ -31,7 +31,7 @@ fn cartpole_config(dir: &Path, budget: u32, episodes: u32) -> PathBuf {
 /// Starts `alfd run --expert human` on a free port; returns the run and the page's address
 /// (`127.0.0.1:PORT`), as the expert wrote it in the run directory.
 fn start_run(config: &Path, run_dir: &Path, actors: usize) -> (Background, String) {
-    start_run_with(config, run_dir, actors, &[])
+    start_run_with(config, run_dir, actors, &["--expert=human"])
 }
 
 /// [`start_run`] with more arguments of `alfd run`.
@@ -43,7 +43,7 @@ fn start_run_with(
 ) -> (Background, String) {
     let mut run = Background(Some(
         alfd()
-            .args(["run", "--quiet", "--expert=human", "--human-port=0"])
+            .args(["run", "--quiet", "--human-port=0"])
             .args(args)
             .arg(format!("--actors={actors}"))
             .arg(format!("--config={}", config.display()))
@@ -143,6 +143,78 @@ fn first_event(addr: &str) -> Value {
         }
     }
     panic!("the event stream ended without an event");
+}
+
+#[test]
+fn a_person_among_several_experts_answers_on_the_page_and_a_second_expert_on_the_same_state() {
+    let _time = timed!();
+    let out = tmp("human-panel");
+    let config = cartpole_config(&out, 4, 3);
+    // The person is the best known: each query goes to them, and the same state to the
+    // script (a double ask, every time); the person is never asked second.
+    let mut text_of = std::fs::read_to_string(&config).unwrap();
+    text_of = text_of.replace("name = \"cartpole-perfect\"\n", "");
+    text_of.push_str(
+        "route = \"best-known\"\ndouble_ask = 1.0\n\
+         [[experts]]\nname = \"human\"\ncost = 10\n\
+         [[experts]]\nname = \"cartpole-perfect\"\ncost = 1\n",
+    );
+    std::fs::write(&config, text_of).unwrap();
+    let run_dir = out.join("run");
+    let (mut run, addr) = start_run_with(&config, &run_dir, 1, &[]);
+    let mut given = Vec::new();
+    for n in 1..=2u64 {
+        let s = until(&addr, "a query to answer", |s| {
+            s["active"] == true
+                && s["query"]["id"]
+                    .as_u64()
+                    .is_some_and(|id| !given.contains(&id))
+        });
+        let id = s["query"]["id"].as_u64().unwrap();
+        let (code, body) = http(
+            &addr,
+            "POST",
+            "/answer",
+            Some(&format!("{{\"id\":{id},\"action\":0}}")),
+        );
+        assert_eq!(code, 202, "{body}");
+        given.push(id);
+        until(&addr, "the answer taken", |s| s["answered"] == n);
+    }
+    let child = run.0.take().unwrap();
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let lines: Vec<Value> = std::fs::read_to_string(run_dir.join("demos.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let who: Vec<(&str, f64, bool)> = lines
+        .iter()
+        .map(|l| {
+            let (e, c, d) = (&l["expert"], &l["cost"], &l["double_asked"]);
+            (
+                e.as_str().unwrap(),
+                c.as_f64().unwrap(),
+                d.as_bool().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        who,
+        [
+            ("human", 10.0, true),
+            ("cartpole-perfect", 1.0, true),
+            ("human", 10.0, true),
+            ("cartpole-perfect", 1.0, true)
+        ]
+    );
+    // The person's answers are their action; each second answer is on the same state.
+    assert!(lines.iter().step_by(2).all(|l| l["action"] == 0));
+    assert!(lines.chunks(2).all(|p| p[0]["state"] == p[1]["state"]));
+    let qualities = std::fs::read_to_string(run_dir.join("experts.csv")).unwrap();
+    assert_eq!(qualities.lines().count(), 5, "{qualities}");
+    crate::runtime::check_run_dir(&run_dir, 4);
 }
 
 #[test]
@@ -486,7 +558,12 @@ fn a_persons_click_after_the_actor_stopped_waiting_is_refused_and_records_nothin
     let out = tmp("human-late");
     let config = cartpole_config(&out, 2, 3);
     let run_dir = out.join("run");
-    let (mut run, addr) = start_run_with(&config, &run_dir, 1, &["--human-query-timeout-ms=300"]);
+    let (mut run, addr) = start_run_with(
+        &config,
+        &run_dir,
+        1,
+        &["--expert=human", "--human-query-timeout-ms=300"],
+    );
     let s = until(&addr, "a query", |s| s["waiting"] == 1);
     let old = s["query"]["id"].as_u64().unwrap();
     // The actor gives up after 300 ms and asks again on a later step: another query is shown.

@@ -8,7 +8,7 @@
 
 use crate::agent::{Demonstrator, ExpertCore};
 use crate::config::{ExperimentConfig, Weighting};
-use crate::panel::{Asker, Member, Panel, Quality, Returns};
+use crate::panel::{Ask, Asker, Member, Panel, Quality, Returns};
 use crate::policy::argmax;
 use crate::rng::{derive_seed, seeded, Rng};
 
@@ -57,9 +57,22 @@ impl PanelLog {
     }
 }
 
+/// What a query the panel routed leads to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Routed {
+    /// Answered with the first expert's action, or `None`: the budget or the cost budget is
+    /// spent.
+    Answered(Option<usize>),
+    /// The person is asked first: the state is shown to them, and their answer given to
+    /// [`PanelAsk::person_answered`] with this ask.
+    Person(Ask),
+}
+
 /// The experts of a run and the panel that routes its queries among them.
 pub struct PanelAsk<'d, S: ?Sized> {
     members: Vec<Box<dyn Demonstrator<S> + 'd>>,
+    /// The member that is a person (answering on a page, later), if any.
+    person: Option<usize>,
     panel: Panel,
     returns: Option<Returns>,
     rng: Rng,
@@ -87,6 +100,7 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
         let e = &cfg.expert;
         Self {
             members,
+            person: None,
             panel: Panel::new(
                 panel_members,
                 e.route,
@@ -134,19 +148,44 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
         (0..self.panel.members().len()).any(|i| self.affordable(i))
     }
 
+    /// Member `i` is a person: a query routed to them first is handed back
+    /// ([`Routed::Person`]) instead of asked, and they are never the second of a double ask.
+    pub fn with_person(mut self, i: usize) -> Self {
+        self.person = Some(i);
+        self.panel.never_second(i);
+        self
+    }
+
     /// Asks the state `obs` (features `x`) at global step `step`, from `asker`: the routed
     /// expert's action, recorded in `core` as a demonstration, and on a double ask a second
     /// expert's too; `None` when the budget or the cost budget is spent. An expert that fails
     /// to answer is marked down and the state goes to another; an error only when every expert
-    /// is down. First, the return of the asker's episode before this one rewards the experts
-    /// that answered in it (with `expert.quality_from_returns`).
+    /// is down, or when the state is routed to a person (who answers in `alfd run` only).
     pub fn ask(
+        &mut self,
+        core: &mut ExpertCore,
+        state: (&S, &[f64]),
+        step: u64,
+        asker: Asker,
+    ) -> Result<Option<usize>> {
+        match self.route_or_answer(core, state, step, asker)? {
+            Routed::Answered(action) => Ok(action),
+            Routed::Person(_) => Err(LoopError::link(
+                "a person among [[experts]] answers in `alfd run` only",
+            )),
+        }
+    }
+
+    /// [`PanelAsk::ask`], but a state routed to the person first comes back as
+    /// [`Routed::Person`], unanswered. First, the return of the asker's episode before this one
+    /// rewards the experts that answered in it (with `expert.quality_from_returns`).
+    pub fn route_or_answer(
         &mut self,
         core: &mut ExpertCore,
         (obs, x): (&S, &[f64]),
         step: u64,
         asker: Asker,
-    ) -> Result<Option<usize>> {
+    ) -> Result<Routed> {
         for (expert, reward) in self.returns.as_mut().map_or(Vec::new(), |r| r.asked(asker)) {
             self.panel.reward(expert, reward);
         }
@@ -156,13 +195,47 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
                 return Err(failure.unwrap_or_else(|| LoopError::link("every expert is down")));
             };
             if core.budget().is_exhausted() || !self.affordable(ask.first) {
-                return Ok(None);
+                return Ok(Routed::Answered(None));
+            }
+            if Some(ask.first) == self.person {
+                return Ok(Routed::Person(ask));
             }
             match self.act(ask.first, obs) {
                 Ok(action) => break (ask, action),
                 Err(e) => failure = Some(self.down(ask.first, e)),
             }
         };
+        self.answered(core, (obs, x), (step, asker), (ask, first));
+        Ok(Routed::Answered(Some(first)))
+    }
+
+    /// The person's `action` on a state the panel routed to them (`ask`, from
+    /// [`Routed::Person`]): recorded as their demonstration, with the second expert's on a
+    /// double ask; `None` (nothing recorded) when the budget or the cost budget ran out while
+    /// they decided.
+    pub fn person_answered(
+        &mut self,
+        core: &mut ExpertCore,
+        state: (&S, &[f64]),
+        (step, asker): (u64, Asker),
+        ask: Ask,
+        action: usize,
+    ) -> Option<usize> {
+        if core.budget().is_exhausted() || !self.affordable(ask.first) {
+            return None;
+        }
+        self.answered(core, state, (step, asker), (ask, action));
+        Some(action)
+    }
+
+    /// The first expert answered `first`: the second asked on a double ask, both recorded.
+    fn answered(
+        &mut self,
+        core: &mut ExpertCore,
+        (obs, x): (&S, &[f64]),
+        (step, asker): (u64, Asker),
+        (ask, first): (Ask, usize),
+    ) {
         let second = match ask.second.filter(|&s| self.affordable(s)) {
             Some(s) => match self.act(s, obs) {
                 Ok(action) => Some((s, action)),
@@ -178,7 +251,6 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
                 r.answered(asker.actor, expert);
             }
         }
-        Ok(Some(first))
     }
 
     /// Records each answer on the state as a demonstration (while the budget lasts), rated
@@ -426,5 +498,65 @@ mod tests {
             .map(|i| (ask.quality(i).answers, ask.quality(i).quality))
             .collect();
         assert_eq!(q, [(2, 0.5), (1, 1.0), (1, 0.0)]);
+    }
+
+    /// A person: never asked as a demonstrator (their answer comes from the page).
+    struct Person;
+
+    impl Demonstrator<[f32]> for Person {
+        fn act(&mut self, _: &[f32]) -> usize {
+            panic!("a person is not asked as a demonstrator")
+        }
+    }
+
+    #[test]
+    fn a_state_routed_to_the_person_waits_for_their_answer_then_is_recorded_with_the_second() {
+        let cfg = ExperimentConfig::from_toml(
+            "seed = 1\nepisodes = 3\n[env]\nname = \"mountaincar\"\n[agent]\nkind = \"bdqn\"\n\
+             [budget]\ntotal = 3\n[expert]\nroute = \"best-known\"\ndouble_ask = 1.0\n\
+             [[experts]]\nname = \"human\"\ncost = 10\n\
+             [[experts]]\nname = \"mountaincar-fair\"\ncost = 2\n\
+             [[experts]]\nname = \"mountaincar-poor\"\n",
+        )
+        .unwrap();
+        let mut core = ExpertCore::for_config(&cfg, 3);
+        let members: Vec<Box<dyn Demonstrator<[f32]>>> =
+            vec![Box::new(Person), Box::new(Always(1)), Box::new(Always(0))];
+        let mut ask = PanelAsk::new(&cfg, members).with_person(0);
+        let (x, f) = ([0.5f32, 0.0], [0.5, 0.0]);
+        // The person is the best known: handed back, nothing asked or recorded yet.
+        let Routed::Person(routed) = ask.route_or_answer(&mut core, (&x, &f), 4, ME).unwrap()
+        else {
+            panic!("not routed to the person");
+        };
+        assert_eq!((routed.first, routed.second), (0, Some(1)));
+        assert!(core.demos().is_empty());
+        // They answer 2: recorded first, then the second expert's answer on the same state.
+        let got = ask.person_answered(&mut core, (&x, &f), (4, ME), routed, 2);
+        assert_eq!(got, Some(2));
+        let demos: Vec<(&str, usize)> = core
+            .demos()
+            .iter()
+            .map(|d| (d.expert.as_str(), d.action))
+            .collect();
+        assert_eq!(demos, [("human", 2), ("mountaincar-fair", 1)]);
+        // `alfd local` has no page: a state routed to the person is an error there.
+        assert!(ask.ask(&mut core, (&x, &f), 5, ME).is_err());
+        // One answer of the budget is left: the person's next one is recorded, its second not.
+        let Routed::Person(routed) = ask.route_or_answer(&mut core, (&x, &f), 6, ME).unwrap()
+        else {
+            panic!("not routed to the person");
+        };
+        assert_eq!(
+            ask.person_answered(&mut core, (&x, &f), (6, ME), routed, 1),
+            Some(1)
+        );
+        assert_eq!(core.demos().len(), 3);
+        assert_eq!(
+            ask.person_answered(&mut core, (&x, &f), (7, ME), routed, 1),
+            None
+        );
+        let log = ask.into_log();
+        assert_eq!(log.spent, 10.0 + 2.0 + 10.0);
     }
 }
