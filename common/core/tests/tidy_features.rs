@@ -1,8 +1,9 @@
 //! The main job's build stays whole: `deploy/run.sh` builds `alfd` without the `hosts` feature
-//! (no zenoh bridge) and without `minari` (no Arrow). Outside the bridge's own crate only the
-//! files listed here may name `alfd_bridge` in code, each behind the feature (a module declared under
-//! `#[cfg(feature = "hosts")]`, items or lines gated in the file, or a binary whose
-//! `required-features` has it). A new file that needs the bridge is gated and added here.
+//! (no zenoh bridge), without `minari` (no Arrow) and without `pages` (no web server). Outside
+//! the bridge's own crate only the files listed here may name `alfd_bridge` in code, each behind
+//! the feature (a module declared under `#[cfg(feature = "hosts")]`, items or lines gated in the
+//! file, or a binary whose `required-features` has it). A new file that needs the bridge is
+//! gated and added here.
 
 use crate::tidy::{code_only, workspace, workspace_rust_files};
 
@@ -78,4 +79,22 @@ fn only_the_gated_minari_module_names_arrow() {
     assert_eq!(naming, ["deploy/lab/src/minari/arrow_io.rs"]);
     let minari = std::fs::read_to_string(workspace().join("deploy/lab/src/minari.rs")).unwrap();
     assert!(minari.contains("#[cfg(feature = \"minari\")]\nmod arrow_io;"));
+}
+
+/// The web pages' server (axum on tokio) is named only in the two page modules, each declared
+/// under its crate's feature (`page` in the expert, `pages` in `alfd`), as `deploy/run.sh`
+/// builds the main job without them.
+#[test]
+fn only_the_gated_page_modules_name_axum_and_tokio() {
+    let naming = naming("", &["axum::", "tokio::", "futures_util::"]);
+    assert_eq!(
+        naming,
+        [
+            "deploy/cli/src/cmd_watch/page.rs",
+            "expert/src/human/server.rs"
+        ]
+    );
+    let read = |rel: &str| std::fs::read_to_string(workspace().join(rel)).unwrap();
+    assert!(read("expert/src/human/mod.rs").contains("#[cfg(feature = \"page\")]\nmod server;"));
+    assert!(read("deploy/cli/src/cmd_watch.rs").contains("#[cfg(feature = \"pages\")]\nmod page;"));
 }
