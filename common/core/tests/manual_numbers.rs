@@ -1,10 +1,17 @@
-//! Numbers with two or more decimals quoted in the prose of README, EXPERIMENTS, BENCHMARKS and
-//! the manual come from committed results: each is found in a file under `results/`, rounded to
-//! the prose's decimals. So do the intervals quoted in whole numbers ("−136 [−147, −127]": an
-//! interval of the results rounded to integers) and the counts ("15 of 30": "15 of 30" or
-//! "15/30" in a results file). Code spans (`beta2 = 0.999`) are settings, not results, and are skipped;
-//! so are the generated parts and code blocks, which `alfd docs --check` keeps equal to their
-//! sources.
+//! Numbers quoted in the prose of README, EXPERIMENTS, BENCHMARKS and the manual come from
+//! committed results:
+//! - a number with two or more decimals is found, rounded to the prose's decimals, in a results
+//!   file its section (the text from one heading to the next) names: a file, a directory, or a
+//!   pattern such as `results/experts-returns-*/ranking.md`; in any results file when the
+//!   section names none. Settings and versions with decimals are listed in `NOT_RESULTS`;
+//! - an interval quoted in whole numbers ("−136 [−147, −127]") is an interval of a results file
+//!   rounded to integers, and a count ("15 of 30") is "15 of 30" or "15/30" in one. These two
+//!   are looked up in all of `results/`: a count of ten is found whatever it is (every "N of
+//!   10" occurs somewhere).
+//!
+//! Numbers with one decimal are not checked: every such value from −200 to 100 occurs in some
+//! results file. Code spans (`beta2 = 0.999`) are settings, not results, and are skipped; so are
+//! the generated parts and code blocks, which `alfd docs --check` keeps equal to their sources.
 
 use std::collections::HashSet;
 use std::path::PathBuf;
@@ -65,23 +72,6 @@ fn decimals_in(text: &str) -> Vec<String> {
         i = k;
     }
     out
-}
-
-/// Every decimal number of the committed results, formatted with 2 to 6 decimals.
-fn results_values() -> HashSet<String> {
-    let mut values = HashSet::new();
-    for text in results_texts() {
-        let tokens = text.split(|c: char| !(c.is_ascii_digit() || ".eE+-".contains(c)));
-        for v in tokens
-            .filter(|t| t.contains('.'))
-            .filter_map(|t| t.parse::<f64>().ok())
-        {
-            for d in DECIMALS..=6 {
-                values.insert(format!("{v:.d$}"));
-            }
-        }
-    }
-    values
 }
 
 /// The numbers of `text` with their places: (start, end, value), in characters; a sign counts
@@ -230,30 +220,170 @@ fn every_whole_number_interval_and_count_quoted_in_prose_is_in_a_committed_resul
     );
 }
 
+/// Settings and versions quoted in prose with two or more decimals, which are not results: the
+/// document and the words around the number, as written (line breaks as spaces).
+const NOT_RESULTS: [(&str, &str); 15] = [
+    ("README.md", "toolchain 1.89"),
+    ("README.md", "Python 3.10+"),
+    ("docs/src/install.md", "toolchain (1.89"),
+    ("docs/src/install.md", "Python 3.10+"),
+    ("docs/src/across-hosts.md", "zenoh 1.10"),
+    ("BENCHMARKS.md", "Linux 6.12"),
+    ("BENCHMARKS.md", "probability 0.05 a step"),
+    ("BENCHMARKS.md", "ε from 1 to 0.05"),
+    ("BENCHMARKS.md", "with Python 3.11 and"),
+    ("EXPERIMENTS.md", "learning rate 0.001"),
+    ("EXPERIMENTS.md", "ε from 1 to 0.05"),
+    ("EXPERIMENTS.md", "λ = 0.75"),
+    ("EXPERIMENTS.md", "+0.75 on top of"),
+    ("EXPERIMENTS.md", "to 0 or to 0.00005"),
+    ("EXPERIMENTS.md", "τ = 0.002"),
+];
+
+/// The committed results files (Markdown, CSV, text, JSON), by path from the workspace.
+fn results_files() -> Vec<(String, String)> {
+    let mut files = Vec::new();
+    let mut dirs = vec![workspace().join("results")];
+    while let Some(dir) = dirs.pop() {
+        for e in std::fs::read_dir(&dir).unwrap().flatten() {
+            let p = e.path();
+            let text_file = p
+                .extension()
+                .is_some_and(|x| ["md", "csv", "txt", "json"].contains(&x.to_str().unwrap()));
+            if p.is_dir() {
+                dirs.push(p);
+            } else if text_file {
+                let rel = p.strip_prefix(workspace()).unwrap().display().to_string();
+                files.push((rel, std::fs::read_to_string(&p).unwrap_or_default()));
+            }
+        }
+    }
+    files
+}
+
+/// Whether the results file `path` is what `cited` names: the file, a directory holding it, or
+/// a pattern whose `*` stands for any part of one name.
+fn cites(cited: &str, path: &str) -> bool {
+    let cited = cited.trim_end_matches(['/', '.', ',', ';', ':', ')']);
+    let (want, have): (Vec<&str>, Vec<&str>) =
+        (cited.split('/').collect(), path.split('/').collect());
+    want.len() <= have.len() && want.iter().zip(&have).all(|(w, h)| matches_name(w, h))
+}
+
+/// Whether `name` matches `pattern`, whose `*` stands for any run of characters.
+fn matches_name(pattern: &str, name: &str) -> bool {
+    match pattern.split_once('*') {
+        None => pattern == name,
+        Some((head, tail)) => name.strip_prefix(head).is_some_and(|rest| {
+            (0..=rest.len())
+                .filter(|&i| rest.is_char_boundary(i))
+                .any(|i| matches_name(tail, &rest[i..]))
+        }),
+    }
+}
+
+/// Every path under `results/` that `text` names.
+fn cited_paths(text: &str) -> Vec<String> {
+    let allowed = |c: char| c.is_ascii_alphanumeric() || "-_./*".contains(c);
+    text.match_indices("results/")
+        .filter(|(at, _)| !text[..*at].ends_with(|c: char| c.is_ascii_alphanumeric()))
+        .map(|(at, _)| text[at..].chars().take_while(|&c| allowed(c)).collect())
+        .collect()
+}
+
+/// A document's sections (split at its headings outside code blocks), each whole.
+fn sections(text: &str) -> Vec<String> {
+    let (mut out, mut current, mut fenced) = (Vec::new(), String::new(), false);
+    for line in text.lines() {
+        if line.starts_with("```") {
+            fenced = !fenced;
+        }
+        if !fenced && line.starts_with('#') && !current.is_empty() {
+            out.push(std::mem::take(&mut current));
+        }
+        current.push_str(line);
+        current.push('\n');
+    }
+    out.push(current);
+    out
+}
+
+/// Every decimal number of `texts`, formatted with 2 to 6 decimals.
+fn values_of<'a>(texts: impl Iterator<Item = &'a str>) -> HashSet<String> {
+    let mut values = HashSet::new();
+    for text in texts {
+        let tokens = text.split(|c: char| !(c.is_ascii_digit() || ".eE+-".contains(c)));
+        for v in tokens
+            .filter(|t| t.contains('.'))
+            .filter_map(|t| t.parse::<f64>().ok())
+        {
+            for d in DECIMALS..=6 {
+                values.insert(format!("{v:.d$}"));
+            }
+        }
+    }
+    values
+}
+
 #[test]
-fn every_number_with_decimals_quoted_in_prose_is_in_a_committed_results_file() {
+fn every_number_with_decimals_quoted_in_prose_is_in_a_results_file_its_section_cites() {
     assert_eq!(
         decimals_in("final −0.015 [+4.497, 1,347.50] at 0.5, v0.3.6, x1.25, 0.50-0.68, 12 345.67 and 12.345."),
         ["-0.015", "4.497", "1347.50", "0.50", "0.68", "345.67", "12.345"]
     );
     assert_eq!(without_code_spans("a `beta2 = 0.999` b"), "a   b");
-    let found = results_values();
-    let (mut quoted, mut missing) = (0, Vec::new());
-    for (doc, text) in documents() {
-        for number in decimals_in(&text) {
-            quoted += 1;
-            if !found.contains(&number) {
-                missing.push(format!("{doc}: {number}"));
+    assert!(cites("results/a/", "results/a/summary.md") && !cites("results/a", "results/ab/x.md"));
+    assert!(cites(
+        "results/x-*/ranking.md",
+        "results/x-acrobot/ranking.md"
+    ));
+    assert!(!cites(
+        "results/x-*/ranking.md",
+        "results/x-acrobot/runs.csv"
+    ));
+    assert_eq!(
+        cited_paths("see `results/a/b.md`, and results/c."),
+        ["results/a/b.md", "results/c."]
+    );
+    let files: Vec<(String, HashSet<String>)> = results_files()
+        .into_iter()
+        .map(|(path, text)| (path, values_of(std::iter::once(text.as_str()))))
+        .collect();
+    let docs = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"].map(|d| workspace().join(d));
+    let (mut quoted, mut scoped, mut missing) = (0, 0, Vec::new());
+    for doc in docs.into_iter().chain(chapters()) {
+        let name = doc.strip_prefix(workspace()).unwrap().display().to_string();
+        for section in sections(&std::fs::read_to_string(&doc).unwrap()) {
+            let cited = cited_paths(&section);
+            // A section that cites no results file: any results file.
+            let found: Vec<&HashSet<String>> = files
+                .iter()
+                .filter(|(path, _)| cited.is_empty() || cited.iter().any(|c| cites(c, path)))
+                .map(|(_, v)| v)
+                .collect();
+            scoped += usize::from(!cited.is_empty());
+            let text = without_code_spans(&prose(&section));
+            let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
+            for number in decimals_in(&text) {
+                quoted += 1;
+                let setting = NOT_RESULTS.iter().any(|(d, around)| {
+                    *d == name && around.contains(&*number) && words.contains(around)
+                });
+                if !setting && !found.iter().any(|v| v.contains(&number)) {
+                    let heading = section.lines().next().unwrap_or_default();
+                    missing.push(format!("{name} ({heading}): {number}"));
+                }
             }
         }
     }
     assert!(
-        quoted >= 200,
-        "only {quoted} numbers read: the reader is broken"
+        quoted >= 200 && scoped >= 40,
+        "only {quoted} numbers read ({scoped} sections with citations): the reader is broken"
     );
     assert!(
         missing.is_empty(),
-        "numbers in prose that no file under results/ holds (to the prose's decimals):\n{}",
+        "numbers in prose that no results file its section cites holds (to the prose's decimals; \
+         a setting or version goes in NOT_RESULTS):\n{}",
         missing.join("\n")
     );
 }
