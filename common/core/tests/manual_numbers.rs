@@ -1,22 +1,20 @@
 //! Numbers quoted in the prose of README, EXPERIMENTS, BENCHMARKS and the manual come from
-//! committed results:
-//! - a number with two or more decimals is found, rounded to the prose's decimals, in a results
-//!   file its section (the text from one heading to the next) names: a file, a directory, or a
-//!   pattern such as `results/experts-returns-*/ranking.md`; in any results file when the
-//!   section names none. Settings and versions with decimals are listed in `NOT_RESULTS`;
-//! - an interval quoted in whole numbers ("−136 [−147, −127]") is an interval of a results file
-//!   rounded to integers, and a count ("15 of 30") is "15 of 30" or "15/30" in one. These two
-//!   are looked up in all of `results/`: a count of ten is found whatever it is (every "N of
-//!   10" occurs somewhere).
+//! committed results. Each is looked up in the results files its section (the text from one
+//! heading to the next) names (a file, a directory, or a pattern such as
+//! `results/experts-returns-*/ranking.md`), or in any results file when the section names none:
+//! - a number with two or more decimals, rounded to the prose's decimals; settings and versions
+//!   with decimals are listed in `NOT_RESULTS`;
+//! - an interval quoted in whole numbers ("−136 [−147, −127]"), as an interval of the file
+//!   rounded to integers, and a count ("15 of 30"), as "15 of 30" or "15/30".
 //!
 //! Numbers with one decimal are not checked: every such value from −200 to 100 occurs in some
-//! results file. Code spans (`beta2 = 0.999`) are settings, not results, and are skipped; so are
-//! the generated parts and code blocks, which `alfd docs --check` keeps equal to their sources.
+//! results file, so the lookup could not fail. Code spans (`beta2 = 0.999`) are settings, not
+//! results, and are skipped; so are the generated parts and code blocks, which
+//! `alfd docs --check` keeps equal to their sources.
 
 use std::collections::HashSet;
-use std::path::PathBuf;
 
-use crate::manual::{chapters, prose, results_texts};
+use crate::manual::{chapters, prose};
 use crate::tidy::workspace;
 
 /// The fewest decimals a quoted number needs to be checked: counts, years and settings such as
@@ -107,23 +105,6 @@ fn numbers_in(chars: &[char]) -> Vec<(usize, usize, f64)> {
     out
 }
 
-/// README, EXPERIMENTS, BENCHMARKS and the manual's chapters: each one's name and its prose
-/// without code spans.
-fn documents() -> Vec<(String, String)> {
-    let mut docs: Vec<PathBuf> = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"]
-        .iter()
-        .map(|d| workspace().join(d))
-        .collect();
-    docs.extend(chapters());
-    docs.iter()
-        .map(|doc| {
-            let text = without_code_spans(&prose(&std::fs::read_to_string(doc).unwrap()));
-            let name = doc.strip_prefix(workspace()).unwrap().display().to_string();
-            (name, text)
-        })
-        .collect()
-}
-
 /// The text between two numbers, each run of white space (a line break included) one space.
 fn gap(chars: &[char]) -> String {
     let text: String = chars.iter().collect();
@@ -163,51 +144,77 @@ fn whole_intervals_and_counts(text: &str) -> (Vec<[i64; 3]>, Vec<[i64; 2]>) {
     (intervals, counts)
 }
 
-/// The intervals of the committed results rounded to whole numbers (half away from zero and
-/// half up), and their counts, "N of M" or "N/M".
-fn results_intervals_and_counts() -> (HashSet<[i64; 3]>, HashSet<[i64; 2]>) {
+/// The intervals of a results file's `text` rounded to whole numbers (half away from zero and
+/// half up), and its counts, "N of M" or "N/M".
+fn intervals_and_counts_of(text: &str) -> (HashSet<[i64; 3]>, HashSet<[i64; 2]>) {
     let (mut intervals, mut counts) = (HashSet::new(), HashSet::new());
-    for text in results_texts() {
-        let chars: Vec<char> = text.chars().collect();
-        let between = |a: usize, b: usize| gap(&chars[a..b]);
-        let n = numbers_in(&chars);
-        for w in n.windows(3) {
-            if between(w[0].1, w[1].0) == " [" && between(w[1].1, w[2].0) == ", " {
-                let v = [w[0].2, w[1].2, w[2].2];
-                intervals.insert(v.map(|x| x.round() as i64));
-                intervals.insert(v.map(|x| (x + 0.5).floor() as i64));
-            }
+    let chars: Vec<char> = text.chars().collect();
+    let between = |a: usize, b: usize| gap(&chars[a..b]);
+    let n = numbers_in(&chars);
+    for w in n.windows(3) {
+        if between(w[0].1, w[1].0) == " [" && between(w[1].1, w[2].0) == ", " {
+            let v = [w[0].2, w[1].2, w[2].2];
+            intervals.insert(v.map(|x| x.round() as i64));
+            intervals.insert(v.map(|x| (x + 0.5).floor() as i64));
         }
-        for w in n.windows(2) {
-            if [" of ", "/"].contains(&between(w[0].1, w[1].0).as_str()) {
-                counts.insert([w[0].2 as i64, w[1].2 as i64]);
-            }
+    }
+    for w in n.windows(2) {
+        if [" of ", "/"].contains(&between(w[0].1, w[1].0).as_str()) {
+            counts.insert([w[0].2 as i64, w[1].2 as i64]);
         }
     }
     (intervals, counts)
 }
 
+/// Of `files` (path, what was read of it), those a section citing `cited` may quote: the ones
+/// it names, or all when it names none.
+fn scoped<'a, T>(files: &'a [(String, T)], cited: &[String]) -> Vec<&'a T> {
+    files
+        .iter()
+        .filter(|(path, _)| cited.is_empty() || cited.iter().any(|c| cites(c, path)))
+        .map(|(_, t)| t)
+        .collect()
+}
+
+/// Every section of README, EXPERIMENTS, BENCHMARKS and the manual's chapters: its document's
+/// name, the results paths it cites, and its prose without code spans.
+fn prose_sections() -> Vec<(String, Vec<String>, String)> {
+    let docs = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"].map(|d| workspace().join(d));
+    let mut out = Vec::new();
+    for doc in docs.into_iter().chain(chapters()) {
+        let name = doc.strip_prefix(workspace()).unwrap().display().to_string();
+        for section in sections(&std::fs::read_to_string(&doc).unwrap()) {
+            let text = without_code_spans(&prose(&section));
+            out.push((name.clone(), cited_paths(&section), text));
+        }
+    }
+    out
+}
+
 #[test]
-fn every_whole_number_interval_and_count_quoted_in_prose_is_in_a_committed_results_file() {
+fn every_whole_number_interval_and_count_quoted_in_prose_is_in_a_results_file_its_section_cites() {
     let (i, c) = whole_intervals_and_counts(
         "at −136\n[−147, −127] (15 of\n30), 0.5 [0.25, 1] and +4 [3, 5] in 2,000 of 20,000 steps",
     );
     assert_eq!(i, [[-136, -147, -127], [4, 3, 5]]);
     assert_eq!(c, [[15, 30], [2000, 20000]]);
-    let (found_intervals, found_counts) = results_intervals_and_counts();
+    let files: Vec<(String, _)> = results_files()
+        .into_iter()
+        .map(|(path, text)| (path, intervals_and_counts_of(&text)))
+        .collect();
     let (mut quoted, mut missing) = (0, Vec::new());
-    for (doc, text) in documents() {
+    for (name, cited, text) in prose_sections() {
+        let found = scoped(&files, &cited);
         let (intervals, counts) = whole_intervals_and_counts(&text);
-        let name = &doc;
         for [x, l, h] in intervals {
             quoted += 1;
-            if !found_intervals.contains(&[x, l, h]) {
+            if !found.iter().any(|(i, _)| i.contains(&[x, l, h])) {
                 missing.push(format!("{name}: {x} [{l}, {h}]"));
             }
         }
         for [n, m] in counts {
             quoted += 1;
-            if !found_counts.contains(&[n, m]) {
+            if !found.iter().any(|(_, c)| c.contains(&[n, m])) {
                 missing.push(format!("{name}: {n} of {m}"));
             }
         }
@@ -215,7 +222,8 @@ fn every_whole_number_interval_and_count_quoted_in_prose_is_in_a_committed_resul
     assert!(quoted >= 60, "only {quoted} read: the reader is broken");
     assert!(
         missing.is_empty(),
-        "whole-number intervals and counts in prose that no file under results/ holds:\n{}",
+        "whole-number intervals and counts in prose that no results file their section cites \
+         holds:\n{}",
         missing.join("\n")
     );
 }
@@ -349,36 +357,25 @@ fn every_number_with_decimals_quoted_in_prose_is_in_a_results_file_its_section_c
         .into_iter()
         .map(|(path, text)| (path, values_of(std::iter::once(text.as_str()))))
         .collect();
-    let docs = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"].map(|d| workspace().join(d));
-    let (mut quoted, mut scoped, mut missing) = (0, 0, Vec::new());
-    for doc in docs.into_iter().chain(chapters()) {
-        let name = doc.strip_prefix(workspace()).unwrap().display().to_string();
-        for section in sections(&std::fs::read_to_string(&doc).unwrap()) {
-            let cited = cited_paths(&section);
-            // A section that cites no results file: any results file.
-            let found: Vec<&HashSet<String>> = files
-                .iter()
-                .filter(|(path, _)| cited.is_empty() || cited.iter().any(|c| cites(c, path)))
-                .map(|(_, v)| v)
-                .collect();
-            scoped += usize::from(!cited.is_empty());
-            let text = without_code_spans(&prose(&section));
-            let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
-            for number in decimals_in(&text) {
-                quoted += 1;
-                let setting = NOT_RESULTS.iter().any(|(d, around)| {
-                    *d == name && around.contains(&*number) && words.contains(around)
-                });
-                if !setting && !found.iter().any(|v| v.contains(&number)) {
-                    let heading = section.lines().next().unwrap_or_default();
-                    missing.push(format!("{name} ({heading}): {number}"));
-                }
+    let (mut quoted, mut citing, mut missing) = (0, 0, Vec::new());
+    for (name, cited, text) in prose_sections() {
+        let found = scoped(&files, &cited);
+        citing += usize::from(!cited.is_empty());
+        let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
+        for number in decimals_in(&text) {
+            quoted += 1;
+            let setting = NOT_RESULTS.iter().any(|(d, around)| {
+                *d == name && around.contains(&*number) && words.contains(around)
+            });
+            if !setting && !found.iter().any(|v| v.contains(&number)) {
+                let heading = text.lines().find(|l| !l.is_empty()).unwrap_or_default();
+                missing.push(format!("{name} ({heading}): {number}"));
             }
         }
     }
     assert!(
-        quoted >= 200 && scoped >= 40,
-        "only {quoted} numbers read ({scoped} sections with citations): the reader is broken"
+        quoted >= 200 && citing >= 40,
+        "only {quoted} numbers read ({citing} sections with citations): the reader is broken"
     );
     assert!(
         missing.is_empty(),
