@@ -17,15 +17,9 @@ leftovers() { ls -A "$tmp" | grep '^alfd-' | sort || true; }
 before="$(leftovers)"
 
 setup_pid=""
-mdbook_pid=""
 report() {
   local status=$?
   set +e
-  if [ -n "$mdbook_pid" ]; then
-    kill "$mdbook_pid" 2>/dev/null
-    wait "$mdbook_pid" 2>/dev/null
-    rm -f "$mdbook_log"
-  fi
   if [ -n "$setup_pid" ]; then
     kill "$setup_pid" 2>/dev/null
     wait "$setup_pid" 2>/dev/null
@@ -77,34 +71,17 @@ setup_log="$tmp/test-setup.$$.log"
   fi
 ) >"$setup_log" 2>&1 &
 setup_pid=$!
+cargo build --release --workspace --locked
 # The manual (docs/, an mdBook): mdBook is built from crates.io into .tools/ on first use (its
 # own pinned lock file, without the server and search features, at a lower optimisation level so
-# that it builds in about a minute), in the background beside the workspace's build, whose last
-# crates leave a processor idle while they compile one at a time; then the book is built, and a
-# test checks its links.
+# that it builds in about a minute), then the book is built; the links are checked by a test.
 mdbook_version=0.4.52
-mdbook_log="$tmp/test-mdbook.$$.log"
 if ! .tools/bin/mdbook --version 2>/dev/null | grep -q "v$mdbook_version"; then
-  echo "== building mdBook $mdbook_version into .tools/ (once, in the background)"
-  (
-    CARGO_PROFILE_RELEASE_OPT_LEVEL=1 CARGO_PROFILE_RELEASE_LTO=false \
-      CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16 CARGO_PROFILE_RELEASE_DEBUG=0 \
-      cargo install --quiet --locked "mdbook@$mdbook_version" --no-default-features --root .tools
-  ) >"$mdbook_log" 2>&1 &
-  mdbook_pid=$!
+  echo "== building mdBook $mdbook_version into .tools/ (once)"
+  CARGO_PROFILE_RELEASE_OPT_LEVEL=1 CARGO_PROFILE_RELEASE_LTO=false \
+    CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16 CARGO_PROFILE_RELEASE_DEBUG=0 \
+    cargo install --quiet --locked "mdbook@$mdbook_version" --no-default-features --root .tools
 fi
-cargo build --release --workspace --locked
-if [ -n "$mdbook_pid" ]; then
-  mdbook_status=0
-  wait "$mdbook_pid" || mdbook_status=$?
-  mdbook_pid=""
-  if [ "$mdbook_status" != 0 ]; then
-    cat "$mdbook_log"
-    echo "building mdBook failed (exit code $mdbook_status)"
-    exit 1
-  fi
-fi
-rm -f "$mdbook_log"
 book="$(.tools/bin/mdbook build docs 2>&1)" || { echo "$book"; exit 1; }
 if grep -E '\[(WARN|ERROR)\]' <<<"$book"; then
   echo "mdbook: the manual builds with the warnings above"
