@@ -6,7 +6,9 @@ random one of three) under round-robin routing, with two estimates of each exper
 - double asks: the share of its double-asked answers that the other expert's answer agrees with
   (the panel's reward from double asks, without the demonstration model's opinion).
 
-Writes results/experts-ranking-ceiling/summary.md. Standard library only; seeded.
+Writes results/experts-ranking-ceiling/summary.md and runs.csv (one row per simulated run: its
+task, answers per expert, double-ask rate, seed, each expert's two estimates and whether each
+estimate ranks the three right). Standard library only; seeded.
 
     python3 deploy/experiments/experts/ceiling.py
 """
@@ -83,11 +85,14 @@ def main():
         "ε one of the three actions at random; round-robin routing. \"gold\" ranks by the share "
         "of right answers (no run can see it: the ceiling of any estimate); \"double asks\" by "
         "the share of double-asked answers the other expert agreed with. A cell is the share of "
-        "runs whose three estimates are in the true order, with a 95% Wilson interval.",
+        "runs whose three estimates are in the true order, with a 95% Wilson interval; each run's "
+        "estimates are in `runs.csv`.",
         "",
         "| task | ε (good, fair, poor) | answers each | double-ask rate | gold | double asks |",
         "|---|---|---:|---:|---:|---:|",
     ]
+    rows = ["task,answers_each,double_ask,seed," + ",".join(
+        f"{k}_{e}" for k in ("gold", "double") for e in EXPERTS) + ",gold_ranked_right,double_ranked_right"]
     for task, eps in TASKS.items():
         for n, d in [(50, 0.1), (50, 0.5), (50, 1.0), (100, 0.5), (200, 0.5)]:
             gold = double = 0
@@ -95,12 +100,15 @@ def main():
                 g, q = run(eps, d, n, seed)
                 gold += ranked(g)
                 double += ranked(q)
+                values = ",".join(f"{v:.6f}" for v in g + q)
+                rows.append(f"{task},{n},{d},{seed},{values},{str(ranked(g)).lower()},{str(ranked(q)).lower()}")
             lines.append(
                 f"| {task} | {', '.join(map(str, eps))} | {n} | {d} | {cell(gold)} | {cell(double)} |"
             )
     out = Path(__file__).resolve().parents[3] / "results" / "experts-ranking-ceiling" / "summary.md"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines) + "\n")
+    (out.parent / "runs.csv").write_text("\n".join(rows) + "\n")
     print(out.read_text())
 
 
