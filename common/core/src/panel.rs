@@ -190,16 +190,12 @@ impl Panel {
         self.answers[expert] += 1;
         self.spent += self.members[expert].cost;
         if opinions > 0 {
-            let r = &mut self.rewards[expert];
-            r.push_back(agreed.min(opinions) as f64 / opinions as f64);
-            if r.len() > self.window {
-                r.pop_front();
-            }
+            self.reward(expert, agreed.min(opinions) as f64 / opinions as f64);
         }
     }
 
-    /// Expert `expert` earned `reward` (in [0, 1]) from a signal other than an answer of its
-    /// own (an episode's return): it enters its quality window like an answer's reward.
+    /// Expert `expert` earned `reward` (in [0, 1]): an answer's share of agreeing opinions, or
+    /// a signal other than an answer of its own (an episode's return), into its quality window.
     pub fn reward(&mut self, expert: usize, reward: f64) {
         let r = &mut self.rewards[expert];
         r.push_back(reward.clamp(0.0, 1.0));
@@ -312,24 +308,28 @@ impl Returns {
     /// A query from `asker`: closes the actor's episode before it if experts answered there; the
     /// rewards earned, as (expert, reward), each expert once.
     pub fn asked(&mut self, asker: Asker) -> Vec<(usize, f64)> {
-        let open = self.open.get(&asker.actor).cloned();
-        let mut earned = Vec::new();
-        match open {
-            Some((episode, _)) if episode == asker.episode => return earned,
-            Some((episode, experts)) if episode + 1 == asker.episode => {
-                if let Some(ret) = asker.last_return.filter(|r| r.is_finite()) {
-                    if let Some(rank) = self.rank(ret) {
-                        earned = experts.into_iter().map(|e| (e, rank)).collect();
-                    }
-                    self.returns.push_back(ret);
-                    if self.returns.len() > self.window {
-                        self.returns.pop_front();
-                    }
-                }
-            }
-            _ => {}
+        if self
+            .open
+            .get(&asker.actor)
+            .is_some_and(|(episode, _)| *episode == asker.episode)
+        {
+            return Vec::new();
         }
-        self.open.insert(asker.actor, (asker.episode, Vec::new()));
+        let closed = self.open.insert(asker.actor, (asker.episode, Vec::new()));
+        // Only the episode just before this one has its return in the query.
+        let Some((_, experts)) = closed.filter(|(episode, _)| episode + 1 == asker.episode) else {
+            return Vec::new();
+        };
+        let Some(ret) = asker.last_return.filter(|r| r.is_finite()) else {
+            return Vec::new();
+        };
+        let earned = self.rank(ret).map_or_else(Vec::new, |rank| {
+            experts.into_iter().map(|e| (e, rank)).collect()
+        });
+        self.returns.push_back(ret);
+        if self.returns.len() > self.window {
+            self.returns.pop_front();
+        }
         earned
     }
 

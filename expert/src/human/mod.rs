@@ -20,6 +20,8 @@ mod server;
 #[cfg(not(feature = "page"))]
 #[path = "server_off.rs"]
 mod server;
+#[cfg(feature = "page")]
+pub use server::serve_in_background;
 pub use server::HumanPage;
 
 /// The name that makes the expert process ask a person (`--expert human`).

@@ -18,6 +18,34 @@ use super::{new_token, Decision, HumanError, PageState, ShownQuery};
 
 const PAGE: &str = include_str!("page.html");
 
+/// Serves `app` on `listener` (bound, non-blocking) until the process exits, from a thread of
+/// its own named `thread` on a single-threaded tokio runtime; `what` names the page in the log.
+/// `alfd watch`'s page is served the same way.
+pub fn serve_in_background(
+    listener: TcpListener,
+    app: Router,
+    (thread, what): (&str, &'static str),
+) -> std::io::Result<()> {
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    std::thread::Builder::new()
+        .name(thread.into())
+        .spawn(move || {
+            runtime.block_on(async move {
+                match tokio::net::TcpListener::from_std(listener) {
+                    Ok(l) => {
+                        if let Err(e) = axum::serve(l, app).await {
+                            tracing::error!("{what} stopped: {e}");
+                        }
+                    }
+                    Err(e) => tracing::error!("{what} cannot start: {e}"),
+                }
+            });
+        })?;
+    Ok(())
+}
+
 struct Shared {
     state: watch::Sender<PageState>,
     decisions: Mutex<mpsc::Sender<Decision>>,
@@ -53,10 +81,6 @@ impl HumanPage {
             decisions: Mutex::new(tx),
             waiting_ids: Mutex::new(Vec::new()),
         });
-        let runtime = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .map_err(HumanError::Start)?;
         let token = new_token();
         let at = |path: &str| format!("/{token}/{path}");
         let app = Router::new()
@@ -73,20 +97,7 @@ impl HumanPage {
                 )
             })
             .with_state(shared.clone());
-        std::thread::Builder::new()
-            .name("human-page".into())
-            .spawn(move || {
-                runtime.block_on(async move {
-                    match tokio::net::TcpListener::from_std(listener) {
-                        Ok(l) => {
-                            if let Err(e) = axum::serve(l, app).await {
-                                tracing::error!("the human expert's page stopped: {e}");
-                            }
-                        }
-                        Err(e) => tracing::error!("the human expert's page cannot start: {e}"),
-                    }
-                });
-            })
+        serve_in_background(listener, app, ("human-page", "the human expert's page"))
             .map_err(HumanError::Start)?;
         Ok(Self {
             addr,

@@ -57,23 +57,7 @@ pub fn serve(run_dir: &Path, port: u16) -> anyhow::Result<WatchPage> {
                 .into_response()
         })
         .with_state(dir);
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()?;
-    std::thread::Builder::new()
-        .name("watch-page".into())
-        .spawn(move || {
-            runtime.block_on(async move {
-                match tokio::net::TcpListener::from_std(listener) {
-                    Ok(l) => {
-                        if let Err(e) = axum::serve(l, app).await {
-                            tracing::error!("the watch page stopped: {e}");
-                        }
-                    }
-                    Err(e) => tracing::error!("the watch page cannot start: {e}"),
-                }
-            });
-        })?;
+    alfd_expert::human::serve_in_background(listener, app, ("watch-page", "the watch page"))?;
     let page = WatchPage { addr, token };
     std::fs::create_dir_all(run_dir)
         .with_context(|| format!("cannot create {}", run_dir.display()))?;
