@@ -131,6 +131,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     )?;
     log_end(&end, &actor, &expert, &checkpoints);
     if end.stopped.is_none() {
+        expert.leave()?;
         stay_until_stop(&session)?;
     }
     Ok(())

@@ -298,6 +298,9 @@ pub struct WireExpert<'s, 'w> {
     /// budget.
     prior_demos: usize,
     pub timeouts: u64,
+    /// The number of the last query this actor stopped waiting for with no answer in hand (0:
+    /// none), told with the next request so that the expert counts an answer sent to it late.
+    gave_up: u64,
     /// The episodes this actor finished and the last one's return, told with each query.
     episodes: EpisodeCount,
     /// How long each answered query waited for its answer, from asking to the answer in hand.
@@ -334,6 +337,7 @@ impl<'s, 'w> WireExpert<'s, 'w> {
             schedule,
             prior_demos: 0,
             timeouts: 0,
+            gave_up: 0,
             episodes: EpisodeCount::default(),
             answer_waits: Vec::new(),
         })
@@ -394,15 +398,43 @@ impl<'s, 'w> WireExpert<'s, 'w> {
         Ok(())
     }
 
+    /// Before it leaves, the actor tells the expert the last query it stopped waiting for, if
+    /// no later request told it: an answer sent to it is then counted late. The report asks
+    /// nothing; the expert lets it go unanswered (waited for at most the timeout).
+    pub fn leave(&mut self) -> Result<()> {
+        if self.gave_up == 0 || self.session.control().active_expert == 0 {
+            return Ok(());
+        }
+        let report = QueryRequest::report(self.me.id, self.me.incarnation, self.gave_up);
+        let mut pending = self.client.ask(&report).map_err(LoopError::link)?;
+        self.gave_up = 0;
+        self.expert.ring().map_err(LoopError::link)?;
+        let epoch = Instant::now();
+        while pending.held() && epoch.elapsed() < self.timeout {
+            if self
+                .session
+                .wait(Duration::from_millis(5))
+                .map_err(LoopError::link)?
+                .is_some()
+            {
+                break;
+            }
+        }
+        pending.poll().map_err(LoopError::link)?;
+        Ok(())
+    }
+
     /// One query (Algorithm 1 line 9), waiting at most the timeout for the answer.
-    fn query(&mut self, request: QueryRequest) -> Result<Answer> {
+    fn query(&mut self, mut request: QueryRequest) -> Result<Answer> {
         if self.session.control().active_expert == 0 {
             return Ok(Answer::NoExpert);
         }
+        request.gave_up = self.gave_up;
         let mut pending = self.client.ask(&request).map_err(LoopError::link)?;
         if pending.servers() == 0 {
             return Ok(Answer::NoExpert);
         }
+        self.gave_up = 0;
         self.expert.ring().map_err(LoopError::link)?;
         // The expert publishes its model (its name in the header) when it becomes active: a
         // person just swapped in gets the person's timeout from the first query on.
@@ -430,8 +462,11 @@ impl<'s, 'w> WireExpert<'s, 'w> {
             late.map_err(LoopError::link)?;
             match poll {
                 Poll::Done(answer) => {
-                    if matches!(answer, Answer::Demo(_)) {
-                        self.answer_waits.push(epoch.elapsed());
+                    match answer {
+                        Answer::Demo(_) => self.answer_waits.push(epoch.elapsed()),
+                        // Let go below, once this returns: the next request says so.
+                        Answer::Timeout => self.gave_up = pending.seq(),
+                        _ => {}
                     }
                     return Ok(answer);
                 }

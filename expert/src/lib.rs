@@ -3,6 +3,7 @@
 //! (and the single-process runner) loads by name.
 
 pub mod human;
+mod late;
 pub mod machine;
 mod process;
 

@@ -29,6 +29,7 @@ use alfd_wire::{
 use tracing::{debug, info};
 
 use crate::human::{self, HumanPage, PageState, HUMAN};
+use crate::late::LateBook;
 use crate::machine::{Action, ExpertMachine, Mode, PanelNote, QueryIn};
 use alfd_demonstrators::demo_log::{self, DemoLog};
 use alfd_demonstrators::registry;
@@ -136,7 +137,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         clock: Instant::now(),
         disk_full_until: None,
         refused: 0,
-        late: 0,
+        late: LateBook::default(),
         delay: answer_delay(),
         refit: None,
         wire_model: None,
@@ -374,9 +375,9 @@ struct Shell<'w> {
     disk_full_until: Option<Duration>,
     /// Demonstrations a full disk refused since the last one recorded.
     refused: u32,
-    /// Answers with a demonstration sent after their actor stopped waiting (the demonstration
-    /// is kept; the actor acted alone).
-    late: u32,
+    /// Answers with a demonstration that their actor never read, having stopped waiting (the
+    /// demonstration is kept; the actor acted alone).
+    late: LateBook,
     /// How long each demonstration is held back before it is asked for ([`ANSWER_DELAY_VAR`]).
     delay: Duration,
     /// Where the refit running on its own thread sends its result.
@@ -467,6 +468,13 @@ impl<'w> Shell<'w> {
                 Err(e) => return Err(e.into()),
             };
             let request = query.request();
+            if let Some(seq) = request.gave_up() {
+                self.late.gave_up((request.actor, request.incarnation), seq);
+            }
+            if request.is_report() {
+                // It asks nothing: dropped unanswered, the asker sees it let go.
+                continue;
+            }
             let q = QueryIn {
                 actor: request.actor,
                 step: request.global_step,
@@ -563,13 +571,18 @@ impl<'w> Shell<'w> {
                     actor,
                     response,
                 } => {
-                    if !query.is_connected() && response.outcome == outcome::ANSWERED {
-                        self.late += 1;
-                        debug!(
-                            actor,
-                            index = response.demo_index,
-                            "the actor stopped waiting; demonstration kept, answer late"
-                        );
+                    let held = query.is_connected();
+                    if response.outcome == outcome::ANSWERED {
+                        let r = query.request();
+                        self.late
+                            .answered((r.actor, r.incarnation), r.header.seq, held);
+                        if !held {
+                            debug!(
+                                actor,
+                                index = response.demo_index,
+                                "the actor stopped waiting; demonstration kept, answer late"
+                            );
+                        }
                     }
                     query.answer(response)?;
                     ring_actor(&mut self.actors, actor)?;
@@ -713,7 +726,7 @@ impl<'w> Shell<'w> {
             pid: std::process::id(),
             demos: u64::from(core.budget().used()),
             budget_left: u64::from(core.budget().remaining()),
-            answers_late: self.late,
+            answers_late: self.late.late(),
             ..Progress::default()
         })?;
         Ok(())

@@ -370,18 +370,22 @@ impl HostForwarder<'_, '_> {
                     Entry::Vacant(v) => v.insert(self.wire.query_client(q.state.len())?),
                 };
                 // A newer query of the same actor replaces the older one (it gave up): an answer
-                // to that one already here still goes up.
+                // to that one already here still goes up; if none is, the expert is told with
+                // the newer query that this host let go of it (its numbering, not the actor's).
                 let (seq, actor) = (q.header.seq, q.actor);
-                if let Some((mut old, old_seq)) = self.pending.insert(actor, (client.ask(&q)?, seq))
-                {
-                    if let Ok(Some(r)) = old.poll() {
-                        self.replaced.push(QueryResponse {
+                let mut q = q;
+                q.gave_up = 0;
+                if let Some((mut old, old_seq)) = self.pending.remove(&actor) {
+                    match old.poll() {
+                        Ok(Some(r)) => self.replaced.push(QueryResponse {
                             request_seq: old_seq,
                             actor,
                             ..r
-                        });
+                        }),
+                        _ => q.gave_up = old.seq(),
                     }
                 }
+                self.pending.insert(actor, (client.ask(&q)?, seq));
                 Ok(())
             }
             Route::Ignore => return Ok(()),

@@ -664,25 +664,30 @@ impl<'w, 'a> Forwarder<'w, 'a> {
     }
 
     /// A remote actor's query to this host's expert, the expert rung. A newer query of the same
-    /// actor replaces the older one (it gave up): an answer to that one already here is late.
+    /// actor replaces the older one (it gave up): an answer to that one already here is late,
+    /// and if none is here the expert is told, with the newer query, that the hub let go of it
+    /// (an answer sent in the instant before is late too, counted by the expert).
     fn query(
         &mut self,
         q: &alfd_wire::QueryRequest,
     ) -> alfd_wire::Result<alfd_wire::Result<usize>> {
+        let mut forwarded = q.clone();
+        forwarded.gave_up = 0;
+        if let Some((mut old, ..)) = self.pending.remove(&q.actor) {
+            if old.poll()?.is_some_and(|r| r.outcome == outcome::ANSWERED) {
+                self.late += 1;
+                self.count();
+            } else {
+                forwarded.gave_up = old.seq();
+            }
+        }
         let client = match self.clients.entry(q.actor) {
             Entry::Occupied(o) => o.into_mut(),
             Entry::Vacant(v) => v.insert(self.wire.query_client(q.state.len())?),
         };
-        let ask = client.ask(q)?;
-        if let Some((mut old, ..)) = self
-            .pending
-            .insert(q.actor, (ask, q.header.seq, Instant::now()))
-        {
-            if old.poll()?.is_some_and(|r| r.outcome == outcome::ANSWERED) {
-                self.late += 1;
-                self.count();
-            }
-        }
+        let ask = client.ask(&forwarded)?;
+        self.pending
+            .insert(q.actor, (ask, q.header.seq, Instant::now()));
         Ok(self.expert.ring())
     }
 

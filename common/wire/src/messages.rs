@@ -12,7 +12,7 @@ use crate::error::{Result, WireError};
 /// The version of the messages below. Bump it whenever a message changes, or the zenoh keys the
 /// bridges send them on (`alfd_bridge`), so that a process or host of another build is refused
 /// by name.
-pub const SCHEMA_VERSION: u32 = 8;
+pub const SCHEMA_VERSION: u32 = 9;
 /// Actors per run (the credit table has one slot per actor id).
 pub const MAX_ACTORS: usize = 16;
 /// Largest observation a message may claim (a peer's bytes can make a receiver allocate no
@@ -568,6 +568,7 @@ pub struct QueryHeader {
     pub global_step: u64,
     pub episode: u64,
     pub last_return: f64,
+    pub gave_up: u64,
 }
 
 /// An actor asks the expert for the action at `state` (as long as the run's observations).
@@ -584,6 +585,10 @@ pub struct QueryRequest {
     pub episode: u64,
     /// The return of the actor's episode before this one; NaN in its first.
     pub last_return: f64,
+    /// The sequence number of this asker's previous query when it stopped waiting for it with
+    /// no answer in hand; 0 when it did not. An expert that answered that query while its asker
+    /// still held it counts the answer late: it was sent, kept, and never read.
+    pub gave_up: u64,
     pub state: Vec<f32>,
 }
 
@@ -611,6 +616,28 @@ impl QueryRequest {
         }
     }
 
+    /// A request that asks nothing and only says that the asker stopped waiting for its query
+    /// `gave_up` (an actor's last word before it leaves); the expert answers none.
+    pub fn report(actor: u16, incarnation: u64, gave_up: u64) -> Self {
+        Self {
+            actor: u32::from(actor),
+            incarnation,
+            gave_up,
+            last_return: f64::NAN,
+            ..Self::default()
+        }
+    }
+
+    /// Whether the request only reports (see [`QueryRequest::report`]).
+    pub fn is_report(&self) -> bool {
+        self.obs_dim == 0
+    }
+
+    /// The asker's previous query that it stopped waiting for, if any.
+    pub fn gave_up(&self) -> Option<u64> {
+        (self.gave_up != 0).then_some(self.gave_up)
+    }
+
     /// The return of the actor's episode before this one, if it told one.
     pub fn last_return(&self) -> Option<f64> {
         self.last_return.is_finite().then_some(self.last_return)
@@ -626,6 +653,7 @@ impl QueryRequest {
             global_step: self.global_step,
             episode: self.episode,
             last_return: self.last_return,
+            gave_up: self.gave_up,
         }
     }
 
@@ -641,6 +669,7 @@ impl QueryRequest {
             global_step: h.global_step,
             episode: h.episode,
             last_return: h.last_return,
+            gave_up: h.gave_up,
             state: values[..used].to_vec(),
         }
     }

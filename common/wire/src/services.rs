@@ -452,10 +452,11 @@ impl Wire {
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .map_err(transport("create a client on", "query"))?;
+        // From 1: a request's `gave_up` names an earlier query by its number, 0 naming none.
         Ok(QueryClient {
             wire: self,
             port,
-            seq: 0,
+            seq: 1,
         })
     }
 

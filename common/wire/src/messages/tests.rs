@@ -299,4 +299,22 @@ mod fuzz {
         };
         assert!(q.checked_state(4).is_err());
     }
+
+    #[test]
+    fn a_request_carries_the_query_its_asker_gave_up_on_and_a_report_asks_nothing() {
+        let mut q = QueryRequest::new(3, 2, 40, &[0.5, -0.5]).unwrap();
+        assert_eq!(q.gave_up(), None);
+        q.gave_up = 17;
+        let back = QueryRequest::from_wire(&q.wire_header(), &q.state);
+        assert_eq!((back.gave_up(), back.is_report()), (Some(17), false));
+        assert_eq!(
+            (back.actor, back.global_step, back.state()),
+            (3, 40, &[0.5, -0.5][..])
+        );
+        let r = QueryRequest::report(3, 2, 18);
+        let back = QueryRequest::from_wire(&r.wire_header(), &[0.0]);
+        assert_eq!((back.actor, back.incarnation), (3, 2));
+        assert_eq!((back.gave_up(), back.is_report()), (Some(18), true));
+        assert!(back.state().is_empty());
+    }
 }
