@@ -98,3 +98,61 @@ fn only_the_gated_page_modules_name_axum_and_tokio() {
     assert!(read("expert/src/human/mod.rs").contains("#[cfg(feature = \"page\")]\nmod server;"));
     assert!(read("deploy/cli/src/cmd_watch.rs").contains("#[cfg(feature = \"pages\")]\nmod page;"));
 }
+
+/// The fences of the code blocks in doc comments that open one (every other fence closes it).
+fn opening_fences(text: &str) -> Vec<String> {
+    let mut open = false;
+    let mut found = Vec::new();
+    for line in text.lines() {
+        let t = line.trim_start();
+        let Some(doc) = t.strip_prefix("///").or_else(|| t.strip_prefix("//!")) else {
+            continue;
+        };
+        let Some(lang) = doc.trim_start().strip_prefix("```") else {
+            continue;
+        };
+        if !open {
+            found.push(lang.trim().to_string());
+        }
+        open = !open;
+    }
+    found
+}
+
+/// `deploy/test.sh` runs no doc tests (rustdoc takes about 40 s to find none): so no doc comment
+/// holds a Rust example. Every code block in one names a language that is not Rust.
+#[test]
+fn no_doc_comment_holds_a_rust_example_since_the_suite_runs_no_doc_tests() {
+    assert_eq!(
+        opening_fences(
+            "/// ```\n/// x\n/// ```\n//! ```text\n//! y\n//! ```\n/// ```rust,no_run\n"
+        ),
+        ["", "text", "rust,no_run"]
+    );
+    let rust: Vec<String> = workspace_rust_files()
+        .iter()
+        .flat_map(|f| {
+            let rel = f.strip_prefix(workspace()).unwrap().display().to_string();
+            opening_fences(&std::fs::read_to_string(f).unwrap())
+                .into_iter()
+                .filter(|lang| {
+                    let first = lang.split(',').next().unwrap_or("");
+                    [
+                        "",
+                        "rust",
+                        "no_run",
+                        "ignore",
+                        "should_panic",
+                        "compile_fail",
+                    ]
+                    .contains(&first)
+                })
+                .map(move |lang| format!("{rel}: ```{lang}"))
+        })
+        .collect();
+    assert!(
+        rust.is_empty(),
+        "Rust examples in doc comments, which deploy/test.sh does not run: {rust:?} \
+         (name the block's language, such as `text`, or run the doc tests there)"
+    );
+}
