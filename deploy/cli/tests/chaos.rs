@@ -54,7 +54,7 @@ fn kind(event: &serde_json::Value) -> String {
     }
 }
 
-/// At least 30 faults of every kind carried out, a fault every 0.2 s for 90 s of a run of 35,000
+/// At least 30 faults of every kind carried out, a fault every 0.2 s for 90 s of a run of 20,000
 /// steps (the run directory on a tmpfs when run as root, for the disk faults).
 #[test]
 fn a_seeded_chaos_run_keeps_every_invariant() {
@@ -81,7 +81,7 @@ fn a_seeded_chaos_run_keeps_every_invariant() {
         "--faults",
         faults,
         "--set",
-        "steps=35000",
+        "steps=20000",
     ];
     let (out, o) = chaos(&dir, "13", 100_000, &args);
     let report = held(&out, &o);
@@ -117,7 +117,7 @@ fn a_seeded_chaos_run_with_python_adapters_keeps_every_invariant() {
         "--set",
         "expert.name=python:alfd_examples:cartpole_balance",
     ];
-    let (out, o) = chaos(&dir, "4", 300, &args);
+    let (out, o) = chaos(&dir, "4", 200, &args);
     let report = held(&out, &o);
     let events = report["events"].as_array().unwrap();
     let adapters_hit = events
@@ -189,7 +189,7 @@ fn a_seeded_chaos_run_with_its_expert_behind_a_slow_link_loses_no_demonstration(
         "--set",
         "query.rule=js-spread",
     ];
-    let (out, o) = chaos(&dir, "3", 300, &args);
+    let (out, o) = chaos(&dir, "3", 200, &args);
     let report = held(&out, &o);
     let host_file = report["invariants"]
         .as_array()
@@ -236,9 +236,9 @@ fn a_seeded_chaos_run_with_several_experts_keeps_every_invariant() {
     std::fs::write(
         &config,
         format!(
-            "seed = 2\nsteps = 150000\n[env]\nname = \"acrobot\"\n\
+            "seed = 2\nsteps = 90000\n[env]\nname = \"acrobot\"\n\
              [agent]\nkind = \"bdqn\"\nheads = 2\n\
-             [query]\nallowance = \"spread\"\ngate = \"chance\"\nhorizon = 150000\n\
+             [query]\nallowance = \"spread\"\ngate = \"chance\"\nhorizon = 90000\n\
              [budget]\ntotal = 150\n[expert]\nmodel = \"krr\"\nroute = \"round-robin\"\n\
              double_ask = 0.2\n\
              [[experts]]\nname = \"acrobot-good\"\ncost = 10\n\
