@@ -17,9 +17,14 @@ leftovers() { ls -A "$tmp" | grep '^alfd-' | sort || true; }
 before="$(leftovers)"
 
 setup_pid=""
+mdbook_pid=""
 report() {
   local status=$?
   set +e
+  if [ -n "$mdbook_pid" ]; then
+    kill "$mdbook_pid" 2>/dev/null
+    wait "$mdbook_pid" 2>/dev/null
+  fi
   if [ -n "$setup_pid" ]; then
     kill "$setup_pid" 2>/dev/null
     wait "$setup_pid" 2>/dev/null
@@ -73,19 +78,18 @@ setup_log="$tmp/test-setup.$$.log"
 setup_pid=$!
 cargo build --release --workspace --locked
 # The manual (docs/, an mdBook): mdBook is built from crates.io into .tools/ on first use (its
-# own pinned lock file, without the server and search features, at a lower optimisation level so
-# that it builds in about a minute), then the book is built; the links are checked by a test.
+# own pinned lock file, without the server and search features, at a lower optimisation level),
+# at the lowest priority beside the tests, which leave a processor idle much of the time; the book
+# is built after them, and its links are checked by a test.
 mdbook_version=0.4.52
+mdbook_pid=""
 if ! .tools/bin/mdbook --version 2>/dev/null | grep -q "v$mdbook_version"; then
-  echo "== building mdBook $mdbook_version into .tools/ (once)"
+  echo "== building mdBook $mdbook_version into .tools/ (once), beside the tests"
   CARGO_PROFILE_RELEASE_OPT_LEVEL=1 CARGO_PROFILE_RELEASE_LTO=false \
     CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16 CARGO_PROFILE_RELEASE_DEBUG=0 \
-    cargo install --quiet --locked "mdbook@$mdbook_version" --no-default-features --root .tools
-fi
-book="$(.tools/bin/mdbook build docs 2>&1)" || { echo "$book"; exit 1; }
-if grep -E '\[(WARN|ERROR)\]' <<<"$book"; then
-  echo "mdbook: the manual builds with the warnings above"
-  exit 1
+    nice -n 19 cargo install --quiet --locked "mdbook@$mdbook_version" --no-default-features \
+    --root .tools -j 1 &
+  mdbook_pid=$!
 fi
 setup_status=0
 wait "$setup_pid" || setup_status=$?
@@ -100,3 +104,12 @@ fi
 # comment holds a Rust example (tidy_features checks it), and rustdoc takes about 40 s to find none.
 # Nor the examples, which `cargo clippy --all-targets` compiles.
 cargo test --release --workspace --locked --lib --bins --tests
+if [ -n "$mdbook_pid" ]; then
+  wait "$mdbook_pid" || { echo "building mdBook failed"; exit 1; }
+  mdbook_pid=""
+fi
+book="$(.tools/bin/mdbook build docs 2>&1)" || { echo "$book"; exit 1; }
+if grep -E '\[(WARN|ERROR)\]' <<<"$book"; then
+  echo "mdbook: the manual builds with the warnings above"
+  exit 1
+fi
