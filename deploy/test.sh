@@ -77,20 +77,6 @@ setup_log="$tmp/test-setup.$$.log"
 ) >"$setup_log" 2>&1 &
 setup_pid=$!
 cargo build --release --workspace --locked
-# The manual (docs/, an mdBook): mdBook is built from crates.io into .tools/ on first use (its
-# own pinned lock file, without the server and search features, at a lower optimisation level),
-# at the lowest priority beside the tests, which leave a processor idle much of the time; the book
-# is built after them, and its links are checked by a test.
-mdbook_version=0.4.52
-mdbook_pid=""
-if ! .tools/bin/mdbook --version 2>/dev/null | grep -q "v$mdbook_version"; then
-  echo "== building mdBook $mdbook_version into .tools/ (once), beside the tests"
-  CARGO_PROFILE_RELEASE_OPT_LEVEL=1 CARGO_PROFILE_RELEASE_LTO=false \
-    CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16 CARGO_PROFILE_RELEASE_DEBUG=0 \
-    nice -n 19 cargo install --quiet --locked "mdbook@$mdbook_version" --no-default-features \
-    --root .tools -j 1 &
-  mdbook_pid=$!
-fi
 setup_status=0
 wait "$setup_pid" || setup_status=$?
 setup_pid=""
@@ -103,6 +89,21 @@ fi
 # Unit tests of every library and binary, and the integration tests. Not the doc tests: no doc
 # comment holds a Rust example (tidy_features checks it), and rustdoc takes about 40 s to find none.
 # Nor the examples, which `cargo clippy --all-targets` compiles.
+cargo test --release --workspace --locked --lib --bins --tests --no-run
+# The manual (docs/, an mdBook): mdBook is built from crates.io into .tools/ on first use (its
+# own pinned lock file, without the server and search features, at a lower optimisation level),
+# at the lowest priority beside the tests once they are compiled (running, they leave a processor
+# idle much of the time); the book is built after them, and its links are checked by a test.
+mdbook_version=0.4.52
+mdbook_pid=""
+if ! .tools/bin/mdbook --version 2>/dev/null | grep -q "v$mdbook_version"; then
+  echo "== building mdBook $mdbook_version into .tools/ (once), beside the tests"
+  CARGO_PROFILE_RELEASE_OPT_LEVEL=1 CARGO_PROFILE_RELEASE_LTO=false \
+    CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16 CARGO_PROFILE_RELEASE_DEBUG=0 \
+    nice -n 19 cargo install --quiet --locked "mdbook@$mdbook_version" --no-default-features \
+    --root .tools -j 1 &
+  mdbook_pid=$!
+fi
 cargo test --release --workspace --locked --lib --bins --tests
 if [ -n "$mdbook_pid" ]; then
   wait "$mdbook_pid" || { echo "building mdBook failed"; exit 1; }

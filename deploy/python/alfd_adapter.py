@@ -317,7 +317,7 @@ class ExpertServer:
 # --------------------------------------------------------------------------------------------
 
 
-def serve(run_id, name, schema, server):
+def serve(run_id, name, schema, server, parent=None):
     import iceoryx2 as iox2
 
     iox2.set_log_level_from_env_or(iox2.LogLevel.Warn)
@@ -365,7 +365,10 @@ def serve(run_id, name, schema, server):
     requests = event("request").listener_builder().create()
     reply = event("reply").notifier_builder().create()
     srv = service.server_builder().create()
-    parent = os.getppid()
+    # The process that started it (`--parent`; else the parent now, which is that process only
+    # if it has not died during this start-up): once it is gone, so is this adapter.
+    if parent is None:
+        parent = os.getppid()
     seq = 0
     print(f"alfd_adapter: serving {base}", file=sys.stderr, flush=True)
     while not stop["now"]:
@@ -418,6 +421,7 @@ def main(argv=None):
         s.add_argument("--run-id")
         s.add_argument("--name")
         s.add_argument("--schema", type=int)
+        s.add_argument("--parent", type=int, help="the pid of the process that started it")
     e = sub.choices["env"]
     e.add_argument("--id", required=True)
     e.add_argument("--kwargs", default="{}")
@@ -450,7 +454,7 @@ def main(argv=None):
     except BadInput as err:
         print(f"alfd_adapter: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    serve(args.run_id, args.name, args.schema, server)
+    serve(args.run_id, args.name, args.schema, server, args.parent)
     return 0
 
 

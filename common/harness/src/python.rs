@@ -124,6 +124,9 @@ impl Adapter {
             .arg(format!("--run-id={run_id}"))
             .arg(format!("--name={name}"))
             .arg(format!("--schema={schema}"))
+            // Killed while the adapter starts up, this process would leave it an orphan that
+            // cannot tell its parent has gone: it is told which pid to watch.
+            .arg(format!("--parent={}", std::process::id()))
             .stdin(Stdio::null())
             .stdout(file.try_clone()?)
             .stderr(file)

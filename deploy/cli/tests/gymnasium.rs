@@ -540,3 +540,36 @@ fn a_gymnasium_run_with_no_budget_needs_no_expert_and_one_with_a_budget_does() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(text(&o).contains("cartpole-1000"), "{}", text(&o));
 }
+
+/// An adapter whose starter died while it started up (its parent is then another process) stops
+/// on its own: it watches the pid it was given, not the parent it finds.
+#[test]
+fn an_adapter_whose_starter_is_gone_stops_by_itself() {
+    let _time = timed!();
+    let python = crate::support::project_python();
+    let adapter = crate::support::repo().join("deploy/python/alfd_adapter.py");
+    let run_id = format!("adapter-orphan-{}", std::process::id());
+    // pid 1 is not this test: as if the process that started the adapter had already died.
+    let mut adapter_cmd = std::process::Command::new(python);
+    adapter_cmd
+        .arg(&adapter)
+        .args(["expert", "--policy=python:alfd_examples:cartpole_balance"])
+        .arg(format!("--run-id={run_id}"))
+        .args([
+            "--name=orphan",
+            &format!("--schema={SCHEMA_VERSION}"),
+            "--parent=1",
+        ]);
+    // Stopped, and the test failed, if it still serves after two minutes.
+    let o = crate::runtime::wait_output(
+        crate::runtime::spawn(adapter_cmd),
+        std::time::Duration::from_secs(120),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("the process that started it has gone"),
+        "{err}"
+    );
+    let _ = wire::clean_run(&run_id);
+}
