@@ -400,28 +400,13 @@ impl<'s, 'w> WireExpert<'s, 'w> {
 
     /// Before it leaves, the actor tells the expert the last query it stopped waiting for, if
     /// no later request told it: an answer sent to it is then counted late. The report asks
-    /// nothing; the expert lets it go unanswered (waited for at most the timeout).
+    /// nothing and is sent as a query is; the expert lets it go unanswered.
     pub fn leave(&mut self) -> Result<()> {
-        if self.gave_up == 0 || self.session.control().active_expert == 0 {
+        if self.gave_up == 0 {
             return Ok(());
         }
         let report = QueryRequest::report(self.me.id, self.me.incarnation, self.gave_up);
-        let mut pending = self.client.ask(&report).map_err(LoopError::link)?;
-        self.gave_up = 0;
-        self.expert.ring().map_err(LoopError::link)?;
-        let epoch = Instant::now();
-        while pending.held() && epoch.elapsed() < self.timeout {
-            if self
-                .session
-                .wait(Duration::from_millis(5))
-                .map_err(LoopError::link)?
-                .is_some()
-            {
-                break;
-            }
-        }
-        pending.poll().map_err(LoopError::link)?;
-        Ok(())
+        self.query(report).map(|_| ())
     }
 
     /// One query (Algorithm 1 line 9), waiting at most the timeout for the answer.

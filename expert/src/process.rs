@@ -571,8 +571,8 @@ impl<'w> Shell<'w> {
                     actor,
                     response,
                 } => {
-                    let held = query.is_connected();
                     if response.outcome == outcome::ANSWERED {
+                        let held = query.is_connected();
                         let r = query.request();
                         self.late
                             .answered((r.actor, r.incarnation), r.header.seq, held);

@@ -206,9 +206,9 @@ pub(crate) fn prose(text: &str) -> String {
     out
 }
 
-/// The text of every Markdown, CSV, text and JSON file under `results/`.
-pub(crate) fn results_texts() -> Vec<String> {
-    let mut texts = Vec::new();
+/// Every Markdown, CSV, text and JSON file under `results/`: its path from the workspace, its text.
+pub(crate) fn results_files() -> Vec<(String, String)> {
+    let mut files = Vec::new();
     let mut dirs = vec![workspace().join("results")];
     while let Some(dir) = dirs.pop() {
         for e in std::fs::read_dir(&dir).unwrap().flatten() {
@@ -219,18 +219,19 @@ pub(crate) fn results_texts() -> Vec<String> {
                 .extension()
                 .is_some_and(|x| ["md", "csv", "txt", "json"].contains(&x.to_str().unwrap()))
             {
-                texts.push(std::fs::read_to_string(&p).unwrap_or_default());
+                let rel = p.strip_prefix(workspace()).unwrap().display().to_string();
+                files.push((rel, std::fs::read_to_string(&p).unwrap_or_default()));
             }
         }
     }
-    texts
+    files
 }
 
 #[test]
 fn every_interval_quoted_in_prose_is_in_a_committed_results_file() {
-    let found: Vec<[f64; 3]> = results_texts()
+    let found: Vec<[f64; 3]> = results_files()
         .iter()
-        .flat_map(|text| intervals(text))
+        .flat_map(|(_, text)| intervals(text))
         .map(|t| t.map(|(v, _)| v))
         .collect();
     let mut docs: Vec<PathBuf> = ["README.md", "EXPERIMENTS.md", "BENCHMARKS.md"]

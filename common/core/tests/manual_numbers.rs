@@ -14,7 +14,7 @@
 
 use std::collections::HashSet;
 
-use crate::manual::{chapters, prose};
+use crate::manual::{chapters, prose, results_files};
 use crate::tidy::workspace;
 
 /// The fewest decimals a quoted number needs to be checked: counts, years and settings such as
@@ -248,27 +248,6 @@ const NOT_RESULTS: [(&str, &str); 15] = [
     ("EXPERIMENTS.md", "τ = 0.002"),
 ];
 
-/// The committed results files (Markdown, CSV, text, JSON), by path from the workspace.
-fn results_files() -> Vec<(String, String)> {
-    let mut files = Vec::new();
-    let mut dirs = vec![workspace().join("results")];
-    while let Some(dir) = dirs.pop() {
-        for e in std::fs::read_dir(&dir).unwrap().flatten() {
-            let p = e.path();
-            let text_file = p
-                .extension()
-                .is_some_and(|x| ["md", "csv", "txt", "json"].contains(&x.to_str().unwrap()));
-            if p.is_dir() {
-                dirs.push(p);
-            } else if text_file {
-                let rel = p.strip_prefix(workspace()).unwrap().display().to_string();
-                files.push((rel, std::fs::read_to_string(&p).unwrap_or_default()));
-            }
-        }
-    }
-    files
-}
-
 /// Whether the results file `path` is what `cited` names: the file, a directory holding it, or
 /// a pattern whose `*` stands for any part of one name.
 fn cites(cited: &str, path: &str) -> bool {
@@ -316,18 +295,16 @@ fn sections(text: &str) -> Vec<String> {
     out
 }
 
-/// Every decimal number of `texts`, formatted with 2 to 6 decimals.
-fn values_of<'a>(texts: impl Iterator<Item = &'a str>) -> HashSet<String> {
+/// Every decimal number of `text`, formatted with 2 to 6 decimals.
+fn values_of(text: &str) -> HashSet<String> {
     let mut values = HashSet::new();
-    for text in texts {
-        let tokens = text.split(|c: char| !(c.is_ascii_digit() || ".eE+-".contains(c)));
-        for v in tokens
-            .filter(|t| t.contains('.'))
-            .filter_map(|t| t.parse::<f64>().ok())
-        {
-            for d in DECIMALS..=6 {
-                values.insert(format!("{v:.d$}"));
-            }
+    let tokens = text.split(|c: char| !(c.is_ascii_digit() || ".eE+-".contains(c)));
+    for v in tokens
+        .filter(|t| t.contains('.'))
+        .filter_map(|t| t.parse::<f64>().ok())
+    {
+        for d in DECIMALS..=6 {
+            values.insert(format!("{v:.d$}"));
         }
     }
     values
@@ -355,7 +332,7 @@ fn every_number_with_decimals_quoted_in_prose_is_in_a_results_file_its_section_c
     );
     let files: Vec<(String, HashSet<String>)> = results_files()
         .into_iter()
-        .map(|(path, text)| (path, values_of(std::iter::once(text.as_str()))))
+        .map(|(path, text)| (path, values_of(&text)))
         .collect();
     let (mut quoted, mut citing, mut missing) = (0, 0, Vec::new());
     for (name, cited, text) in prose_sections() {
