@@ -5,6 +5,8 @@
 pub mod human;
 mod late;
 pub mod machine;
+mod member;
 mod process;
 
+pub use member::member_name;
 pub use process::{log_name, run, Args, ANSWER_DELAY_VAR};

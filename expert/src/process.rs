@@ -46,11 +46,25 @@ pub struct Args {
     /// This expert's generation in the run (1 for the first, +1 per swap).
     #[arg(long, default_value_t = 1)]
     pub generation: u16,
+    /// Answer only as the built-in expert at this place of `[[experts]]` (from 0), serving
+    /// `remote/<name>`: the expert process starts one such process per built-in expert.
+    #[arg(long, requires = "name")]
+    pub member: Option<usize>,
+    /// With `--member`: the service's name (`expert-<generation>-<member>`), also its log's
+    /// (`adapter-<name>.log`).
+    #[arg(long, requires = "member")]
+    pub name: Option<String>,
+    /// With `--member`: the pid of the process that started it; this one stops once it is gone.
+    #[arg(long)]
+    pub parent: Option<u32>,
 }
 
 /// The name of the process's log file (without `.log`).
 pub fn log_name(args: &Args) -> String {
-    format!("expert-{}", args.generation)
+    match &args.name {
+        Some(name) if args.member.is_some() => format!("adapter-{name}"),
+        _ => format!("expert-{}", args.generation),
+    }
 }
 
 /// Who demonstrates: a built-in demonstrator, an external one behind a Python adapter, or a
@@ -68,25 +82,23 @@ enum Source {
 
 type Machine<'w> = ExpertMachine<IncomingQuery<'w>>;
 
-/// Runs the expert until the launcher says stop, a newer expert replaces it, or a termination
-/// signal arrives.
+/// Runs the expert (or with `--member`, one of several experts) until the launcher says stop, a
+/// newer expert replaces it, or a termination signal arrives.
 pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
+    match args.member {
+        Some(member) => crate::member::serve(args, member, schema),
+        None => expert(args, schema),
+    }
+}
+
+fn expert(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     // Answering is the query path: woken by an actor, it runs before a busy learner or refit.
     alfd_harness::Sched::query_path().apply();
     let setup = args.process.load()?;
     let runtime = &setup.runtime;
     let (obs_dim, actions) = setup.env_dims()?;
-    let name = args
-        .expert
-        .clone()
-        .unwrap_or_else(|| setup.config.run_expert_name());
-    // Several experts answer in this process when it is started under their joined name (the
-    // run's own, or one `alfd expert add|remove` made).
-    let added = alfd_demonstrators::added::read(&args.process.run_dir)?;
-    let cfg = &match name.as_str() {
-        HUMAN => setup.config.with_one_expert(HUMAN),
-        _ => setup.config.with_roster(&name, &added),
-    };
+    let (name, cfg) = roster(args, &setup.config)?;
+    let cfg = &cfg;
     let panel = !cfg.experts.is_empty();
     let demos_path = args.process.run_dir.join("demos.jsonl");
     // Read the demonstrations now, to refuse a bad file before the run depends on us; they are
@@ -97,7 +109,13 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     // A run that never asks (B = 0) needs no expert for its environment: its own (the config's)
     // is not built; one swapped in by name is.
     let source = if panel {
-        panel_source(args, cfg, (me, schema), actions, runtime.query_timeout())?
+        panel_source(
+            args,
+            (cfg, &name),
+            (me, schema),
+            actions,
+            runtime.query_timeout(),
+        )?
     } else if name == setup.config.expert.name && !cfg.needs_expert() {
         Source::BuiltIn(Box::new(alfd_common::agent::NoExpert))
     } else {
@@ -149,6 +167,25 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     shell.apply(&mut machine, stop)?;
     log_counts(&machine, stop_reason);
     Ok(())
+}
+
+/// The name this process answers under (`--expert`, else the run's) and the config with the
+/// experts it names: several when it is their joined name (the run's own, or one `alfd expert
+/// add|remove` made), else one.
+pub(crate) fn roster(
+    args: &Args,
+    config: &alfd_common::config::ExperimentConfig,
+) -> alfd_harness::Result<(String, alfd_common::config::ExperimentConfig)> {
+    let name = args
+        .expert
+        .clone()
+        .unwrap_or_else(|| config.run_expert_name());
+    let added = alfd_demonstrators::added::read(&args.process.run_dir)?;
+    let cfg = match name.as_str() {
+        HUMAN => config.with_one_expert(HUMAN),
+        _ => config.with_roster(&name, &added),
+    };
+    Ok((name, cfg))
 }
 
 /// What the expert did, in its log as it stops.
@@ -278,25 +315,36 @@ fn source(
     })
 }
 
-/// The experts of `[[experts]]` and the panel that routes the queries among them: built-in
-/// ones in this process, each external one (`python:`, `sb3:`) from an adapter of its own
-/// (`remote/expert-<generation>-<i>`, its log RUN_DIR/adapter-expert-<generation>-<i>.log),
-/// which stops with this process. An external expert that does not answer within `timeout` is
-/// asked no more; its queries go to the others.
+/// The experts of `[[experts]]` and the panel that routes the queries among them. Each expert but
+/// a person answers from a process of its own that stops with this one, named
+/// `expert-<generation>-<i>` (its service `remote/<that name>`, its log
+/// RUN_DIR/adapter-<that name>.log): a built-in one from `alfd-expert --member i`, an external
+/// one (`python:`, `sb3:`) from a Python adapter. An expert that does not answer within
+/// `timeout` (its process killed, paused or gone) is asked no more; its queries go to the others.
 fn panel_source(
     args: &Args,
-    cfg: &alfd_common::config::ExperimentConfig,
+    (cfg, joined): (&alfd_common::config::ExperimentConfig, &str),
     (me, schema): (Process, u32),
     actions: usize,
     timeout: Duration,
 ) -> alfd_harness::Result<Source> {
     let run_dir = &args.process.run_dir;
-    let members = registry::panel(cfg, registry::People::Allowed, |i, policy| {
-        let name = format!("expert-{}-{i}", args.generation);
+    let run_id = args.process.run_id.as_str();
+    let program = std::env::current_exe().what(|| "cannot find alfd-expert itself".to_owned())?;
+    let members = registry::panel_apart(cfg, registry::People::Allowed, |i, elsewhere| {
+        let name = crate::member::member_name(args.generation, i);
         let log = run_dir.join(format!("adapter-{name}.log"));
-        let id = (args.process.run_id.as_str(), name.as_str());
-        let external = AdapterDemonstrator::start(policy, id, me, schema, actions, &log, timeout)?;
-        Ok(Box::new(external))
+        let adapter = match elsewhere {
+            registry::Elsewhere::External(policy) => {
+                Adapter::expert(policy, run_id, &name, schema, &log)?
+            }
+            registry::Elsewhere::BuiltIn => {
+                let member = (joined, args.generation, i);
+                Adapter::member(&program, &args.process, member, &name, &log)?
+            }
+        };
+        let expert = AdapterDemonstrator::connect(adapter, run_id, me, schema, actions, timeout)?;
+        Ok(Box::new(expert))
     })?;
     let panel = PanelAsk::new(cfg, members);
     Ok(Source::Panel(Box::new(match person_in(cfg) {

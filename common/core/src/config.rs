@@ -73,7 +73,7 @@ pub struct ExperimentConfig {
     pub demos: DemosConfig,
     /// Several experts at once (`[[experts]]`, one table each), asked as `expert.route` says;
     /// `[expert]` keeps what is the run's (the demonstration model). Neural agents only; in
-    /// `alfd run` the expert process hosts them all. Empty: the one expert `expert.name`.
+    /// `alfd run` each but a person answers from a process of its own. Empty: `expert.name`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub experts: Vec<PanelEntry>,
     #[serde(default, skip_serializing_if = "LoggingConfig::is_default")]
@@ -636,7 +636,7 @@ impl ExperimentConfig {
     }
 
     /// The name the run's expert answers under: `expert.name`, or with several experts
-    /// (`[[experts]]`) theirs joined by `+` (the expert process that hosts them all).
+    /// (`[[experts]]`) theirs joined by `+` (the expert process that routes among them).
     pub fn run_expert_name(&self) -> String {
         if self.experts.is_empty() {
             return self.expert.name.clone();

@@ -338,9 +338,43 @@ pub fn panel(
     people: People,
     mut external: impl FnMut(usize, &str) -> alfd_harness::Result<Box<dyn Demonstrator<[f32]>>>,
 ) -> alfd_harness::Result<Vec<Box<dyn Demonstrator<[f32]>>>> {
+    assemble(cfg, people, false, |i, elsewhere| match elsewhere {
+        Elsewhere::External(policy) => external(i, policy),
+        Elsewhere::BuiltIn => Ok(member(cfg, i)?),
+    })
+}
+
+/// One of `[[experts]]` that answers from a process of its own, for [`panel_apart`]'s caller
+/// to start and connect to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Elsewhere<'a> {
+    /// `python:` or `sb3:`: the policy, served by a Python adapter.
+    External(&'a str),
+    /// A built-in expert, served by a process that builds it with [`member`].
+    BuiltIn,
+}
+
+/// [`panel`] with every expert but a person in a process of its own: each built-in and external
+/// expert is checked here and then `elsewhere(i, what)` starts it and returns the demonstrator
+/// that asks it.
+pub fn panel_apart(
+    cfg: &alfd_common::config::ExperimentConfig,
+    people: People,
+    elsewhere: impl FnMut(usize, Elsewhere<'_>) -> alfd_harness::Result<Box<dyn Demonstrator<[f32]>>>,
+) -> alfd_harness::Result<Vec<Box<dyn Demonstrator<[f32]>>>> {
+    assemble(cfg, people, true, elsewhere)
+}
+
+fn assemble(
+    cfg: &alfd_common::config::ExperimentConfig,
+    people: People,
+    apart: bool,
+    mut elsewhere: impl FnMut(
+        usize,
+        Elsewhere<'_>,
+    ) -> alfd_harness::Result<Box<dyn Demonstrator<[f32]>>>,
+) -> alfd_harness::Result<Vec<Box<dyn Demonstrator<[f32]>>>> {
     let refuse = |name: &str, why: &str| BadInput(format!("[[experts]]: `{name}` {why}"));
-    let built =
-        |name: &str| for_config(cfg, name).map_err(|e| BadInput(format!("[[experts]]: {}", e.0)));
     let mut members: Vec<Box<dyn Demonstrator<[f32]>>> = Vec::new();
     for (i, e) in cfg.experts.iter().enumerate() {
         if e.name == alfd_harness::HUMAN_EXPERT {
@@ -367,16 +401,45 @@ pub fn panel(
                 );
             }
             check_external(&e.name)?;
-            members.push(external(i, &e.name)?);
+            members.push(elsewhere(i, Elsewhere::External(&e.name))?);
             continue;
         }
-        let first = built(&e.name)?;
-        members.push(match (&e.becomes, e.after) {
-            (Some(then), Some(after)) => Box::new(Becomes::new(first, built(then)?, after)),
-            _ => first,
+        // Built here first: an unknown name is refused before any process starts.
+        let built = member(cfg, i)?;
+        members.push(match apart {
+            true => elsewhere(i, Elsewhere::BuiltIn)?,
+            false => built,
         });
     }
     Ok(members)
+}
+
+/// The built-in expert at place `i` of `[[experts]]` (with `becomes`, one for its first `after`
+/// answers and another from then on); a person, an external expert or a place beyond the list
+/// is bad input.
+pub fn member(
+    cfg: &alfd_common::config::ExperimentConfig,
+    i: usize,
+) -> Result<Box<dyn Demonstrator<[f32]>>, BadInput> {
+    let built =
+        |name: &str| for_config(cfg, name).map_err(|e| BadInput(format!("[[experts]]: {}", e.0)));
+    let Some(e) = cfg.experts.get(i) else {
+        return Err(BadInput(format!(
+            "[[experts]] has {} experts: there is none at place {i}",
+            cfg.experts.len()
+        )));
+    };
+    if e.name == alfd_harness::HUMAN_EXPERT || external_policy(&e.name).is_some() {
+        return Err(BadInput(format!(
+            "[[experts]]: `{}` at place {i} is not a built-in expert",
+            e.name
+        )));
+    }
+    let first = built(&e.name)?;
+    Ok(match (&e.becomes, e.after) {
+        (Some(then), Some(after)) => Box::new(Becomes::new(first, built(then)?, after)),
+        _ => first,
+    })
 }
 
 /// A CliffWalk demonstrator by name, for `env` (the optimal one is computed for its map).

@@ -113,17 +113,30 @@ impl Adapter {
     fn spawn(args: Vec<String>, run_id: &str, name: &str, schema: u32, log: &Path) -> Result<Self> {
         let python = interpreter()?;
         let adapter = python_dir().join("alfd_adapter.py");
+        let mut command = Command::new(&python);
+        command
+            .arg(&adapter)
+            .args(args)
+            .arg(format!("--run-id={run_id}"))
+            .arg(format!("--name={name}"))
+            .arg(format!("--schema={schema}"));
+        let what = || format!("cannot start {} {}", python.display(), adapter.display());
+        Self::start(command, name, log, what)
+    }
+
+    /// Starts `command` with its output appended to `log`, telling it the pid to watch.
+    fn start(
+        mut command: Command,
+        name: &str,
+        log: &Path,
+        what: impl FnOnce() -> String,
+    ) -> Result<Self> {
         let file = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
             .open(log)
             .what(|| format!("cannot open {}", log.display()))?;
-        let child = Command::new(&python)
-            .arg(&adapter)
-            .args(args)
-            .arg(format!("--run-id={run_id}"))
-            .arg(format!("--name={name}"))
-            .arg(format!("--schema={schema}"))
+        let child = command
             // Killed while the adapter starts up, this process would leave it an orphan that
             // cannot tell its parent has gone: it is told which pid to watch.
             .arg(format!("--parent={}", std::process::id()))
@@ -131,12 +144,38 @@ impl Adapter {
             .stdout(file.try_clone()?)
             .stderr(file)
             .spawn()
-            .what(|| format!("cannot start {} {}", python.display(), adapter.display()))?;
+            .what(what)?;
         tracing::info!(adapter = name, pid = child.id(), "adapter started");
         Ok(Self {
             child: Mutex::new(child),
             name: name.to_owned(),
             log: log.to_owned(),
+        })
+    }
+
+    /// Starts `program` (this workspace's `alfd-expert`) serving the built-in expert at place
+    /// `member` of `[[experts]]` as `remote/<name>`; `expert` is the joined name the expert
+    /// process was started under, so that both read the same list. Its process name is
+    /// `alfd-expert-member`, so that nothing looking for the expert process finds it.
+    pub fn member(
+        program: &Path,
+        process: &crate::ProcessArgs,
+        (expert, generation, member): (&str, u16, usize),
+        name: &str,
+        log: &Path,
+    ) -> Result<Self> {
+        use std::os::unix::process::CommandExt as _;
+        let mut command = Command::new(program);
+        command
+            .arg0("alfd-expert-member")
+            .arg(format!("--run-dir={}", process.run_dir.display()))
+            .arg(format!("--run-id={}", process.run_id))
+            .arg(format!("--expert={expert}"))
+            .arg(format!("--generation={generation}"))
+            .arg(format!("--member={member}"))
+            .arg(format!("--name={name}"));
+        Self::start(command, name, log, || {
+            format!("cannot start {}", program.display())
         })
     }
 
@@ -246,6 +285,18 @@ impl AdapterDemonstrator {
         timeout: Duration,
     ) -> Result<Self> {
         let adapter = Adapter::expert(policy, run_id, name, schema, log)?;
+        Self::connect(adapter, run_id, me, schema, actions, timeout)
+    }
+
+    /// Connects to `adapter`, started already, as `me`.
+    pub fn connect(
+        adapter: Adapter,
+        run_id: &str,
+        me: Process,
+        schema: u32,
+        actions: usize,
+        timeout: Duration,
+    ) -> Result<Self> {
         let remote = RemoteDemonstrator::new(adapter.connect(run_id, me, schema)?, actions);
         Ok(Self {
             remote,

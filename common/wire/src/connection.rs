@@ -100,22 +100,7 @@ impl Wire {
     /// Whether SIGINT or SIGTERM arrived (sticky). Any other signal iceoryx2 catches (SIGCONT,
     /// SIGTSTP, SIGUSR1, ...) is not a request to stop.
     pub fn termination_requested(&self) -> bool {
-        // iceoryx2 keeps only the last signal caught, and `node.wait` takes it: a
-        // `TerminationRequest` is SIGINT or SIGTERM; an `Interrupt` says only that some signal
-        // cut the (zero-length) sleep short, so the check is made again to learn which.
-        for _ in 0..MAX_INTERRUPTED_CHECKS {
-            if TERMINATION_REQUESTED.load(Ordering::Relaxed) {
-                return true;
-            }
-            match self.node.wait(Duration::ZERO) {
-                Ok(()) => return false,
-                Err(NodeWaitFailure::TerminationRequest) => {
-                    TERMINATION_REQUESTED.store(true, Ordering::Relaxed);
-                }
-                Err(NodeWaitFailure::Interrupt) => {}
-            }
-        }
-        TERMINATION_REQUESTED.load(Ordering::Relaxed)
+        termination_requested(&self.node)
     }
 
     /// Removes what crashed processes of this run left behind; returns how many nodes it removed.
@@ -161,4 +146,25 @@ impl Wire {
             })
         }
     }
+}
+
+/// Whether SIGINT or SIGTERM arrived at this process (sticky), asked through `node`, created
+/// with [`SignalHandlingMode::HandleTerminationRequests`].
+pub(crate) fn termination_requested(node: &Node<Transport>) -> bool {
+    // iceoryx2 keeps only the last signal caught, and `node.wait` takes it: a
+    // `TerminationRequest` is SIGINT or SIGTERM; an `Interrupt` says only that some signal
+    // cut the (zero-length) sleep short, so the check is made again to learn which.
+    for _ in 0..MAX_INTERRUPTED_CHECKS {
+        if TERMINATION_REQUESTED.load(Ordering::Relaxed) {
+            return true;
+        }
+        match node.wait(Duration::ZERO) {
+            Ok(()) => return false,
+            Err(NodeWaitFailure::TerminationRequest) => {
+                TERMINATION_REQUESTED.store(true, Ordering::Relaxed);
+            }
+            Err(NodeWaitFailure::Interrupt) => {}
+        }
+    }
+    TERMINATION_REQUESTED.load(Ordering::Relaxed)
 }

@@ -53,6 +53,8 @@
 //! - `stream`: the weights' copy into shared memory, with stores that bypass the cache.
 //! - `remote`: services to Python adapters: [`RemoteEnv`] (an environment in another process)
 //!   and [`RemoteDemonstrator`] (an external expert).
+//! - `remote_server`: [`RemoteServer`], the serving side of `remote/<name>` for a demonstrator
+//!   of this workspace in a process of its own (one of several experts).
 //! - `wakeups`: doorbells ([`Doorbell`], [`Bell`], [`ActorBells`]) and the [`Waiter`].
 //! - `control`: [`ControlWatch`], a process's view of the launcher.
 //! - `housekeeping`: the files a run leaves, and their removal
@@ -67,6 +69,7 @@ mod housekeeping;
 mod messages;
 mod ports;
 mod remote;
+mod remote_server;
 mod services;
 mod stream;
 mod wakeups;
@@ -96,6 +99,7 @@ pub use remote::{
     remote_kind, remote_limits, remote_status, Liveness, RemoteClient, RemoteDemonstrator,
     RemoteEnv, RemoteRequest, RemoteResponse, RemoteSpec, MAX_REMOTE_VALUES, REMOTE_MESSAGE_LEN,
 };
+pub use remote_server::RemoteServer;
 pub use services::{
     transitions_bytes, weights_bytes, Channel, CHANNELS, CONTROL, CREDITS, DEMO_MODEL, PROGRESS,
     TRANSITIONS, WEIGHTS,

@@ -210,6 +210,78 @@ fn service_name(run_id: &str, topic: &str) -> Result<ServiceName> {
     ServiceName::new(&name).map_err(transport("name service", name.clone()))
 }
 
+type RemoteRr = iceoryx2::service::port_factory::request_response::PortFactory<
+    Transport,
+    RemoteRequest,
+    (),
+    RemoteResponse,
+    (),
+>;
+type RemoteEvent = iceoryx2::service::port_factory::event::PortFactory<Transport>;
+
+/// The three services of `remote/<name>` opened (or created) on a node of their own, with the
+/// settings both sides and the Python adapter use.
+pub(crate) struct RemoteServices {
+    pub(crate) rr: RemoteRr,
+    /// `remote/<name>/request`: a client wakes the server.
+    pub(crate) request: RemoteEvent,
+    /// `remote/<name>/reply`: the server wakes its clients.
+    pub(crate) reply: RemoteEvent,
+    pub(crate) node: Node<Transport>,
+}
+
+impl RemoteServices {
+    pub(crate) fn open(
+        run_id: &str,
+        name: &str,
+        node_name: &str,
+        signals: SignalHandlingMode,
+    ) -> Result<Self> {
+        use remote_limits::*;
+        let cfg = run_config(run_id)?;
+        let service = format!("remote/{name}");
+        let node = NodeBuilder::new()
+            .name(&NodeName::new(node_name).map_err(transport("name node", node_name.to_owned()))?)
+            .config(&cfg)
+            .signal_handling_mode(signals)
+            .create::<Transport>()
+            .map_err(transport("create node", node_name.to_owned()))?;
+        let rr_name = service_name(run_id, &service)?;
+        let rr = patiently(&rr_name, || {
+            node.service_builder(&rr_name)
+                .request_response::<RemoteRequest, RemoteResponse>()
+                .max_servers(MAX_SERVERS)
+                .max_clients(MAX_CLIENTS)
+                .max_nodes(MAX_NODES)
+                .max_active_requests_per_client(MAX_ACTIVE_REQUESTS_PER_CLIENT)
+                .max_response_buffer_size(MAX_RESPONSE_BUFFER_SIZE)
+                .enable_safe_overflow_for_requests(true)
+                .enable_safe_overflow_for_responses(true)
+                .open_or_create()
+        })
+        .map_err(transport("open", service.clone()))?;
+        let event = |topic: &str| {
+            let name = service_name(run_id, &format!("{service}/{topic}"))?;
+            patiently(&name, || {
+                node.service_builder(&name)
+                    .event()
+                    .max_listeners(MAX_LISTENERS)
+                    .max_notifiers(MAX_NOTIFIERS)
+                    .max_nodes(MAX_NODES)
+                    .event_id_max_value(EVENT_ID_MAX_VALUE)
+                    .open_or_create()
+            })
+            .map_err(transport("open", name.to_string()))
+        };
+        Ok(Self {
+            rr,
+            request: event("request")?,
+            reply: event("reply")?,
+            node,
+        })
+    }
+}
+
 /// Says why an adapter will never answer (it exited), `None` while it runs.
 pub type Liveness = Box<dyn Fn() -> Option<String>>;
 
@@ -274,55 +346,29 @@ impl RemoteClient {
         wait: Duration,
         gone: &mut dyn FnMut() -> Option<String>,
     ) -> Result<Self> {
-        use remote_limits::*;
-        let cfg = run_config(run_id)?;
         let service = format!("remote/{name}");
-        let node_name = format!("{me}-{name}");
-        let node = NodeBuilder::new()
-            .name(&NodeName::new(&node_name).map_err(transport("name node", node_name.clone()))?)
-            .config(&cfg)
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<Transport>()
-            .map_err(transport("create node", node_name))?;
-        let rr_name = service_name(run_id, &service)?;
-        let rr = patiently(&rr_name, || {
-            node.service_builder(&rr_name)
-                .request_response::<RemoteRequest, RemoteResponse>()
-                .max_servers(MAX_SERVERS)
-                .max_clients(MAX_CLIENTS)
-                .max_nodes(MAX_NODES)
-                .max_active_requests_per_client(MAX_ACTIVE_REQUESTS_PER_CLIENT)
-                .max_response_buffer_size(MAX_RESPONSE_BUFFER_SIZE)
-                .enable_safe_overflow_for_requests(true)
-                .enable_safe_overflow_for_responses(true)
-                .open_or_create()
-        })
-        .map_err(transport("open", service.clone()))?;
-        let event = |topic: &str| {
-            let name = service_name(run_id, &format!("{service}/{topic}"))?;
-            patiently(&name, || {
-                node.service_builder(&name)
-                    .event()
-                    .max_listeners(MAX_LISTENERS)
-                    .max_notifiers(MAX_NOTIFIERS)
-                    .max_nodes(MAX_NODES)
-                    .event_id_max_value(EVENT_ID_MAX_VALUE)
-                    .open_or_create()
-            })
-            .map_err(transport("open", name.to_string()))
-        };
-        let request_bell = event("request")?
+        let ports = RemoteServices::open(
+            run_id,
+            name,
+            &format!("{me}-{name}"),
+            SignalHandlingMode::Disabled,
+        )?;
+        let request_bell = ports
+            .request
             .notifier_builder()
             .create()
             .map_err(transport("create a notifier on", service.clone()))?;
-        let reply = event("reply")?
+        let reply = ports
+            .reply
             .listener_builder()
             .create()
             .map_err(transport("create a listener on", service.clone()))?;
-        let client = rr
+        let client = ports
+            .rr
             .client_builder()
             .create()
             .map_err(transport("create a client on", service.clone()))?;
+        let rr = &ports.rr;
         wait_for_server(&service, wait, gone, || {
             rr.dynamic_config().number_of_servers() > 0
         })?;
@@ -335,7 +381,7 @@ impl RemoteClient {
             me,
             schema,
             gone: None,
-            _node: node,
+            _node: ports.node,
         })
     }
 

@@ -37,7 +37,7 @@ pub enum ExpertCommand {
         seed: u64,
     },
     /// Add an expert to a live run's experts (`[[experts]]`, or its one expert): a new expert
-    /// process hosts them all and takes over once up, as `alfd swap-expert` does.
+    /// process routes among them all and takes over once up, as `alfd swap-expert` does.
     Add {
         /// The run directory of a live run.
         #[arg(long)]

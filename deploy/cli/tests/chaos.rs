@@ -220,17 +220,17 @@ fn a_seeded_chaos_run_with_its_expert_behind_a_slow_link_loses_no_demonstration(
     assert!(remote >= 50, "{remote} demonstrations of the remote expert");
 }
 
-/// Three experts (`[[experts]]`), two built in the expert process and one from a Python adapter of
-/// its own; the expert process killed, paused and swapped (for one of them alone, and back to all
-/// three), the external expert's adapter killed and paused, while the budget is spent across the
-/// run: every invariant holds, and every answer the panel gave is in `demos.jsonl` with its cost
+/// Three experts (`[[experts]]`), each answering from a process of its own (two built-in ones'
+/// `alfd-expert --member`, one Python adapter); the expert process killed, paused and swapped
+/// (for one of them alone, and back to all three), the experts' processes killed and paused,
+/// while the budget is spent across the run: every invariant holds, and every answer the panel gave is in `demos.jsonl` with its cost
 /// and in `experts.csv`.
 #[test]
 fn a_seeded_chaos_run_with_several_experts_keeps_every_invariant() {
     let _time = timed!();
     let dir = tmp("chaos-experts");
     let config = dir.join("three.toml");
-    // The second expert answers from a Python adapter of its own: kills and pauses aim at it too.
+    // Each expert answers from a process of its own: kills and pauses aim at them too.
     let pump = "python:alfd_examples:acrobot_pump";
     let three = format!("acrobot-good+{pump}+acrobot-poor");
     std::fs::write(
@@ -299,6 +299,6 @@ fn a_seeded_chaos_run_with_several_experts_keeps_every_invariant() {
         .count();
     assert!(
         member_hit >= 1,
-        "the external expert's adapter was never hit: {events:#?}"
+        "no expert's process was ever hit: {events:#?}"
     );
 }

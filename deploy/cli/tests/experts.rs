@@ -236,8 +236,9 @@ fn with_external(steps: u32, budget: u32) -> String {
 
 const PUMP: &str = "python:alfd_examples:acrobot_pump";
 
-/// The pids of the adapters whose command line holds `needle`.
-fn adapters_with(needle: &str) -> Vec<u32> {
+/// The pids of the processes whose command line (its words joined by spaces) holds every one of
+/// `needles`.
+fn processes_with(needles: &[&str]) -> Vec<u32> {
     std::fs::read_dir("/proc")
         .unwrap()
         .flatten()
@@ -245,14 +246,22 @@ fn adapters_with(needle: &str) -> Vec<u32> {
         .filter(|pid| {
             std::fs::read(format!("/proc/{pid}/cmdline")).is_ok_and(|c| {
                 let c = String::from_utf8_lossy(&c).replace('\0', " ");
-                c.contains("alfd_adapter.py") && c.contains(needle)
+                needles.iter().all(|n| c.contains(n))
             })
         })
         .collect()
 }
 
+fn kill(pid: u32) {
+    assert!(std::process::Command::new("kill")
+        .args(["-KILL", &pid.to_string()])
+        .status()
+        .unwrap()
+        .success());
+}
+
 #[test]
-fn an_external_expert_among_three_answers_as_in_alfd_local_and_once_killed_the_others_go_on() {
+fn an_external_expert_among_three_answers_as_in_alfd_local_and_two_killed_leave_the_third() {
     let _time = timed!();
     let dir = tmp("experts-external");
     // One actor in lockstep and `alfd local`: the same answers, the external ones included.
@@ -267,9 +276,13 @@ fn an_external_expert_among_three_answers_as_in_alfd_local_and_once_killed_the_o
         assert_eq!(d.action, if d.state[4] > 0.0 { 0 } else { 2 }, "{d:?}");
     }
     assert!(local.join("adapter-expert-1-1.log").is_file());
-    assert!(lockstep.join("adapter-expert-1-1.log").is_file());
+    // In `alfd run`, every expert answers from a process of its own.
+    for i in 0..3 {
+        assert!(lockstep.join(format!("adapter-expert-1-{i}.log")).is_file());
+    }
 
-    // Two actors; the external expert's adapter killed once it has answered three times.
+    // Two actors; once the external expert has answered three times, its adapter and the
+    // built-in `acrobot-poor`'s process are killed.
     let config = dir.join("long.toml");
     std::fs::write(&config, with_external(40_000, 60)).unwrap();
     let out = dir.join("killed");
@@ -279,36 +292,48 @@ fn an_external_expert_among_three_answers_as_in_alfd_local_and_once_killed_the_o
         log().matches(PUMP).count() >= 3
     });
     let id = crate::runtime::run_id(&out);
-    let pids = adapters_with(&format!("--run-id={id} --name=expert-1-1"));
-    assert_eq!(pids.len(), 1, "one adapter for the external expert");
+    let member = |i: usize| {
+        let (run, name) = (format!("--run-id={id} "), format!("--name=expert-1-{i} "));
+        let pids = processes_with(&["alfd-expert-member ", &run, &name]);
+        assert_eq!(pids.len(), 1, "one process for built-in expert {i}");
+        pids[0]
+    };
+    assert_ne!(member(0), member(2));
+    let adapter = processes_with(&[
+        "alfd_adapter.py",
+        &format!("--run-id={id} --name=expert-1-1"),
+    ]);
+    assert_eq!(adapter.len(), 1, "one adapter for the external expert");
     let before = log();
-    assert!(std::process::Command::new("kill")
-        .args(["-KILL", &pids[0].to_string()])
-        .status()
-        .unwrap()
-        .success());
+    kill(adapter[0]);
+    kill(member(2));
     let o = crate::runtime::wait_output(bg, std::time::Duration::from_secs(180));
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    // Every answer written before the kill is kept, the budget is spent all the same, and after
-    // the kill (an answer in flight aside) the other two answer.
+    // Every answer written before the kills is kept, the budget is spent all the same, and after
+    // them (an answer in flight aside) the third answers.
     let after = log();
     assert!(after.starts_with(&before), "the log was rewritten");
     let demos = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     assert_eq!(demos.len(), 60, "the whole budget is spent");
     let later = &after[before.len()..];
     assert!(later.matches(PUMP).count() <= 1, "{later}");
-    for name in ["acrobot-good", "acrobot-poor"] {
-        assert!(later.contains(name), "{name} did not answer after the kill");
-    }
+    assert!(later.matches("acrobot-poor").count() <= 1, "{later}");
+    assert!(
+        later.contains("acrobot-good"),
+        "acrobot-good did not answer after the kills"
+    );
     let expert_logs: String = std::fs::read_dir(&out)
         .unwrap()
         .flatten()
         .filter(|e| e.file_name().to_string_lossy().starts_with("expert"))
         .map(|e| std::fs::read_to_string(e.path()).unwrap_or_default())
         .collect();
-    assert!(
-        expert_logs.contains("its queries go to the other experts"),
-        "the expert's log says the external one is down"
+    assert_eq!(
+        expert_logs
+            .matches("its queries go to the other experts")
+            .count(),
+        2,
+        "the expert's log says both are down"
     );
     assert_eq!(
         alfd_wire::leftover_files(&id),

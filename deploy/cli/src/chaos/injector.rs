@@ -18,8 +18,9 @@ pub enum Target {
     /// The joined host (`alfd join` on 127.0.0.1 with actors of its own); killed, it is started
     /// again.
     Host,
-    /// The adapter of an external expert among several (`[[experts]]`, by its place): killed or
-    /// paused, the panel asks the others.
+    /// The process of one of several experts (`[[experts]]`, by its place; a built-in one's
+    /// `alfd-expert --member` or an external one's adapter): killed or paused, the panel asks
+    /// the others.
     Member(u16),
 }
 
@@ -160,8 +161,8 @@ impl Injector {
         self
     }
 
-    /// Aims kills and pauses at the adapters of these external experts of `[[experts]]` (their
-    /// places) too, each as likely as the learner (none: a seed gives the schedule of a run
+    /// Aims kills and pauses at the processes of these experts of `[[experts]]` (their places)
+    /// too, each as likely as the learner (none: a seed gives the schedule of a run
     /// without them).
     pub fn with_members(mut self, members: Vec<u16>) -> Self {
         self.members = members;
@@ -218,8 +219,8 @@ impl Injector {
     }
 
     /// An actor, the learner, the expert, (with adapters) an actor's adapter, (with a joined
-    /// host) the host or (with members) an external expert's adapter, each as likely as the
-    /// learner.
+    /// host) the host or (with members) one of several experts' processes, each as likely as
+    /// the learner.
     fn target(&mut self) -> Target {
         let actors = u32::from(self.actors);
         let adapters = if self.adapters { actors } else { 0 };

@@ -193,7 +193,7 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
     } else {
         args.experts.clone()
     };
-    let members = external_members(cfg.as_ref());
+    let members = apart_members(cfg.as_ref());
     let actors = u16::try_from(args.actors).map_err(|_| usage("--actors is too large"))?;
     let gap = Duration::from_secs_f64(args.every);
     // A Gymnasium environment is served by Python adapters, which are targets too.
@@ -217,12 +217,13 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
     report::report(&chaos, ended)
 }
 
-/// The places in `[[experts]]` of the external experts (`python:`, `sb3:`), each answering from
-/// an adapter of its own.
-fn external_members(cfg: Option<&alfd_common::config::ExperimentConfig>) -> Vec<u16> {
+/// The places in `[[experts]]` of the experts that answer from a process of their own: every
+/// one but a person (a built-in one from `alfd-expert --member`, an external one from a Python
+/// adapter).
+fn apart_members(cfg: Option<&alfd_common::config::ExperimentConfig>) -> Vec<u16> {
     let Some(cfg) = cfg else { return Vec::new() };
     (0..cfg.experts.len())
-        .filter(|&i| alfd_demonstrators::registry::external_policy(&cfg.experts[i].name).is_some())
+        .filter(|&i| cfg.experts[i].name != alfd_expert::human::HUMAN)
         .filter_map(|i| u16::try_from(i).ok())
         .collect()
 }

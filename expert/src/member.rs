@@ -1,0 +1,100 @@
+//! One of several experts in a process of its own (`alfd-expert --member I`): the expert process
+//! of a run with `[[experts]]` starts one per built-in expert, as it starts a Python adapter per
+//! external one, and asks each through `remote/expert-<generation>-<I>`. Budget, routing,
+//! `demos.jsonl` and the demonstration model stay in the expert process; this one only answers.
+//!
+//! It stops on SIGINT or SIGTERM, and by itself once the process that started it is gone.
+
+use std::time::Duration;
+
+use alfd_common::agent::Demonstrator;
+use alfd_demonstrators::registry;
+use alfd_wire::{remote_kind, RemoteRequest, RemoteResponse, RemoteServer};
+use tracing::info;
+
+use crate::Args;
+
+/// How long one wait for a request lasts: how soon a gone parent is noticed.
+const POLL: Duration = Duration::from_millis(200);
+
+/// The name of `[[experts]]`' `member`-th expert's service and log (`expert-<generation>-<i>`).
+pub fn member_name(generation: u16, member: usize) -> String {
+    format!("expert-{generation}-{member}")
+}
+
+/// Serves the built-in expert at place `member` of the run's `[[experts]]` until a signal or the
+/// end of its parent.
+pub fn serve(args: &Args, member: usize, schema: u32) -> alfd_harness::Result<()> {
+    let setup = args.process.load()?;
+    let (_, actions) = setup.env_dims()?;
+    let (_, cfg) = crate::process::roster(args, &setup.config)?;
+    let mut expert = registry::member(&cfg, member)?;
+    let name = member_name(args.generation, member);
+    let mut server = RemoteServer::create(&args.process.run_id, &name, schema)?;
+    let parent = args
+        .parent
+        .unwrap_or_else(std::os::unix::process::parent_id);
+    info!(expert = %cfg.experts[member].name, service = server.service(), "serving");
+    let mut answered = 0;
+    while !server.termination_requested() {
+        answered += server.serve(POLL, &mut |r| act(expert.as_mut(), actions, r))?;
+        if std::os::unix::process::parent_id() != parent {
+            info!(answered, "the process that started it has gone: stopping");
+            return Ok(());
+        }
+    }
+    info!(answered, "stopping");
+    Ok(())
+}
+
+/// The expert's answer to one request.
+fn act(
+    expert: &mut dyn Demonstrator<[f32]>,
+    actions: usize,
+    r: &RemoteRequest,
+) -> Result<RemoteResponse, String> {
+    if r.kind != remote_kind::ACT {
+        return Err(format!(
+            "an expert answers ACT ({}), not {}",
+            remote_kind::ACT,
+            r.kind
+        ));
+    }
+    let len = (r.len as usize).min(r.values.len());
+    let obs: Vec<f32> = r.values[..len].iter().map(|&v| v as f32).collect();
+    let action = expert.try_act(&obs)?;
+    if action >= actions {
+        return Err(format!("action {action} of {actions}"));
+    }
+    Ok(RemoteResponse {
+        action: action as u32,
+        ..RemoteResponse::default()
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Sign;
+
+    impl Demonstrator<[f32]> for Sign {
+        fn act(&mut self, s: &[f32]) -> usize {
+            usize::from(s[0] > 0.0) + usize::from(s[0] > 10.0) * 5
+        }
+    }
+
+    #[test]
+    fn a_member_answers_act_with_its_experts_action_and_refuses_anything_else() {
+        let ask = |kind, values: &[f64]| {
+            let r = RemoteRequest::new(kind, 0).with_values(values).unwrap();
+            act(&mut Sign, 2, &r)
+        };
+        assert_eq!(ask(remote_kind::ACT, &[0.5]).unwrap().action, 1);
+        assert_eq!(ask(remote_kind::ACT, &[-0.5]).unwrap().action, 0);
+        let e = ask(remote_kind::STEP, &[0.5]).unwrap_err();
+        assert!(e.contains("ACT (7), not 3"), "{e}");
+        let e = ask(remote_kind::ACT, &[50.0]).unwrap_err();
+        assert!(e.contains("action 6 of 2"), "{e}");
+    }
+}
