@@ -76,7 +76,11 @@ setup_log="$tmp/test-setup.$$.log"
   fi
 ) >"$setup_log" 2>&1 &
 setup_pid=$!
-cargo build --release --workspace --locked
+# Every binary, and the tests compiled (unit tests of every library and binary, the integration
+# tests), in one cargo invocation, whose scheduler then keeps both processors busy to the end.
+# Not the doc tests: no doc comment holds a Rust example (tidy_features checks it), and rustdoc
+# takes about 40 s to find none. Nor the examples, which `cargo clippy --all-targets` compiles.
+cargo build --release --workspace --locked --lib --bins --tests
 setup_status=0
 wait "$setup_pid" || setup_status=$?
 setup_pid=""
@@ -86,13 +90,9 @@ if [ "$setup_status" != 0 ]; then
   echo "the set-up above failed (exit code $setup_status)"
   exit 1
 fi
-# Unit tests of every library and binary, and the integration tests. Not the doc tests: no doc
-# comment holds a Rust example (tidy_features checks it), and rustdoc takes about 40 s to find none.
-# Nor the examples, which `cargo clippy --all-targets` compiles.
-cargo test --release --workspace --locked --lib --bins --tests --no-run
 # The manual (docs/, an mdBook): mdBook is built from crates.io into .tools/ on first use (its
 # own pinned lock file, without the server and search features, at a lower optimisation level),
-# at the lowest priority beside the tests once they are compiled (running, they leave a processor
+# at the lowest priority beside the tests (running, they leave a processor
 # idle much of the time); the book is built after them, and its links are checked by a test.
 mdbook_version=0.4.52
 mdbook_pid=""
