@@ -11,13 +11,23 @@ use alfd_wire as wire;
 use crate::runtime::{rows, run_id, spawn_run, summary};
 use crate::support::{alfd, text, timed, tmp, Background};
 
-/// A free TCP port on 127.0.0.1 (the OS's choice, released at once).
+/// A port free on 127.0.0.1 for TCP and UDP, below Linux's ephemeral range (32768 and up): a
+/// port the kernel handed out and this test released could be handed at once to a client socket
+/// of a concurrent test (zenoh's QUIC clients bind one per connection) before its listener binds
+/// it. The tests of this binary take turns through one counter; other binaries start elsewhere.
 pub(crate) fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static NEXT: AtomicU32 = AtomicU32::new(0);
+    let start = std::process::id().wrapping_mul(97);
+    loop {
+        let n = NEXT.fetch_add(1, Ordering::Relaxed);
+        let port = 20_000 + (start.wrapping_add(n) % 12_000) as u16;
+        let tcp = std::net::TcpListener::bind(("127.0.0.1", port));
+        let udp = std::net::UdpSocket::bind(("127.0.0.1", port));
+        if tcp.is_ok() && udp.is_ok() {
+            return port;
+        }
+    }
 }
 
 /// `alfd join` as another host (its own working directory and home) with `link` (`--connect`
@@ -708,13 +718,6 @@ fn a_remote_actor_killed_with_sigkill_is_restarted_by_its_host_with_a_new_incarn
 }
 
 /// A free UDP port on 127.0.0.1 (for a quic/ endpoint).
-fn free_udp_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 /// `alfd certs DIR --host …` (the CLI), checked.
 fn certs(dir: &Path, hosts: &[&str]) {
@@ -747,7 +750,7 @@ fn tls_a_run_across_hosts_takes_hosts_of_its_ca_and_refuses_strangers() {
     );
     certs(&ca, &["127.0.0.1", "remote"]);
     certs(&other, &["stranger"]);
-    let port = free_udp_port();
+    let port = free_port();
     let endpoint = format!("quic/127.0.0.1:{port}");
     let mut sets = vec![format!("--listen={endpoint}")];
     sets.extend(tls_flags(&ca, &ca, "127.0.0.1"));
