@@ -8,9 +8,11 @@
 use std::time::Duration;
 
 use alfd_common::agent::Demonstrator;
+use alfd_common::restarts::{Ended, Restarts, Verdict};
 use alfd_demonstrators::registry;
+use alfd_harness::python::AdapterDemonstrator;
 use alfd_wire::{remote_kind, RemoteRequest, RemoteResponse, RemoteServer};
-use tracing::info;
+use tracing::{info, warn};
 
 use crate::Args;
 
@@ -70,6 +72,79 @@ fn act(
         action: action as u32,
         ..RemoteResponse::default()
     })
+}
+
+/// Starts one of several experts' processes and connects to it.
+pub type Start = Box<dyn FnMut() -> alfd_harness::Result<AdapterDemonstrator>>;
+
+/// One of several experts answering from a process of its own, which the expert process
+/// supervises: a process that has ended is started again before the next question, under the
+/// run's restart rule (`--max-restarts`; never after it refused its input), and only then, or
+/// when it does not answer in time, is the expert marked down by the panel.
+pub struct Supervised {
+    expert: AdapterDemonstrator,
+    start: Start,
+    restarts: Restarts<()>,
+    name: String,
+    run_id: String,
+}
+
+impl Supervised {
+    /// Starts the expert `name` with `start`, to restart it at most `max_restarts` times.
+    pub fn start(
+        mut start: Start,
+        name: &str,
+        run_id: &str,
+        max_restarts: u32,
+    ) -> alfd_harness::Result<Self> {
+        Ok(Self {
+            expert: start()?,
+            start,
+            restarts: Restarts::new(max_restarts),
+            name: name.to_owned(),
+            run_id: run_id.to_owned(),
+        })
+    }
+
+    /// Starts the process again if it ended and the restart rule allows; why not otherwise.
+    fn revive(&mut self) -> Result<(), String> {
+        let Some(code) = self.expert.exited() else {
+            return Ok(());
+        };
+        match self.restarts.ended(&(), Ended::of(code, false)) {
+            Verdict::Restart { nth } => {
+                warn!(expert = %self.name, nth, ?code, "its process ended: starting it again");
+                // What the dead process held (its server of the service) goes first.
+                let _ = alfd_wire::cleanup_dead_nodes(&self.run_id);
+                self.expert = (self.start)()
+                    .map_err(|e| format!("{} cannot be started again: {e}", self.name))?;
+                Ok(())
+            }
+            Verdict::GiveUp(why) => Err(format!("{} {why}", self.name)),
+            Verdict::Done => Ok(()),
+        }
+    }
+}
+
+impl Demonstrator<[f32]> for Supervised {
+    fn act(&mut self, s: &[f32]) -> usize {
+        self.try_act(s).unwrap_or_else(|e| {
+            tracing::error!("{e}");
+            0
+        })
+    }
+
+    fn try_act(&mut self, s: &[f32]) -> Result<usize, String> {
+        self.revive()?;
+        match self.expert.try_act(s) {
+            // Killed while it was asked: started again, it is asked again.
+            Err(_) if self.expert.exited().is_some() => {
+                self.revive()?;
+                self.expert.try_act(s)
+            }
+            answer => answer,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -109,13 +109,7 @@ fn expert(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     // A run that never asks (B = 0) needs no expert for its environment: its own (the config's)
     // is not built; one swapped in by name is.
     let source = if panel {
-        panel_source(
-            args,
-            (cfg, &name),
-            (me, schema),
-            actions,
-            runtime.query_timeout(),
-        )?
+        panel_source(args, (cfg, &name), (me, schema), actions, runtime)?
     } else if name == setup.config.expert.name && !cfg.needs_expert() {
         Source::BuiltIn(Box::new(alfd_common::agent::NoExpert))
     } else {
@@ -319,31 +313,39 @@ fn source(
 /// a person answers from a process of its own that stops with this one, named
 /// `expert-<generation>-<i>` (its service `remote/<that name>`, its log
 /// RUN_DIR/adapter-<that name>.log): a built-in one from `alfd-expert --member i`, an external
-/// one (`python:`, `sb3:`) from a Python adapter. An expert that does not answer within
-/// `timeout` (its process killed, paused or gone) is asked no more; its queries go to the others.
+/// one (`python:`, `sb3:`) from a Python adapter. This process supervises them: one whose
+/// process has ended is started again before its next question (at most `--max-restarts`
+/// times); one that still cannot answer, or not within `timeout` (its process paused, say), is
+/// asked no more, and its queries go to the others.
 fn panel_source(
     args: &Args,
     (cfg, joined): (&alfd_common::config::ExperimentConfig, &str),
     (me, schema): (Process, u32),
     actions: usize,
-    timeout: Duration,
+    runtime: &alfd_harness::RuntimeConfig,
 ) -> alfd_harness::Result<Source> {
-    let run_dir = &args.process.run_dir;
-    let run_id = args.process.run_id.as_str();
     let program = std::env::current_exe().what(|| "cannot find alfd-expert itself".to_owned())?;
+    let run_id = args.process.run_id.clone();
     let members = registry::panel_apart(cfg, registry::People::Allowed, |i, elsewhere| {
         let name = crate::member::member_name(args.generation, i);
-        let log = run_dir.join(format!("adapter-{name}.log"));
-        let adapter = match elsewhere {
-            registry::Elsewhere::External(policy) => {
-                Adapter::expert(policy, run_id, &name, schema, &log)?
-            }
-            registry::Elsewhere::BuiltIn => {
-                let member = (joined, args.generation, i);
-                Adapter::member(&program, &args.process, member, &name, &log)?
-            }
+        let log = args.process.run_dir.join(format!("adapter-{name}.log"));
+        let (process, program, joined) = (args.process.clone(), program.clone(), joined.to_owned());
+        let (policy, generation) = match elsewhere {
+            registry::Elsewhere::External(policy) => (Some(policy.to_owned()), args.generation),
+            registry::Elsewhere::BuiltIn => (None, args.generation),
         };
-        let expert = AdapterDemonstrator::connect(adapter, run_id, me, schema, actions, timeout)?;
+        let (id, service, timeout) = (run_id.clone(), name.clone(), runtime.query_timeout());
+        let start: crate::member::Start = Box::new(move || {
+            let adapter = match &policy {
+                Some(policy) => Adapter::expert(policy, &id, &service, schema, &log)?,
+                None => {
+                    let member = (joined.as_str(), generation, i);
+                    Adapter::member(&program, &process, member, &service, &log)?
+                }
+            };
+            AdapterDemonstrator::connect(adapter, &id, me, schema, actions, timeout)
+        });
+        let expert = crate::member::Supervised::start(start, &name, &run_id, runtime.max_restarts)?;
         Ok(Box::new(expert))
     })?;
     let panel = PanelAsk::new(cfg, members);

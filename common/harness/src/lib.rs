@@ -31,7 +31,7 @@ pub use prior::{read_prior, write_prior, PRIOR_FILE};
 pub use process::{check_wire_limits, main, read_text, ProcessArgs, Setup};
 pub use runtime::{
     Refit, RuntimeConfig, RuntimeConfigError, DEFAULT_CHECKPOINT_EVERY,
-    DEFAULT_HUMAN_QUERY_TIMEOUT_MS, HUMAN_EXPERT, RUNTIME_FILE,
+    DEFAULT_HUMAN_QUERY_TIMEOUT_MS, DEFAULT_MAX_RESTARTS, HUMAN_EXPERT, RUNTIME_FILE,
 };
 pub use sched::{micros_var, set_timer_slack, Sched, QUERY_SLICE};
 pub use session::{Session, SessionError, LAUNCHER_SILENCE, STOP_REQUESTED, TERMINATION_SIGNAL};

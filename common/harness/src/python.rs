@@ -224,6 +224,12 @@ impl Adapter {
         }
     }
 
+    /// How the adapter exited, once it has: its exit code, or `None` when a signal ended it.
+    pub fn exited(&self) -> Option<Option<i32>> {
+        let mut child = self.child.lock().ok()?;
+        child.try_wait().ok().flatten().map(|s| s.code())
+    }
+
     fn exit_code(&self) -> Option<i32> {
         let mut child = self.child.lock().ok()?;
         child.try_wait().ok().flatten().and_then(|s| s.code())
@@ -303,6 +309,13 @@ impl AdapterDemonstrator {
             adapter,
             timeout,
         })
+    }
+}
+
+impl AdapterDemonstrator {
+    /// How its adapter exited, once it has (see [`Adapter::exited`]).
+    pub fn exited(&self) -> Option<Option<i32>> {
+        self.adapter.exited()
     }
 }
 

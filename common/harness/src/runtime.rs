@@ -51,6 +51,10 @@ pub struct RuntimeConfig {
     /// is ready: queries never wait for a refit, and runs no longer repeat to the byte).
     #[serde(default)]
     pub refit: Refit,
+    /// Restarts allowed per actor, of the expert, of the learner (the launcher's), and of each
+    /// of several experts' processes (the expert process's), before it gives up on it.
+    #[serde(default = "default_max_restarts")]
+    pub max_restarts: u32,
     /// A Gymnasium environment's spaces and limit, as its adapter reported them when the run
     /// started (absent for the built-in environments).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -71,6 +75,13 @@ pub enum Refit {
 /// The default of [`RuntimeConfig::checkpoint_every`] (see BENCHMARKS.md: a CartPole checkpoint
 /// with a full 10,000-transition buffer costs well under 5% of the learner's time at this period).
 pub const DEFAULT_CHECKPOINT_EVERY: u64 = 10_000;
+
+/// `alfd run`'s default `--max-restarts` ([`RuntimeConfig::max_restarts`]).
+pub const DEFAULT_MAX_RESTARTS: u32 = 5;
+
+fn default_max_restarts() -> u32 {
+    DEFAULT_MAX_RESTARTS
+}
 
 /// The name of the human expert (`--expert human`).
 pub const HUMAN_EXPERT: &str = "human";
@@ -97,6 +108,7 @@ impl Default for RuntimeConfig {
             weights_every: 1,
             checkpoint_every: DEFAULT_CHECKPOINT_EVERY,
             refit: Refit::Inline,
+            max_restarts: DEFAULT_MAX_RESTARTS,
             env_spec: None,
         }
     }

@@ -80,7 +80,8 @@ pub struct RunArgs {
     /// (queries never wait for a refit: for large models; the model is published when ready).
     #[arg(long, value_enum, default_value_t = alfd_harness::Refit::Inline)]
     pub refit: alfd_harness::Refit,
-    /// Restarts allowed per actor, of the expert and of the learner, before the run fails (kept
+    /// Restarts allowed per actor, of the expert, of the learner (before the run fails) and of
+    /// each of several experts' processes (before it is asked no more) (kept
     /// by `alfd resume`).
     #[arg(long, default_value_t = alfd_launcher::DEFAULT_MAX_RESTARTS)]
     pub max_restarts: u32,
@@ -280,6 +281,7 @@ fn runtime_config(
         weights_every: args.weights_every,
         checkpoint_every: args.checkpoint_every,
         refit: args.refit,
+        max_restarts: args.max_restarts,
         env_spec,
         ..RuntimeConfig::default()
     };

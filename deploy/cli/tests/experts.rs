@@ -261,7 +261,7 @@ fn kill(pid: u32) {
 }
 
 #[test]
-fn an_external_expert_among_three_answers_as_in_alfd_local_and_two_killed_leave_the_third() {
+fn an_external_expert_among_three_answers_as_in_alfd_local_and_killed_experts_are_restarted() {
     let _time = timed!();
     let dir = tmp("experts-external");
     // One actor in lockstep and `alfd local`: the same answers, the external ones included.
@@ -282,63 +282,96 @@ fn an_external_expert_among_three_answers_as_in_alfd_local_and_two_killed_leave_
     }
 
     // Two actors; once the external expert has answered three times, its adapter and the
-    // built-in `acrobot-poor`'s process are killed.
+    // built-in `acrobot-poor`'s process are killed: both are started again and answer again.
     let config = dir.join("long.toml");
     std::fs::write(&config, with_external(40_000, 60)).unwrap();
-    let out = dir.join("killed");
-    let mut bg = two_actors(&config, &out, &["--query-timeout-ms=2000"]);
+    let (before, later, logs) = kill_during(&dir.join("restarted"), &config, &[1, 2], &[]);
+    for name in [PUMP, "acrobot-poor", "acrobot-good"] {
+        assert!(
+            before.contains(name),
+            "{name} did not answer before the kills"
+        );
+        assert!(
+            later.contains(name),
+            "{name} did not answer after the kills"
+        );
+    }
+    assert_eq!(
+        logs.matches("its process ended: starting it again").count(),
+        2,
+        "{logs}"
+    );
+    assert!(
+        !logs.contains("its queries go to the other experts"),
+        "{logs}"
+    );
+    // With no restarts allowed, the killed expert is asked no more and the others go on.
+    let (_, later, logs) = kill_during(&dir.join("down"), &config, &[2], &["--max-restarts=0"]);
+    assert!(later.matches("acrobot-poor").count() <= 1, "{later}");
+    for name in [PUMP, "acrobot-good"] {
+        assert!(later.contains(name), "{name} did not answer after the kill");
+    }
+    assert!(
+        logs.contains("its queries go to the other experts"),
+        "{logs}"
+    );
+}
+
+/// `alfd run --actors=2` of `config` into `out` (with `extra` arguments), in which the processes
+/// of the experts at `places` of `[[experts]]` are killed once the external one has answered
+/// three times. Checks that the run finishes, spending its whole budget, with every answer
+/// written before the kills kept; returns `demos.jsonl` before the kills and what came after,
+/// and the expert processes' logs.
+fn kill_during(
+    out: &Path,
+    config: &Path,
+    places: &[usize],
+    extra: &[&str],
+) -> (String, String, String) {
+    let mut args = vec!["--query-timeout-ms=2000"];
+    args.extend(extra);
+    let mut bg = two_actors(config, out, &args);
     let log = || std::fs::read_to_string(out.join("demos.jsonl")).unwrap_or_default();
     crate::runtime::wait_until(&mut bg, "three answers of the external expert", || {
         log().matches(PUMP).count() >= 3
     });
-    let id = crate::runtime::run_id(&out);
-    let member = |i: usize| {
-        let (run, name) = (format!("--run-id={id} "), format!("--name=expert-1-{i} "));
-        let pids = processes_with(&["alfd-expert-member ", &run, &name]);
-        assert_eq!(pids.len(), 1, "one process for built-in expert {i}");
+    let id = crate::runtime::run_id(out);
+    let run = format!("--run-id={id} ");
+    // Every expert answers from a process of its own: a built-in one's is alfd-expert's.
+    let process = |i: usize| {
+        let name = format!("--name=expert-1-{i} ");
+        let program = if i == 1 {
+            "alfd_adapter.py"
+        } else {
+            "alfd-expert-member "
+        };
+        let pids = processes_with(&[program, &run, &name]);
+        assert_eq!(pids.len(), 1, "one process for expert {i}");
         pids[0]
     };
-    assert_ne!(member(0), member(2));
-    let adapter = processes_with(&[
-        "alfd_adapter.py",
-        &format!("--run-id={id} --name=expert-1-1"),
-    ]);
-    assert_eq!(adapter.len(), 1, "one adapter for the external expert");
+    assert_ne!(process(0), process(2));
     let before = log();
-    kill(adapter[0]);
-    kill(member(2));
+    for &i in places {
+        kill(process(i));
+    }
     let o = crate::runtime::wait_output(bg, std::time::Duration::from_secs(180));
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    // Every answer written before the kills is kept, the budget is spent all the same, and after
-    // them (an answer in flight aside) the third answers.
     let after = log();
     assert!(after.starts_with(&before), "the log was rewritten");
     let demos = alfd_demonstrators::demo_log::read(&out.join("demos.jsonl")).unwrap();
     assert_eq!(demos.len(), 60, "the whole budget is spent");
-    let later = &after[before.len()..];
-    assert!(later.matches(PUMP).count() <= 1, "{later}");
-    assert!(later.matches("acrobot-poor").count() <= 1, "{later}");
-    assert!(
-        later.contains("acrobot-good"),
-        "acrobot-good did not answer after the kills"
-    );
-    let expert_logs: String = std::fs::read_dir(&out)
+    let logs: String = std::fs::read_dir(out)
         .unwrap()
         .flatten()
         .filter(|e| e.file_name().to_string_lossy().starts_with("expert"))
         .map(|e| std::fs::read_to_string(e.path()).unwrap_or_default())
         .collect();
     assert_eq!(
-        expert_logs
-            .matches("its queries go to the other experts")
-            .count(),
-        2,
-        "the expert's log says both are down"
-    );
-    assert_eq!(
         alfd_wire::leftover_files(&id),
         Vec::<std::path::PathBuf>::new()
     );
+    let later = after[before.len()..].to_owned();
+    (before, later, logs)
 }
 
 #[test]

@@ -717,8 +717,6 @@ fn a_remote_actor_killed_with_sigkill_is_restarted_by_its_host_with_a_new_incarn
     }
 }
 
-/// A free UDP port on 127.0.0.1 (for a quic/ endpoint).
-
 /// `alfd certs DIR --host …` (the CLI), checked.
 fn certs(dir: &Path, hosts: &[&str]) {
     let mut c = alfd();

@@ -141,8 +141,7 @@ fn one() -> u32 {
     1
 }
 
-/// `alfd run`'s default `--max-restarts`.
-pub const DEFAULT_MAX_RESTARTS: u32 = 5;
+pub use alfd_harness::DEFAULT_MAX_RESTARTS;
 
 fn default_max_restarts() -> u32 {
     DEFAULT_MAX_RESTARTS
