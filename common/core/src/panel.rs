@@ -21,9 +21,10 @@
 //! of them earns the episode's percentile rank among the returns of the episodes before it (one
 //! reward per expert per episode, whatever its share of the episode's answers).
 //!
-//! An expert that fails to answer (its process gone, no answer in time) is marked down: no
-//! route asks it again in this panel's life, and the query goes to the others. `best-known`
-//! with its expert down asks the cheapest expert up.
+//! An expert that fails to answer (its process gone, no answer in time) is marked down: the query
+//! goes to the others, and no route asks it for the next [`RETRY_AFTER`] routed queries (twice
+//! as many after each further failure); then it is up again, on trial (a process paused for a
+//! while answers again). `best-known` with its expert down asks the cheapest expert up.
 
 use std::collections::{BTreeMap, VecDeque};
 
@@ -31,6 +32,10 @@ use rand::Rng as _;
 use serde::{Deserialize, Serialize};
 
 use crate::rng::Rng;
+
+/// Routed queries an expert marked down waits before it is asked again, after its first failure
+/// (each further failure doubles its wait).
+pub const RETRY_AFTER: u64 = 100;
 
 /// How a query picks its expert.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -83,6 +88,11 @@ pub struct Panel {
     answers: Vec<u64>,
     rewards: Vec<VecDeque<f64>>,
     up: Vec<bool>,
+    /// For an expert marked down: the routed query from which it is up again, and its wait.
+    back_at: Vec<Option<u64>>,
+    wait: Vec<u64>,
+    /// Queries routed so far.
+    routed: u64,
     /// Whether expert `i` may be the second of a double ask (a person is asked first or not
     /// at all: a second ask would hold the first answer up).
     second_ok: Vec<bool>,
@@ -112,6 +122,9 @@ impl Panel {
             answers: vec![0; n],
             rewards: vec![VecDeque::new(); n],
             up: vec![true; n],
+            back_at: vec![None; n],
+            wait: vec![0; n],
+            routed: 0,
             second_ok: vec![true; n],
             next: 0,
             spent: 0.0,
@@ -127,9 +140,23 @@ impl Panel {
         self.spent
     }
 
-    /// Marks expert `i` down: no route asks it again.
-    pub fn set_down(&mut self, i: usize) {
+    /// Marks expert `i` down: no route asks it for the next [`RETRY_AFTER`] routed queries,
+    /// twice as many as the last time after a further failure; the number of them.
+    pub fn set_down(&mut self, i: usize) -> u64 {
         self.up[i] = false;
+        self.wait[i] = (self.wait[i] * 2).max(RETRY_AFTER);
+        self.back_at[i] = Some(self.routed + self.wait[i]);
+        self.wait[i]
+    }
+
+    /// Brings the experts whose wait is over up again.
+    fn retry(&mut self) {
+        for i in 0..self.members.len() {
+            if self.back_at[i].is_some_and(|at| self.routed >= at) {
+                self.back_at[i] = None;
+                self.up[i] = true;
+            }
+        }
     }
 
     /// Expert `i` is never the second of a double ask.
@@ -144,6 +171,8 @@ impl Panel {
 
     /// Whom to ask about the next state; `None` when every expert is down.
     pub fn route(&mut self, rng: &mut Rng) -> Option<Ask> {
+        self.routed += 1;
+        self.retry();
         if !self.up.contains(&true) {
             return None;
         }
@@ -534,7 +563,7 @@ mod tests {
     }
 
     #[test]
-    fn an_expert_down_is_asked_no_more_and_every_route_goes_on_with_the_others() {
+    fn an_expert_down_is_not_asked_and_every_route_goes_on_with_the_others() {
         let mut rng = seeded(4);
         let mut p = panel(Route::RoundRobin, 1.0);
         p.set_down(1);
@@ -572,5 +601,36 @@ mod tests {
         );
         p.set_down(0);
         assert_eq!(p.route(&mut rng), None, "every expert down");
+    }
+
+    #[test]
+    fn an_expert_down_is_asked_again_after_its_wait_which_doubles_with_each_failure() {
+        let mut rng = seeded(5);
+        let mut p = panel(Route::RoundRobin, 0.0);
+        let firsts = |p: &mut Panel, rng: &mut Rng, n: u64| -> Vec<usize> {
+            (0..n).map(|_| p.route(rng).unwrap().first).collect()
+        };
+        assert_eq!(p.set_down(1), RETRY_AFTER);
+        let waiting = firsts(&mut p, &mut rng, RETRY_AFTER - 1);
+        assert!(!waiting.contains(&1) && !p.is_up(1), "down for its wait");
+        let back = firsts(&mut p, &mut rng, 3);
+        assert!(
+            p.is_up(1) && back.contains(&1),
+            "up again, on trial: {back:?}"
+        );
+        // A second failure: twice the wait, from then on.
+        assert_eq!(p.set_down(1), 2 * RETRY_AFTER);
+        let waiting = firsts(&mut p, &mut rng, 2 * RETRY_AFTER - 1);
+        assert!(!waiting.contains(&1));
+        assert!(firsts(&mut p, &mut rng, 3).contains(&1));
+        // Every expert down: no one is asked until the first wait is over.
+        let mut p = panel(Route::Cheapest, 0.0);
+        for i in 0..3 {
+            p.set_down(i);
+        }
+        for _ in 0..RETRY_AFTER - 1 {
+            assert_eq!(p.route(&mut rng), None);
+        }
+        assert!(p.route(&mut rng).is_some(), "back after the wait");
     }
 }

@@ -1,6 +1,7 @@
 //! The one restart rule of a run's supervisors: the launcher's for its actors, its learner and
-//! its expert (`alfd_launcher::expert_lifecycle`), and a joined host's for its actors (through
-//! the run's roster, `alfd_bridge::roster`). A process that ended without
+//! its expert (`alfd_launcher::expert_lifecycle`), a joined host's for its actors (through the
+//! run's roster, `alfd_bridge::roster`), and the expert process's for the processes of its
+//! several experts (`alfd-expert`'s `member.rs`). A process that ended without
 //! finishing its work is started again while its restarts are fewer than the run's
 //! `--max-restarts`, unless it refused its input (exit code 2): the same input would be refused
 //! again. Pure: a supervisor says how a process ended and carries out the verdict.

@@ -304,8 +304,8 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
 
     /// Marks `expert` down after its failure `e`, which it gives back.
     fn down(&mut self, expert: usize, e: LoopError) -> LoopError {
-        tracing::warn!("{e}; its queries go to the other experts from now on");
-        self.panel.set_down(expert);
+        let wait = self.panel.set_down(expert);
+        tracing::warn!("{e}; its queries go to the other experts, for the next {wait} queries");
         self.log
             .down
             .push(self.panel.members()[expert].name.clone());
