@@ -35,9 +35,10 @@ pub(crate) fn bin_dir() -> &'static Path {
             .to_path_buf();
         let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
         let mut cmd = Command::new(cargo);
-        // The whole workspace, as `deploy/test.sh` builds it: the same features, so nothing
-        // is compiled twice.
-        cmd.args(["build", "--workspace", "--bins"])
+        // The whole workspace with the same targets as `deploy/test.sh` builds: cargo unifies
+        // the dev-dependencies' features only when tests are built, so `--bins` alone would
+        // build every process binary anew, with other features, while the tests run.
+        cmd.args(["build", "--workspace", "--lib", "--bins", "--tests"])
             .current_dir(repo());
         // Without the variables cargo sets for this test binary: a build script that watches
         // one (ring's watches CARGO_MANIFEST_DIR) would otherwise see it change and rebuild its
