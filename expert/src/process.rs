@@ -330,10 +330,11 @@ fn panel_source(
         let name = crate::member::member_name(args.generation, i);
         let log = args.process.run_dir.join(format!("adapter-{name}.log"));
         let (process, program, joined) = (args.process.clone(), program.clone(), joined.to_owned());
-        let (policy, generation) = match elsewhere {
-            registry::Elsewhere::External(policy) => (Some(policy.to_owned()), args.generation),
-            registry::Elsewhere::BuiltIn => (None, args.generation),
+        let policy = match elsewhere {
+            registry::Elsewhere::External(policy) => Some(policy.to_owned()),
+            registry::Elsewhere::BuiltIn => None,
         };
+        let generation = args.generation;
         let (id, service, timeout) = (run_id.clone(), name.clone(), runtime.query_timeout());
         let start: crate::member::Start = Box::new(move || {
             let adapter = match &policy {

@@ -336,26 +336,7 @@ fn every_number_with_decimals_quoted_in_prose_is_in_a_results_file_its_section_c
         cited_paths("see `results/a/b.md`, and results/c."),
         ["results/a/b.md", "results/c."]
     );
-    let files: Vec<(String, HashSet<String>)> = results_files()
-        .into_iter()
-        .map(|(path, text)| (path, values_of(&text)))
-        .collect();
-    let (mut quoted, mut citing, mut missing) = (0, 0, Vec::new());
-    for (name, cited, text) in prose_sections() {
-        let found = scoped(&files, &cited);
-        citing += usize::from(!cited.is_empty());
-        let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
-        for number in decimals_in(&text) {
-            quoted += 1;
-            let setting = NOT_RESULTS.iter().any(|(d, around)| {
-                *d == name && around.contains(&*number) && words.contains(around)
-            });
-            if !setting && !found.iter().any(|v| v.contains(&number)) {
-                let heading = text.lines().find(|l| !l.is_empty()).unwrap_or_default();
-                missing.push(format!("{name} ({heading}): {number}"));
-            }
-        }
-    }
+    let (quoted, citing, missing) = unfound(&decimals_in, false, &NOT_RESULTS);
     assert!(
         quoted >= 200 && citing >= 40,
         "only {quoted} numbers read ({citing} sections with citations): the reader is broken"
@@ -366,6 +347,41 @@ fn every_number_with_decimals_quoted_in_prose_is_in_a_results_file_its_section_c
          a setting or version goes in NOT_RESULTS):\n{}",
         missing.join("\n")
     );
+}
+
+/// The numbers `pick` takes from each section's prose (only the sections that cite results files
+/// with `citing_only`), each looked up in the results files its section cites: how many were
+/// read, how many sections cite files, and those found in none (the settings of `not_results`
+/// aside), named with their document and heading.
+fn unfound(
+    pick: &dyn Fn(&str) -> Vec<String>,
+    citing_only: bool,
+    not_results: &[(&str, &str)],
+) -> (usize, usize, Vec<String>) {
+    let files: Vec<(String, HashSet<String>)> = results_files()
+        .into_iter()
+        .map(|(path, text)| (path, values_of(&text)))
+        .collect();
+    let (mut quoted, mut citing, mut missing) = (0, 0, Vec::new());
+    for (name, cited, text) in prose_sections() {
+        citing += usize::from(!cited.is_empty());
+        if citing_only && cited.is_empty() {
+            continue;
+        }
+        let found = scoped(&files, &cited);
+        let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
+        for number in pick(&text) {
+            quoted += 1;
+            let setting = not_results.iter().any(|(d, around)| {
+                *d == name && around.contains(&*number) && words.contains(around)
+            });
+            if !setting && !found.iter().any(|v| v.contains(&number)) {
+                let heading = text.lines().find(|l| !l.is_empty()).unwrap_or_default();
+                missing.push(format!("{name} ({heading}): {number}"));
+            }
+        }
+    }
+    (quoted, citing, missing)
 }
 
 /// Settings quoted with one decimal in sections that cite results files: the document and the
@@ -387,31 +403,13 @@ fn every_number_with_one_decimal_in_a_section_citing_results_is_in_the_files_it_
         with_decimals("at 0.5 s, 12.25 and 1,347.5 (v0.3.6)", 1),
         ["0.5", "12.25", "1347.5"]
     );
-    let files: Vec<(String, HashSet<String>)> = results_files()
-        .into_iter()
-        .map(|(path, text)| (path, values_of(&text)))
-        .collect();
-    let (mut quoted, mut missing) = (0, Vec::new());
-    for (name, cited, text) in prose_sections() {
-        if cited.is_empty() {
-            continue;
-        }
-        let found = scoped(&files, &cited);
-        let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
-        for number in with_decimals(&text, 1) {
-            if number.split_once('.').is_some_and(|(_, d)| d.len() != 1) {
-                continue;
-            }
-            quoted += 1;
-            let setting = NOT_RESULTS_ONE_DECIMAL.iter().any(|(d, around)| {
-                *d == name && around.contains(&*number) && words.contains(around)
-            });
-            if !setting && !found.iter().any(|v| v.contains(&number)) {
-                let heading = text.lines().find(|l| !l.is_empty()).unwrap_or_default();
-                missing.push(format!("{name} ({heading}): {number}"));
-            }
-        }
-    }
+    let one_decimal = |text: &str| {
+        let numbers = with_decimals(text, 1).into_iter();
+        numbers
+            .filter(|n| n.split_once('.').is_some_and(|(_, d)| d.len() == 1))
+            .collect()
+    };
+    let (quoted, _, missing) = unfound(&one_decimal, true, &NOT_RESULTS_ONE_DECIMAL);
     assert!(
         quoted >= 50,
         "only {quoted} numbers read: the reader is broken"

@@ -231,8 +231,7 @@ impl Adapter {
     }
 
     fn exit_code(&self) -> Option<i32> {
-        let mut child = self.child.lock().ok()?;
-        child.try_wait().ok().flatten().and_then(|s| s.code())
+        self.exited().flatten()
     }
 }
 
