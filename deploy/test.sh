@@ -104,7 +104,10 @@ if ! .tools/bin/mdbook --version 2>/dev/null | grep -q "v$mdbook_version"; then
     --root .tools -j 1 &
   mdbook_pid=$!
 fi
-cargo test --release --workspace --locked --lib --bins --tests
+# The multi-process tests wait on processes more than they compute: three at a time, not one per
+# processor (ALFD_TEST_THREADS sets another number).
+cargo test --release --workspace --locked --lib --bins --tests -- \
+  --test-threads="${ALFD_TEST_THREADS:-3}"
 if [ -n "$mdbook_pid" ]; then
   wait "$mdbook_pid" || { echo "building mdBook failed"; exit 1; }
   mdbook_pid=""

@@ -7,9 +7,11 @@
 //! - an interval quoted in whole numbers ("−136 [−147, −127]"), as an interval of the file
 //!   rounded to integers, and a count ("15 of 30"), as "15 of 30" or "15/30".
 //!
-//! A number with one decimal is checked only in a section that cites results files (settings
-//! listed in `NOT_RESULTS_ONE_DECIMAL`): every such value from −200 to 100 occurs in some results
-//! file, so a lookup in all of them could not fail. Code spans (`beta2 = 0.999`) are settings, not
+//! A number with one decimal, and a whole number of 100 or more, is checked only in a section
+//! that cites results files (settings listed in `NOT_RESULTS_ONE_DECIMAL` and
+//! `NOT_RESULTS_WHOLE`): every such value from −200 to 100, and most whole numbers, occur in some
+//! results file, so a lookup in all of them could not fail. Whole numbers below 100 are not
+//! checked: seeds, budgets and counts of that size are in every file. Code spans (`beta2 = 0.999`) are settings, not
 //! results, and are skipped; so are the generated parts and code blocks, which
 //! `alfd docs --check` keeps equal to their sources.
 
@@ -358,9 +360,19 @@ fn unfound(
     citing_only: bool,
     not_results: &[(&str, &str)],
 ) -> (usize, usize, Vec<String>) {
+    unfound_in(pick, &values_of, citing_only, not_results)
+}
+
+/// [`unfound`] with the values of each results file read by `values`.
+fn unfound_in(
+    pick: &dyn Fn(&str) -> Vec<String>,
+    values: &dyn Fn(&str) -> HashSet<String>,
+    citing_only: bool,
+    not_results: &[(&str, &str)],
+) -> (usize, usize, Vec<String>) {
     let files: Vec<(String, HashSet<String>)> = results_files()
         .into_iter()
-        .map(|(path, text)| (path, values_of(&text)))
+        .map(|(path, text)| (path, values(&text)))
         .collect();
     let (mut quoted, mut citing, mut missing) = (0, 0, Vec::new());
     for (name, cited, text) in prose_sections() {
@@ -373,7 +385,10 @@ fn unfound(
         for number in pick(&text) {
             quoted += 1;
             let setting = not_results.iter().any(|(d, around)| {
-                *d == name && around.contains(&*number) && words.contains(around)
+                let plain = around.replace(',', "").replace('−', "-");
+                *d == name
+                    && (around.contains(&*number) || plain.contains(&*number))
+                    && words.contains(around)
             });
             if !setting && !found.iter().any(|v| v.contains(&number)) {
                 let heading = text.lines().find(|l| !l.is_empty()).unwrap_or_default();
@@ -418,6 +433,101 @@ fn every_number_with_one_decimal_in_a_section_citing_results_is_in_the_files_it_
         missing.is_empty(),
         "numbers with one decimal in prose that no results file their section cites holds (a \
          setting goes in NOT_RESULTS_ONE_DECIMAL):\n{}",
+        missing.join("\n")
+    );
+}
+
+/// The whole numbers of `text` of 100 or more (in absolute value) that read as results: not
+/// part of a decimal, a year, a range ("seeds 1000-1009"), a compound ("a 10,000-transition
+/// buffer"), a setting ("B = 300") or a count ("15 of 30", checked on its own); normalised
+/// (`-140`, `2833`).
+fn large_wholes(text: &str) -> Vec<String> {
+    let body: String = text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let chars: Vec<char> = body.chars().collect();
+    let before = |s: usize, n: usize| chars[s.saturating_sub(n)..s].iter().collect::<String>();
+    let after = |e: usize, n: usize| {
+        chars[e..(e + n).min(chars.len())]
+            .iter()
+            .collect::<String>()
+    };
+    let mut out = Vec::new();
+    for (s, e, v) in numbers_in(&chars) {
+        let decimal = chars[s..e].contains(&'.');
+        let year = (1990.0..=2030.0).contains(&v);
+        let hyphen_after = after(e, 2).starts_with('-') && after(e, 2).len() == 2;
+        let range_end =
+            before(s, 2).ends_with('-') && before(s, 2).starts_with(|c: char| c.is_ascii_digit());
+        let setting = before(s, 2) == "= ";
+        let count = after(e, 4) == " of " || before(s, 4) == " of ";
+        if decimal || year || v.abs() < 100.0 || hyphen_after || range_end || setting || count {
+            continue;
+        }
+        out.push(format!("{}", v as i64));
+    }
+    out
+}
+
+/// Every number of `text` rounded to a whole one (half away from zero): each field between
+/// commas, and each number as prose writes it ("2,048").
+fn wholes_of(text: &str) -> HashSet<String> {
+    let tokens = text.split(|c: char| !(c.is_ascii_digit() || ".eE+-".contains(c)));
+    let chars: Vec<char> = text.chars().collect();
+    let prose = numbers_in(&chars).into_iter().map(|(_, _, v)| v);
+    tokens
+        .filter_map(|t| t.parse::<f64>().ok())
+        .chain(prose)
+        .filter(|v| v.abs() < 1e15)
+        .map(|v| format!("{}", v.round() as i64))
+        .collect()
+}
+
+/// Settings and design counts quoted as whole numbers of 100 or more in sections that cite
+/// results files: the document and the words around the number, as written (line breaks as
+/// spaces).
+const NOT_RESULTS_WHOLE: [(&str, &str); 19] = [
+    ("README.md", "expert, 50,000 environment steps"),
+    ("README.md", "the full 1000 steps"),
+    ("docs/src/install.md", "expert, 50,000 environment steps"),
+    ("EXPERIMENTS.md", "spread over its 60,000 steps"),
+    ("EXPERIMENTS.md", "Thresholds: −140 on MountainCar"),
+    ("EXPERIMENTS.md", "−100 on Acrobot"),
+    ("EXPERIMENTS.md", "episodes end after 500 steps"),
+    ("EXPERIMENTS.md", "for the 1000 expert"),
+    ("EXPERIMENTS.md", "the paper's 180"),
+    ("EXPERIMENTS.md", "well before 20,000"),
+    ("EXPERIMENTS.md", "its 3,360 runs (8 sweeps"),
+    ("EXPERIMENTS.md", "(840 runs of about"),
+    ("BENCHMARKS.md", "on 1,010, in process"),
+    ("BENCHMARKS.md", "at a time up to 1,000,000"),
+    ("BENCHMARKS.md", "about 16,600 steps with"),
+    ("BENCHMARKS.md", "every 200 µs"),
+    ("BENCHMARKS.md", "replay 10,000"),
+    ("BENCHMARKS.md", "time constant 1,000 steps"),
+    ("BENCHMARKS.md", "every 1,000 steps"),
+];
+
+#[test]
+fn every_whole_number_of_100_or_more_in_a_section_citing_results_is_in_the_files_it_cites() {
+    assert_eq!(
+        large_wholes("at −140, 2,833 and 12 steps in 2026, seeds 1000-1009, a 10,000-step run, B = 300, 15 of 300 and 120.5"),
+        ["-140", "2833"]
+    );
+    assert!(
+        wholes_of("x,-140.4,2833\n").is_superset(&HashSet::from(["-140".into(), "2833".into()]))
+    );
+    let (quoted, _, missing) = unfound_in(&large_wholes, &wholes_of, true, &NOT_RESULTS_WHOLE);
+    assert!(
+        quoted >= 100,
+        "only {quoted} numbers read: the reader is broken"
+    );
+    assert!(
+        missing.is_empty(),
+        "whole numbers of 100 or more in prose that no results file their section cites holds \
+         (a setting goes in NOT_RESULTS_WHOLE):\n{}",
         missing.join("\n")
     );
 }
