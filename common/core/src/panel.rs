@@ -14,7 +14,11 @@
 //! `cheapest` the cheapest; `round-robin` each in turn; `interval` the cheapest expert whose
 //! interval can still hold the best quality (its upper end at least every other expert's lower
 //! end, IEThresh's rule); `upper-per-cost` the expert whose interval's upper end per unit of cost
-//! is highest (optimism under uncertainty, paid for).
+//! is highest (optimism under uncertainty, paid for); `escalate` the cheapest, and, where its
+//! answer disagrees with the demonstration model fitted so far (or there is none yet), the next
+//! expert up the cost ladder too, whose answer the actor then acts on and which, when it
+//! differs, overrules the first (kept at weight 0): pay for a better opinion only where the
+//! cheap one is in doubt, after proactive learning's reliable and unreliable oracles.
 //!
 //! With `expert.quality_from_returns`, the returns of the episodes that followed each expert's
 //! advice are a third signal ([`Returns`]): when an episode in which experts answered ends, each
@@ -51,6 +55,9 @@ pub enum Route {
     Interval,
     /// The highest upper end of the quality interval per unit of cost.
     UpperPerCost,
+    /// The cheapest; where its answer disagrees with the demonstration model, the next expert
+    /// up the cost ladder as well, whose answer is acted on.
+    Escalate,
 }
 
 /// One expert of the panel: its name and what one answer costs.
@@ -178,7 +185,7 @@ impl Panel {
         }
         let first = match self.route {
             Route::BestKnown if self.up[self.best_known] => self.best_known,
-            Route::BestKnown | Route::Cheapest => self.cheapest(|_| true),
+            Route::BestKnown | Route::Cheapest | Route::Escalate => self.cheapest(|_| true),
             Route::RoundRobin => self.next_in_turn(),
             Route::Interval => {
                 let q: Vec<Quality> = (0..self.members.len()).map(|i| self.quality(i)).collect();
@@ -200,6 +207,21 @@ impl Panel {
             .then(|| self.least_answered_but(first))
             .flatten();
         Some(Ask { first, second })
+    }
+
+    /// Whether an answer in doubt is checked by the next expert up the cost ladder
+    /// ([`Route::Escalate`]).
+    pub fn escalates(&self) -> bool {
+        self.route == Route::Escalate
+    }
+
+    /// The expert a doubtful answer of `first` goes up to: the cheapest expert up that costs
+    /// more than `first` and may be a second (the first of equal costs); `None` at the top.
+    pub fn above(&self, first: usize) -> Option<usize> {
+        let cost = self.members[first].cost;
+        (0..self.members.len())
+            .filter(|&i| self.up[i] && self.second_ok[i] && self.members[i].cost > cost)
+            .min_by(|&a, &b| self.members[a].cost.total_cmp(&self.members[b].cost))
     }
 
     /// The next expert up in turn.
@@ -469,6 +491,24 @@ mod tests {
         let mut p = panel(Route::RoundRobin, 0.0);
         let firsts: Vec<usize> = (0..4).map(|_| p.route(&mut rng).unwrap().first).collect();
         assert_eq!(firsts, [0, 1, 2, 0]);
+    }
+
+    #[test]
+    fn escalate_asks_the_cheapest_and_goes_up_the_cost_ladder_one_rung() {
+        let mut rng = seeded(1);
+        let mut p = panel(Route::Escalate, 0.0);
+        assert!(p.escalates() && !panel(Route::Cheapest, 0.0).escalates());
+        assert_eq!(p.route(&mut rng).unwrap().first, 2);
+        // poor (1) goes up to fair (2), fair to good (10); good is the top.
+        assert_eq!(
+            (p.above(2), p.above(1), p.above(0)),
+            (Some(1), Some(0), None)
+        );
+        // An expert down, or never a second, is passed over.
+        p.set_down(1);
+        assert_eq!(p.above(2), Some(0));
+        p.never_second(0);
+        assert_eq!(p.above(2), None);
     }
 
     #[test]

@@ -8,15 +8,16 @@ about whom to ask, not where), shaping from the first demonstration (`shaping.mi
 greedy evaluation of 20 episodes after every 10 training episodes.
 
 Methods: one per route (`best-known` = always the good expert, `cheapest` = always the poor one,
-`round-robin`, `interval`, `upper-per-cost`), B = 0, and `good-turns-poor` (round-robin, the good
-expert answering as the poor one after its 25th answer). Primary metrics: the cost spent when
+`round-robin`, `interval`, `upper-per-cost`, `escalate` = the poor one, and the next up the cost
+ladder where its answer disagrees with the demonstration model), B = 0, and `good-turns-poor`
+(round-robin, the good expert answering as the poor one after its 25th answer). Primary metrics: the cost spent when
 greedy evaluation first reaches the threshold (Kaplan-Meier median; a run that never reaches it
 is censored at its total cost) and the paired difference of the final greedy evaluation against
 `best-known`.
 
 Tuning (seeds 1000-1009, `tune-TASK.toml`): `expert.double_ask` in {0.1, 0.3} for `interval` and
-`upper-per-cost` (`round-robin` and `good-turns-poor` ask a second expert at the first value, the
-fixed routes never). The choice, fixed before the tuning runs: the value under which those two
+`upper-per-cost` (`round-robin` and `good-turns-poor` ask a second expert at the first value;
+`best-known`, `cheapest` and `escalate` never at random). The choice, fixed before the tuning runs: the value under which those two
 routes together reach the threshold in the most runs, ties broken by the lower mean cost to the
 threshold (censored runs at their total cost). The reported seeds 0-29 (`study-TASK.toml`) run
 with the chosen value only.
@@ -34,9 +35,10 @@ TASKS = {
 COSTS = {"good": 10, "fair": 2, "poor": 1}
 BUDGET = 150
 TURN_AFTER = 25
-ROUTES = ["best-known", "cheapest", "round-robin", "interval", "upper-per-cost"]
+ROUTES = ["best-known", "cheapest", "round-robin", "interval", "upper-per-cost", "escalate"]
 TUNED = ["interval", "upper-per-cost"]
-FIXED = ["best-known", "cheapest"]
+# Routes that never ask a second expert at random (`escalate` asks one by its own rule).
+FIXED = ["best-known", "cheapest", "escalate"]
 
 
 def config(task):
@@ -70,7 +72,7 @@ def common(task):
 def methods(task, double_asks):
     out = [("never", "B = 0", common(task) + ["budget.total=0"], None)]
     for route in ROUTES:
-        # The two fixed routes ask one expert and never a second: the plain baselines.
+        # The fixed routes never ask a second expert at random.
         for d in double_asks if route in TUNED else [0 if route in FIXED else double_asks[0]]:
             tag = f"-d{d}" if len(double_asks) > 1 and route in TUNED else ""
             out.append((f"{route}{tag}", f"{route}{tag}",

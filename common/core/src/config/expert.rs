@@ -44,7 +44,10 @@ pub struct ExpertConfig {
     /// With several experts (`[[experts]]`): which one a query goes to. `best-known` (always
     /// `best_known`, for comparison), `cheapest`, `round-robin`, `interval` (the cheapest whose
     /// quality interval can still be the best's, after IEThresh), `upper-per-cost` (the highest
-    /// upper end of the quality interval per unit of cost).
+    /// upper end of the quality interval per unit of cost), `escalate` (the cheapest, and where
+    /// its answer disagrees with the demonstration model, or there is none yet, the next expert
+    /// up the cost ladder too, whose answer is acted on; a differing answer overrules the first,
+    /// which is kept at weight 0).
     #[serde(default = "default_route", skip_serializing_if = "is_default_route")]
     pub route: Route,
     /// With several experts: the expert `best-known` asks (default the first of `[[experts]]`).

@@ -60,8 +60,8 @@ impl PanelLog {
 /// What a query the panel routed leads to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Routed {
-    /// Answered with the first expert's action, or `None`: the budget or the cost budget is
-    /// spent.
+    /// Answered with the action to act on (the first expert's, or on an escalation the
+    /// second's), or `None`: the budget or the cost budget is spent.
     Answered(Option<usize>),
     /// The person is asked first: the state is shown to them, and their answer given to
     /// [`PanelAsk::person_answered`] with this ask.
@@ -205,8 +205,8 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
                 Err(e) => failure = Some(self.down(ask.first, e)),
             }
         };
-        self.answered(core, (obs, x), (step, asker), (ask, first));
-        Ok(Routed::Answered(Some(first)))
+        let action = self.answered(core, (obs, x), (step, asker), (ask, first));
+        Ok(Routed::Answered(Some(action)))
     }
 
     /// The person's `action` on a state the panel routed to them (`ask`, from
@@ -224,19 +224,20 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
         if core.budget().is_exhausted() || !self.affordable(ask.first) {
             return None;
         }
-        self.answered(core, state, (step, asker), (ask, action));
-        Some(action)
+        Some(self.answered(core, state, (step, asker), (ask, action)))
     }
 
-    /// The first expert answered `first`: the second asked on a double ask, both recorded.
+    /// The first expert answered `first`: the second asked on a double ask or an escalation,
+    /// both recorded; the action to act on (the second's on an escalation it answered).
     fn answered(
         &mut self,
         core: &mut ExpertCore,
         (obs, x): (&S, &[f64]),
         (step, asker): (u64, Asker),
         (ask, first): (Ask, usize),
-    ) {
-        let second = match ask.second.filter(|&s| self.affordable(s)) {
+    ) -> usize {
+        let escalated = self.escalation(core, x, ask, first);
+        let second = match escalated.or(ask.second).filter(|&s| self.affordable(s)) {
             Some(s) => match self.act(s, obs) {
                 Ok(action) => Some((s, action)),
                 Err(e) => {
@@ -246,15 +247,37 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
             },
             None => None,
         };
-        for expert in self.record(core, x, step, (ask.first, first), second) {
+        // An escalation's second answer that differs overrules the first.
+        let overruled = second.is_some_and(|(s, a)| escalated == Some(s) && a != first);
+        let recorded = self.record(core, x, step, (ask.first, first), second, overruled);
+        for &expert in &recorded {
             if let Some(r) = &mut self.returns {
                 r.answered(asker.actor, expert);
             }
         }
+        match second {
+            Some((s, action)) if escalated == Some(s) && recorded.contains(&s) => action,
+            _ => first,
+        }
+    }
+
+    /// With [`Route::Escalate`](crate::panel::Route::Escalate): the expert above the first when
+    /// the first's answer `first` disagrees with the demonstration model's greedy action at `x`
+    /// (or no model is fitted yet).
+    fn escalation(&self, core: &ExpertCore, x: &[f64], ask: Ask, first: usize) -> Option<usize> {
+        if !self.panel.escalates() {
+            return None;
+        }
+        let model = core.model().map(|m| argmax(&m.probs(x)));
+        (model != Some(first))
+            .then(|| self.panel.above(ask.first))
+            .flatten()
     }
 
     /// Records each answer on the state as a demonstration (while the budget lasts), rated
-    /// against the other answer and the demonstration model's; the experts recorded.
+    /// against the other answer and the demonstration model's; the first at weight 0 when
+    /// `overruled` (an escalation's second answer differs: kept, and left out of the model);
+    /// the experts recorded.
     fn record(
         &mut self,
         core: &mut ExpertCore,
@@ -262,6 +285,7 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
         step: u64,
         first: (usize, usize),
         second: Option<(usize, usize)>,
+        overruled: bool,
     ) -> Vec<usize> {
         let mut recorded = Vec::new();
         let model = core.model().map(|m| argmax(&m.probs(x)));
@@ -280,6 +304,7 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
             let name = self.panel.members()[expert].name.clone();
             // Weighted by what the run knew of the expert before this answer.
             let weight = match self.weighted {
+                _ if i == 0 && overruled => 0.0,
                 true => self.panel.quality(expert).quality,
                 false => 1.0,
             };
@@ -341,9 +366,17 @@ mod tests {
     };
 
     fn setup(extra: &str) -> (ExperimentConfig, ExpertCore, PanelAsk<'static, [f32]>) {
+        setup_routed("route = \"round-robin\"\ndouble_ask = 1.0\n", extra)
+    }
+
+    /// [`setup`] with `[expert]` settings of one's own (`route`, `double_ask`).
+    fn setup_routed(
+        expert: &str,
+        extra: &str,
+    ) -> (ExperimentConfig, ExpertCore, PanelAsk<'static, [f32]>) {
         let cfg = ExperimentConfig::from_toml(&format!(
             "seed = 1\nepisodes = 3\n[env]\nname = \"mountaincar\"\n[agent]\nkind = \"bdqn\"\n\
-             [expert]\nroute = \"round-robin\"\ndouble_ask = 1.0\n{extra}\
+             [expert]\n{expert}{extra}\
              [[experts]]\nname = \"mountaincar-energy\"\ncost = 10\n\
              [[experts]]\nname = \"mountaincar-fair\"\ncost = 2\n\
              [[experts]]\nname = \"mountaincar-poor\"\n"
@@ -414,6 +447,42 @@ mod tests {
             csv.starts_with("step,expert,answers,quality,low,high\n7,mountaincar-energy,1,1,0,1\n"),
             "{csv}"
         );
+    }
+
+    #[test]
+    fn escalate_asks_above_the_cheapest_where_the_model_disagrees_and_acts_on_that_answer() {
+        let escalate = "route = \"escalate\"\ndouble_ask = 0.0\nmodel = \"krr\"\n";
+        let (_, mut core, mut ask) = setup_routed(escalate, "[budget]\ntotal = 7\n");
+        let (x, xf) = ([0.5f32, 0.0], [0.5, 0.0]);
+        // No model yet: poor's 0 goes up to fair, whose 2 is acted on.
+        assert_eq!(ask.ask(&mut core, (&x, &xf), 1, ME).unwrap(), Some(2));
+        // The model fitted on 0 and 2 at this state: wherever its greedy action is poor's 0 no
+        // one else is asked; where it is not, fair is, and acted on.
+        let greedy = argmax(&core.model().unwrap().probs(&xf));
+        let before = core.demos().len();
+        let want = if greedy == 0 { 0 } else { 2 };
+        assert_eq!(ask.ask(&mut core, (&x, &xf), 2, ME).unwrap(), Some(want));
+        let asked = core.demos().len() - before;
+        assert_eq!(asked, if greedy == 0 { 1 } else { 2 });
+        let names: Vec<&str> = core.demos().iter().map(|d| d.expert.as_str()).collect();
+        assert_eq!(names[..2], ["mountaincar-poor", "mountaincar-fair"]);
+        let log = ask.into_log();
+        assert_eq!(log.answers[..2], [(1.0, true), (2.0, true)]);
+    }
+
+    #[test]
+    fn escalate_asks_no_one_else_where_the_cheapest_agrees_with_the_model() {
+        let escalate = "route = \"escalate\"\ndouble_ask = 0.0\nmodel = \"krr\"\n";
+        let (_, mut core, mut ask) = setup_routed(escalate, "[budget]\ntotal = 20\n");
+        let (x, xf) = ([0.5f32, 0.0], [0.5, 0.0]);
+        // Four demonstrations of 0 at this state: the model says 0.
+        for step in 0..4 {
+            core.record(&xf, 0, step, "mountaincar-poor");
+        }
+        assert_eq!(argmax(&core.model().unwrap().probs(&xf)), 0);
+        assert_eq!(ask.ask(&mut core, (&x, &xf), 9, ME).unwrap(), Some(0));
+        assert_eq!(core.demos().len(), 5);
+        assert_eq!(ask.into_log().answers, [(1.0, false)]);
     }
 
     #[test]

@@ -45,14 +45,18 @@ pub struct Expected {
 /// Every invariant of the run in `dir` (its config's text is `config_toml`).
 pub fn check(dir: &Path, config_toml: &str, want: Expected) -> Vec<Verdict> {
     let summary = read_json(&dir.join("summary.json"));
-    let demos = demo_indices(&dir.join("demos.jsonl"));
+    let demos = demo_lines(&dir.join("demos.jsonl"));
+    let cut = step_limit_cut(&dir.join("episodes.csv"), &summary, want);
     vec![
         verdict("finished", finished(&summary, want)),
         verdict(
             "episodes",
             episode_rows(&dir.join("episodes.csv"), &summary),
         ),
-        verdict("demonstrations", demos_agree(&demos, &summary, want.budget)),
+        verdict(
+            "demonstrations",
+            demos_agree(&demos, &summary, want.budget, cut),
+        ),
         verdict(
             "checkpoints",
             checkpoints_load(dir, config_toml, want.actors),
@@ -122,8 +126,8 @@ fn episode_rows(
     }
 }
 
-/// The `index` of every line of `demos.jsonl`, in file order.
-fn demo_indices(path: &Path) -> Result<Vec<u64>, String> {
+/// The `index` and `step` of every line of `demos.jsonl`, in file order.
+fn demo_lines(path: &Path) -> Result<Vec<(u64, u64)>, String> {
     let text = match std::fs::read_to_string(path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
@@ -134,24 +138,50 @@ fn demo_indices(path: &Path) -> Result<Vec<u64>, String> {
         .map(|(n, line)| {
             serde_json::from_str::<serde_json::Value>(line)
                 .ok()
-                .and_then(|v| v["index"].as_u64())
+                .and_then(|v| Some((v["index"].as_u64()?, v["step"].as_u64()?)))
                 .ok_or_else(|| format!("demos.jsonl line {}: not a demonstration", n + 1))
         })
         .collect()
 }
 
+/// For a run the step limit stopped: the global step at which the first of the actors recorded
+/// its last episode. A demonstration asked after it may be in an episode the limit cut (not
+/// recorded), or reach the other actors' rows only with a model published after their last
+/// one; `None` for a run the episode limit stopped (every actor's share is recorded whole).
+fn step_limit_cut(
+    episodes_csv: &Path,
+    summary: &Result<serde_json::Value, String>,
+    want: Expected,
+) -> Option<u64> {
+    let s = summary.as_ref().ok()?;
+    let episodes = s["episodes"].as_u64()? as usize;
+    if want.steps.is_none() || want.episodes == Some(episodes) {
+        return None;
+    }
+    let text = std::fs::read_to_string(episodes_csv).ok()?;
+    let rows = alfd_common::record::parse_episodes_csv(&text).ok()?;
+    let mut last = std::collections::BTreeMap::new();
+    for r in &rows {
+        last.insert(r.actor, r.total_steps);
+    }
+    last.into_values().min()
+}
+
 /// `demos.jsonl` is 0..n without a gap or a repeat, n within the budget, and n is what
-/// `summary.json` counts.
+/// `summary.json` counts. A demonstration the episodes do not count as used came late to its
+/// actor (`answers_late`) or, in a run the step limit stopped, was asked after `cut`
+/// ([`step_limit_cut`]).
 fn demos_agree(
-    demos: &Result<Vec<u64>, String>,
+    demos: &Result<Vec<(u64, u64)>, String>,
     summary: &Result<serde_json::Value, String>,
     budget: u32,
+    cut: Option<u64>,
 ) -> Result<String, String> {
     let demos = demos.as_ref().map_err(Clone::clone)?;
-    if let Some((line, index)) = demos
+    if let Some((line, (index, _))) = demos
         .iter()
         .enumerate()
-        .find(|(i, index)| **index != *i as u64)
+        .find(|(i, (index, _))| *index != *i as u64)
     {
         return Err(format!(
             "demos.jsonl line {}: index {index} where {line} was due",
@@ -163,19 +193,24 @@ fn demos_agree(
         return Err(format!("{n} demonstrations against a budget of {budget}"));
     }
     let s = summary.as_ref().map_err(Clone::clone)?;
-    let (demos, used) = (s["demos"].as_u64(), s["demos_used"].as_u64());
-    // A demonstration whose answer came after its actor stopped waiting is kept, not used.
+    let (counted, used) = (s["demos"].as_u64(), s["demos_used"].as_u64());
     let late = s["answers_late"].as_u64().unwrap_or(0);
     let unused = n.saturating_sub(used.unwrap_or(0));
-    if demos != Some(n) || used.is_none_or(|u| u > n) || unused > late {
+    let at_end = demos
+        .iter()
+        .skip(used.unwrap_or(0) as usize)
+        .filter(|(_, step)| cut.is_some_and(|c| *step > c))
+        .count() as u64;
+    if counted != Some(n) || used.is_none_or(|u| u > n) || unused > late + at_end {
         return Err(format!(
-            "demos.jsonl holds {n}; summary.json counts demos {demos:?}, demos_used {used:?}, \
-             answers_late {late}"
+            "demos.jsonl holds {n}; summary.json counts demos {counted:?}, demos_used {used:?}, \
+             answers_late {late}; {at_end} asked after the step limit's cut (step {cut:?})"
         ));
     }
     Ok(format!(
-        "{n} of {budget}, indices 0..{n}, as summary.json counts ({unused} kept from answers \
-         that came late, of {late} late)"
+        "{n} of {budget}, indices 0..{n}, as summary.json counts ({unused} unused: of {late} \
+         answers that came late and {at_end} asked after step {cut:?}, where the first actor \
+         recorded its last episode)"
     ))
 }
 
@@ -306,27 +341,53 @@ mod tests {
 
     #[test]
     fn demonstrations_must_be_gap_free_within_the_budget_and_as_counted() {
-        let ok = Ok(vec![0, 1, 2]);
-        assert!(demos_agree(&ok, &summary(5, 3, false), 3).is_ok());
-        assert!(demos_agree(&ok, &summary(5, 3, false), 2)
+        // Indices 0..3, asked at steps 100, 200 and 300.
+        let ok = Ok(vec![(0, 100), (1, 200), (2, 300)]);
+        assert!(demos_agree(&ok, &summary(5, 3, false), 3, None).is_ok());
+        assert!(demos_agree(&ok, &summary(5, 3, false), 2, None)
             .unwrap_err()
             .contains("budget of 2"));
-        assert!(demos_agree(&ok, &summary(5, 2, false), 3)
+        assert!(demos_agree(&ok, &summary(5, 2, false), 3, None)
             .unwrap_err()
             .contains("counts demos Some(2)"));
-        // Unused demonstrations are only those whose answers came late.
+        // Unused demonstrations are only those whose answers came late...
         let late = |used: u64, late: u64| {
             Ok(serde_json::json!({"demos": 3, "demos_used": used, "answers_late": late}))
         };
-        assert!(demos_agree(&ok, &late(1, 2), 3).is_ok());
-        assert!(demos_agree(&ok, &late(1, 1), 3)
+        assert!(demos_agree(&ok, &late(1, 2), 3, None).is_ok());
+        assert!(demos_agree(&ok, &late(1, 1), 3, None)
             .unwrap_err()
             .contains("answers_late 1"));
-        assert!(demos_agree(&ok, &late(4, 0), 3).is_err());
-        let gap = Ok(vec![0, 2]);
-        assert!(demos_agree(&gap, &summary(5, 2, false), 3)
+        assert!(demos_agree(&ok, &late(4, 0), 3, None).is_err());
+        // ... or, in a run the step limit stopped, those asked after the step limit's cut.
+        assert!(demos_agree(&ok, &late(2, 0), 3, Some(250)).is_ok());
+        assert!(demos_agree(&ok, &late(1, 1), 3, Some(250)).is_ok());
+        let e = demos_agree(&ok, &late(1, 0), 3, Some(250)).unwrap_err();
+        assert!(e.contains("1 asked after the step limit's cut"), "{e}");
+        assert!(demos_agree(&ok, &late(2, 0), 3, Some(300)).is_err());
+        let gap = Ok(vec![(0, 100), (2, 200)]);
+        assert!(demos_agree(&gap, &summary(5, 2, false), 3, None)
             .unwrap_err()
             .contains("line 2: index 2 where 1 was due"));
+    }
+
+    #[test]
+    fn the_step_limits_cut_is_where_the_first_actor_recorded_its_last_episode() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("episodes.csv");
+        let rows = "episode,return,length,demos_used,total_steps,actor\n\
+                    0,1,10,0,100,0\n1,1,10,0,150,1\n2,1,10,1,400,0\n3,1,10,1,320,1\n";
+        std::fs::write(&path, rows).unwrap();
+        let ran = |episodes| Ok(serde_json::json!({"episodes": episodes}));
+        let steps = Expected {
+            episodes: Some(10),
+            steps: Some(500),
+            ..limits(None, None)
+        };
+        assert_eq!(step_limit_cut(&path, &ran(4), steps), Some(320));
+        // The episode limit stopped it, or it has none: no cut.
+        assert_eq!(step_limit_cut(&path, &ran(10), steps), None);
+        assert_eq!(step_limit_cut(&path, &ran(4), limits(Some(10), None)), None);
     }
 
     #[test]
