@@ -7,11 +7,13 @@
 //! - an interval quoted in whole numbers ("−136 [−147, −127]"), as an interval of the file
 //!   rounded to integers, and a count ("15 of 30"), as "15 of 30" or "15/30".
 //!
-//! A number with one decimal, and a whole number of 100 or more, is checked only in a section
+//! A number with one decimal, and a whole number of 10 or more, is checked only in a section
 //! that cites results files (settings listed in `NOT_RESULTS_ONE_DECIMAL` and
 //! `NOT_RESULTS_WHOLE`): every such value from −200 to 100, and most whole numbers, occur in some
-//! results file, so a lookup in all of them could not fail. Whole numbers below 100 are not
-//! checked: seeds, budgets and counts of that size are in every file. Code spans (`beta2 = 0.999`) are settings, not
+//! results file, so a lookup in all of them could not fail. Ordinals ("26th"), sizes ("15×15")
+//! and exponents ("1e-30") are not results; single digits are not checked. A whole number below
+//! 100 is in most results files somewhere, so its lookup catches a number no cited file holds,
+//! not one that holds it in another place. Code spans (`beta2 = 0.999`) are settings, not
 //! results, and are skipped; so are the generated parts and code blocks, which
 //! `alfd docs --check` keeps equal to their sources.
 
@@ -437,10 +439,10 @@ fn every_number_with_one_decimal_in_a_section_citing_results_is_in_the_files_it_
     );
 }
 
-/// The whole numbers of `text` of 100 or more (in absolute value) that read as results: not
+/// The whole numbers of `text` of 10 or more (in absolute value) that read as results: not
 /// part of a decimal, a year, a range ("seeds 1000-1009"), a compound ("a 10,000-transition
-/// buffer"), a setting ("B = 300") or a count ("15 of 30", checked on its own); normalised
-/// (`-140`, `2833`).
+/// buffer"), a setting ("B = 300"), a count ("15 of 30", checked on its own), an ordinal, a size
+/// or an exponent; normalised (`-140`, `2833`).
 fn large_wholes(text: &str) -> Vec<String> {
     let body: String = text
         .lines()
@@ -463,7 +465,20 @@ fn large_wholes(text: &str) -> Vec<String> {
             before(s, 2).ends_with('-') && before(s, 2).starts_with(|c: char| c.is_ascii_digit());
         let setting = before(s, 2) == "= ";
         let count = after(e, 4) == " of " || before(s, 4) == " of ";
-        if decimal || year || v.abs() < 100.0 || hyphen_after || range_end || setting || count {
+        // "26th", "15×15", "1e-30": an ordinal, a size, an exponent.
+        let ordinal = ["th", "st", "nd", "rd"].contains(&after(e, 2).as_str());
+        let size = after(e, 1) == "×" || before(s, 1) == "×";
+        let exponent = ["e-", "e+"].contains(&before(s, 2).as_str());
+        let skipped = [
+            hyphen_after,
+            range_end,
+            setting,
+            count,
+            ordinal,
+            size,
+            exponent,
+        ];
+        if decimal || year || v.abs() < 10.0 || skipped.contains(&true) {
             continue;
         }
         out.push(format!("{}", v as i64));
@@ -485,10 +500,10 @@ fn wholes_of(text: &str) -> HashSet<String> {
         .collect()
 }
 
-/// Settings and design counts quoted as whole numbers of 100 or more in sections that cite
+/// Settings and design counts quoted as whole numbers of 10 or more in sections that cite
 /// results files: the document and the words around the number, as written (line breaks as
 /// spaces).
-const NOT_RESULTS_WHOLE: [(&str, &str); 19] = [
+const NOT_RESULTS_WHOLE: [(&str, &str); 32] = [
     ("README.md", "expert, 50,000 environment steps"),
     ("README.md", "the full 1000 steps"),
     ("docs/src/install.md", "expert, 50,000 environment steps"),
@@ -508,13 +523,29 @@ const NOT_RESULTS_WHOLE: [(&str, &str); 19] = [
     ("BENCHMARKS.md", "replay 10,000"),
     ("BENCHMARKS.md", "time constant 1,000 steps"),
     ("BENCHMARKS.md", "every 1,000 steps"),
+    ("EXPERIMENTS.md", "(bursts of 30)"),
+    ("EXPERIMENTS.md", "bursts of 30 steps"),
+    ("EXPERIMENTS.md", "scale 3, 10 and 30"),
+    ("EXPERIMENTS.md", "weight of 2; 25% of every batch"),
+    ("EXPERIMENTS.md", "B = 300; 25% of every batch"),
+    ("BENCHMARKS.md", "lower priority (nice 10)"),
+    ("BENCHMARKS.md", "copied every 50 updates"),
+    ("docs/src/across-hosts.md", "(at most 16 actors"),
+    ("docs/src/faults.md", "left 30 s after the end"),
+    ("docs/src/faults.md", "at least 30 faults"),
+    ("docs/src/faults.md", "handshake timeout and 10 s"),
+    ("docs/src/faults.md", "for 90 s of a"),
+    ("docs/src/faults.md", "a 96 MB tmpfs"),
 ];
 
 #[test]
-fn every_whole_number_of_100_or_more_in_a_section_citing_results_is_in_the_files_it_cites() {
+fn every_whole_number_of_10_or_more_in_a_section_citing_results_is_in_the_files_it_cites() {
     assert_eq!(
-        large_wholes("at −140, 2,833 and 12 steps in 2026, seeds 1000-1009, a 10,000-step run, B = 300, 15 of 300 and 120.5"),
-        ["-140", "2833"]
+        large_wholes(
+            "at −140, 2,833 and 12 steps in 2026, seeds 1000-1009, a 10,000-step run, B = 300, \
+             15 of 300 and 120.5, the 26th, 15×15, below 1e-30 and 7"
+        ),
+        ["-140", "2833", "12"]
     );
     assert!(
         wholes_of("x,-140.4,2833\n").is_superset(&HashSet::from(["-140".into(), "2833".into()]))
@@ -526,7 +557,7 @@ fn every_whole_number_of_100_or_more_in_a_section_citing_results_is_in_the_files
     );
     assert!(
         missing.is_empty(),
-        "whole numbers of 100 or more in prose that no results file their section cites holds \
+        "whole numbers of 10 or more in prose that no results file their section cites holds \
          (a setting goes in NOT_RESULTS_WHOLE):\n{}",
         missing.join("\n")
     );
