@@ -10,10 +10,11 @@
 //! A number with one decimal, and a whole number of 10 or more, is checked only in a section
 //! that cites results files (settings listed in `NOT_RESULTS_ONE_DECIMAL` and
 //! `NOT_RESULTS_WHOLE`): every such value from −200 to 100, and most whole numbers, occur in some
-//! results file, so a lookup in all of them could not fail. Ordinals ("26th"), sizes ("15×15")
-//! and exponents ("1e-30") are not results; single digits are not checked. A whole number below
-//! 100 is in most results files somewhere, so its lookup catches a number no cited file holds,
-//! not one that holds it in another place. Code spans (`beta2 = 0.999`) are settings, not
+//! results file, so a lookup in all of them could not fail. A section that cites none quotes no
+//! whole number of 10 or more but the settings listed in `UNCITED_SETTINGS`. Ordinals ("26th"),
+//! sizes ("15×15"), exponents ("1e-30") and names ("AVX-512") are not results; single digits are
+//! not checked. A whole number below 100 is in most results files somewhere, so its lookup
+//! catches a number no cited file holds, not one that holds it in another place. Code spans (`beta2 = 0.999`) are settings, not
 //! results, and are skipped; so are the generated parts and code blocks, which
 //! `alfd docs --check` keeps equal to their sources.
 
@@ -365,6 +366,15 @@ fn unfound(
     unfound_in(pick, &values_of, citing_only, not_results)
 }
 
+/// Whether `number` of document `name` is a setting of `not_results`: an entry of that document
+/// holds it and the section's `words` hold the entry.
+fn listed(not_results: &[(&str, &str)], name: &str, words: &str, number: &str) -> bool {
+    not_results.iter().any(|(d, around)| {
+        let plain = around.replace(',', "").replace('−', "-");
+        *d == name && (around.contains(number) || plain.contains(number)) && words.contains(around)
+    })
+}
+
 /// [`unfound`] with the values of each results file read by `values`.
 fn unfound_in(
     pick: &dyn Fn(&str) -> Vec<String>,
@@ -386,12 +396,7 @@ fn unfound_in(
         let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
         for number in pick(&text) {
             quoted += 1;
-            let setting = not_results.iter().any(|(d, around)| {
-                let plain = around.replace(',', "").replace('−', "-");
-                *d == name
-                    && (around.contains(&*number) || plain.contains(&*number))
-                    && words.contains(around)
-            });
+            let setting = listed(not_results, &name, &words, &number);
             if !setting && !found.iter().any(|v| v.contains(&number)) {
                 let heading = text.lines().find(|l| !l.is_empty()).unwrap_or_default();
                 missing.push(format!("{name} ({heading}): {number}"));
@@ -442,8 +447,8 @@ fn every_number_with_one_decimal_in_a_section_citing_results_is_in_the_files_it_
 
 /// The whole numbers of `text` of 10 or more (in absolute value) that read as results: not
 /// part of a decimal, a year, a range ("seeds 1000-1009"), a compound ("a 10,000-transition
-/// buffer"), a setting ("B = 300"), a count ("15 of 30", checked on its own), an ordinal, a size
-/// or an exponent; normalised (`-140`, `2833`).
+/// buffer"), a setting ("B = 300"), a count ("15 of 30", checked on its own), an ordinal, a size,
+/// an exponent or a name ("AVX-512"); normalised (`-140`, `2833`).
 fn large_wholes(text: &str) -> Vec<String> {
     let body: String = text
         .lines()
@@ -466,10 +471,12 @@ fn large_wholes(text: &str) -> Vec<String> {
             before(s, 2).ends_with('-') && before(s, 2).starts_with(|c: char| c.is_ascii_digit());
         let setting = before(s, 2) == "= ";
         let count = after(e, 4) == " of " || before(s, 4) == " of ";
-        // "26th", "15×15", "1e-30": an ordinal, a size, an exponent.
+        // "26th", "15×15", "1e-30", "AVX-512", "DeepSea(50)": an ordinal, a size, an exponent,
+        // part of a name.
         let ordinal = ["th", "st", "nd", "rd"].contains(&after(e, 2).as_str());
         let size = after(e, 1) == "×" || before(s, 1) == "×";
-        let exponent = ["e-", "e+"].contains(&before(s, 2).as_str());
+        let lead = before(s, 2);
+        let named = lead.starts_with(char::is_alphabetic) && (lead.ends_with(['-', '+', '(']));
         let skipped = [
             hyphen_after,
             range_end,
@@ -477,7 +484,7 @@ fn large_wholes(text: &str) -> Vec<String> {
             count,
             ordinal,
             size,
-            exponent,
+            named,
         ];
         if decimal || year || v.abs() < 10.0 || skipped.contains(&true) {
             continue;
@@ -544,7 +551,7 @@ fn every_whole_number_of_10_or_more_in_a_section_citing_results_is_in_the_files_
     assert_eq!(
         large_wholes(
             "at −140, 2,833 and 12 steps in 2026, seeds 1000-1009, a 10,000-step run, B = 300, \
-             15 of 300 and 120.5, the 26th, 15×15, below 1e-30 and 7"
+             15 of 300 and 120.5, the 26th, 15×15, below 1e-30, AVX-512, DeepSea(50) and 7"
         ),
         ["-140", "2833", "12"]
     );
@@ -560,6 +567,102 @@ fn every_whole_number_of_10_or_more_in_a_section_citing_results_is_in_the_files_
         missing.is_empty(),
         "whole numbers of 10 or more in prose that no results file their section cites holds \
          (a setting goes in NOT_RESULTS_WHOLE):\n{}",
+        missing.join("\n")
+    );
+}
+
+/// Settings, sizes and limits quoted as whole numbers of 10 or more in sections that cite no
+/// results file: the document and the words around the number, as written.
+const UNCITED_SETTINGS: [(&str, &str); 40] = [
+    ("EXPERIMENTS.md", "limit of 1,000 (figure 4"),
+    ("EXPERIMENTS.md", "after 300 episodes, the mean"),
+    ("EXPERIMENTS.md", "gradient norm ≤ 10, learning"),
+    ("EXPERIMENTS.md", "starting at 1,000 steps"),
+    ("EXPERIMENTS.md", "the last 1,000 divergences"),
+    ("EXPERIMENTS.md", "the first 30,000 stored"),
+    ("EXPERIMENTS.md", "clamped to [0, 200]"),
+    ("EXPERIMENTS.md", "(50,000 steps, expert"),
+    ("EXPERIMENTS.md", "(60,000 steps, the scripted"),
+    ("EXPERIMENTS.md", "all three uses, 25% of every batch"),
+    ("EXPERIMENTS.md", "all three uses, 10% of every batch"),
+    ("EXPERIMENTS.md", "(100,000 steps, the scripted"),
+    ("EXPERIMENTS.md", "from 1000 up (1000"),
+    ("EXPERIMENTS.md", "(from reset seed 100)"),
+    ("EXPERIMENTS.md", "δ = 10 or 30, each"),
+    ("EXPERIMENTS.md", "far above 200"),
+    ("BENCHMARKS.md", "one kind, 24 GiB"),
+    ("docs/src/configuration.md", "γ = 0.99, 3000 episodes"),
+    ("docs/src/configuration.md", "L_q = 1000, p_r = 99"),
+    ("docs/src/experts.md", "at most 64 values"),
+    ("docs/src/experts.md", "(mode 0600"),
+    ("docs/src/experts.md", "is 128 random bits"),
+    ("docs/src/experts.md", "gets 403"),
+    ("docs/src/experts.md", "(default 300000"),
+    ("docs/src/experts.md", "with a 95% interval"),
+    ("docs/src/faults.md", "(every 100 ms"),
+    ("docs/src/faults.md", "(default 10,000)"),
+    ("docs/src/multi-process.md", "sends 2,500 values"),
+    ("docs/src/multi-process.md", "or 32 with"),
+    ("docs/src/multi-process.md", "every 200 µs"),
+    ("docs/src/multi-process.md", "a 100 µs slice"),
+    ("docs/src/outputs.md", "of the last 50 episodes"),
+    ("docs/src/outputs.md", "of the last 100 episodes"),
+    ("docs/src/outputs.md", "request gets 403"),
+    ("docs/src/sweeps.md", "is a 95% percentile"),
+    ("docs/src/sweeps.md", "(1000 [1000, 1000])"),
+    (
+        "docs/src/troubleshooting.md",
+        "at most 64 values (or 64 states",
+    ),
+    ("docs/src/troubleshooting.md", "K is at most 20"),
+    (
+        "docs/src/troubleshooting.md",
+        "at most 10,000 demonstrations",
+    ),
+    (
+        "docs/src/troubleshooting.md",
+        "up to 1,000,000 on 512 landmarks",
+    ),
+];
+
+#[test]
+fn a_section_citing_no_results_file_quotes_no_whole_number_of_10_or_more_but_its_settings() {
+    let sections = prose_sections();
+    let stale: Vec<_> = UNCITED_SETTINGS
+        .iter()
+        .filter(|(doc, around)| {
+            !sections.iter().any(|(name, _, text)| {
+                name == doc
+                    && text
+                        .split_whitespace()
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                        .contains(around)
+            })
+        })
+        .collect();
+    assert!(
+        stale.is_empty(),
+        "UNCITED_SETTINGS entries found nowhere: {stale:?}"
+    );
+    let mut missing = Vec::new();
+    for (name, cited, text) in sections {
+        let heading = text.lines().find(|l| !l.is_empty()).unwrap_or_default();
+        // A table of contents repeats the headings, which are not prose.
+        if !cited.is_empty() || heading.trim_start_matches('#').trim() == "Contents" {
+            continue;
+        }
+        let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
+        for number in large_wholes(&text) {
+            if !listed(&UNCITED_SETTINGS, &name, &words, &number) {
+                missing.push(format!("{name} ({heading}): {number}"));
+            }
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "whole numbers of 10 or more in sections that cite no results file (a result: cite the \
+         file it comes from; a setting: UNCITED_SETTINGS):\n{}",
         missing.join("\n")
     );
 }
