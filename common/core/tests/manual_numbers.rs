@@ -11,7 +11,8 @@
 //! that cites results files (settings listed in `NOT_RESULTS_ONE_DECIMAL` and
 //! `NOT_RESULTS_WHOLE`): every such value from −200 to 100, and most whole numbers, occur in some
 //! results file, so a lookup in all of them could not fail. A section that cites none quotes no
-//! whole number of 10 or more but the settings listed in `UNCITED_SETTINGS`. Ordinals ("26th"),
+//! whole number of 10 or more, nor one with one decimal, but the settings listed in
+//! `UNCITED_SETTINGS`. Ordinals ("26th"),
 //! sizes ("15×15"), exponents ("1e-30") and names ("AVX-512") are not results; single digits are
 //! not checked. A whole number below 100 is in most results files somewhere, so its lookup
 //! catches a number no cited file holds, not one that holds it in another place. Code spans (`beta2 = 0.999`) are settings, not
@@ -420,19 +421,21 @@ const NOT_RESULTS_ONE_DECIMAL: [(&str, &str); 7] = [
 
 /// One decimal is checked only where a section cites its results files: looked up in any file,
 /// such a number would always be found (see the module's documentation).
+/// The numbers of `text` with exactly one decimal.
+fn one_decimals(text: &str) -> Vec<String> {
+    let numbers = with_decimals(text, 1).into_iter();
+    numbers
+        .filter(|n| n.split_once('.').is_some_and(|(_, d)| d.len() == 1))
+        .collect()
+}
+
 #[test]
 fn every_number_with_one_decimal_in_a_section_citing_results_is_in_the_files_it_cites() {
     assert_eq!(
         with_decimals("at 0.5 s, 12.25 and 1,347.5 (v0.3.6)", 1),
         ["0.5", "12.25", "1347.5"]
     );
-    let one_decimal = |text: &str| {
-        let numbers = with_decimals(text, 1).into_iter();
-        numbers
-            .filter(|n| n.split_once('.').is_some_and(|(_, d)| d.len() == 1))
-            .collect()
-    };
-    let (quoted, _, missing) = unfound(&one_decimal, true, &NOT_RESULTS_ONE_DECIMAL);
+    let (quoted, _, missing) = unfound(&one_decimals, true, &NOT_RESULTS_ONE_DECIMAL);
     assert!(
         quoted >= 50,
         "only {quoted} numbers read: the reader is broken"
@@ -511,7 +514,7 @@ fn wholes_of(text: &str) -> HashSet<String> {
 /// Settings and design counts quoted as whole numbers of 10 or more in sections that cite
 /// results files: the document and the words around the number, as written (line breaks as
 /// spaces).
-const NOT_RESULTS_WHOLE: [(&str, &str); 32] = [
+const NOT_RESULTS_WHOLE: [(&str, &str); 33] = [
     ("README.md", "expert, 50,000 environment steps"),
     ("README.md", "the full 1000 steps"),
     ("docs/src/install.md", "expert, 50,000 environment steps"),
@@ -531,6 +534,10 @@ const NOT_RESULTS_WHOLE: [(&str, &str); 32] = [
     ("BENCHMARKS.md", "replay 10,000"),
     ("BENCHMARKS.md", "time constant 1,000 steps"),
     ("BENCHMARKS.md", "every 1,000 steps"),
+    (
+        "docs/src/troubleshooting.md",
+        "up to 1,000,000 on 512 landmarks",
+    ),
     ("EXPERIMENTS.md", "(bursts of 30)"),
     ("EXPERIMENTS.md", "bursts of 30 steps"),
     ("EXPERIMENTS.md", "scale 3, 10 and 30"),
@@ -571,9 +578,20 @@ fn every_whole_number_of_10_or_more_in_a_section_citing_results_is_in_the_files_
     );
 }
 
-/// Settings, sizes and limits quoted as whole numbers of 10 or more in sections that cite no
-/// results file: the document and the words around the number, as written.
-const UNCITED_SETTINGS: [(&str, &str); 40] = [
+/// Settings, sizes, limits and versions quoted as whole numbers of 10 or more or with one decimal
+/// in sections that cite no results file: the document and the words around the number, as
+/// written.
+const UNCITED_SETTINGS: [(&str, &str); 43] = [
+    ("README.md", "Apache License 2.0"),
+    ("EXPERIMENTS.md", "margin 0.8)"),
+    ("EXPERIMENTS.md", "KRR model of them (λ = 0.5)"),
+    ("docs/src/configuration.md", "(sections 5.1.2, 5.3)"),
+    ("docs/src/configuration.md", "with probability 0.5."),
+    (
+        "docs/src/experts.md",
+        "0.5 before the expert's first rating",
+    ),
+    ("docs/src/outputs.md", "(every 0.5 s)"),
     ("EXPERIMENTS.md", "limit of 1,000 (figure 4"),
     ("EXPERIMENTS.md", "after 300 episodes, the mean"),
     ("EXPERIMENTS.md", "gradient norm ≤ 10, learning"),
@@ -610,40 +628,24 @@ const UNCITED_SETTINGS: [(&str, &str); 40] = [
     ("docs/src/outputs.md", "request gets 403"),
     ("docs/src/sweeps.md", "is a 95% percentile"),
     ("docs/src/sweeps.md", "(1000 [1000, 1000])"),
-    (
-        "docs/src/troubleshooting.md",
-        "at most 64 values (or 64 states",
-    ),
-    ("docs/src/troubleshooting.md", "K is at most 20"),
-    (
-        "docs/src/troubleshooting.md",
-        "at most 10,000 demonstrations",
-    ),
-    (
-        "docs/src/troubleshooting.md",
-        "up to 1,000,000 on 512 landmarks",
-    ),
 ];
 
 #[test]
-fn a_section_citing_no_results_file_quotes_no_whole_number_of_10_or_more_but_its_settings() {
+fn a_section_citing_no_results_file_quotes_no_whole_number_of_10_or_more_nor_one_decimal_but_its_settings(
+) {
     let sections = prose_sections();
     let stale: Vec<_> = UNCITED_SETTINGS
         .iter()
         .filter(|(doc, around)| {
-            !sections.iter().any(|(name, _, text)| {
-                name == doc
-                    && text
-                        .split_whitespace()
-                        .collect::<Vec<_>>()
-                        .join(" ")
-                        .contains(around)
+            !sections.iter().any(|(name, cited, text)| {
+                let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
+                name == doc && cited.is_empty() && words.contains(around)
             })
         })
         .collect();
     assert!(
         stale.is_empty(),
-        "UNCITED_SETTINGS entries found nowhere: {stale:?}"
+        "UNCITED_SETTINGS entries in no section that cites nothing: {stale:?}"
     );
     let mut missing = Vec::new();
     for (name, cited, text) in sections {
@@ -653,7 +655,7 @@ fn a_section_citing_no_results_file_quotes_no_whole_number_of_10_or_more_but_its
             continue;
         }
         let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
-        for number in large_wholes(&text) {
+        for number in large_wholes(&text).into_iter().chain(one_decimals(&text)) {
             if !listed(&UNCITED_SETTINGS, &name, &words, &number) {
                 missing.push(format!("{name} ({heading}): {number}"));
             }
@@ -661,7 +663,7 @@ fn a_section_citing_no_results_file_quotes_no_whole_number_of_10_or_more_but_its
     }
     assert!(
         missing.is_empty(),
-        "whole numbers of 10 or more in sections that cite no results file (a result: cite the \
+        "whole numbers of 10 or more and numbers with one decimal in sections that cite no results file (a result: cite the \
          file it comes from; a setting: UNCITED_SETTINGS):\n{}",
         missing.join("\n")
     );
