@@ -20,7 +20,8 @@ Tuning (seeds 1000-1009, `tune-TASK.toml`): `expert.double_ask` in {0.1, 0.3} fo
 `best-known`, `cheapest` and `escalate` never at random). The choice, fixed before the tuning runs: the value under which those two
 routes together reach the threshold in the most runs, ties broken by the lower mean cost to the
 threshold (censored runs at their total cost). The reported seeds 0-29 (`study-TASK.toml`) run
-with the chosen value only.
+with the chosen value only, and `recovery-TASK.toml` runs `good-turns-poor` with B = 400 on them,
+so that the changed expert answers more than 100 times after the change.
 """
 import sys
 from pathlib import Path
@@ -99,6 +100,24 @@ def write(task, name, title, seeds, double_asks, turn):
     (HERE / name).write_text("\n".join(lines) + "\n")
 
 
+def recovery(task, double_ask):
+    """The study's `good-turns-poor` with B = 400: the changed expert answers 100 times and more
+    after the change (about 25 at B = 150), so that recovery within 100 answers can be seen."""
+    _, _, _, threshold = TASKS[task]
+    sets = [s.replace(f"budget.total={BUDGET}", "budget.total=400") for s in common(task)]
+    sets += ["expert.route=round-robin", f"expert.double_ask={double_ask}"]
+    title = f"{task}: the good expert turns poor, B = 400"
+    quoted = ", ".join(f'"{s}"' for s in sets)
+    lines = [
+        f"# {title}", "# Written by deploy/experiments/experts/make.py.",
+        f'title = "{title}"', "seeds = 30", 'x = "steps"', "last = 20", "smooth = 3",
+        'legend = "lower-right"', f"eval_threshold = {threshold}", "eval_curves = true",
+        "", "[[method]]", 'name = "good-turns-poor-b400"', 'label = "good turns poor, B = 400"',
+        f'config = "config-{task}-turns.toml"', f"set = [{quoted}]",
+    ]
+    (HERE / f"recovery-{task}.toml").write_text("\n".join(lines) + "\n")
+
+
 def turns(task):
     """The same experts, the good one answering as the poor one after its 25th answer."""
     _, prefix, _, _ = TASKS[task]
@@ -119,6 +138,7 @@ def main():
         if chosen:
             write(task, f"study-{task}.toml", f"{task}: three experts at costs 10/2/1", 30,
                   [float(chosen)], True)
+            recovery(task, float(chosen))
 
 
 if __name__ == "__main__":
