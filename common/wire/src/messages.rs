@@ -17,7 +17,7 @@ pub const SCHEMA_VERSION: u32 = 9;
 pub const MAX_ACTORS: usize = 16;
 /// Largest observation a message may claim (a peer's bytes can make a receiver allocate no
 /// more). A run sizes its services to its own observations and heads; how much shared memory
-/// that takes is [`transitions_bytes`].
+/// that takes is [`transitions_bytes`](crate::transitions_bytes).
 pub const MAX_OBS_DIM: usize = u16::MAX as usize;
 /// Largest number of heads (K) a bootstrap mask may claim.
 pub const MAX_HEADS: usize = u16::MAX as usize;
