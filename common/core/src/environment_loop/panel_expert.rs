@@ -454,8 +454,11 @@ mod tests {
         let escalate = "route = \"escalate\"\ndouble_ask = 0.0\nmodel = \"krr\"\n";
         let (_, mut core, mut ask) = setup_routed(escalate, "[budget]\ntotal = 7\n");
         let (x, xf) = ([0.5f32, 0.0], [0.5, 0.0]);
-        // No model yet: poor's 0 goes up to fair, whose 2 is acted on.
+        // No model yet: poor's 0 goes up to fair, whose 2 is acted on and overrules it: poor's
+        // answer is kept at weight 0, fair's at its quality before it (0.5, unrated).
         assert_eq!(ask.ask(&mut core, (&x, &xf), 1, ME).unwrap(), Some(2));
+        let weights: Vec<f64> = core.demos().iter().map(|d| d.weight).collect();
+        assert_eq!(weights, [0.0, 0.5]);
         // The model fitted on 0 and 2 at this state: wherever its greedy action is poor's 0 no
         // one else is asked; where it is not, fair is, and acted on.
         let greedy = argmax(&core.model().unwrap().probs(&xf));
