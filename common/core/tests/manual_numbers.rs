@@ -12,12 +12,12 @@
 //! `NOT_RESULTS_WHOLE`): every such value from −200 to 100, and most whole numbers, occur in some
 //! results file, so a lookup in all of them could not fail. A section that cites none quotes no
 //! whole number of 10 or more, nor one with one decimal, but the settings listed in
-//! `UNCITED_SETTINGS`. Ordinals ("26th"),
-//! sizes ("15×15"), exponents ("1e-30") and names ("AVX-512") are not results; single digits are
-//! not checked. A whole number below 100 is in most results files somewhere, so its lookup
-//! catches a number no cited file holds, not one that holds it in another place. Code spans (`beta2 = 0.999`) are settings, not
-//! results, and are skipped; so are the generated parts and code blocks, which
-//! `alfd docs --check` keeps equal to their sources.
+//! `UNCITED_SETTINGS`. Ordinals ("26th"), sizes ("15×15"), exponents ("1e-30") and names
+//! ("AVX-512") are not results; single digits are not checked. A whole number below 100 is in
+//! most results files somewhere, so its lookup catches a number no cited file holds, not one
+//! that holds it in another place. Code spans (`beta2 = 0.999`) are settings, not results, and
+//! are skipped; so are the generated parts and code blocks, which `alfd docs --check` keeps
+//! equal to their sources.
 
 use std::collections::HashSet;
 
@@ -117,10 +117,15 @@ fn numbers_in(chars: &[char]) -> Vec<(usize, usize, f64)> {
     out
 }
 
+/// `text` with each run of white space (a line break included) one space.
+fn words(text: &str) -> String {
+    text.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
 /// The text between two numbers, each run of white space (a line break included) one space.
 fn gap(chars: &[char]) -> String {
     let text: String = chars.iter().collect();
-    let mut out = text.split_whitespace().collect::<Vec<_>>().join(" ");
+    let mut out = words(&text);
     if text.starts_with(char::is_whitespace) {
         out.insert(0, ' ');
     }
@@ -394,7 +399,7 @@ fn unfound_in(
             continue;
         }
         let found = scoped(&files, &cited);
-        let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
+        let words = words(&text);
         for number in pick(&text) {
             quoted += 1;
             let setting = listed(not_results, &name, &words, &number);
@@ -419,8 +424,6 @@ const NOT_RESULTS_ONE_DECIMAL: [(&str, &str); 7] = [
     ("docs/src/faults.md", "every 0.2 s for 90 s"),
 ];
 
-/// One decimal is checked only where a section cites its results files: looked up in any file,
-/// such a number would always be found (see the module's documentation).
 /// The numbers of `text` with exactly one decimal.
 fn one_decimals(text: &str) -> Vec<String> {
     let numbers = with_decimals(text, 1).into_iter();
@@ -429,6 +432,8 @@ fn one_decimals(text: &str) -> Vec<String> {
         .collect()
 }
 
+/// One decimal is checked only where a section cites its results files: looked up in any file,
+/// such a number would always be found (see the module's documentation).
 #[test]
 fn every_number_with_one_decimal_in_a_section_citing_results_is_in_the_files_it_cites() {
     assert_eq!(
@@ -638,7 +643,7 @@ fn a_section_citing_no_results_file_quotes_no_whole_number_of_10_or_more_nor_one
         .iter()
         .filter(|(doc, around)| {
             !sections.iter().any(|(name, cited, text)| {
-                let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
+                let words = words(text);
                 name == doc && cited.is_empty() && words.contains(around)
             })
         })
@@ -654,7 +659,7 @@ fn a_section_citing_no_results_file_quotes_no_whole_number_of_10_or_more_nor_one
         if !cited.is_empty() || heading.trim_start_matches('#').trim() == "Contents" {
             continue;
         }
-        let words = text.split_whitespace().collect::<Vec<_>>().join(" ");
+        let words = words(&text);
         for number in large_wholes(&text).into_iter().chain(one_decimals(&text)) {
             if !listed(&UNCITED_SETTINGS, &name, &words, &number) {
                 missing.push(format!("{name} ({heading}): {number}"));
@@ -663,8 +668,8 @@ fn a_section_citing_no_results_file_quotes_no_whole_number_of_10_or_more_nor_one
     }
     assert!(
         missing.is_empty(),
-        "whole numbers of 10 or more and numbers with one decimal in sections that cite no results file (a result: cite the \
-         file it comes from; a setting: UNCITED_SETTINGS):\n{}",
+        "whole numbers of 10 or more and numbers with one decimal in sections that cite no \
+         results file (a result: cite the file it comes from; a setting: UNCITED_SETTINGS):\n{}",
         missing.join("\n")
     );
 }

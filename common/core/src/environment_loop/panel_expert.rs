@@ -236,7 +236,9 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
         (step, asker): (u64, Asker),
         (ask, first): (Ask, usize),
     ) -> usize {
-        let escalated = self.escalation(core, x, ask, first);
+        // The demonstration model's opinion on the state, before either answer is recorded.
+        let model = core.model().map(|m| argmax(&m.probs(x)));
+        let escalated = self.escalation(model, ask, first);
         let second = match escalated.or(ask.second).filter(|&s| self.affordable(s)) {
             Some(s) => match self.act(s, obs) {
                 Ok(action) => Some((s, action)),
@@ -249,7 +251,14 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
         };
         // An escalation's second answer that differs overrules the first.
         let overruled = second.is_some_and(|(s, a)| escalated == Some(s) && a != first);
-        let recorded = self.record(core, x, step, (ask.first, first), second, overruled);
+        let recorded = self.record(
+            core,
+            (x, step),
+            model,
+            (ask.first, first),
+            second,
+            overruled,
+        );
         for &expert in &recorded {
             if let Some(r) = &mut self.returns {
                 r.answered(asker.actor, expert);
@@ -262,33 +271,31 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
     }
 
     /// With [`Route::Escalate`](crate::panel::Route::Escalate): the expert above the first when
-    /// the first's answer `first` disagrees with the demonstration model's greedy action at `x`
+    /// the first's answer `first` disagrees with the demonstration model's greedy action `model`
     /// (or no model is fitted yet).
-    fn escalation(&self, core: &ExpertCore, x: &[f64], ask: Ask, first: usize) -> Option<usize> {
+    fn escalation(&self, model: Option<usize>, ask: Ask, first: usize) -> Option<usize> {
         if !self.panel.escalates() {
             return None;
         }
-        let model = core.model().map(|m| argmax(&m.probs(x)));
         (model != Some(first))
             .then(|| self.panel.above(ask.first))
             .flatten()
     }
 
-    /// Records each answer on the state as a demonstration (while the budget lasts), rated
-    /// against the other answer and the demonstration model's; the first at weight 0 when
-    /// `overruled` (an escalation's second answer differs: kept, and left out of the model);
-    /// the experts recorded.
+    /// Records each answer on the state `x` as a demonstration (while the budget lasts), rated
+    /// against the other answer and the demonstration model's (`model`); the first at weight 0
+    /// when `overruled` (an escalation's second answer differs: kept, and left out of the
+    /// model); the experts recorded.
     fn record(
         &mut self,
         core: &mut ExpertCore,
-        x: &[f64],
-        step: u64,
+        (x, step): (&[f64], u64),
+        model: Option<usize>,
         first: (usize, usize),
         second: Option<(usize, usize)>,
         overruled: bool,
     ) -> Vec<usize> {
         let mut recorded = Vec::new();
-        let model = core.model().map(|m| argmax(&m.probs(x)));
         let double = second.is_some();
         let mut answers = vec![first];
         answers.extend(second);
