@@ -32,13 +32,19 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     None => i += 1,
                     Some(status) => {
                         let p = self.procs.remove(i);
-                        if !status.success() {
-                            failures.push(format!(
-                                "{} {}; see {}",
-                                proc_binary(&p.kind, &p.name),
-                                describe(status),
-                                self.log_of(&p.name)
-                            ));
+                        let what = format!(
+                            "{} {}; see {}",
+                            proc_binary(&p.kind, &p.name),
+                            describe(status),
+                            self.log_of(&p.name)
+                        );
+                        match stopped_from_outside(status) {
+                            // What it did is recorded already (rows with the launcher,
+                            // demonstrations in demos.jsonl, checkpoints written whole); the
+                            // learner's weights are checked below.
+                            true => warn!("{what}, while the run was stopping"),
+                            false if !status.success() => failures.push(what),
+                            false => {}
                         }
                     }
                 }
@@ -119,6 +125,31 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 answers_late: self.answers_late(),
                 demos_experts_wrote: self.demos_experts_wrote,
             }),
+        }
+    }
+}
+
+/// Whether a process was ended by a signal from outside (SIGKILL, SIGTERM: an operator, the OOM
+/// killer), not by a fault of its own (an exit code, a panic's abort, a segmentation fault).
+fn stopped_from_outside(status: ExitStatus) -> bool {
+    use std::os::unix::process::ExitStatusExt as _;
+    matches!(status.signal(), Some(9 | 15))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::os::unix::process::ExitStatusExt as _;
+
+    use super::*;
+
+    #[test]
+    fn only_a_kill_or_a_termination_from_outside_is_not_the_process_s_own_failure() {
+        let signal = |s: i32| ExitStatus::from_raw(s);
+        let code = |c: i32| ExitStatus::from_raw(c << 8);
+        assert!(stopped_from_outside(signal(9)) && stopped_from_outside(signal(15)));
+        // An abort (a panic's, say), a segmentation fault, an exit code: its own.
+        for status in [signal(6), signal(11), code(1), code(101), code(0)] {
+            assert!(!stopped_from_outside(status), "{status:?}");
         }
     }
 }
