@@ -344,6 +344,9 @@ impl DemoModelSender<'_> {
 pub struct DemoModelReceiver<'w> {
     pub(crate) wire: &'w Wire,
     pub(crate) port: Subscriber<Transport, [u8], DemoModelHeader>,
+    /// The version last returned: an older one arriving later (the old expert's last
+    /// publication while a swap is under way) is dropped.
+    pub(crate) held: std::cell::Cell<Option<u64>>,
 }
 
 impl fmt::Debug for DemoModelReceiver<'_> {
@@ -353,7 +356,11 @@ impl fmt::Debug for DemoModelReceiver<'_> {
 }
 
 impl DemoModelReceiver<'_> {
-    /// Copies the newest model waiting into `out`, if any, and returns its header.
+    /// Copies the newest model waiting into `out`, if any, and returns its header. Newest is
+    /// the highest version (the later one among equals), not the last received: while experts
+    /// are swapped, the old and the new one both publish, and samples of several publishers
+    /// arrive in no set order. A version below the one last returned is dropped (versions
+    /// grow with the expert's generation, and a restart is a new generation).
     pub fn latest_into(&self, out: &mut Vec<u8>) -> Result<Option<DemoModelHeader>> {
         let mut newest = None;
         while let Some(sample) = self
@@ -361,13 +368,18 @@ impl DemoModelReceiver<'_> {
             .receive()
             .map_err(transport("receive on", "demo-model"))?
         {
-            newest = Some(sample);
+            let version = sample.user_header().version;
+            let above = newest.as_ref().map(|(v, _)| *v).or(self.held.get());
+            if above.is_none_or(|v| v <= version) {
+                newest = Some((version, sample));
+            }
         }
-        let Some(sample) = newest else {
+        let Some((_, sample)) = newest else {
             return Ok(None);
         };
         let h = *sample.user_header();
         self.wire.check("demo-model", &h.header)?;
+        self.held.set(Some(h.version));
         let len = (h.len as usize).min(sample.payload().len());
         out.clear();
         out.extend_from_slice(&sample.payload()[..len]);
@@ -790,6 +802,54 @@ mod tests {
             );
             assert_eq!(h.expert_name(), "cartpole-1000");
             assert_eq!(h.len, 10_000);
+        });
+    }
+
+    #[test]
+    fn of_two_experts_publishing_the_highest_model_version_is_kept_whatever_the_order() {
+        with_run("demo-model-two", |run| {
+            let old = wire(run, Role::Expert, 1);
+            let new = wire(run, Role::Expert, 2);
+            let actor = wire(run, Role::Actor, 0);
+            let rx = actor.demo_model_receiver().unwrap();
+            // A subscriber drains one publisher after another, not in the order sent: with the
+            // new expert's publisher connected first, the old one's sample comes last.
+            let mut tx_new = new.demo_model_sender().unwrap();
+            let mut tx_old = old.demo_model_sender().unwrap();
+            let header = |generation: u64, v: u64| DemoModelHeader {
+                version: (generation << 32) | v,
+                expert: generation as u32,
+                ..DemoModelHeader::default()
+            };
+            // The new expert publishes first, the old one's last model after it; then the other
+            // way round.
+            for (first, second) in [(true, false), (false, true)] {
+                for new_first in [first, second] {
+                    if new_first {
+                        tx_new.publish(header(2, 1), &[2]).unwrap();
+                    } else {
+                        tx_old.publish(header(1, 9), &[1]).unwrap();
+                    }
+                }
+                let mut out = Vec::new();
+                let h = rx.latest_into(&mut out).unwrap().expect("a model");
+                assert_eq!(
+                    (h.expert, h.version & 0xffff_ffff, &out[..]),
+                    (2, 1, &[2u8][..])
+                );
+                assert!(rx.latest_into(&mut out).unwrap().is_none());
+            }
+            // The old expert's model arriving alone after the new one's is dropped; the new
+            // expert's next one is taken.
+            tx_old.publish(header(1, 10), &[1]).unwrap();
+            let mut out = Vec::new();
+            assert!(rx.latest_into(&mut out).unwrap().is_none());
+            tx_new.publish(header(2, 2), &[2]).unwrap();
+            let h = rx
+                .latest_into(&mut out)
+                .unwrap()
+                .expect("the new expert's model");
+            assert_eq!(h.version, (2 << 32) | 2);
         });
     }
 

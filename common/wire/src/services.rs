@@ -439,7 +439,11 @@ impl Wire {
             .buffer_size(2)
             .create()
             .map_err(transport("create a subscriber on", "demo-model"))?;
-        Ok(DemoModelReceiver { wire: self, port })
+        Ok(DemoModelReceiver {
+            wire: self,
+            port,
+            held: std::cell::Cell::new(None),
+        })
     }
 
     /// Actor side of `query`, its requests sized for states of `obs_dim` values (a larger one
