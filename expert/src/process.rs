@@ -349,7 +349,7 @@ fn panel_source(
         let expert = crate::member::Supervised::start(start, &name, &run_id, runtime.max_restarts)?;
         Ok(Box::new(expert))
     })?;
-    let panel = PanelAsk::new(cfg, members);
+    let panel = PanelAsk::new(cfg, members, actions);
     Ok(Source::Panel(Box::new(match person_in(cfg) {
         Some(i) => panel.with_person(i),
         None => panel,

@@ -18,7 +18,14 @@
 //! answer disagrees with the demonstration model fitted so far (or there is none yet), the next
 //! expert up the cost ladder too, whose answer the actor then acts on and which, when it
 //! differs, overrules the first (kept at weight 0): pay for a better opinion only where the
-//! cheap one is in doubt, after proactive learning's reliable and unreliable oracles.
+//! cheap one is in doubt, after proactive learning's reliable and unreliable oracles;
+//! `signal-per-cost` the expert with the most signal per unit of cost, signal being the square of
+//! its agreement above chance (the upper end of its interval, rescaled so that agreeing by
+//! chance with one of K actions is 0 and always agreeing 1). An answer that is right with
+//! probability a and otherwise one of the other K - 1 actions at random carries
+//! b = (K a - 1) / (K - 1) above chance; the answers needed to outvote such noise grow as 1 / b²,
+//! so cost / b² is what one unit of agreement beyond chance costs. Agreement with other opinions
+//! is b times theirs, so the rescaled quality orders experts as b does.
 //!
 //! With `expert.quality_from_returns`, the returns of the episodes that followed each expert's
 //! advice are a third signal ([`Returns`]): when an episode in which experts answered ends, each
@@ -58,6 +65,9 @@ pub enum Route {
     /// The cheapest; where its answer disagrees with the demonstration model, the next expert
     /// up the cost ladder as well, whose answer is acted on.
     Escalate,
+    /// The most agreement above chance, squared, per unit of cost (the upper end of the
+    /// quality interval).
+    SignalPerCost,
 }
 
 /// One expert of the panel: its name and what one answer costs.
@@ -105,6 +115,8 @@ pub struct Panel {
     second_ok: Vec<bool>,
     next: usize,
     spent: f64,
+    /// The actions an expert chooses among (agreement by chance is one in this many).
+    actions: usize,
 }
 
 impl Panel {
@@ -135,7 +147,14 @@ impl Panel {
             second_ok: vec![true; n],
             next: 0,
             spent: 0.0,
+            actions: 2,
         }
+    }
+
+    /// The panel of experts choosing among `actions` actions (2 unless set; at least 2).
+    pub fn with_actions(mut self, actions: usize) -> Self {
+        self.actions = actions.max(2);
+        self
     }
 
     pub fn members(&self) -> &[Member] {
@@ -202,6 +221,7 @@ impl Panel {
                     .max_by(|&a, &b| value(a).total_cmp(&value(b)).then(b.cmp(&a)))
                     .expect("an expert is up")
             }
+            Route::SignalPerCost => self.most_signal_per_cost(),
         };
         let second = (self.members.len() > 1 && rng.random::<f64>() < self.double_ask)
             .then(|| self.least_answered_but(first))
@@ -222,6 +242,20 @@ impl Panel {
         (0..self.members.len())
             .filter(|&i| self.up[i] && self.second_ok[i] && self.members[i].cost > cost)
             .min_by(|&a, &b| self.members[a].cost.total_cmp(&self.members[b].cost))
+    }
+
+    /// The expert up with the most agreement above chance, squared, per unit of cost (the upper
+    /// end of its interval; the first of equals).
+    fn most_signal_per_cost(&self) -> usize {
+        let k = self.actions as f64;
+        let value = |i: usize| {
+            let above_chance = ((k * self.quality(i).high - 1.0) / (k - 1.0)).max(0.0);
+            above_chance.powi(2) / self.members[i].cost.max(1e-12)
+        };
+        (0..self.members.len())
+            .filter(|&i| self.up[i])
+            .max_by(|&a, &b| value(a).total_cmp(&value(b)).then(b.cmp(&a)))
+            .expect("an expert is up")
     }
 
     /// The next expert up in turn.
@@ -546,6 +580,41 @@ mod tests {
         // Value per cost: good 1/10, fair 0.657/2, poor 0/1: the fair one.
         p.route = Route::UpperPerCost;
         assert_eq!(p.route(&mut rng).unwrap().first, 1);
+    }
+
+    #[test]
+    fn signal_per_cost_asks_the_expert_whose_squared_agreement_above_chance_costs_least() {
+        let mut rng = seeded(4);
+        let mut p = panel(Route::SignalPerCost, 0.0).with_actions(3);
+        // Nothing known: every upper end is 1 (all signal), so the cheapest.
+        assert_eq!(p.route(&mut rng).unwrap().first, 2);
+        // good agrees 9 times in 10, fair 8 in 10, poor 6 in 10 (100 answers each).
+        let agree = |p: &mut Panel, expert, share: usize| {
+            for k in 0..100 {
+                p.answered(expert, usize::from(k % 10 < share), 1);
+            }
+        };
+        agree(&mut p, 0, 9);
+        agree(&mut p, 1, 8);
+        agree(&mut p, 2, 6);
+        let value = |p: &Panel, i: usize, cost: f64| {
+            ((3.0 * p.quality(i).high - 1.0) / 2.0).max(0.0).powi(2) / cost
+        };
+        let (good, fair, poor) = (value(&p, 0, 10.0), value(&p, 1, 2.0), value(&p, 2, 1.0));
+        // Upper ends 0.959, 0.879, 0.697: signal 0.939², 0.818², 0.546² per cost 10, 2, 1.
+        assert!(fair > poor && poor > good, "{good} {fair} {poor}");
+        assert_eq!(p.route(&mut rng).unwrap().first, 1);
+        // The same agreements among two actions (chance 1/2): fair 0.758² / 2 = 0.29 against
+        // poor 0.394² = 0.16; among many actions the poor one's signal nears its agreement,
+        // 0.697² against fair's 0.879² / 2: the poor one.
+        assert_eq!(p.clone().with_actions(2).route(&mut rng).unwrap().first, 1);
+        assert_eq!(
+            p.clone().with_actions(1000).route(&mut rng).unwrap().first,
+            2
+        );
+        // An expert down is passed over.
+        p.set_down(1);
+        assert_eq!(p.route(&mut rng).unwrap().first, 2);
     }
 
     #[test]

@@ -357,11 +357,12 @@ fn local_expert<'d>(
     demonstrator: &'d mut dyn Demonstrator<[f32]>,
     panel: Vec<Box<dyn Demonstrator<[f32]>>>,
 ) -> LocalExpert<'d, [f32]> {
+    let actions = core.num_actions();
     let expert = LocalExpert::new(core, demonstrator, &cfg.expert.name, cfg.shaping_enabled());
     if panel.is_empty() {
         return expert;
     }
-    expert.with_panel(PanelAsk::new(cfg, panel))
+    expert.with_panel(PanelAsk::new(cfg, panel, actions))
 }
 
 /// Where a neural run starts: its agent, expert and records, fresh (the `prior`

@@ -9,7 +9,8 @@ greedy evaluation of 20 episodes after every 10 training episodes.
 
 Methods: one per route (`best-known` = always the good expert, `cheapest` = always the poor one,
 `round-robin`, `interval`, `upper-per-cost`, `escalate` = the poor one, and the next up the cost
-ladder where its answer disagrees with the demonstration model), B = 0, and `good-turns-poor`
+ladder where its answer disagrees with the demonstration model, `signal-per-cost` = the most
+agreement above chance, squared, per unit of cost), B = 0, and `good-turns-poor`
 (round-robin, the good expert answering as the poor one after its 25th answer). Primary metrics: the cost spent when
 greedy evaluation first reaches the threshold (Kaplan-Meier median; a run that never reaches it
 is censored at its total cost) and the paired difference of the final greedy evaluation against
@@ -21,7 +22,9 @@ Tuning (seeds 1000-1009, `tune-TASK.toml`): `expert.double_ask` in {0.1, 0.3} fo
 routes together reach the threshold in the most runs, ties broken by the lower mean cost to the
 threshold (censored runs at their total cost). The reported seeds 0-29 (`study-TASK.toml`) run
 with the chosen value only, and `recovery-TASK.toml` runs `good-turns-poor` with B = 400 on them,
-so that the changed expert answers more than 100 times after the change.
+so that the changed expert answers more than 100 times after the change. `tune-routes-TASK.toml`
+runs the routes of this project's own (`escalate`, `signal-per-cost`) on the tuning seeds beside
+`best-known`, `cheapest`, `round-robin` and `always-fair` (the fair expert always).
 """
 import sys
 from pathlib import Path
@@ -36,7 +39,11 @@ TASKS = {
 COSTS = {"good": 10, "fair": 2, "poor": 1}
 BUDGET = 150
 TURN_AFTER = 25
-ROUTES = ["best-known", "cheapest", "round-robin", "interval", "upper-per-cost", "escalate"]
+ROUTES = ["best-known", "cheapest", "round-robin", "interval", "upper-per-cost", "escalate",
+          "signal-per-cost"]
+# The routes of this project's own, tried on the tuning seeds beside the fixed ones and
+# `always-fair` (`best-known` with the fair expert named: not a route, the bar for one that finds it).
+OWN = ["escalate", "signal-per-cost"]
 TUNED = ["interval", "upper-per-cost"]
 # Routes that never ask a second expert at random (`escalate` asks one by its own rule).
 FIXED = ["best-known", "cheapest", "escalate"]
@@ -70,9 +77,9 @@ def common(task):
     ]
 
 
-def methods(task, double_asks):
+def methods(task, double_asks, routes=ROUTES):
     out = [("never", "B = 0", common(task) + ["budget.total=0"], None)]
-    for route in ROUTES:
+    for route in routes:
         # The fixed routes never ask a second expert at random.
         for d in double_asks if route in TUNED else [0 if route in FIXED else double_asks[0]]:
             tag = f"-d{d}" if len(double_asks) > 1 and route in TUNED else ""
@@ -81,7 +88,7 @@ def methods(task, double_asks):
     return out
 
 
-def write(task, name, title, seeds, double_asks, turn):
+def write(task, name, title, seeds, double_asks, turn, routes=ROUTES):
     _, _, _, threshold = TASKS[task]
     lines = [
         f"# {title}", "# Written by deploy/experiments/experts/make.py.",
@@ -89,7 +96,7 @@ def write(task, name, title, seeds, double_asks, turn):
         'legend = "lower-right"', f"eval_threshold = {threshold}", "eval_curves = true",
         'baseline = "best-known"',
     ]
-    ms = methods(task, double_asks)
+    ms = methods(task, double_asks, routes)
     if turn:
         ms.append(("good-turns-poor", "good turns poor", common(task) + [
             "expert.route=round-robin", f"expert.double_ask={double_asks[0]}"], f"config-{task}-turns.toml"))
@@ -98,6 +105,29 @@ def write(task, name, title, seeds, double_asks, turn):
         lines += ["", "[[method]]", f'name = "{m}"', f'label = "{label}"',
                   f'config = "{cfg or f"config-{task}.toml"}"', f"set = [{quoted}]"]
     (HERE / name).write_text("\n".join(lines) + "\n")
+
+
+def own_routes(task, double_ask):
+    """`tune-routes-TASK.toml`: the routes of this project's own against the fixed ones and
+    `always-fair`, on the tuning seeds (run with `--first-seed 1000`)."""
+    _, prefix, _, threshold = TASKS[task]
+    title = f"{task}: routes of one's own, tuning seeds"
+    lines = [
+        f"# {title}", "# Written by deploy/experiments/experts/make.py.",
+        f'title = "{title}"', "seeds = 10", 'x = "steps"', "last = 20", "smooth = 3",
+        'legend = "lower-right"', f"eval_threshold = {threshold}", "eval_curves = true",
+        'baseline = "best-known"',
+    ]
+    ms = [m for m in methods(task, [double_ask])
+          if m[0] in ("best-known", "cheapest", "round-robin", *OWN)]
+    fair = [s.replace(f"{prefix}-good", f"{prefix}-fair") for s in common(task)]
+    ms.append(("always-fair", "always-fair", fair + ["expert.route=best-known",
+                                                     "expert.double_ask=0"], None))
+    for m, label, sets, _ in ms:
+        quoted = ", ".join(f'"{s}"' for s in sets)
+        lines += ["", "[[method]]", f'name = "{m}"', f'label = "{label}"',
+                  f'config = "config-{task}.toml"', f"set = [{quoted}]"]
+    (HERE / f"tune-routes-{task}.toml").write_text("\n".join(lines) + "\n")
 
 
 def recovery(task, double_ask):
@@ -133,12 +163,14 @@ def main():
     for task in TASKS:
         config(task)
         turns(task)
+        # The double-ask tuning's routes (`signal-per-cost` has its own tuning file).
         write(task, f"tune-{task}.toml", f"{task}: three experts, tuning seeds", 10,
-              [0.1, 0.3], False)
+              [0.1, 0.3], False, ROUTES[:-1])
         if chosen:
             write(task, f"study-{task}.toml", f"{task}: three experts at costs 10/2/1", 30,
                   [float(chosen)], True)
             recovery(task, float(chosen))
+            own_routes(task, float(chosen))
 
 
 if __name__ == "__main__":

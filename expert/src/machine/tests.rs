@@ -397,7 +397,7 @@ fn panel() -> PanelAsk<'static, [f32]> {
         Box::new(Always(1)),
         Box::new(Always(0)),
     ];
-    PanelAsk::new(&cfg, members)
+    PanelAsk::new(&cfg, members, 2)
 }
 
 #[test]
@@ -453,7 +453,7 @@ fn a_query_the_panel_routes_to_the_person_waits_for_their_decision() {
         Box::new(alfd_demonstrators::registry::PersonSlot),
         Box::new(Always(1)),
     ];
-    let mut p = PanelAsk::new(&cfg, members).with_person(0);
+    let mut p = PanelAsk::new(&cfg, members, 2).with_person(0);
     let mut m = active(3, false, 0);
     // Routed to the person (the best known): shown on the page, nothing answered yet.
     let out = m.panel_demonstrated((1, asker(7)), &[0.25, -1.0], 30, &mut p);

@@ -413,6 +413,11 @@ impl ExpertCore {
         Ok(())
     }
 
+    /// The actions the environment offers (and the demonstration model chooses among).
+    pub fn num_actions(&self) -> usize {
+        self.num_actions
+    }
+
     pub fn budget(&self) -> Budget {
         self.budget
     }

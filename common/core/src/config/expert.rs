@@ -47,7 +47,9 @@ pub struct ExpertConfig {
     /// upper end of the quality interval per unit of cost), `escalate` (the cheapest, and where
     /// its answer disagrees with the demonstration model, or there is none yet, the next expert
     /// up the cost ladder too, whose answer is acted on; a differing answer overrules the first,
-    /// which is kept at weight 0).
+    /// which is kept at weight 0), `signal-per-cost` (the most agreement above chance, squared,
+    /// per unit of cost: the upper end of the quality interval, rescaled so that agreeing by
+    /// chance is 0).
     #[serde(default = "default_route", skip_serializing_if = "is_default_route")]
     pub route: Route,
     /// With several experts: the expert `best-known` asks (default the first of `[[experts]]`).

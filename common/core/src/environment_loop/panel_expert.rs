@@ -82,8 +82,13 @@ pub struct PanelAsk<'d, S: ?Sized> {
 }
 
 impl<'d, S: ?Sized> PanelAsk<'d, S> {
-    /// The panel of `cfg`'s `[[experts]]`, `members` their demonstrators in the same order.
-    pub fn new(cfg: &ExperimentConfig, members: Vec<Box<dyn Demonstrator<S> + 'd>>) -> Self {
+    /// The panel of `cfg`'s `[[experts]]`, `members` their demonstrators in the same order,
+    /// choosing among `actions` actions.
+    pub fn new(
+        cfg: &ExperimentConfig,
+        members: Vec<Box<dyn Demonstrator<S> + 'd>>,
+        actions: usize,
+    ) -> Self {
         assert_eq!(
             members.len(),
             cfg.experts.len(),
@@ -107,7 +112,8 @@ impl<'d, S: ?Sized> PanelAsk<'d, S> {
                 cfg.best_known(),
                 e.double_ask,
                 e.quality_window,
-            ),
+            )
+            .with_actions(actions),
             returns: e
                 .quality_from_returns
                 .then(|| Returns::new(e.quality_window)),
@@ -395,7 +401,7 @@ mod tests {
             Box::new(Always(2)),
             Box::new(Always(0)),
         ];
-        let ask = PanelAsk::new(&cfg, members);
+        let ask = PanelAsk::new(&cfg, members, 2);
         (cfg, core, ask)
     }
 
@@ -557,7 +563,7 @@ mod tests {
             Box::new(Always(1)),
             Box::new(Always(0)),
         ];
-        let mut ask = PanelAsk::new(&cfg, members);
+        let mut ask = PanelAsk::new(&cfg, members, 2);
         let x = [0.5f32, 0.0];
         // No demonstration model and no double ask: answers alone earn no reward. In turn,
         // one query per episode, with the return of the episode before.
@@ -601,7 +607,7 @@ mod tests {
         let mut core = ExpertCore::for_config(&cfg, 3);
         let members: Vec<Box<dyn Demonstrator<[f32]>>> =
             vec![Box::new(Person), Box::new(Always(1)), Box::new(Always(0))];
-        let mut ask = PanelAsk::new(&cfg, members).with_person(0);
+        let mut ask = PanelAsk::new(&cfg, members, 2).with_person(0);
         let (x, f) = ([0.5f32, 0.0], [0.5, 0.0]);
         // The person is the best known: handed back, nothing asked or recorded yet.
         let Routed::Person(routed) = ask.route_or_answer(&mut core, (&x, &f), 4, ME).unwrap()
