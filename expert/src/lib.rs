@@ -6,6 +6,7 @@ pub mod human;
 mod late;
 pub mod machine;
 mod member;
+mod page_member;
 mod process;
 
 pub use member::member_name;

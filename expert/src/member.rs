@@ -1,6 +1,7 @@
 //! One of several experts in a process of its own (`alfd-expert --member I`): the expert process
-//! of a run with `[[experts]]` starts one per built-in expert, as it starts a Python adapter per
-//! external one, and asks each through `remote/expert-<generation>-<I>`. Budget, routing,
+//! of a run with `[[experts]]` starts one per built-in expert and one for a person's page (see
+//! `page_member`), as it starts a Python adapter per external one, and asks each through
+//! `remote/expert-<generation>-<I>`. Budget, routing,
 //! `demos.jsonl` and the demonstration model stay in the expert process; this one only answers.
 //!
 //! It stops on SIGINT or SIGTERM, and by itself once the process that started it is gone.
@@ -30,6 +31,13 @@ pub fn serve(args: &Args, member: usize, schema: u32) -> alfd_harness::Result<()
     let setup = args.process.load()?;
     let (_, actions) = setup.env_dims()?;
     let (_, cfg) = crate::process::roster(args, &setup.config)?;
+    if cfg
+        .experts
+        .get(member)
+        .is_some_and(|e| e.name == crate::human::HUMAN)
+    {
+        return crate::page_member::serve(args, member, schema);
+    }
     let mut expert = registry::member(&cfg, member)?;
     let name = member_name(args.generation, member);
     let mut server = RemoteServer::create(&args.process.run_id, &name, schema)?;

@@ -31,6 +31,7 @@ use tracing::{debug, info};
 use crate::human::{self, HumanPage, PageState, HUMAN};
 use crate::late::LateBook;
 use crate::machine::{Action, ExpertMachine, Mode, PanelNote, QueryIn};
+use crate::page_member::{PageApart, PageLink};
 use alfd_demonstrators::demo_log::{self, DemoLog};
 use alfd_demonstrators::registry;
 
@@ -118,11 +119,13 @@ fn expert(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     let wire = args.process.connect(me, schema)?;
     let session = Session::join(&wire, Doorbell::Expert, runtime.handshake_timeout())?;
     let core = expert_core(args, cfg, obs_dim, actions)?;
-    // A person answers on the page: the expert, or one of several.
-    let page = match matches!(source, Source::Person) || person_in(cfg).is_some() {
-        true => Some(start_page(args, runtime.human_port, cfg, actions, &core)?),
-        false => None,
-    };
+    let page = page(
+        args,
+        (cfg, &name, &source),
+        (me, schema),
+        runtime,
+        (actions, &core),
+    )?;
     let mut machine = ExpertMachine::new(
         args.generation,
         &name,
@@ -309,8 +312,9 @@ fn source(
     })
 }
 
-/// The experts of `[[experts]]` and the panel that routes the queries among them. Each expert but
-/// a person answers from a process of its own that stops with this one, named
+/// The experts of `[[experts]]` and the panel that routes the queries among them. Each expert
+/// answers from a process of its own that stops with this one (a person's page: `page_apart`),
+/// named
 /// `expert-<generation>-<i>` (its service `remote/<that name>`, its log
 /// RUN_DIR/adapter-<that name>.log): a built-in one from `alfd-expert --member i`, an external
 /// one (`python:`, `sb3:`) from a Python adapter. This process supervises them: one whose
@@ -356,6 +360,63 @@ fn panel_source(
     })))
 }
 
+/// The page a person answers on: the expert's (served here), or one of several experts' (served
+/// by a process of its own); `None` without a person.
+fn page(
+    args: &Args,
+    (cfg, name, source): (&alfd_common::config::ExperimentConfig, &str, &Source),
+    (me, schema): (Process, u32),
+    runtime: &alfd_harness::RuntimeConfig,
+    (actions, core): (usize, &ExpertCore),
+) -> alfd_harness::Result<Option<PageLink>> {
+    Ok(match (source, person_in(cfg)) {
+        (Source::Person, _) => Some(PageLink::Here(start_page(
+            args,
+            runtime.human_port,
+            cfg,
+            actions,
+            core,
+        )?)),
+        (_, Some(i)) => Some(PageLink::Apart(Box::new(page_apart(
+            args,
+            (name, i),
+            (me, schema),
+            runtime,
+        )?))),
+        _ => None,
+    })
+}
+
+/// The page of the person at place `i` of `[[experts]]` (`joined`: the experts' joined name), in
+/// a process of its own, `expert-<generation>-<i>` as every member (its log
+/// RUN_DIR/adapter-<that name>.log), started again under `--max-restarts` if it ends.
+fn page_apart(
+    args: &Args,
+    (joined, i): (&str, usize),
+    (me, schema): (Process, u32),
+    runtime: &alfd_harness::RuntimeConfig,
+) -> alfd_harness::Result<PageApart> {
+    let program = std::env::current_exe().what(|| "cannot find alfd-expert itself".to_owned())?;
+    let name = crate::member::member_name(args.generation, i);
+    let log = args.process.run_dir.join(format!("adapter-{name}.log"));
+    let (process, joined, generation) = (args.process.clone(), joined.to_owned(), args.generation);
+    let start: crate::page_member::Start = Box::new(move || {
+        let member = (joined.as_str(), generation, i);
+        let adapter = Adapter::member(&program, &process, member, &name, &log)?;
+        crate::page_member::connect(adapter, &process.run_id, me, schema)
+    });
+    PageApart::start(
+        start,
+        &args.process.run_id,
+        runtime.max_restarts,
+        PAGE_SYNC_TIMEOUT,
+    )
+}
+
+/// How long a sync with a person's page in a process of its own may take (it is answered at
+/// once; a paused page process holds the expert up this long).
+const PAGE_SYNC_TIMEOUT: Duration = Duration::from_millis(500);
+
 /// Where a person (`human`) is among `cfg`'s several experts, if they are.
 fn person_in(cfg: &alfd_common::config::ExperimentConfig) -> Option<usize> {
     cfg.experts.iter().position(|e| e.name == HUMAN)
@@ -374,30 +435,17 @@ fn start_page(
     let page = HumanPage::start(
         port,
         PageState {
-            env: env.to_string(),
-            actions: human::action_labels(env, actions),
-            active: false,
             budget_total: core.budget().total(),
             budget_left: core.budget().remaining(),
             // The demonstrations in this model (with refits in the background, possibly fewer
             // than recorded): the actors start shaping at `shaping.min_demos` of them.
             demos: core.model_run_demos(),
-            waiting: 0,
-            query: None,
-            answered: 0,
-            declined: 0,
-            version: 0,
+            ..PageState::blank(env, actions)
         },
     )
     .map_err(|e| BadInput(e.to_string()))?;
     info!(addr = %page.addr(), "the human expert's page is served (its address with the token: the run directory's human-page file)");
-    alfd_harness::write_private(
-        &args
-            .process
-            .run_dir
-            .join(human::human_page_file(args.generation)),
-        format!("{}\n", page.url()).as_bytes(),
-    )?;
+    human::write_address(&args.process.run_dir, args.generation, &page)?;
     Ok(page)
 }
 
@@ -414,7 +462,7 @@ struct Shell<'w> {
     progress: alfd_wire::Sender<'w, Progress>,
     log: Option<DemoLog>,
     source: Source,
-    page: Option<HumanPage>,
+    page: Option<PageLink>,
     demos_path: PathBuf,
     /// Several experts' quality as the run sees it, a row per answer.
     experts_path: PathBuf,
@@ -544,7 +592,8 @@ impl<'w> Shell<'w> {
 
     /// The queries whose actors stopped waiting, the person's decisions, and the page's state.
     fn poll_page(&mut self, m: &mut Machine<'w>) -> alfd_harness::Result<()> {
-        let Some(decisions) = self.page.as_ref().map(HumanPage::decisions) else {
+        let now = Instant::now();
+        let Some(decisions) = self.page.as_mut().map(|p| p.decisions(now)).transpose()? else {
             return Ok(());
         };
         // The actors that gave up waiting (their timeout) are no longer shown, nor answered.
@@ -564,10 +613,9 @@ impl<'w> Shell<'w> {
             }
             self.apply(m, answered)?;
         }
-        let page = self.page.as_ref().expect("checked above");
-        page.set_waiting(&m.waiting());
+        let page = self.page.as_mut().expect("checked above");
         let (core, c) = (m.core(), m.counts());
-        page.update(|s| {
+        page.show(&m.waiting(), |s| {
             s.active = m.mode() == Mode::Active;
             s.budget_left = core.budget().remaining();
             s.budget_total = core.budget().total();

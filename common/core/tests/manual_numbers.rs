@@ -586,8 +586,13 @@ fn every_whole_number_of_10_or_more_in_a_section_citing_results_is_in_the_files_
 /// Settings, sizes, limits and versions quoted as whole numbers of 10 or more or with one decimal
 /// in sections that cite no results file: the document and the words around the number, as
 /// written.
-const UNCITED_SETTINGS: [(&str, &str); 43] = [
+const UNCITED_SETTINGS: [(&str, &str); 45] = [
     ("README.md", "Apache License 2.0"),
+    (
+        "docs/src/experts.md",
+        "whenever that changes and every 50 ms",
+    ),
+    ("docs/src/experts.md", "states of at most 53 values"),
     ("EXPERIMENTS.md", "margin 0.8)"),
     ("EXPERIMENTS.md", "KRR model of them (λ = 0.5)"),
     ("docs/src/configuration.md", "(sections 5.1.2, 5.3)"),

@@ -354,9 +354,9 @@ pub enum Elsewhere<'a> {
     BuiltIn,
 }
 
-/// [`panel`] with every expert but a person in a process of its own: each built-in and external
-/// expert is checked here and then `elsewhere(i, what)` starts it and returns the demonstrator
-/// that asks it.
+/// [`panel`] with every expert in a process of its own: each built-in and external expert is
+/// checked here and then `elsewhere(i, what)` starts it and returns the demonstrator that asks
+/// it; a person is a [`PersonSlot`] (the caller starts the process of their page).
 pub fn panel_apart(
     cfg: &alfd_common::config::ExperimentConfig,
     people: People,
@@ -381,8 +381,8 @@ fn assemble(
             if people == People::Refused {
                 return Err(refuse(
                     &e.name,
-                    "(a person) answers among several experts in `alfd run` only, where its \
-                     expert process serves their page",
+                    "(a person) answers among several experts in `alfd run` only, where a \
+                     process of its own serves their page",
                 )
                 .into());
             }

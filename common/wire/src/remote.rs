@@ -67,6 +67,10 @@ pub mod remote_kind {
     pub const CLOSE: u32 = 6;
     /// Demonstrator: the action at observation `values`; the answer's `action`.
     pub const ACT: u32 = 7;
+    /// A person's page in a process of its own: what the page shows, in `values`; the answer
+    /// carries the person's oldest decision not yet delivered, if any (the expert's
+    /// `human::link` module has the layout).
+    pub const PAGE: u32 = 8;
 }
 
 /// `status` of a [`RemoteResponse`].

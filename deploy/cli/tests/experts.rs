@@ -238,7 +238,7 @@ const PUMP: &str = "python:alfd_examples:acrobot_pump";
 
 /// The pids of the processes whose command line (its words joined by spaces) holds every one of
 /// `needles`.
-fn processes_with(needles: &[&str]) -> Vec<u32> {
+pub(crate) fn processes_with(needles: &[&str]) -> Vec<u32> {
     std::fs::read_dir("/proc")
         .unwrap()
         .flatten()
@@ -252,7 +252,7 @@ fn processes_with(needles: &[&str]) -> Vec<u32> {
         .collect()
 }
 
-fn kill(pid: u32) {
+pub(crate) fn kill(pid: u32) {
     assert!(std::process::Command::new("kill")
         .args(["-KILL", &pid.to_string()])
         .status()

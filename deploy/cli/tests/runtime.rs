@@ -216,14 +216,16 @@ fn refits_in_the_background_answer_every_query_and_the_models_still_shape() {
     let _time = timed!();
     let out = tmp("background-refits");
     // The budget is spent in the first episode, and a background refit (at nice 10) may wait
-    // for a core while other tests run: the run goes on long enough after it (300 episodes, a
-    // few thousand steps) for its model to be published and read.
+    // for a core while other tests run: the run goes on long enough after it (1000 episodes,
+    // about 25,000 steps: two seconds or more; 300 episodes, under a second, were seen to end
+    // before the model came with two busy loops beside the tests) for its model to be
+    // published and read.
     let o = run(
         &out,
         1,
         &[
             "--refit=background",
-            "episodes=300",
+            "episodes=1000",
             "budget.total=20",
             "query.rule=first",
         ],

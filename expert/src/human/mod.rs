@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 
 // The page's server (axum), behind the `page` feature; without it, `HumanPage::start` says how
 // to build it.
+pub mod link;
 #[cfg(feature = "page")]
 mod server;
 #[cfg(not(feature = "page"))]
@@ -86,6 +87,38 @@ pub struct PageState {
     pub version: u64,
 }
 
+impl PageState {
+    /// The page of `env` with `actions` actions, standing by, before anything is known.
+    pub fn blank(env: &str, actions: usize) -> Self {
+        Self {
+            env: env.to_owned(),
+            actions: action_labels(env, actions),
+            active: false,
+            budget_total: 0,
+            budget_left: 0,
+            demos: 0,
+            waiting: 0,
+            query: None,
+            answered: 0,
+            declined: 0,
+            version: 0,
+        }
+    }
+}
+
+/// Writes the address of `page` (with its token) to the run directory's human-page file of
+/// `generation`, which only its owner can read.
+pub fn write_address(
+    run_dir: &std::path::Path,
+    generation: u16,
+    page: &HumanPage,
+) -> alfd_harness::Result<()> {
+    alfd_harness::write_private(
+        &run_dir.join(human_page_file(generation)),
+        format!("{}\n", page.url()).as_bytes(),
+    )
+}
+
 /// What the person decided about a query: an action, or `None` (declined).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Decision {
@@ -140,20 +173,9 @@ mod tests {
     fn a_port_in_use_is_refused_naming_it() {
         let held = std::net::TcpListener::bind((Ipv4Addr::LOCALHOST, 0)).unwrap();
         let port = held.local_addr().unwrap().port();
-        let state = PageState {
-            env: "cartpole".into(),
-            actions: action_labels("cartpole", 2),
-            active: false,
-            budget_total: 1,
-            budget_left: 1,
-            demos: 0,
-            waiting: 0,
-            query: None,
-            answered: 0,
-            declined: 0,
-            version: 0,
-        };
-        let e = HumanPage::start(port, state).unwrap_err().to_string();
+        let e = HumanPage::start(port, PageState::blank("cartpole", 2))
+            .unwrap_err()
+            .to_string();
         assert!(
             e.starts_with(&format!(
                 "cannot serve the human expert's page on 127.0.0.1:{port}"

@@ -141,6 +141,15 @@ impl HumanPage {
         });
     }
 
+    /// Shows what a sync from the expert process says (a page in a process of its own): the
+    /// oldest waiting query is the only one the person can decide.
+    pub fn show(&self, sync: &super::link::PageSync) {
+        if let Ok(mut ids) = self.shared.waiting_ids.lock() {
+            *ids = sync.query.iter().map(|q| q.id).collect();
+        }
+        self.update(|s| sync.apply(s));
+    }
+
     /// The person's decisions since the last call.
     pub fn decisions(&self) -> Vec<Decision> {
         self.decisions.try_iter().collect()

@@ -33,6 +33,10 @@ impl HumanPage {
         match self.never {}
     }
 
+    pub fn show(&self, _sync: &super::link::PageSync) {
+        match self.never {}
+    }
+
     pub fn decisions(&self) -> Vec<Decision> {
         match self.never {}
     }

@@ -19,8 +19,8 @@ pub enum Target {
     /// again.
     Host,
     /// The process of one of several experts (`[[experts]]`, by its place; a built-in one's
-    /// `alfd-expert --member` or an external one's adapter): killed or paused, the panel asks
-    /// the others.
+    /// or a person's page's `alfd-expert --member`, or an external one's adapter): killed or
+    /// paused, the panel asks the others (a killed one is started again).
     Member(u16),
 }
 

@@ -217,13 +217,12 @@ pub fn run(args: ChaosArgs) -> anyhow::Result<()> {
     report::report(&chaos, ended)
 }
 
-/// The places in `[[experts]]` of the experts that answer from a process of their own: every
-/// one but a person (a built-in one from `alfd-expert --member`, an external one from a Python
-/// adapter).
+/// The places in `[[experts]]` of the experts, each of which answers from a process of its own
+/// (a built-in one and a person's page from `alfd-expert --member`, an external one from a
+/// Python adapter).
 fn apart_members(cfg: Option<&alfd_common::config::ExperimentConfig>) -> Vec<u16> {
     let Some(cfg) = cfg else { return Vec::new() };
     (0..cfg.experts.len())
-        .filter(|&i| cfg.experts[i].name != alfd_expert::human::HUMAN)
         .filter_map(|i| u16::try_from(i).ok())
         .collect()
 }
