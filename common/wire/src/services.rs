@@ -439,11 +439,7 @@ impl Wire {
             .buffer_size(2)
             .create()
             .map_err(transport("create a subscriber on", "demo-model"))?;
-        Ok(DemoModelReceiver {
-            wire: self,
-            port,
-            held: std::cell::Cell::new(None),
-        })
+        Ok(DemoModelReceiver { wire: self, port })
     }
 
     /// Actor side of `query`, its requests sized for states of `obs_dim` values (a larger one

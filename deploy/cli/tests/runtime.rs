@@ -215,18 +215,19 @@ fn a_small_run_with_two_actors_fills_its_run_directory() {
 fn refits_in_the_background_answer_every_query_and_the_models_still_shape() {
     let _time = timed!();
     let out = tmp("background-refits");
-    // The budget is spent in the first episode, and a background refit (at nice 10) may wait
-    // for a core while other tests run: the run goes on long enough after it (1000 episodes,
-    // about 25,000 steps: two seconds or more; 300 episodes, under a second, were seen to end
-    // before the model came with two busy loops beside the tests) for its model to be
-    // published and read.
+    // The budget is spent in the first 20 steps, and a background refit (at nice 10) may wait
+    // for a core while other tests run. Eq. 4's shaping stops at twice the last
+    // demonstration's step by default, before a late model comes; at 1000 times it goes on
+    // through the whole run (300 episodes, a few thousand steps), so that a model published
+    // late still shapes.
     let o = run(
         &out,
         1,
         &[
             "--refit=background",
-            "episodes=1000",
+            "episodes=300",
             "budget.total=20",
+            "shaping.stop_multiple=1000",
             "query.rule=first",
         ],
     );
