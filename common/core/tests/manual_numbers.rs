@@ -7,15 +7,15 @@
 //! - an interval quoted in whole numbers ("−136 [−147, −127]"), as an interval of the file
 //!   rounded to integers, and a count ("15 of 30"), as "15 of 30" or "15/30".
 //!
-//! A number with one decimal, and a whole number of 10 or more, is checked only in a section
-//! that cites results files (settings listed in `NOT_RESULTS_ONE_DECIMAL` and
+//! A number with one decimal, and a whole number (1 or more in absolute value), is checked only
+//! in a section that cites results files (settings listed in `NOT_RESULTS_ONE_DECIMAL` and
 //! `NOT_RESULTS_WHOLE`): every such value from −200 to 100, and most whole numbers, occur in some
 //! results file, so a lookup in all of them could not fail. A section that cites none quotes no
 //! whole number of 10 or more, nor one with one decimal, but the settings listed in
-//! `UNCITED_SETTINGS`. Ordinals ("26th"), sizes ("15×15"), exponents ("1e-30") and names
-//! ("AVX-512") are not results; single digits are not checked. A whole number below 100 is in
-//! most results files somewhere, so its lookup catches a number no cited file holds, not one
-//! that holds it in another place. Code spans (`beta2 = 0.999`) are settings, not results, and
+//! `UNCITED_SETTINGS`; its single digits ("2 actors", "3 actions") are not checked. Ordinals
+//! ("26th"), sizes ("15×15"), exponents ("1e-30"), names ("AVX-512") and references ("figure
+//! 6", "eq. 4") are not results. A whole number below 100 is in most results files somewhere,
+//! so its lookup catches a number no cited file holds, not one that holds it in another place. Code spans (`beta2 = 0.999`) are settings, not results, and
 //! are skipped; so are the generated parts and code blocks, which `alfd docs --check` keeps
 //! equal to their sources.
 
@@ -453,11 +453,23 @@ fn every_number_with_one_decimal_in_a_section_citing_results_is_in_the_files_it_
     );
 }
 
-/// The whole numbers of `text` of 10 or more (in absolute value) that read as results: not
+/// The whole numbers of `text` of 10 or more (in absolute value) that read as results (see
+/// [`wholes_from`]).
+fn large_wholes(text: &str) -> Vec<String> {
+    wholes_from(text, 10.0)
+}
+
+/// The whole numbers of `text` other than 0 that read as results (see [`wholes_from`]).
+fn nonzero_wholes(text: &str) -> Vec<String> {
+    wholes_from(text, 1.0)
+}
+
+/// The whole numbers of `text` of `least` or more (in absolute value) that read as results: not
 /// part of a decimal, a year, a range ("seeds 1000-1009"), a compound ("a 10,000-transition
 /// buffer"), a setting ("B = 300"), a count ("15 of 30", checked on its own), an ordinal, a size,
-/// an exponent or a name ("AVX-512"); normalised (`-140`, `2833`).
-fn large_wholes(text: &str) -> Vec<String> {
+/// an exponent's mantissa or power, a name ("AVX-512") or a reference ("figure 6", "eq. 4");
+/// normalised (`-140`, `2833`).
+fn wholes_from(text: &str, least: f64) -> Vec<String> {
     let body: String = text
         .lines()
         .filter(|l| !l.starts_with('#'))
@@ -485,6 +497,14 @@ fn large_wholes(text: &str) -> Vec<String> {
         let size = after(e, 1) == "×" || before(s, 1) == "×";
         let lead = before(s, 2);
         let named = lead.starts_with(char::is_alphabetic) && (lead.ends_with(['-', '+', '(']));
+        let exponent = after(e, 2).starts_with('e')
+            && after(e, 2).ends_with(|c: char| c.is_ascii_digit() || "-+".contains(c));
+        let word_before = before(s, 14)
+            .split_whitespace()
+            .last()
+            .map(|w| w.trim_end_matches('.').to_lowercase());
+        let reference =
+            before(s, 1) == " " && word_before.is_some_and(|w| REFERENCES.contains(&w.as_str()));
         let skipped = [
             hyphen_after,
             range_end,
@@ -493,14 +513,29 @@ fn large_wholes(text: &str) -> Vec<String> {
             ordinal,
             size,
             named,
+            exponent,
+            reference,
         ];
-        if decimal || year || v.abs() < 10.0 || skipped.contains(&true) {
+        if decimal || year || v.abs() < least || skipped.contains(&true) {
             continue;
         }
         out.push(format!("{}", v as i64));
     }
     out
 }
+
+/// The words before a number that make it a reference, not a result ("figure 6", "eq. 4").
+const REFERENCES: [&str; 9] = [
+    "figure",
+    "fig",
+    "eq",
+    "algorithm",
+    "section",
+    "sections",
+    "table",
+    "chapter",
+    "line",
+];
 
 /// Every number of `text` rounded to a whole one (half away from zero): each field between
 /// commas, and each number as prose writes it ("2,048").
@@ -516,10 +551,11 @@ fn wholes_of(text: &str) -> HashSet<String> {
         .collect()
 }
 
-/// Settings and design counts quoted as whole numbers of 10 or more in sections that cite
-/// results files: the document and the words around the number, as written (line breaks as
-/// spaces).
-const NOT_RESULTS_WHOLE: [(&str, &str); 33] = [
+/// Settings and design counts quoted as whole numbers in sections that cite results files: the
+/// document and the words around the number, as written (line breaks as spaces).
+const NOT_RESULTS_WHOLE: [(&str, &str); 35] = [
+    ("EXPERIMENTS.md", "2-step returns; 6 heads; the MSE"),
+    ("docs/src/across-hosts.md", "has been silent for 5 s"),
     ("README.md", "expert, 50,000 environment steps"),
     ("README.md", "the full 1000 steps"),
     ("docs/src/install.md", "expert, 50,000 environment steps"),
@@ -559,25 +595,23 @@ const NOT_RESULTS_WHOLE: [(&str, &str); 33] = [
 ];
 
 #[test]
-fn every_whole_number_of_10_or_more_in_a_section_citing_results_is_in_the_files_it_cites() {
-    assert_eq!(
-        large_wholes(
-            "at −140, 2,833 and 12 steps in 2026, seeds 1000-1009, a 10,000-step run, B = 300, \
-             15 of 300 and 120.5, the 26th, 15×15, below 1e-30, AVX-512, DeepSea(50) and 7"
-        ),
-        ["-140", "2833", "12"]
-    );
+fn every_whole_number_in_a_section_citing_results_is_in_the_files_it_cites() {
+    let sample = "at −140, 2,833 and 12 steps in 2026, seeds 1000-1009, a 10,000-step run, \
+                  B = 300, 15 of 300 and 120.5, the 26th, 15×15, below 1e-30, AVX-512, \
+                  DeepSea(50), figure 6, eq. 4, 0 and 7";
+    assert_eq!(nonzero_wholes(sample), ["-140", "2833", "12", "7"]);
+    assert_eq!(large_wholes(sample), ["-140", "2833", "12"]);
     assert!(
         wholes_of("x,-140.4,2833\n").is_superset(&HashSet::from(["-140".into(), "2833".into()]))
     );
-    let (quoted, _, missing) = unfound_in(&large_wholes, &wholes_of, true, &NOT_RESULTS_WHOLE);
+    let (quoted, _, missing) = unfound_in(&nonzero_wholes, &wholes_of, true, &NOT_RESULTS_WHOLE);
     assert!(
         quoted >= 100,
         "only {quoted} numbers read: the reader is broken"
     );
     assert!(
         missing.is_empty(),
-        "whole numbers of 10 or more in prose that no results file their section cites holds \
+        "whole numbers in prose that no results file their section cites holds \
          (a setting goes in NOT_RESULTS_WHOLE):\n{}",
         missing.join("\n")
     );
