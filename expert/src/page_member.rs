@@ -61,6 +61,11 @@ pub fn serve(args: &Args, member: usize, schema: u32) -> alfd_harness::Result<()
     Ok(())
 }
 
+/// How long the expert process leaves a page that did not answer a sync (its process paused,
+/// say) before it syncs again: each sync it does not answer holds the expert process up for the
+/// sync's timeout.
+pub const QUIET_AFTER_FAILURE: Duration = Duration::from_secs(2);
+
 /// Starts the page's process and connects to it.
 pub type Start = Box<dyn FnMut() -> alfd_harness::Result<(Adapter, RemoteClient)>>;
 
@@ -73,6 +78,8 @@ pub struct PageApart {
     restarts: Restarts<()>,
     shown: PageSync,
     sent: Option<(PageSync, Instant)>,
+    /// After a sync the page did not answer: no sync until then.
+    quiet_until: Option<Instant>,
     timeout: Duration,
     run_id: String,
 }
@@ -94,6 +101,7 @@ impl PageApart {
             restarts: Restarts::new(max_restarts),
             shown: PageSync::default(),
             sent: None,
+            quiet_until: None,
             timeout,
             run_id: run_id.to_owned(),
         })
@@ -129,7 +137,7 @@ impl PageApart {
     }
 
     fn due(&self, now: Instant) -> bool {
-        sync_due(self.sent.as_ref(), &self.shown, now)
+        sync_due(self.sent.as_ref(), self.quiet_until, &self.shown, now)
     }
 
     /// One sync: the page's oldest undelivered decision, if any.
@@ -139,10 +147,19 @@ impl PageApart {
         self.sent = Some((self.shown.clone(), now));
         match self.client.call(request, self.timeout) {
             Ok(r) => Ok(link::decision(&r)),
-            Err(e) => {
+            Err(e) if self.adapter.exited().is_some() => {
                 warn!("the person's page did not answer a sync: {e}");
-                self.sent = None;
                 self.revive()?;
+                self.sent = None;
+                Ok(None)
+            }
+            Err(e) => {
+                warn!(
+                    "the person's page did not answer a sync: {e}; the next in {} s",
+                    QUIET_AFTER_FAILURE.as_secs()
+                );
+                self.sent = None;
+                self.quiet_until = Some(now + QUIET_AFTER_FAILURE);
                 Ok(None)
             }
         }
@@ -176,9 +193,16 @@ impl PageApart {
 }
 
 /// Whether to sync with the page showing `shown` at `now`, the last sync `sent` (what it showed,
-/// and when; `None`: none yet, or it failed): when the page changed, or [`SYNC_EVERY`] passed.
-fn sync_due(sent: Option<&(PageSync, Instant)>, shown: &PageSync, now: Instant) -> bool {
-    sent.is_none_or(|(was, at)| was != shown || now.duration_since(*at) >= SYNC_EVERY)
+/// and when; `None`: none yet, or it failed): when the page changed, or [`SYNC_EVERY`] passed,
+/// unless it is before `quiet_until` (a sync failed).
+fn sync_due(
+    sent: Option<&(PageSync, Instant)>,
+    quiet_until: Option<Instant>,
+    shown: &PageSync,
+    now: Instant,
+) -> bool {
+    quiet_until.is_none_or(|t| now >= t)
+        && sent.is_none_or(|(was, at)| was != shown || now.duration_since(*at) >= SYNC_EVERY)
 }
 
 /// Connects to the page process `adapter`, started already, as `me`.
@@ -232,18 +256,22 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_sync_is_due_first_on_a_change_and_every_sync_period() {
+    fn a_sync_is_due_first_on_a_change_and_every_sync_period_but_not_soon_after_a_failure() {
         let t0 = Instant::now();
         let shown = PageSync::default();
-        assert!(sync_due(None, &shown, t0));
+        assert!(sync_due(None, None, &shown, t0));
         let sent = (shown.clone(), t0);
         let later = |ms| t0 + Duration::from_millis(ms);
-        assert!(!sync_due(Some(&sent), &shown, later(10)));
-        assert!(sync_due(Some(&sent), &shown, t0 + SYNC_EVERY));
+        assert!(!sync_due(Some(&sent), None, &shown, later(10)));
+        assert!(sync_due(Some(&sent), None, &shown, t0 + SYNC_EVERY));
         let changed = PageSync {
             waiting: 1,
             ..PageSync::default()
         };
-        assert!(sync_due(Some(&sent), &changed, later(1)));
+        assert!(sync_due(Some(&sent), None, &changed, later(1)));
+        // After a sync the page did not answer: nothing until the quiet time is over.
+        let quiet = Some(t0 + QUIET_AFTER_FAILURE);
+        assert!(!sync_due(None, quiet, &changed, later(1000)));
+        assert!(sync_due(None, quiet, &changed, t0 + QUIET_AFTER_FAILURE));
     }
 }

@@ -414,8 +414,9 @@ fn page_apart(
 }
 
 /// How long a sync with a person's page in a process of its own may take (it is answered at
-/// once; a paused page process holds the expert up this long).
-const PAGE_SYNC_TIMEOUT: Duration = Duration::from_millis(500);
+/// once; a paused page process holds the expert up this long, every
+/// `page_member::QUIET_AFTER_FAILURE`).
+const PAGE_SYNC_TIMEOUT: Duration = Duration::from_millis(200);
 
 /// Where a person (`human`) is among `cfg`'s several experts, if they are.
 fn person_in(cfg: &alfd_common::config::ExperimentConfig) -> Option<usize> {

@@ -611,8 +611,12 @@ fn every_whole_number_in_a_section_citing_results_is_in_the_files_it_cites() {
 /// Settings, sizes, limits, versions and formulas quoted as whole numbers or with one decimal in
 /// sections that cite no results file: the document and the words around the number, as
 /// written.
-const UNCITED_SETTINGS: [(&str, &str); 51] = [
+const UNCITED_SETTINGS: [(&str, &str); 52] = [
     ("README.md", "Apache License 2.0"),
+    (
+        "docs/src/experts.md",
+        "within 200 ms (its process paused, say) is not synced again for 2 s",
+    ),
     ("docs/src/experts.md", "300000, 5 minutes"),
     ("docs/src/experts.md", "b = (K q - 1) / (K - 1)"),
     ("docs/src/experts.md", "b = (K a - 1) / (K - 1)"),
