@@ -73,6 +73,47 @@ fn start_run_with(
     }
 }
 
+#[test]
+fn a_paused_page_of_a_person_among_several_experts_is_synced_seldom_and_the_others_answer() {
+    let _time = timed!();
+    let out = tmp("human-paused");
+    // Six answers of the script and six queries of the person, each given up after 0.5 s: the
+    // run lasts longer than the pause below (2000 short episodes besides).
+    let config = cartpole_config(&out, 6, 2000);
+    // Each in turn: the person (whose queries time out, nobody answering) and the script.
+    let mut text_of = std::fs::read_to_string(&config).unwrap();
+    text_of = text_of.replace("name = \"cartpole-perfect\"\n", "");
+    text_of.push_str(
+        "route = \"round-robin\"\ndouble_ask = 0.0\n\
+         [[experts]]\nname = \"human\"\ncost = 10\n\
+         [[experts]]\nname = \"cartpole-perfect\"\ncost = 1\n",
+    );
+    std::fs::write(&config, text_of).unwrap();
+    let run_dir = out.join("run");
+    let (mut run, _) = start_run_with(&config, &run_dir, 1, &["--human-query-timeout-ms=500"]);
+    let run_arg = format!("--run-dir={}", run_dir.display());
+    let pids = crate::experts::processes_with(&["--member=0", &run_arg]);
+    assert_eq!(pids.len(), 1, "{pids:?}");
+    // Paused for 3 s: without a pause between failed syncs (200 ms each) there would be about
+    // 15 of them; with 2 s between, at most 3.
+    crate::runtime::signal("STOP", pids[0]);
+    std::thread::sleep(Duration::from_secs(3));
+    crate::runtime::signal("CONT", pids[0]);
+    let o = run.0.take().unwrap().wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let log = std::fs::read_to_string(run_dir.join("expert-1.log")).unwrap();
+    let failed = log
+        .matches("the person's page did not answer a sync")
+        .count();
+    assert!((1..=3).contains(&failed), "{failed} failed syncs:\n{log}");
+    // The page's process was not started again: paused is not gone.
+    assert!(!log.contains("starting it again"), "{log}");
+    // The script answered its turns; the person none.
+    let demos = std::fs::read_to_string(run_dir.join("demos.jsonl")).unwrap();
+    let script = demos.matches("\"expert\":\"cartpole-perfect\"").count();
+    assert_eq!((script, demos.lines().count()), (6, 6), "{demos}");
+}
+
 /// The page's address once the human-page file names another than `old`.
 fn new_page_addr(run_dir: &Path, old: &str) -> String {
     let start = Instant::now();
