@@ -9,7 +9,7 @@
 use std::time::Duration;
 
 use alfd_common::agent::Demonstrator;
-use alfd_common::restarts::{Ended, Restarts, Verdict};
+use alfd_common::restarts::{Ended, GiveUp, Restarts, Verdict};
 use alfd_demonstrators::registry;
 use alfd_harness::python::AdapterDemonstrator;
 use alfd_wire::{remote_kind, RemoteRequest, RemoteResponse, RemoteServer};
@@ -116,21 +116,39 @@ impl Supervised {
 
     /// Starts the process again if it ended and the restart rule allows; why not otherwise.
     fn revive(&mut self) -> Result<(), String> {
-        let Some(code) = self.expert.exited() else {
-            return Ok(());
-        };
-        match self.restarts.ended(&(), Ended::of(code, false)) {
-            Verdict::Restart { nth } => {
-                warn!(expert = %self.name, nth, ?code, "its process ended: starting it again");
-                // What the dead process held (its server of the service) goes first.
-                let _ = alfd_wire::cleanup_dead_nodes(&self.run_id);
+        let exited = self.expert.exited();
+        match restart_due(&mut self.restarts, exited, &self.run_id) {
+            Ok(None) => Ok(()),
+            Ok(Some(nth)) => {
+                warn!(expert = %self.name, nth, code = ?exited.flatten(), "its process ended: starting it again");
                 self.expert = (self.start)()
                     .map_err(|e| format!("{} cannot be started again: {e}", self.name))?;
                 Ok(())
             }
-            Verdict::GiveUp(why) => Err(format!("{} {why}", self.name)),
-            Verdict::Done => Ok(()),
+            Err(why) => Err(format!("{} {why}", self.name)),
         }
+    }
+}
+
+/// Whether a member's process, `exited` as [`alfd_harness::python::Adapter::exited`] says, is
+/// to be started again under `restarts`: `Ok(None)` while it runs (or once it finished),
+/// `Ok(Some(nth))` for its `nth` restart (what the dead process held in the run's shared memory,
+/// its server of the service, is removed first), or why not.
+pub(crate) fn restart_due(
+    restarts: &mut Restarts<()>,
+    exited: Option<Option<i32>>,
+    run_id: &str,
+) -> Result<Option<u32>, GiveUp> {
+    let Some(code) = exited else {
+        return Ok(None);
+    };
+    match restarts.ended(&(), Ended::of(code, false)) {
+        Verdict::Restart { nth } => {
+            let _ = alfd_wire::cleanup_dead_nodes(run_id);
+            Ok(Some(nth))
+        }
+        Verdict::GiveUp(why) => Err(why),
+        Verdict::Done => Ok(None),
     }
 }
 

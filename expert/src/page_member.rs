@@ -9,7 +9,7 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use alfd_common::restarts::{Ended, GiveUp, Restarts, Verdict};
+use alfd_common::restarts::{GiveUp, Restarts};
 use alfd_harness::python::Adapter;
 use alfd_harness::{BadInput, HarnessError};
 use alfd_wire::{Process, RemoteClient, RemoteServer};
@@ -120,8 +120,8 @@ impl PageApart {
 
     /// The person's decisions that arrived: syncs while the page changed since the last one,
     /// [`SYNC_EVERY`] passed, or a decision came back. A page that does not answer is logged
-    /// and asked again at the next sync; one whose process ended is started again while the
-    /// restart rule allows, and is an error once it does not.
+    /// and left alone for [`QUIET_AFTER_FAILURE`]; one whose process ended is started again
+    /// while the restart rule allows, and is an error once it does not.
     pub fn decisions(&mut self, now: Instant) -> alfd_harness::Result<Vec<Decision>> {
         let mut out = Vec::new();
         while self.due(now) || !out.is_empty() {
@@ -150,7 +150,6 @@ impl PageApart {
             Err(e) if self.adapter.exited().is_some() => {
                 warn!("the person's page did not answer a sync: {e}");
                 self.revive()?;
-                self.sent = None;
                 Ok(None)
             }
             Err(e) => {
@@ -167,27 +166,24 @@ impl PageApart {
 
     /// Starts the page's process again if it ended and the restart rule allows.
     fn revive(&mut self) -> alfd_harness::Result<()> {
-        let Some(code) = self.adapter.exited() else {
-            return Ok(());
-        };
-        match self.restarts.ended(&(), Ended::of(code, false)) {
-            Verdict::Restart { nth } => {
+        let exited = self.adapter.exited();
+        match crate::member::restart_due(&mut self.restarts, exited, &self.run_id) {
+            Ok(None) => Ok(()),
+            Ok(Some(nth)) => {
+                let code = exited.flatten();
                 warn!(
                     nth,
                     ?code,
                     "the person's page's process ended: starting it again"
                 );
-                // What the dead process held (its server of the service) goes first.
-                let _ = alfd_wire::cleanup_dead_nodes(&self.run_id);
                 (self.adapter, self.client) = (self.start)()?;
                 self.sent = None;
                 Ok(())
             }
-            Verdict::GiveUp(GiveUp::Refused) => {
+            Err(GiveUp::Refused) => {
                 Err(BadInput(format!("the person's page {}", GiveUp::Refused)).into())
             }
-            Verdict::GiveUp(why) => Err(HarnessError::Run(format!("the person's page {why}"))),
-            Verdict::Done => Ok(()),
+            Err(why) => Err(HarnessError::Run(format!("the person's page {why}"))),
         }
     }
 }

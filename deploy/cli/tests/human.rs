@@ -53,16 +53,9 @@ fn start_run_with(
             .spawn()
             .unwrap(),
     ));
-    let file = run_dir.join("human-page-1.txt");
     let start = Instant::now();
     loop {
-        if let Ok(url) = std::fs::read_to_string(&file) {
-            let url = url.trim().to_owned();
-            let addr = url
-                .strip_prefix("http://")
-                .and_then(|u| u.strip_suffix('/'))
-                .unwrap_or_else(|| panic!("not an address: {url}"))
-                .to_owned();
+        if let Some(addr) = page_addr(run_dir) {
             return (run, addr);
         }
         if let Ok(Some(status)) = run.child().try_wait() {
@@ -117,17 +110,24 @@ fn a_paused_page_of_a_person_among_several_experts_is_synced_seldom_and_the_othe
     assert_eq!((script, demos.lines().count()), (6, 6), "{demos}");
 }
 
+/// The page's address (`HOST:PORT/TOKEN`) in the run directory's human-page file of the first
+/// expert generation, once it is written.
+fn page_addr(run_dir: &Path) -> Option<String> {
+    let url = std::fs::read_to_string(run_dir.join("human-page-1.txt")).ok()?;
+    let url = url.trim();
+    let addr = url
+        .strip_prefix("http://")
+        .and_then(|u| u.strip_suffix('/'))
+        .unwrap_or_else(|| panic!("not an address: {url}"));
+    Some(addr.to_owned())
+}
+
 /// The page's address once the human-page file names another than `old`.
 fn new_page_addr(run_dir: &Path, old: &str) -> String {
     let start = Instant::now();
     loop {
-        let url = std::fs::read_to_string(run_dir.join("human-page-1.txt")).unwrap();
-        let addr = url
-            .trim()
-            .trim_start_matches("http://")
-            .trim_end_matches('/');
-        if addr != old && !addr.is_empty() {
-            return addr.to_owned();
+        if let Some(addr) = page_addr(run_dir).filter(|a| a != old) {
+            return addr;
         }
         assert!(start.elapsed() < Duration::from_secs(60), "no new page");
         std::thread::sleep(Duration::from_millis(50));
