@@ -94,7 +94,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     )? {
         return Ok(());
     }
-    let mut progress = wire.progress_sender()?;
+    let mut progress = wire.episode_sender()?;
     let mut actor = GenericActor::new(core, adder, variables);
     let mut eval_env = setup.actor_env(&mut adapter, &args.process, args.actor_id, schema)?;
     let eval_seed = build::eval_seed(cfg);

@@ -228,6 +228,11 @@ pub struct RuntimeSummary {
     /// wrote): `demos` is at least this in a sound run, else the run fails.
     #[serde(default)]
     pub demos_experts_wrote: u64,
+    /// Episode records an actor played that never reached the launcher (each actor's records
+    /// are numbered, so a gap shows): the run counts them played, `episodes.csv` lacks their
+    /// rows. 0 in a sound run.
+    #[serde(default)]
+    pub episodes_lost: u64,
 }
 
 impl RunSummary {
@@ -385,6 +390,7 @@ mod tests {
             demos_refused: 0,
             answers_late: 2,
             demos_experts_wrote: 3,
+            episodes_lost: 0,
         });
         let json = serde_json::to_string(&s).unwrap();
         let v: serde_json::Value = serde_json::from_str(&json).unwrap();

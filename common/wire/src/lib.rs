@@ -102,6 +102,6 @@ pub use remote::{
 pub use remote_server::RemoteServer;
 pub use services::{
     transitions_bytes, weights_bytes, Channel, CHANNELS, CONTROL, CREDITS, DEMO_MODEL, PROGRESS,
-    TRANSITIONS, WEIGHTS,
+    PROGRESS_PATIENCE, TRANSITIONS, WEIGHTS,
 };
 pub use wakeups::{ActorBells, Bell, Doorbell, Waiter, Wake};

@@ -85,10 +85,10 @@ pub const DEMO_MODEL: Channel = Channel {
     safe_overflow: true,
 };
 
-/// Every process's episodes and status to the launcher. A publisher discards what a full buffer
-/// cannot take (a send never blocks an actor), so the buffer holds seconds of the fastest
-/// episodes: with room for 256, one actor playing 2000 CartPole episodes of at most 20 steps
-/// lost 25 of their records, and the launcher waited for them for ever.
+/// Every process's episodes and status to the launcher. An actor's episode records wait for
+/// room in a full buffer (at most [`PROGRESS_PATIENCE`] each), so the launcher falling behind
+/// slows the actors rather than losing their episodes; a status message is dropped by a full
+/// buffer (the next one supersedes it). The launcher drains the buffer every 100 ms or sooner.
 pub const PROGRESS: Channel = Channel {
     name: "progress",
     publishers: MAX_NODES,
@@ -100,6 +100,21 @@ pub const PROGRESS: Channel = Channel {
 
 /// Progress messages the launcher's subscriber holds.
 const PROGRESS_BUFFER: usize = 8192;
+
+/// How long an actor's episode record waits for room in the launcher's full buffer before it
+/// is dropped (the launcher then counts it lost, by the gap in the actor's numbers): a full
+/// buffer of 8192 means a launcher stalled, and an actor must not wait for ever on a launcher
+/// that died.
+pub const PROGRESS_PATIENCE: Duration = Duration::from_secs(2);
+
+/// What an episode record's sender does with a full buffer, `elapsed` into its wait.
+fn episode_backpressure(elapsed: Duration) -> iceoryx2::port::BackpressureAction {
+    if elapsed < PROGRESS_PATIENCE {
+        iceoryx2::port::BackpressureAction::Retry
+    } else {
+        iceoryx2::port::BackpressureAction::DiscardData
+    }
+}
 
 /// The launcher's control (stop, the active expert): only the newest matters.
 pub const CONTROL: Channel = Channel {
@@ -476,7 +491,23 @@ impl Wire {
         Ok(QueryServer { wire: self, port })
     }
 
-    /// Every process's side of `progress`.
+    /// An actor's side of `progress`, for its episode records: a full buffer is waited on (see
+    /// [`PROGRESS_PATIENCE`]).
+    pub fn episode_sender(&self) -> Result<Sender<'_, Progress>> {
+        let port = self
+            .progress_service()?
+            .publisher_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .set_backpressure_handler(|info: &iceoryx2::port::BackpressureInfo| {
+                episode_backpressure(info.elapsed_time)
+            })
+            .create()
+            .map_err(transport("create a publisher on", "progress"))?;
+        Ok(self.sender(port))
+    }
+
+    /// Every process's side of `progress` for status messages (and a bridge's forwarding): a
+    /// full buffer drops the message.
     pub fn progress_sender(&self) -> Result<Sender<'_, Progress>> {
         let port = self
             .progress_service()?
@@ -489,10 +520,15 @@ impl Wire {
 
     /// The launcher's side of `progress`.
     pub fn progress_receiver(&self) -> Result<Receiver<'_, Progress>> {
+        self.progress_receiver_holding(PROGRESS_BUFFER)
+    }
+
+    /// A subscriber to `progress` whose buffer holds `n` messages.
+    pub(crate) fn progress_receiver_holding(&self, n: usize) -> Result<Receiver<'_, Progress>> {
         let port = self
             .progress_service()?
             .subscriber_builder()
-            .buffer_size(PROGRESS_BUFFER)
+            .buffer_size(n)
             .create()
             .map_err(transport("create a subscriber on", "progress"))?;
         Ok(self.receiver(port))

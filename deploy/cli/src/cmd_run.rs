@@ -319,6 +319,18 @@ pub fn finish(plan: &Plan, output: Output) -> anyhow::Result<()> {
             r.demos_refused
         );
     }
+    if let Some(lost) = summary
+        .runtime
+        .as_ref()
+        .map(|r| r.episodes_lost)
+        .filter(|&n| n > 0)
+    {
+        eprintln!(
+            "warning: {lost} episode records never reached the launcher (see the run's log): \
+             the run counted them played, {} lacks their rows",
+            run_dir.join("episodes.csv").display()
+        );
+    }
     if summary.runtime.as_ref().is_some_and(|r| r.interrupted) {
         eprintln!(
             "interrupted: the run was stopped cleanly; its directory is {}",

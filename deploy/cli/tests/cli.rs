@@ -848,6 +848,7 @@ fn the_manual_documents_every_output_column_and_summary_field() {
             demos_refused: 0,
             answers_late: 0,
             demos_experts_wrote: 0,
+            episodes_lost: 0,
         }),
     };
     let json = serde_json::to_value(&summary).unwrap();

@@ -154,9 +154,68 @@ impl EpisodeLog {
     }
 }
 
+/// Which episode records never reached the launcher. An actor's incarnation sends its records
+/// in order, numbered 0, 1, 2… (the progress message's sequence number), and one publisher's
+/// messages arrive in the order sent: a number past the next one expected means the records in
+/// between were lost on the way (an actor retries a full buffer for a while, then drops).
+#[derive(Debug, Default)]
+pub(super) struct Arrivals {
+    /// Per (actor id, incarnation), the sequence number expected next.
+    next: std::collections::HashMap<(u16, u64), u64>,
+    /// Records lost, per actor id and in all.
+    lost_by: std::collections::HashMap<u16, u32>,
+    lost: u64,
+}
+
+impl Arrivals {
+    /// Takes in record `seq` of actor `id`'s `incarnation`; how many records of it before this
+    /// one were lost (0 in a sound run). A number at or below one already seen (a repeat) loses
+    /// nothing.
+    pub(super) fn arrive(&mut self, id: u16, incarnation: u64, seq: u64) -> u64 {
+        let next = self.next.entry((id, incarnation)).or_insert(0);
+        let lost = seq.saturating_sub(*next);
+        *next = (*next).max(seq + 1);
+        if lost > 0 {
+            let by = self.lost_by.entry(id).or_insert(0);
+            *by = by.saturating_add(u32::try_from(lost).unwrap_or(u32::MAX));
+            self.lost += lost;
+        }
+        lost
+    }
+
+    /// Records of actor `id` lost so far (all its incarnations).
+    pub(super) fn lost_by(&self, id: u16) -> u32 {
+        self.lost_by.get(&id).copied().unwrap_or(0)
+    }
+
+    /// Records lost so far, all actors.
+    pub(super) fn lost(&self) -> u64 {
+        self.lost
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_record_whose_number_skips_ahead_counts_those_in_between_lost_per_actor_and_incarnation() {
+        let mut a = Arrivals::default();
+        assert_eq!(a.arrive(0, 1, 0), 0);
+        assert_eq!(a.arrive(0, 1, 1), 0);
+        // Records 2, 3 and 4 of actor 0 never came.
+        assert_eq!(a.arrive(0, 1, 5), 3);
+        assert_eq!(a.arrive(0, 1, 6), 0);
+        // Another actor, and a new incarnation of actor 0, count from 0: a first record
+        // numbered 2 means its first two were lost.
+        assert_eq!(a.arrive(1, 1, 0), 0);
+        assert_eq!(a.arrive(0, 2, 2), 2);
+        // A repeat (or an older number) loses nothing and moves nothing back.
+        assert_eq!(a.arrive(0, 2, 1), 0);
+        assert_eq!(a.arrive(0, 2, 3), 0);
+        assert_eq!((a.lost_by(0), a.lost_by(1), a.lost_by(7)), (5, 0, 0));
+        assert_eq!(a.lost(), 5);
+    }
 
     /// A log on a file that refuses writes (`/dev/full`) until it is swapped for a real one.
     #[test]

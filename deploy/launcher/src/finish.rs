@@ -124,6 +124,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
                 demos_refused: self.hub_counts.0,
                 answers_late: self.answers_late(),
                 demos_experts_wrote: self.demos_experts_wrote,
+                episodes_lost: self.arrivals.lost(),
             }),
         }
     }

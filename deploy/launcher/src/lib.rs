@@ -62,7 +62,7 @@ use tracing::{debug, info, warn};
 
 use alfd_common::restarts::{Ended, Restarts, Verdict};
 use children::{describe, last_error, pin, proc_binary, RateMeter};
-use episodes::{open_episodes, shares, EpisodeLog, Row};
+use episodes::{open_episodes, shares, Arrivals, EpisodeLog, Row};
 use error::{bail, ensure};
 use expert_lifecycle::{Action, Exit, ExpertLifecycle};
 
@@ -327,6 +327,8 @@ struct Launcher<'a, 'w> {
     /// The run's TensorBoard scalars (`RUN_DIR/tb/`).
     board: alfd_harness::tensorboard::Board,
     recorded: u64,
+    /// Episode records that never arrived (their numbers show them).
+    arrivals: Arrivals,
     returns: VecDeque<f64>,
     all_returns: Vec<f64>,
     /// Demonstrations used, as the actors reported them with their episodes (monotone).
@@ -429,6 +431,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
             csv: EpisodeLog::new(csv, plan.run_dir.join("episodes.csv")),
             board: alfd_harness::tensorboard::Board::open(&plan.run_dir, "launcher", &plan.cfg),
             recorded: all_returns.len() as u64,
+            arrivals: Arrivals::default(),
             returns: all_returns.iter().rev().take(20).rev().copied().collect(),
             all_returns,
             demos_used: demos_before,
@@ -574,7 +577,10 @@ impl<'a, 'w> Launcher<'a, 'w> {
             };
             let role = Role::from_u16(p.header.role);
             match (p.kind, role) {
-                (progress_kind::EPISODE, Some(Role::Actor)) => self.record_episode(&p)?,
+                (progress_kind::EPISODE, Some(Role::Actor)) => {
+                    self.note_lost(&p);
+                    self.record_episode(&p)?;
+                }
                 (progress_kind::STATUS, Some(Role::Learner)) => {
                     self.seen.learner_state = p.state;
                     self.seen.learner_env_steps = p.env_steps;
@@ -629,11 +635,31 @@ impl<'a, 'w> Launcher<'a, 'w> {
         }
     }
 
+    /// Counts the records of `p`'s actor that `p`'s number shows lost, and says so: the run
+    /// counts them played (an episode limit is reached without them).
+    fn note_lost(&mut self, p: &Progress) {
+        let (id, seq) = (p.header.id, p.header.seq);
+        let lost = self.arrivals.arrive(id, p.incarnation, seq);
+        if lost > 0 {
+            warn!(
+                actor = id,
+                incarnation = p.incarnation,
+                lost,
+                "episode records lost on the way to the launcher: counted played, not in episodes.csv"
+            );
+        }
+    }
+
+    /// Episodes recorded and episodes whose records were lost.
+    fn accounted(&self) -> u64 {
+        self.recorded + self.arrivals.lost()
+    }
+
     fn record_episode(&mut self, p: &Progress) -> Result<()> {
         let cfg = &self.plan.cfg;
         let episodes_done = cfg
             .episode_limit()
-            .is_some_and(|n| self.recorded >= u64::from(n));
+            .is_some_and(|n| self.accounted() >= u64::from(n));
         // By its own global step, not by when its message comes: the learner's count that ends
         // a step-limited run can arrive before the last episodes within the limit.
         let past_steps = cfg
@@ -704,14 +730,15 @@ impl<'a, 'w> Launcher<'a, 'w> {
 
     fn episodes_left(&self, id: u16) -> Option<u32> {
         let i = usize::from(id);
-        self.quota.map(|q| q[i].saturating_sub(self.recorded_by[i]))
+        let played = self.recorded_by[i].saturating_add(self.arrivals.lost_by(id));
+        self.quota.map(|q| q[i].saturating_sub(played))
     }
 
     /// Whether the run has reached its episode or step limit.
     fn done(&self) -> bool {
         let cfg = &self.plan.cfg;
         cfg.episode_limit()
-            .is_some_and(|n| self.recorded >= u64::from(n))
+            .is_some_and(|n| self.accounted() >= u64::from(n))
             || cfg
                 .step_limit()
                 .is_some_and(|n| self.seen.learner_env_steps >= n)
