@@ -75,6 +75,8 @@ mod stream;
 mod wakeups;
 
 #[cfg(test)]
+mod progress_tests;
+#[cfg(test)]
 mod test_support;
 
 pub use connection::{quiet_transport_logs, run_prefix, validate_run_id, Wire};

@@ -313,6 +313,26 @@ fn clean_earlier_launches(run_ids: &[String], patience: Duration) {
     }
 }
 
+/// The run's progress bar (hidden with `--quiet`): episodes when the run has an episode limit,
+/// else environment steps.
+fn progress_bar(plan: &Plan) -> indicatif::ProgressBar {
+    if !plan.progress {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(match plan.cfg.episode_limit() {
+        Some(n) => u64::from(n),
+        None => plan.cfg.steps,
+    });
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:25}] {pos}/{len} episodes  {msg}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    bar
+}
+
 struct Launcher<'a, 'w> {
     plan: &'a Plan,
     control: Control,
@@ -401,23 +421,7 @@ impl<'a, 'w> Launcher<'a, 'w> {
                     plan.actors,
                 )
             });
-        let bar = if plan.progress {
-            // Episodes when the run has an episode limit, else environment steps.
-            let bar = indicatif::ProgressBar::new(match plan.cfg.episode_limit() {
-                Some(n) => u64::from(n),
-                None => plan.cfg.steps,
-            });
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "{elapsed_precise} [{bar:25}] {pos}/{len} episodes  {msg}",
-                )
-                .expect("valid template")
-                .progress_chars("=> "),
-            );
-            bar
-        } else {
-            indicatif::ProgressBar::hidden()
-        };
+        let bar = progress_bar(plan);
         Ok(Self {
             plan,
             control,
