@@ -132,7 +132,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
     log_end(&end, &actor, &expert, &checkpoints);
     if end.stopped.is_none() {
         expert.leave()?;
-        stay_until_stop(&session)?;
+        stay_until_stop(&session, &mut progress, me.incarnation)?;
     }
     Ok(())
 }
@@ -178,10 +178,22 @@ fn first_weights(
 }
 
 /// Its share played, the actor stays until the launcher says stop, since messages of a process
-/// that has exited may never reach their receiver (its episodes, its last transitions).
-fn stay_until_stop(session: &Session<'_>) -> alfd_harness::Result<()> {
+/// that has exited may never reach their receiver (its episodes, its last transitions). Every
+/// second it says so on its episodes' publisher, with the number of records it sent
+/// (`progress_kind::SHARE_PLAYED`): the launcher then knows of a last record lost on the way.
+fn stay_until_stop(
+    session: &Session<'_>,
+    progress: &mut alfd_wire::Sender<'_, Progress>,
+    incarnation: u64,
+) -> alfd_harness::Result<()> {
     info!("played its share of the episodes; waiting for the run to end");
-    let reason = wait_for_stop(session)?;
+    let sent = progress.sent();
+    let reason = loop {
+        progress.send(Progress::share_played(incarnation, sent))?;
+        if let Some(reason) = wait_for_stop(session, Duration::from_secs(1))? {
+            break reason;
+        }
+    };
     info!(reason, "actor leaving");
     Ok(())
 }
@@ -441,16 +453,22 @@ fn restore(
     Ok(c.clone())
 }
 
-/// Waits until the launcher says stop or a termination signal arrives; the reason.
-fn wait_for_stop(session: &Session<'_>) -> alfd_harness::Result<&'static str> {
-    loop {
+/// Waits until the launcher says stop or a termination signal arrives, for at most `patience`;
+/// the reason, `None` if neither came.
+fn wait_for_stop(
+    session: &Session<'_>,
+    patience: Duration,
+) -> alfd_harness::Result<Option<&'static str>> {
+    let deadline = std::time::Instant::now() + patience;
+    while std::time::Instant::now() < deadline {
         if let Some(stop) = session.should_stop()? {
-            return Ok(stop.0);
+            return Ok(Some(stop.0));
         }
         if let Some(stop) = session.wait(Duration::from_millis(100))? {
-            return Ok(stop.0);
+            return Ok(Some(stop.0));
         }
     }
+    Ok(None)
 }
 
 #[cfg(test)]

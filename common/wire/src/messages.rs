@@ -746,6 +746,10 @@ pub mod progress_kind {
     pub const EPISODE: u32 = 1;
     /// A process reports its state and counters.
     pub const STATUS: u32 = 2;
+    /// An actor played its share of the episodes; `episodes_sent` says how many records it
+    /// sent before. Sent after them on the same publisher, again every second until the run
+    /// stops: the launcher learns of a last record lost on the way.
+    pub const SHARE_PLAYED: u32 = 3;
 }
 
 /// `state` of a status [`Progress`] message.
@@ -798,8 +802,9 @@ pub struct Progress {
     pub incarnation: u64,
     /// An episode (kind EPISODE), numbered by its actor.
     pub episode: Episode,
-    // --- counters (status) ---
-    /// Environment steps received (learner).
+    // --- counters (status; `env_steps` also of kind SHARE_PLAYED) ---
+    /// Environment steps received (learner); the episode records this incarnation sent (an
+    /// actor's SHARE_PLAYED).
     pub env_steps: u64,
     pub updates: u64,
     /// Demonstrations answered in the whole run (expert).
@@ -820,6 +825,21 @@ impl Progress {
             episode: Episode(record),
             ..Self::default()
         }
+    }
+
+    /// An actor's share played, after `sent` episode records.
+    pub fn share_played(incarnation: u64, sent: u64) -> Self {
+        Self {
+            kind: progress_kind::SHARE_PLAYED,
+            incarnation,
+            env_steps: sent,
+            ..Self::default()
+        }
+    }
+
+    /// The episode records an actor's SHARE_PLAYED message says it sent.
+    pub fn episodes_sent(&self) -> u64 {
+        self.env_steps
     }
 }
 

@@ -46,6 +46,11 @@ impl<T: Message> Sender<'_, T> {
         Ok(seq)
     }
 
+    /// Messages sent so far (the next one's sequence number).
+    pub fn sent(&self) -> u64 {
+        self.seq
+    }
+
     /// Sends `msg` as it is, its header (sender, sequence number) untouched: a bridge passes on
     /// what another process sent. The schema version is checked like a received message's.
     pub fn forward(&mut self, msg: T) -> Result<()> {

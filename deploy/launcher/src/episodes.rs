@@ -155,26 +155,58 @@ impl EpisodeLog {
 }
 
 /// Which episode records never reached the launcher. An actor's incarnation sends its records
-/// in order, numbered 0, 1, 2… (the progress message's sequence number), and one publisher's
-/// messages arrive in the order sent: a number past the next one expected means the records in
-/// between were lost on the way (an actor retries a full buffer for a while, then drops).
+/// in order on one publisher, numbered 0, 1, 2… (the progress message's sequence number), and
+/// one publisher's messages arrive in the order sent: a number past the next one expected means
+/// the records in between were lost on the way (an actor waits for room in a full buffer for a
+/// while, then drops). A lost last record leaves no gap; the SHARE_PLAYED message that follows
+/// the records says how many were sent.
 #[derive(Debug, Default)]
 pub(super) struct Arrivals {
-    /// Per (actor id, incarnation), the sequence number expected next.
-    next: std::collections::HashMap<(u16, u64), u64>,
+    streams: std::collections::HashMap<(u16, u64), Stream>,
     /// Records lost, per actor id and in all.
     lost_by: std::collections::HashMap<u16, u32>,
     lost: u64,
 }
 
+/// One actor incarnation's records as they arrived.
+#[derive(Debug, Default)]
+struct Stream {
+    /// The sequence number expected next.
+    next: u64,
+    received: u64,
+    lost: u64,
+    /// Its share played: the numbers after it are SHARE_PLAYED messages, not records.
+    played: bool,
+}
+
 impl Arrivals {
     /// Takes in record `seq` of actor `id`'s `incarnation`; how many records of it before this
-    /// one were lost (0 in a sound run). A number at or below one already seen (a repeat) loses
+    /// one were lost (0 in a sound run). A number below one already seen (a repeat) loses
     /// nothing.
     pub(super) fn arrive(&mut self, id: u16, incarnation: u64, seq: u64) -> u64 {
-        let next = self.next.entry((id, incarnation)).or_insert(0);
-        let lost = seq.saturating_sub(*next);
-        *next = (*next).max(seq + 1);
+        let s = self.streams.entry((id, incarnation)).or_default();
+        let lost = if s.played {
+            0
+        } else {
+            seq.saturating_sub(s.next)
+        };
+        s.next = s.next.max(seq + 1);
+        s.received += 1;
+        s.lost += lost;
+        self.count(id, lost)
+    }
+
+    /// Actor `id`'s `incarnation` played its share after sending `sent` records; how many of
+    /// them are newly known lost (those not received: every record came before this message).
+    pub(super) fn played(&mut self, id: u16, incarnation: u64, sent: u64) -> u64 {
+        let s = self.streams.entry((id, incarnation)).or_default();
+        s.played = true;
+        let lost = sent.saturating_sub(s.received).saturating_sub(s.lost);
+        s.lost += lost;
+        self.count(id, lost)
+    }
+
+    fn count(&mut self, id: u16, lost: u64) -> u64 {
         if lost > 0 {
             let by = self.lost_by.entry(id).or_insert(0);
             *by = by.saturating_add(u32::try_from(lost).unwrap_or(u32::MAX));
@@ -215,6 +247,25 @@ mod tests {
         assert_eq!(a.arrive(0, 2, 3), 0);
         assert_eq!((a.lost_by(0), a.lost_by(1), a.lost_by(7)), (5, 0, 0));
         assert_eq!(a.lost(), 5);
+    }
+
+    #[test]
+    fn a_share_played_after_more_records_than_came_counts_the_last_ones_lost_once() {
+        let mut a = Arrivals::default();
+        for seq in [0, 1, 3] {
+            a.arrive(4, 1, seq);
+        }
+        assert_eq!(a.lost(), 1, "record 2");
+        // Six records sent: 4 and 5 (the last) never came; 2 is counted already.
+        assert_eq!(a.played(4, 1, 6), 2);
+        // The same message again, and its own numbers skipping (one of them dropped), lose
+        // no record more.
+        assert_eq!(a.played(4, 1, 6), 0);
+        assert_eq!(a.arrive(4, 1, 9), 0);
+        assert_eq!((a.lost_by(4), a.lost()), (3, 3));
+        // A share played with every record received loses nothing.
+        a.arrive(5, 1, 0);
+        assert_eq!(a.played(5, 1, 1), 0);
     }
 
     /// A log on a file that refuses writes (`/dev/full`) until it is swapped for a real one.

@@ -32,6 +32,7 @@
 //!   ignored by the launcher (the children, in process groups of their own, never see it): the
 //!   run goes on; Ctrl-C stops it cleanly.
 
+mod bar;
 mod children;
 mod episodes;
 mod error;
@@ -61,6 +62,7 @@ use serde::{Deserialize, Serialize};
 use tracing::{debug, info, warn};
 
 use alfd_common::restarts::{Ended, Restarts, Verdict};
+use bar::{demo_troubles, progress_bar};
 use children::{describe, last_error, pin, proc_binary, RateMeter};
 use episodes::{open_episodes, shares, Arrivals, EpisodeLog, Row};
 use error::{bail, ensure};
@@ -313,26 +315,6 @@ fn clean_earlier_launches(run_ids: &[String], patience: Duration) {
     }
 }
 
-/// The run's progress bar (hidden with `--quiet`): episodes when the run has an episode limit,
-/// else environment steps.
-fn progress_bar(plan: &Plan) -> indicatif::ProgressBar {
-    if !plan.progress {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(match plan.cfg.episode_limit() {
-        Some(n) => u64::from(n),
-        None => plan.cfg.steps,
-    });
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:25}] {pos}/{len} episodes  {msg}",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    bar
-}
-
 struct Launcher<'a, 'w> {
     plan: &'a Plan,
     control: Control,
@@ -582,8 +564,16 @@ impl<'a, 'w> Launcher<'a, 'w> {
             let role = Role::from_u16(p.header.role);
             match (p.kind, role) {
                 (progress_kind::EPISODE, Some(Role::Actor)) => {
-                    self.note_lost(&p);
+                    let lost = self
+                        .arrivals
+                        .arrive(p.header.id, p.incarnation, p.header.seq);
+                    self.note_lost(&p, lost);
                     self.record_episode(&p)?;
+                }
+                (progress_kind::SHARE_PLAYED, Some(Role::Actor)) => {
+                    let sent = p.episodes_sent();
+                    let lost = self.arrivals.played(p.header.id, p.incarnation, sent);
+                    self.note_lost(&p, lost);
                 }
                 (progress_kind::STATUS, Some(Role::Learner)) => {
                     self.seen.learner_state = p.state;
@@ -639,14 +629,12 @@ impl<'a, 'w> Launcher<'a, 'w> {
         }
     }
 
-    /// Counts the records of `p`'s actor that `p`'s number shows lost, and says so: the run
-    /// counts them played (an episode limit is reached without them).
-    fn note_lost(&mut self, p: &Progress) {
-        let (id, seq) = (p.header.id, p.header.seq);
-        let lost = self.arrivals.arrive(id, p.incarnation, seq);
+    /// Says that `lost` records of `p`'s actor never came (see [`Arrivals`]): the run counts
+    /// them played (an episode limit is reached without them).
+    fn note_lost(&self, p: &Progress, lost: u64) {
         if lost > 0 {
             warn!(
-                actor = id,
+                actor = p.header.id,
                 incarnation = p.incarnation,
                 lost,
                 "episode records lost on the way to the launcher: counted played, not in episodes.csv"
@@ -949,18 +937,6 @@ impl<'a, 'w> Launcher<'a, 'w> {
             Err(e) => warn!("cannot clean up dead nodes: {e}"),
         }
     }
-}
-
-/// What the progress line says of demonstrations refused or answered late (nothing when none).
-fn demo_troubles(late: u64, refused: u64) -> String {
-    let mut s = String::new();
-    if late > 0 {
-        s.push_str(&format!(" ({late} late)"));
-    }
-    if refused > 0 {
-        s.push_str(&format!(" ({refused} REFUSED)"));
-    }
-    s
 }
 
 /// Writes `bytes` to `dir/name`, replacing the file whole (a reader never sees half of it).
