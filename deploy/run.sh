@@ -6,8 +6,9 @@
 # demonstrations of the cartpole-1000 expert, 50,000 steps), 2 actors.
 # Builds the four binaries a run on this host uses first (alfd, alfd-actor, alfd-learner,
 # alfd-expert), without runs across hosts (the `hosts` feature: zenoh and its TLS), Minari
-# datasets (the `minari` feature: Arrow) and web pages (the `pages` feature: axum; the watch
-# page and a person's page), showing
+# datasets (the `minari` feature: Arrow), web pages (the `pages` feature: axum; the watch
+# page and a person's page) and the dependency features only the tests use (`test-features`),
+# showing
 # cargo's progress (quick when they are up to date). `cargo build --release --workspace` (as the
 # test command does) builds every binary with every feature.
 set -euo pipefail
