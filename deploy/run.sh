@@ -8,8 +8,7 @@
 # alfd-expert), without runs across hosts (the `hosts` feature: zenoh and its TLS), Minari
 # datasets (the `minari` feature: Arrow), web pages (the `pages` feature: axum; the watch
 # page and a person's page) and the dependency features only the tests use (`test-features`),
-# showing
-# cargo's progress (quick when they are up to date). `cargo build --release --workspace` (as the
+# showing cargo's progress (quick when they are up to date). `cargo build --release --workspace` (as the
 # test command does) builds every binary with every feature.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
