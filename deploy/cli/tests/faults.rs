@@ -2,8 +2,9 @@
 //! is restarted from its checkpoint, and with no restarts left (`--max-restarts 0`) a killed
 //! actor or learner ends the run naming the limit; the launcher killed with SIGKILL
 //! leaves no process and no iceoryx2 file, and `alfd resume` finishes the run; `episodes = N`
-//! with several actors plays and records exactly N episodes, and the run's files agree;
-//! `alfd clean` removes a dead run's files and leaves a live run alone.
+//! with several actors plays and records exactly N episodes, and the run's files agree; records
+//! an actor says it sent that never came are counted lost and played; `alfd clean` removes a
+//! dead run's files and leaves a live run alone.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -215,6 +216,51 @@ fn episodes_n_with_two_actors_plays_and_records_n_and_the_files_agree() {
         let log = std::fs::read_to_string(out.join("actor-0.log")).unwrap();
         assert!(log.contains("played its share"), "{log}");
     }
+}
+
+/// Records an actor says it sent (its share played) that never reached the launcher are
+/// counted lost and played: the episode limit is reached without them, and `summary.json` and
+/// the end of the output say how many. The message comes from the test, as actor 7's (no actor
+/// of this run) of an incarnation that played nothing here, three times as an actor repeats it.
+#[test]
+fn records_an_actor_says_it_sent_that_never_came_count_played_and_lost() {
+    let _time = timed!();
+    let out = tmp("lost-records");
+    let sets = [
+        "episodes=3000",
+        "steps=0",
+        "env.max_episode_steps=20",
+        "query.rule=never",
+        "budget.total=0",
+        "expert.model=none",
+    ];
+    let mut r = spawn_run(&out, 2, &sets);
+    wait_rows(&out, 1, &mut r);
+    let actor = wire::Process::new(wire::Role::Actor, 7);
+    let me = wire::Wire::connect(&run_id(&out), actor, wire::SCHEMA_VERSION).unwrap();
+    let mut tx = me.episode_sender().unwrap();
+    for _ in 0..3 {
+        tx.send(wire::Progress::share_played(99, 3)).unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Gone once the launcher has drained its buffer (it does every 100 ms at most).
+    let seen = rows(&out).len();
+    wait_rows(&out, seen + 20, &mut r);
+    drop(tx);
+    drop(me);
+    let o = wait_output(r, Duration::from_secs(180));
+    assert!(o.status.success(), "{}", text(&o));
+    let s = summary(&out);
+    assert_eq!(
+        (s["episodes_lost"].as_u64(), s["episodes"].as_u64()),
+        (Some(3), Some(2997))
+    );
+    check_rows_and_demos(&out, 2997);
+    assert!(
+        text(&o).contains("3 episode records never reached the launcher"),
+        "{}",
+        text(&o)
+    );
 }
 
 #[test]
