@@ -175,6 +175,9 @@ fn an_expert_on_another_host_answers_every_query_and_its_demonstrations_are_writ
         &[
             &listen,
             "--insecure",
+            // Every answer is used however slow the loaded machine is: the test is of what is
+            // written, not of the wait.
+            "--query-timeout-ms=30000",
             "episodes=120",
             "budget.total=12",
             "query.rule=first",
