@@ -8,6 +8,7 @@ pub mod machine;
 mod member;
 mod page_member;
 mod process;
+mod quality_file;
 
 pub use member::member_name;
 pub use process::{log_name, run, Args, ANSWER_DELAY_VAR};

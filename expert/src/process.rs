@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use alfd_common::agent::{Demonstrator, ExpertCore, Refitted};
 use alfd_common::demo_model::lanes::SharedLanes;
-use alfd_common::environment_loop::panel_expert::{PanelAsk, PanelLog};
+use alfd_common::environment_loop::panel_expert::PanelAsk;
 use alfd_common::panel::Asker;
 use alfd_harness::python::{Adapter, AdapterDemonstrator};
 use alfd_harness::{BadInput, ProcessArgs, Refit, Session};
@@ -32,6 +32,7 @@ use crate::human::{self, HumanPage, PageState, HUMAN};
 use crate::late::LateBook;
 use crate::machine::{Action, ExpertMachine, Mode, PanelNote, QueryIn};
 use crate::page_member::{PageApart, PageLink};
+use crate::quality_file;
 use alfd_demonstrators::demo_log::{self, DemoLog};
 use alfd_demonstrators::registry;
 
@@ -711,6 +712,8 @@ impl<'w> Shell<'w> {
     /// bad input too, exit code 2), refits on it, opens the log and carries out what follows.
     fn load_demos(&mut self, m: &mut Machine<'w>) -> alfd_harness::Result<Option<&'static str>> {
         let records = read_demos(&self.demos_path, self.obs_dim, self.actions)?;
+        quality_file::trim(&self.experts_path, &self.demos_path)
+            .what(|| format!("cannot cut back {}", self.experts_path.display()))?;
         let n = records.len();
         let next = m
             .activate(records)
@@ -762,6 +765,19 @@ impl<'w> Shell<'w> {
         record: &alfd_common::agent::DemoRecord,
         panel: Option<&PanelNote>,
     ) -> alfd_harness::Result<bool> {
+        // The quality row first (see `quality_file`).
+        let row_at = match panel.map(|n| quality_file::append(&self.experts_path, &n.quality_line))
+        {
+            None => None,
+            Some(Ok(at)) => Some(at),
+            Some(Err(e)) if e.raw_os_error() == Some(28) => {
+                return Ok(self.refuse(record, &e));
+            }
+            Some(Err(e)) => {
+                let path = self.experts_path.display().to_string();
+                return Err(e).what(|| format!("cannot write {path}"));
+            }
+        };
         let Some(log) = self.log.as_mut() else {
             return Err(HarnessError::Run("a demonstration with no log open".into()));
         };
@@ -770,17 +786,13 @@ impl<'w> Shell<'w> {
             None => log.append(record),
         };
         if let Err(e) = appended {
+            if let Some(at) = row_at {
+                quality_file::cut_back(&self.experts_path, at);
+            }
             if !e.is_disk_full() {
                 return Err(e).what(|| "the demonstration log".into());
             }
-            tracing::warn!(
-                "{e}: demonstration {} not kept; no query is answered for {:?}",
-                record.index,
-                DISK_FULL_PAUSE
-            );
-            self.disk_full_until = Some(self.now() + DISK_FULL_PAUSE);
-            self.refused += 1;
-            return Ok(false);
+            return Ok(self.refuse(record, &e));
         }
         if self.refused > 0 {
             info!(
@@ -794,10 +806,24 @@ impl<'w> Shell<'w> {
             action = record.action,
             "demonstration"
         );
-        if let Some(note) = panel {
-            append_quality(&self.experts_path, &note.quality_line)?;
-        }
         Ok(true)
+    }
+
+    /// A demonstration a full disk refused: not kept, and no query is answered for
+    /// [`DISK_FULL_PAUSE`]; `false`.
+    fn refuse(
+        &mut self,
+        record: &alfd_common::agent::DemoRecord,
+        e: &dyn std::fmt::Display,
+    ) -> bool {
+        tracing::warn!(
+            "{e}: demonstration {} not kept; no query is answered for {:?}",
+            record.index,
+            DISK_FULL_PAUSE
+        );
+        self.disk_full_until = Some(self.now() + DISK_FULL_PAUSE);
+        self.refused += 1;
+        false
     }
 
     fn ask(&mut self, actor: u32, state: &[f32]) -> alfd_harness::Result<Option<usize>> {
@@ -835,24 +861,6 @@ impl<'w> Shell<'w> {
 
 /// Rings the doorbell of the actor that asked (an id beyond `u16` has none: it is not truncated
 /// onto another actor's).
-/// Appends one row to `experts.csv`, its header first when the file is new or empty.
-fn append_quality(path: &std::path::Path, line: &str) -> alfd_harness::Result<()> {
-    use std::io::Write as _;
-    let mut file = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(path)
-        .what(|| format!("cannot open {}", path.display()))?;
-    let new = file.metadata().map(|m| m.len() == 0).unwrap_or(true);
-    let text = if new {
-        format!("{}{line}", PanelLog::CSV_HEADER)
-    } else {
-        line.to_owned()
-    };
-    file.write_all(text.as_bytes())
-        .what(|| format!("cannot write {}", path.display()))
-}
-
 fn ring_actor(actors: &mut ActorBells<'_>, actor: u32) -> alfd_harness::Result<()> {
     if let Ok(id) = u16::try_from(actor) {
         actors.ring(id)?;
