@@ -756,8 +756,6 @@ impl<'w> Shell<'w> {
         self.apply(m, next)
     }
 
-    /// The demonstrator's action for `state`, or `None` when an external one failed (the actor
-    /// acts on its own after its timeout; no budget is spent).
     /// Appends a demonstration to `demos.jsonl`; `false` when a full disk refused it (then no
     /// query is asked for [`DISK_FULL_PAUSE`]).
     fn record(
@@ -770,7 +768,7 @@ impl<'w> Shell<'w> {
         {
             None => None,
             Some(Ok(at)) => Some(at),
-            Some(Err(e)) if e.raw_os_error() == Some(28) => {
+            Some(Err(e)) if alfd_harness::disk_full(&e) => {
                 return Ok(self.refuse(record, &e));
             }
             Some(Err(e)) => {
@@ -826,6 +824,8 @@ impl<'w> Shell<'w> {
         false
     }
 
+    /// The demonstrator's action for `state`, or `None` when an external one failed (the actor
+    /// acts on its own after its timeout; no budget is spent).
     fn ask(&mut self, actor: u32, state: &[f32]) -> alfd_harness::Result<Option<usize>> {
         match &mut self.source {
             Source::BuiltIn(d) => Ok(Some(d.act(state))),

@@ -4,13 +4,14 @@
 //! `demos.jsonl` holds ([`trim`]), and a demonstration a full disk refused takes its row back
 //! ([`cut_back`]).
 
-use std::io::Write as _;
 use std::path::Path;
 
 use alfd_common::environment_loop::panel_expert::PanelLog;
+use alfd_demonstrators::demo_log;
 
 /// Appends one row (`line`, its line ending included), the header first when the file is new
-/// or empty; the file's length before it, for [`cut_back`].
+/// or empty, whole (a row cut short by a full disk is taken back); the file's length before
+/// it, for [`cut_back`].
 pub(crate) fn append(path: &Path, line: &str) -> std::io::Result<u64> {
     let mut file = std::fs::OpenOptions::new()
         .create(true)
@@ -22,11 +23,7 @@ pub(crate) fn append(path: &Path, line: &str) -> std::io::Result<u64> {
     } else {
         line.to_owned()
     };
-    if let Err(e) = file.write_all(text.as_bytes()) {
-        // A row cut short (a full disk) is taken back whole.
-        let _ = file.set_len(before);
-        return Err(e);
-    }
+    alfd_harness::append_whole(&mut file, text.as_bytes(), false)?;
     Ok(before)
 }
 
@@ -51,13 +48,7 @@ pub(crate) fn trim(experts: &Path, demos: &Path) -> std::io::Result<()> {
     let Ok(csv) = std::fs::read_to_string(experts) else {
         return Ok(());
     };
-    let answers = std::fs::read_to_string(demos)
-        .unwrap_or_default()
-        .lines()
-        .filter(|l| {
-            serde_json::from_str::<serde_json::Value>(l).is_ok_and(|v| v.get("cost").is_some())
-        })
-        .count();
+    let answers = demo_log::panel_answers(&std::fs::read_to_string(demos).unwrap_or_default());
     if let Some(kept) = first_rows(&csv, answers) {
         tracing::warn!(
             answers,

@@ -137,6 +137,16 @@ pub fn line(record: &DemoRecord, panel: Option<(f64, bool)>) -> Vec<u8> {
     out
 }
 
+/// The lines of `demos.jsonl` text that are answers of several experts' (those [`line`] wrote
+/// with a `cost`).
+pub fn panel_answers(text: &str) -> usize {
+    text.lines()
+        .filter(|l| {
+            serde_json::from_str::<serde_json::Value>(l).is_ok_and(|v| v.get("cost").is_some())
+        })
+        .count()
+}
+
 /// `demos.jsonl`, open for appending.
 #[derive(Debug)]
 pub struct DemoLog {
@@ -208,6 +218,16 @@ mod tests {
             io: std::io::Error::from_raw_os_error(5),
         };
         assert!(!other.is_disk_full(), "EIO is not a full disk");
+    }
+
+    #[test]
+    fn panel_answers_counts_the_lines_written_with_a_cost() {
+        let mut text = Vec::new();
+        text.extend(line(&record(0), Some((2.0, false))));
+        text.extend(line(&record(1), None));
+        text.extend(line(&record(2), Some((1.0, true))));
+        assert_eq!(panel_answers(std::str::from_utf8(&text).unwrap()), 2);
+        assert_eq!(panel_answers(""), 0);
     }
 
     fn record(index: u32) -> DemoRecord {

@@ -72,16 +72,9 @@ fn a_paused_page_of_a_person_among_several_experts_is_synced_seldom_and_the_othe
     let out = tmp("human-paused");
     // Six answers of the script and six queries of the person, each given up after 0.5 s: the
     // run lasts longer than the pause below (2000 short episodes besides).
-    let config = cartpole_config(&out, 6, 2000);
     // Each in turn: the person (whose queries time out, nobody answering) and the script.
-    let mut text_of = std::fs::read_to_string(&config).unwrap();
-    text_of = text_of.replace("name = \"cartpole-perfect\"\n", "");
-    text_of.push_str(
-        "route = \"round-robin\"\ndouble_ask = 0.0\n\
-         [[experts]]\nname = \"human\"\ncost = 10\n\
-         [[experts]]\nname = \"cartpole-perfect\"\ncost = 1\n",
-    );
-    std::fs::write(&config, text_of).unwrap();
+    let config =
+        person_and_script_config(&out, (6, 2000), "route = \"round-robin\"\ndouble_ask = 0.0");
     let run_dir = out.join("run");
     let (mut run, _) = start_run_with(&config, &run_dir, 1, &["--human-query-timeout-ms=500"]);
     let run_arg = format!("--run-dir={}", run_dir.display());
@@ -108,6 +101,20 @@ fn a_paused_page_of_a_person_among_several_experts_is_synced_seldom_and_the_othe
     let demos = std::fs::read_to_string(run_dir.join("demos.jsonl")).unwrap();
     let script = demos.matches("\"expert\":\"cartpole-perfect\"").count();
     assert_eq!((script, demos.lines().count()), (6, 6), "{demos}");
+}
+
+/// [`cartpole_config`] (`budget` and `episodes`) with two experts, the person at cost 10 and
+/// `cartpole-perfect` at cost 1, `routing` (lines of `[expert]`) between them.
+fn person_and_script_config(out: &Path, (budget, episodes): (u32, u32), routing: &str) -> PathBuf {
+    let config = cartpole_config(out, budget, episodes);
+    let text = std::fs::read_to_string(&config)
+        .unwrap()
+        .replace("name = \"cartpole-perfect\"\n", "")
+        + routing
+        + "\n[[experts]]\nname = \"human\"\ncost = 10\n\
+           [[experts]]\nname = \"cartpole-perfect\"\ncost = 1\n";
+    std::fs::write(&config, text).unwrap();
+    config
 }
 
 /// The page's address (`HOST:PORT/TOKEN`) in the run directory's human-page file of the first
@@ -210,17 +217,9 @@ fn first_event(addr: &str) -> Value {
 fn a_person_among_several_experts_answers_on_a_page_of_its_own_process_restarted_when_killed() {
     let _time = timed!();
     let out = tmp("human-panel");
-    let config = cartpole_config(&out, 4, 3);
     // The person is the best known: each query goes to them, and the same state to the
     // script (a double ask, every time); the person is never asked second.
-    let mut text_of = std::fs::read_to_string(&config).unwrap();
-    text_of = text_of.replace("name = \"cartpole-perfect\"\n", "");
-    text_of.push_str(
-        "route = \"best-known\"\ndouble_ask = 1.0\n\
-         [[experts]]\nname = \"human\"\ncost = 10\n\
-         [[experts]]\nname = \"cartpole-perfect\"\ncost = 1\n",
-    );
-    std::fs::write(&config, text_of).unwrap();
+    let config = person_and_script_config(&out, (4, 3), "route = \"best-known\"\ndouble_ask = 1.0");
     let run_dir = out.join("run");
     let (mut run, mut addr) = start_run_with(&config, &run_dir, 1, &[]);
     // The page is served by a process of its own, as every one of several experts answers.

@@ -162,10 +162,8 @@ impl EpisodeLog {
 /// the records says how many were sent.
 #[derive(Debug, Default)]
 pub(super) struct Arrivals {
+    /// Per (actor id, incarnation).
     streams: std::collections::HashMap<(u16, u64), Stream>,
-    /// Records lost, per actor id and in all.
-    lost_by: std::collections::HashMap<u16, u32>,
-    lost: u64,
 }
 
 /// One actor incarnation's records as they arrived.
@@ -193,7 +191,7 @@ impl Arrivals {
         s.next = s.next.max(seq + 1);
         s.received += 1;
         s.lost += lost;
-        self.count(id, lost)
+        lost
     }
 
     /// Actor `id`'s `incarnation` played its share after sending `sent` records; how many of
@@ -203,26 +201,23 @@ impl Arrivals {
         s.played = true;
         let lost = sent.saturating_sub(s.received).saturating_sub(s.lost);
         s.lost += lost;
-        self.count(id, lost)
-    }
-
-    fn count(&mut self, id: u16, lost: u64) -> u64 {
-        if lost > 0 {
-            let by = self.lost_by.entry(id).or_insert(0);
-            *by = by.saturating_add(u32::try_from(lost).unwrap_or(u32::MAX));
-            self.lost += lost;
-        }
         lost
     }
 
     /// Records of actor `id` lost so far (all its incarnations).
     pub(super) fn lost_by(&self, id: u16) -> u32 {
-        self.lost_by.get(&id).copied().unwrap_or(0)
+        let lost: u64 = self
+            .streams
+            .iter()
+            .filter(|((a, _), _)| *a == id)
+            .map(|(_, s)| s.lost)
+            .sum();
+        u32::try_from(lost).unwrap_or(u32::MAX)
     }
 
     /// Records lost so far, all actors.
     pub(super) fn lost(&self) -> u64 {
-        self.lost
+        self.streams.values().map(|s| s.lost).sum()
     }
 }
 

@@ -642,16 +642,19 @@ impl<'a, 'w> Launcher<'a, 'w> {
         }
     }
 
-    /// Episodes recorded and episodes whose records were lost.
-    fn accounted(&self) -> u64 {
-        self.recorded + self.arrivals.lost()
+    /// Whether the episodes recorded, with those whose records were lost, reach the run's
+    /// episode limit (if it has one).
+    fn episode_limit_reached(&self) -> bool {
+        let played = self.recorded + self.arrivals.lost();
+        self.plan
+            .cfg
+            .episode_limit()
+            .is_some_and(|n| played >= u64::from(n))
     }
 
     fn record_episode(&mut self, p: &Progress) -> Result<()> {
         let cfg = &self.plan.cfg;
-        let episodes_done = cfg
-            .episode_limit()
-            .is_some_and(|n| self.accounted() >= u64::from(n));
+        let episodes_done = self.episode_limit_reached();
         // By its own global step, not by when its message comes: the learner's count that ends
         // a step-limited run can arrive before the last episodes within the limit.
         let past_steps = cfg
@@ -728,10 +731,10 @@ impl<'a, 'w> Launcher<'a, 'w> {
 
     /// Whether the run has reached its episode or step limit.
     fn done(&self) -> bool {
-        let cfg = &self.plan.cfg;
-        cfg.episode_limit()
-            .is_some_and(|n| self.accounted() >= u64::from(n))
-            || cfg
+        self.episode_limit_reached()
+            || self
+                .plan
+                .cfg
                 .step_limit()
                 .is_some_and(|n| self.seen.learner_env_steps >= n)
     }
