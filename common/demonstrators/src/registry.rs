@@ -57,7 +57,7 @@ pub enum RegistryError {
         env: String,
         known: String,
     },
-    #[error("expert `{name}`: {env} demonstrators act on state ids and need the map; they are loaded with `registry::cliffwalk`")]
+    #[error("expert `{name}`: {env} demonstrators act on {env}'s state ids, for Q-table agents")]
     NotVector { name: String, env: String },
     #[error("expert `{name}` is corrupt: {reason}")]
     Corrupt { name: String, reason: String },
@@ -244,9 +244,45 @@ fn vector_demonstrator(
     }
 }
 
+/// How often each noisy DeepSea expert answers uniformly at random instead of moving right (a
+/// generator seeded from its name): the good, fair and poor experts of MountainCar's and
+/// Acrobot's ladders have the same shares.
+const DEEPSEA_NOISE: [(&str, f64); 3] = [
+    ("deepsea-good", 0.1),
+    ("deepsea-fair", 0.25),
+    ("deepsea-poor", 0.5),
+];
+
+/// `inner` as the DeepSea expert `e` (its kind): the right move, or that move with
+/// [`DEEPSEA_NOISE`]'s share of random answers.
+fn deepsea_expert<S: ?Sized, D: Demonstrator<S> + Send + 'static>(
+    e: &ExpertEntry,
+    inner: D,
+) -> Result<Box<dyn Demonstrator<S> + Send>, BadInput> {
+    let corrupt = |reason: String| {
+        BadInput::from(RegistryError::Corrupt {
+            name: e.name.clone(),
+            reason,
+        })
+    };
+    match e.kind.as_str() {
+        "deepsea-optimal" => Ok(Box::new(inner)),
+        "deepsea-noisy" => {
+            let (_, epsilon) = DEEPSEA_NOISE
+                .iter()
+                .find(|(name, _)| *name == e.name)
+                .ok_or_else(|| corrupt("no noisy DeepSea expert has this name".into()))?;
+            Ok(Box::new(crate::scripted::Noisy::new(
+                inner, *epsilon, 2, &e.name,
+            )))
+        }
+        other => Err(corrupt(format!("kind `{other}` is not a deepsea kind"))),
+    }
+}
+
 /// A DeepSea demonstrator by name, for the instance `env` (its action mapping):
-/// `deepsea-optimal` moves right at every cell, `deepsea-good` does so but answers uniformly at
-/// random one time in ten (a generator seeded from its name).
+/// `deepsea-optimal` moves right at every cell; `deepsea-good`, `deepsea-fair` and
+/// `deepsea-poor` do so but answer uniformly at random one time in ten, four and two.
 pub fn deepsea(
     name: &str,
     env: &DeepSeaCells,
@@ -257,14 +293,7 @@ pub fn deepsea(
             .map(|s| env.optimal_action_at(s))
             .collect(),
     };
-    match e.kind.as_str() {
-        "deepsea-optimal" => Ok(Box::new(table)),
-        "deepsea-noisy" => Ok(Box::new(crate::scripted::Noisy::new(table, 0.1, 2, name))),
-        other => Err(BadInput::from(RegistryError::Corrupt {
-            name: name.to_owned(),
-            reason: format!("kind `{other}` is not a deepsea kind"),
-        })),
-    }
+    deepsea_expert(&e, table)
 }
 
 /// The DeepSea instance's right moves for its one-hot observations (the neural agents' view):
@@ -291,19 +320,7 @@ pub fn for_config(
     let e = entry(name, "deepsea").map_err(BadInput::from)?;
     let grid = alfd_common::env::DeepSea::new(cfg.env.deepsea_size(), cfg.deepsea_mapping_seed())
         .map_err(|err| BadInput(err.to_string()))?;
-    match e.kind.as_str() {
-        "deepsea-optimal" => Ok(Box::new(DeepSeaGrid(grid))),
-        "deepsea-noisy" => Ok(Box::new(crate::scripted::Noisy::new(
-            DeepSeaGrid(grid),
-            0.1,
-            2,
-            name,
-        ))),
-        other => Err(BadInput::from(RegistryError::Corrupt {
-            name: name.to_owned(),
-            reason: format!("kind `{other}` is not a deepsea kind"),
-        })),
-    }
+    deepsea_expert(&e, DeepSeaGrid(grid))
 }
 
 /// Whether a person (`human`) may be among `[[experts]]`: in `alfd run`, whose expert process
@@ -515,6 +532,33 @@ mod tests {
     }
 
     #[test]
+    fn deepseas_experts_move_right_at_their_share_of_cells_and_rank_by_it() {
+        let sea = DeepSeaCells(alfd_common::env::DeepSea::new(20, 3).unwrap());
+        let n = sea.num_states();
+        let right_share = |name: &str| {
+            let mut d = deepsea(name, &sea).unwrap();
+            let right = (0..20_000)
+                .filter(|i| d.act(&(i % n)) == sea.optimal_action_at(i % n))
+                .count();
+            right as f64 / 20_000.0
+        };
+        assert_eq!(right_share("deepsea-optimal"), 1.0);
+        // A random answer is the right move half the time: 1 - epsilon / 2 of the answers.
+        for (name, epsilon) in DEEPSEA_NOISE {
+            let share = right_share(name);
+            assert!(
+                (share - (1.0 - epsilon / 2.0)).abs() < 0.01,
+                "{name}: {share}"
+            );
+        }
+        let err = deepsea("deepsea-great", &sea).err().unwrap().to_string();
+        assert!(
+            err.contains("deepsea-fair") && err.contains("deepsea-poor"),
+            "{err}"
+        );
+    }
+
+    #[test]
     fn unknown_names_are_refused_with_the_known_ones() {
         let err = cartpole("cartpole-9000").err().unwrap().to_string();
         assert!(
@@ -571,6 +615,6 @@ mod tests {
             .err()
             .unwrap()
             .to_string();
-        assert!(err.contains("registry::cliffwalk"), "{err}");
+        assert!(err.contains("state ids, for Q-table agents"), "{err}");
     }
 }

@@ -32,9 +32,12 @@ pub enum ExpertCommand {
         /// Episodes to play (at most 1,000,000).
         #[arg(long, default_value_t = 100)]
         episodes: usize,
-        /// Seed of the first reset.
+        /// Seed of the first reset (and, for DeepSea, of its action mapping).
         #[arg(long, default_value_t = 12345)]
         seed: u64,
+        /// DeepSea's N, for its experts.
+        #[arg(long, default_value_t = 10)]
+        size: usize,
     },
     /// Add an expert to a live run's experts (`[[experts]]`, or its one expert): a new expert
     /// process routes among them all and takes over once up, as `alfd swap-expert` does.
@@ -118,6 +121,7 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
             name,
             episodes,
             seed,
+            size,
         } => {
             if episodes == 0 {
                 return Err(usage("--episodes must be at least 1"));
@@ -127,7 +131,7 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
                     "--episodes {episodes}: at most {MAX_EVAL_EPISODES} episodes are evaluated"
                 )));
             }
-            let stats = evaluate_named(&name, episodes, seed)?;
+            let stats = evaluate_named(&name, episodes, seed, size)?;
             println!("{}", serde_json::to_string(&stats)?);
             Ok(())
         }
@@ -135,8 +139,14 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
 }
 
 /// Evaluates a demonstrator by name on its environment with the default step limit
-/// (CartPole-1000, the default CliffWalk, MountainCar-v0, Acrobot-v1).
-pub fn evaluate_named(name: &str, episodes: usize, seed: u64) -> anyhow::Result<ReturnStats> {
+/// (CartPole-1000, the default CliffWalk, MountainCar-v0, Acrobot-v1, DeepSea(`size`) with the
+/// action mapping of `seed`).
+pub fn evaluate_named(
+    name: &str,
+    episodes: usize,
+    seed: u64,
+    size: usize,
+) -> anyhow::Result<ReturnStats> {
     let entry = registry::list().into_iter().find(|e| e.name == name);
     let env = match entry {
         Some(e) => e.env.parse().map_err(anyhow::Error::msg)?,
@@ -149,6 +159,12 @@ pub fn evaluate_named(name: &str, episodes: usize, seed: u64) -> anyhow::Result<
             let mut d = registry::cliffwalk(name, &env)?;
             evaluate_cliffwalk(d.as_mut(), &env, episodes, seed)
         }
+        EnvName::Deepsea => {
+            let env = crate::setup::deepsea(&deepsea_config(size, seed)?)?;
+            let mut d = registry::deepsea(name, &env)?;
+            evaluate(&mut env.clone(), episodes, seed, |s| d.act(s))
+                .map_err(|e| anyhow::anyhow!("evaluating {name}: {e}"))?
+        }
         _ => {
             let mut d = registry::for_env(env, name)?;
             let mut env = vector_env_named(env, env.default_max_episode_steps())
@@ -158,6 +174,14 @@ pub fn evaluate_named(name: &str, episodes: usize, seed: u64) -> anyhow::Result<
         }
     };
     Ok(ReturnStats::of(&returns))
+}
+
+fn deepsea_config(size: usize, seed: u64) -> anyhow::Result<ExperimentConfig> {
+    let text = format!(
+        "seed = {seed}\nepisodes = 1\n[env]\nname = \"deepsea\"\nsize = {size}\n\
+         [agent]\nkind = \"qlearning\"\n"
+    );
+    ExperimentConfig::from_toml(&text).map_err(|e| usage(format!("--size {size}: {e}")))
 }
 
 fn cliffwalk_config() -> ExperimentConfig {

@@ -426,6 +426,32 @@ fn expert_eval_prints_mean_median_std() {
     assert!(row.contains(&format!("{mean:.1}")), "{row} vs {mean}");
 }
 
+#[test]
+fn deepseas_experts_are_evaluated_on_deepsea_of_the_size_asked_and_rank_by_their_noise() {
+    let _time = timed!();
+    let mean = |name: &str, size: &str| {
+        let o = alfd(&["expert", "eval", name, "--size", size, "--episodes", "2000"]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        v["mean"].as_f64().unwrap()
+    };
+    // Every move right: the treasure (1) less the moves' cost (0.01 in all).
+    assert!((mean("deepsea-optimal", "20") - 0.99).abs() < 1e-9);
+    // A move right with probability 1 - epsilon / 2 at each row: the treasure with that to the
+    // power N, so at N = 20 about 0.36, 0.07 and 0.003 of the episodes.
+    let (good, fair, poor) = (
+        mean("deepsea-good", "20"),
+        mean("deepsea-fair", "20"),
+        mean("deepsea-poor", "20"),
+    );
+    assert!(good > fair && fair > poor, "{good} {fair} {poor}");
+    assert!((good - 0.95f64.powi(20)).abs() < 0.05, "{good}");
+    assert_usage_error(
+        &["expert", "eval", "deepsea-good", "--size", "0"],
+        "--size 0",
+    );
+}
+
 /// `alfd local` of `config` (40 episodes) into `out`, with `extra` arguments.
 fn local_40(config: &str, out: &Path, extra: &[&str]) -> Output {
     let out = out.to_str().unwrap();

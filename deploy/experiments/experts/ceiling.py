@@ -1,6 +1,6 @@
 """How often can three experts be ranked right after n answers each? A simulation of the
 experts of the study (each answers the right action, or with probability epsilon a uniformly
-random one of three) under round-robin routing, with two estimates of each expert's quality:
+random one of the task's actions) under round-robin routing, with two estimates of each expert's quality:
 
 - gold: the share of its answers that are the right action (what no run can see; the ceiling);
 - double asks: the share of its double-asked answers that the other expert's answer agrees with
@@ -17,13 +17,15 @@ import math
 import random
 from pathlib import Path
 
-ACTIONS = 3
 SEEDS = 1000
-TASKS = {"MountainCar-v0": [0.1, 0.25, 0.5], "Acrobot-v1": [0.25, 0.5, 0.75]}
+# task: (epsilon of the good, fair and poor experts, number of actions)
+TASKS = {"MountainCar-v0": ([0.1, 0.25, 0.5], 3), "Acrobot-v1": ([0.25, 0.5, 0.75], 3),
+         "DeepSea(20)": ([0.1, 0.25, 0.5], 2)}
+GOAL_SEEDS, GOAL_RIGHT = 10, 9
 EXPERTS = ["good", "fair", "poor"]
 
 
-def run(eps, double_ask, n, seed):
+def run(eps, actions, double_ask, n, seed):
     """One simulated run until every expert has answered n times: (gold, double-ask) estimates."""
     rng = random.Random(seed)
     k = len(eps)
@@ -33,7 +35,7 @@ def run(eps, double_ask, n, seed):
     doubles = [0] * k
 
     def answer(i):
-        a = rng.randrange(ACTIONS) if rng.random() < eps[i] else 0
+        a = rng.randrange(actions) if rng.random() < eps[i] else 0
         answers[i] += 1
         right[i] += a == 0
         return a
@@ -71,6 +73,14 @@ def wilson(hits, n, z=1.96):
     return 100 * (centre - half), 100 * (centre + half)
 
 
+def goal_chance(hits):
+    """The chance that at least GOAL_RIGHT of GOAL_SEEDS runs rank right, each with the cell's
+    share: how often a study of the issue's size would meet its ranking goal."""
+    p = hits / SEEDS
+    return sum(math.comb(GOAL_SEEDS, k) * p**k * (1 - p) ** (GOAL_SEEDS - k)
+               for k in range(GOAL_RIGHT, GOAL_SEEDS + 1))
+
+
 def cell(hits):
     lo, hi = wilson(hits, SEEDS)
     return f"{100 * hits / SEEDS:.1f}% [{lo:.1f}, {hi:.1f}]"
@@ -82,28 +92,31 @@ def main():
         "",
         "Written by `deploy/experiments/experts/ceiling.py` (a simulation, seeded, "
         f"{SEEDS} runs per cell). Each expert answers the right action, or with probability "
-        "ε one of the three actions at random; round-robin routing. \"gold\" ranks by the share "
+        "ε one of the task's actions at random; round-robin routing. \"gold\" ranks by the share "
         "of right answers (no run can see it: the ceiling of any estimate); \"double asks\" by "
         "the share of double-asked answers the other expert agreed with. A cell is the share of "
         "runs whose three estimates are in the true order, with a 95% Wilson interval; each run's "
-        "estimates are in `runs.csv`.",
+        "estimates are in `runs.csv`. \"9 of 10\": the chance that at least 9 of 10 runs rank right "
+        "with that share (binomial), i.e. that a study of 10 seeds meets the ranking goal.",
         "",
-        "| task | ε (good, fair, poor) | answers each | double-ask rate | gold | double asks |",
-        "|---|---|---:|---:|---:|---:|",
+        "| task | ε (good, fair, poor) | answers each | double-ask rate | gold | gold: 9 of 10 "
+        "| double asks | double asks: 9 of 10 |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
     ]
     rows = ["task,answers_each,double_ask,seed," + ",".join(
         f"{k}_{e}" for k in ("gold", "double") for e in EXPERTS) + ",gold_ranked_right,double_ranked_right"]
-    for task, eps in TASKS.items():
+    for task, (eps, actions) in TASKS.items():
         for n, d in [(50, 0.1), (50, 0.5), (50, 1.0), (100, 0.5), (200, 0.5)]:
             gold = double = 0
             for seed in range(SEEDS):
-                g, q = run(eps, d, n, seed)
+                g, q = run(eps, actions, d, n, seed)
                 gold += ranked(g)
                 double += ranked(q)
                 values = ",".join(f"{v:.6f}" for v in g + q)
                 rows.append(f"{task},{n},{d},{seed},{values},{str(ranked(g)).lower()},{str(ranked(q)).lower()}")
             lines.append(
-                f"| {task} | {', '.join(map(str, eps))} | {n} | {d} | {cell(gold)} | {cell(double)} |"
+                f"| {task} | {', '.join(map(str, eps))} | {n} | {d} | {cell(gold)} | "
+                f"{goal_chance(gold):.2f} | {cell(double)} | {goal_chance(double):.2f} |"
             )
     out = Path(__file__).resolve().parents[3] / "results" / "experts-ranking-ceiling" / "summary.md"
     out.parent.mkdir(parents=True, exist_ok=True)

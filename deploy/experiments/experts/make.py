@@ -1,11 +1,14 @@
-"""Writes the several-experts study's files (run from anywhere: python3 make.py [DOUBLE_ASK]).
+"""Writes the several-experts study's files (run from anywhere: python3 make.py [DOUBLE_ASK |
+TASK=DOUBLE_ASK]...).
 
 Three experts of one task at once, a good, a fair and a poor one at costs 10, 2 and 1 per answer
-(`alfd expert eval` ranks them good > fair > poor). Each run: the task's recommended preset with
-the experts in `[[experts]]`, B = 150 answers spread over the run's steps
-(`query.allowance = "spread"`), asked at state-blind moments (`query.gate = "chance"`: the study is
-about whom to ask, not where), shaping from the first demonstration (`shaping.min_demos = 1`),
-greedy evaluation of 20 episodes after every 10 training episodes.
+(`alfd expert eval` ranks them good > fair > poor). Each run: the task's recommended preset (for
+DeepSea(20), the neural DeepSea preset as PRESET_SETS changes it) with the experts in
+`[[experts]]`, B = 150 answers spread over the run's steps (`query.allowance = "spread"`), asked
+at state-blind moments (`query.gate = "chance"`: the study is about whom to ask, not where),
+shaping from the first demonstration (`shaping.min_demos = 1`), greedy evaluation of 20 episodes
+(DeepSea: 1, it is deterministic) after every 10 training episodes. Each task has its own tuned
+`expert.double_ask` (`python3 make.py 0.1 deepsea=0.3` writes the study's files as run).
 
 Methods: one per route (`best-known` = always the good expert, `cheapest` = always the poor one,
 `round-robin`, `interval`, `upper-per-cost`, `escalate` = the poor one, and the next up the cost
@@ -30,11 +33,22 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-PRESETS = HERE.parent.parent / "configs" / "recommended"
+CONFIGS = HERE.parent.parent / "configs"
 TASKS = {
-    # task: (preset, experts good/fair/poor, steps, evaluation threshold)
-    "mountaincar": ("mountaincar.toml", "mountaincar", 60000, -140),
-    "acrobot": ("acrobot.toml", "acrobot", 100000, -100),
+    # task: (preset, experts good/fair/poor, steps, evaluation threshold, evaluation episodes)
+    "mountaincar": ("recommended/mountaincar.toml", "mountaincar", 60000, -140, 20),
+    "acrobot": ("recommended/acrobot.toml", "acrobot", 100000, -100, 20),
+    # DeepSea(20) is deterministic: one evaluation episode is exact; the treasure is the threshold.
+    "deepsea": ("deepsea-bdqn.toml", "deepsea", 12000, 0.5, 1),
+}
+# What a task's preset is changed in. DeepSea: the neural DeepSea study's network (separate
+# torsos, no margin) at N = 20, where the network alone does not find the treasure, for 30 N
+# episodes; the demonstration model fitted (for the routes' and the quality estimates' use) but
+# shaping nothing (lambda = 0), as the neural DeepSea study shapes nothing.
+PRESET_SETS = {
+    "deepsea": ["env.size=20", "episodes=600", "agent.shared_torso=false",
+                "agent.margin_loss_weight=0", "expert.model=krr", "shaping.kind=paper",
+                "shaping.lambda=0"],
 }
 COSTS = {"good": 10, "fair": 2, "poor": 1}
 BUDGET = 150
@@ -45,15 +59,17 @@ ROUTES = ["best-known", "cheapest", "round-robin", "interval", "upper-per-cost",
 # `always-fair` (`best-known` with the fair expert named: not a route, the bar for one that finds it).
 OWN = ["escalate", "signal-per-cost"]
 TUNED = ["interval", "upper-per-cost"]
+# The tasks whose tuning seeds the routes of one's own were tried on (DeepSea came after them).
+ROUTE_TUNING_TASKS = ["mountaincar", "acrobot"]
 # Routes that never ask a second expert at random (`escalate` asks one by its own rule).
 FIXED = ["best-known", "cheapest", "escalate"]
 
 
 def config(task):
     """The preset with its `[expert]` name left out and the three experts listed."""
-    preset, prefix, _, _ = TASKS[task]
+    preset, prefix, _, _, _ = TASKS[task]
     lines, section = [], None
-    for line in (PRESETS / preset).read_text().splitlines():
+    for line in (CONFIGS / preset).read_text().splitlines():
         if line.startswith("["):
             section = line.strip()
         if section == "[expert]" and line.startswith("name ="):
@@ -61,6 +77,8 @@ def config(task):
         lines.append(line)
     head = [f"# The {task} preset with three experts at once.",
             "# Written by deploy/experiments/experts/make.py."]
+    if task in PRESET_SETS:
+        head.append(f"# The study's methods change the preset in: {', '.join(PRESET_SETS[task])}.")
     # The study fits the demonstration model on every answer alike.
     lines += ["[demos]", 'weighting = "none"', ""]
     for quality, cost in COSTS.items():
@@ -69,11 +87,11 @@ def config(task):
 
 
 def common(task):
-    _, prefix, steps, _ = TASKS[task]
-    return [
+    _, prefix, steps, _, evaluation = TASKS[task]
+    return PRESET_SETS.get(task, []) + [
         "query.rule=never", f"query.horizon={steps}", "query.allowance=spread", "query.gate=chance",
         f"budget.total={BUDGET}", "shaping.min_demos=1", "evaluation.every=10",
-        "evaluation.episodes=20", f"expert.best_known={prefix}-good",
+        f"evaluation.episodes={evaluation}", f"expert.best_known={prefix}-good",
     ]
 
 
@@ -89,7 +107,7 @@ def methods(task, double_asks, routes=ROUTES):
 
 
 def write(task, name, title, seeds, double_asks, turn, routes=ROUTES):
-    _, _, _, threshold = TASKS[task]
+    threshold = TASKS[task][3]
     lines = [
         f"# {title}", "# Written by deploy/experiments/experts/make.py.",
         f'title = "{title}"', f"seeds = {seeds}", 'x = "steps"', "last = 20", "smooth = 3",
@@ -110,7 +128,7 @@ def write(task, name, title, seeds, double_asks, turn, routes=ROUTES):
 def own_routes(task, double_ask):
     """`tune-routes-TASK.toml`: the routes of this project's own against the fixed ones and
     `always-fair`, on the tuning seeds (run with `--first-seed 1000`)."""
-    _, prefix, _, threshold = TASKS[task]
+    _, prefix, _, threshold, _ = TASKS[task]
     title = f"{task}: routes of one's own, tuning seeds"
     lines = [
         f"# {title}", "# Written by deploy/experiments/experts/make.py.",
@@ -133,7 +151,7 @@ def own_routes(task, double_ask):
 def recovery(task, double_ask):
     """The study's `good-turns-poor` with B = 400: the changed expert answers 100 times and more
     after the change (about 25 at B = 150), so that recovery within 100 answers can be seen."""
-    _, _, _, threshold = TASKS[task]
+    threshold = TASKS[task][3]
     sets = [s.replace(f"budget.total={BUDGET}", "budget.total=400") for s in common(task)]
     sets += ["expert.route=round-robin", f"expert.double_ask={double_ask}"]
     title = f"{task}: the good expert turns poor, B = 400"
@@ -150,7 +168,7 @@ def recovery(task, double_ask):
 
 def turns(task):
     """The same experts, the good one answering as the poor one after its 25th answer."""
-    _, prefix, _, _ = TASKS[task]
+    prefix = TASKS[task][1]
     text = (HERE / f"config-{task}.toml").read_text()
     good = f'name = "{prefix}-good"\ncost = 10\n'
     assert good in text
@@ -158,19 +176,30 @@ def turns(task):
     (HERE / f"config-{task}-turns.toml").write_text(text)
 
 
+def chosen_values(args):
+    """`VALUE` for every task, or `TASK=VALUE` for some: each task's tuned `expert.double_ask`."""
+    chosen = {}
+    for arg in args:
+        task, _, value = arg.rpartition("=")
+        for t in [task] if task else TASKS:
+            chosen[t] = float(value)
+    return chosen
+
+
 def main():
-    chosen = sys.argv[1] if len(sys.argv) > 1 else None
+    chosen = chosen_values(sys.argv[1:])
     for task in TASKS:
         config(task)
         turns(task)
         # The double-ask tuning's routes (`signal-per-cost` has its own tuning file).
         write(task, f"tune-{task}.toml", f"{task}: three experts, tuning seeds", 10,
               [0.1, 0.3], False, ROUTES[:-1])
-        if chosen:
+        if task in chosen:
             write(task, f"study-{task}.toml", f"{task}: three experts at costs 10/2/1", 30,
-                  [float(chosen)], True)
-            recovery(task, float(chosen))
-            own_routes(task, float(chosen))
+                  [chosen[task]], True)
+            recovery(task, chosen[task])
+            if task in ROUTE_TUNING_TASKS:
+                own_routes(task, chosen[task])
 
 
 if __name__ == "__main__":
