@@ -72,8 +72,8 @@ pub struct ExperimentConfig {
     #[serde(default, skip_serializing_if = "DemosConfig::is_default")]
     pub demos: DemosConfig,
     /// Several experts at once (`[[experts]]`, one table each), asked as `expert.route` says;
-    /// `[expert]` keeps what is the run's (the demonstration model). Neural agents only; in
-    /// `alfd run` each but a person answers from a process of its own. Empty: `expert.name`.
+    /// `[expert]` keeps the run's demonstration model. In `alfd run` each but a person answers
+    /// from its own process; Q-table agents take built-in experts only. Empty: `expert.name`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub experts: Vec<PanelEntry>,
     #[serde(default, skip_serializing_if = "LoggingConfig::is_default")]

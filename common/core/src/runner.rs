@@ -31,6 +31,8 @@ pub struct TabularRun {
     pub agent: TabularAgent,
     /// The demonstrations of the run, in the order they were given.
     pub demos: Vec<crate::agent::DemoRecord>,
+    /// With several experts: who answered, at what cost, and their qualities over the run.
+    pub panel: Option<PanelLog>,
 }
 
 /// What a neural run leaves behind.
@@ -182,7 +184,7 @@ pub fn run_tabular<E: TabularEnv>(
     run_tabular_checkpointed(
         cfg,
         env,
-        demonstrator,
+        (demonstrator, Vec::new()),
         None,
         Checkpoints::none(),
         |_| ControlFlow::Continue(()),
@@ -191,16 +193,18 @@ pub fn run_tabular<E: TabularEnv>(
     .expect("a run from scratch restores nothing")
 }
 
-/// [`run_tabular`] with checkpoints (see [`Checkpoints`]) and the expert gate `oracle` consults
-/// (needed by that gate only). With `evaluation.every`, each evaluation plays the greedy policy
-/// of the heads' mean on a copy of `env`.
+/// [`run_tabular`] with the `[[experts]]` of `cfg` (`experts`: the demonstrator, and the
+/// experts' demonstrators in order, none when the one expert answers), checkpoints (see
+/// [`Checkpoints`]) and the expert gate `oracle` consults (needed by that gate only). With
+/// `evaluation.every`, each evaluation plays the greedy policy of the heads' mean on a copy of
+/// `env`.
 ///
 /// # Panics
 /// If the config's gate is `oracle` and `oracle` is `None`.
 pub fn run_tabular_checkpointed<E: TabularEnv>(
     cfg: &ExperimentConfig,
     mut env: E,
-    demonstrator: &mut dyn Demonstrator<usize>,
+    (demonstrator, panel): (&mut dyn Demonstrator<usize>, TabularPanel),
     oracle: Option<crate::query::Oracle<usize>>,
     checkpoints: Checkpoints<'_, TabularRunState>,
     mut save: impl FnMut(&TabularRunState) -> ControlFlow<()>,
@@ -213,7 +217,8 @@ pub fn run_tabular_checkpointed<E: TabularEnv>(
     let mut eval_env = env.clone();
     let eval_seed = build::eval_seed(cfg);
     let core = ExpertCore::for_config(cfg, env.num_actions());
-    let mut expert = LocalExpert::new(core, demonstrator, &cfg.expert.name, false);
+    // Tabular runs shape no reward.
+    let mut expert = local_expert(cfg, core, demonstrator, panel, false);
     let mut records = Vec::new();
     let mut progress = Progress::default();
     if let Some(s) = checkpoints.from {
@@ -258,13 +263,18 @@ pub fn run_tabular_checkpointed<E: TabularEnv>(
         },
     )
     .expect("an in-process tabular run cannot fail");
+    let (core, panel) = expert.into_parts();
     Ok(TabularRun {
         records,
         greedy_policy: agent.greedy_policy(),
         agent,
-        demos: expert.core.snapshot().demos,
+        demos: core.snapshot().demos,
+        panel,
     })
 }
+
+/// The demonstrators of a tabular run's `[[experts]]`, in order.
+pub type TabularPanel = Vec<Box<dyn Demonstrator<usize>>>;
 
 /// Runs a neural experiment (the config's environment, e.g. CartPole): Algorithm 1 with the
 /// actor and the learner in one process, the actor acting on the learner's newest weights at
@@ -350,15 +360,17 @@ pub enum RunError {
     NoOracle,
 }
 
-/// The in-process expert of a neural run: `demonstrator`, or the `panel` of `[[experts]]`.
-fn local_expert<'d>(
+/// The in-process expert of a run: `demonstrator`, or the `panel` of `[[experts]]`; `shaping`
+/// says whether its model shapes the reward.
+fn local_expert<'d, S: ?Sized>(
     cfg: &ExperimentConfig,
     core: ExpertCore,
-    demonstrator: &'d mut dyn Demonstrator<[f32]>,
-    panel: Vec<Box<dyn Demonstrator<[f32]>>>,
-) -> LocalExpert<'d, [f32]> {
+    demonstrator: &'d mut dyn Demonstrator<S>,
+    panel: Vec<Box<dyn Demonstrator<S>>>,
+    shaping: bool,
+) -> LocalExpert<'d, S> {
     let actions = core.num_actions();
-    let expert = LocalExpert::new(core, demonstrator, &cfg.expert.name, cfg.shaping_enabled());
+    let expert = LocalExpert::new(core, demonstrator, &cfg.expert.name, shaping);
     if panel.is_empty() {
         return expert;
     }
@@ -449,7 +461,8 @@ pub fn run_neural_on(
     } = neural_start(cfg, env.as_mut(), oracle, prior, checkpoints.from)?;
     let handle = LearnerHandle::new(learner);
     let mut actor = GenericActor::new(core, handle.adder(), handle.variables());
-    let mut expert = local_expert(cfg, expert_core, demonstrator, panel);
+    let shaping = cfg.shaping_enabled();
+    let mut expert = local_expert(cfg, expert_core, demonstrator, panel, shaping);
     let eval_seed = build::eval_seed(cfg);
     let limit = cfg.episode_limit();
     let end = environment_loop::run_from(

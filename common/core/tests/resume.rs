@@ -123,7 +123,7 @@ fn a_tabular_run_resumed_from_any_checkpoint_is_the_uninterrupted_run() {
         run_tabular_checkpointed(
             &c,
             env.clone(),
-            &mut optimal.clone(),
+            (&mut optimal.clone(), Vec::new()),
             None,
             Checkpoints {
                 from: None,
@@ -144,7 +144,7 @@ fn a_tabular_run_resumed_from_any_checkpoint_is_the_uninterrupted_run() {
             let resumed = run_tabular_checkpointed(
                 &c,
                 env.clone(),
-                &mut optimal.clone(),
+                (&mut optimal.clone(), Vec::new()),
                 None,
                 Checkpoints {
                     from: Some(&s),

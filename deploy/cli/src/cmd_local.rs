@@ -211,6 +211,8 @@ pub(crate) enum Pieces {
     Tabular {
         env: TabularEnvs,
         demonstrator: Box<dyn alfd_common::agent::Demonstrator<usize> + Send>,
+        /// `[[experts]]`' demonstrators, in order (none: the one expert answers).
+        panel: alfd_common::runner::TabularPanel,
         oracle: Option<Oracle<usize>>,
     },
     Neural {
@@ -231,6 +233,7 @@ impl Pieces {
                 let env = TabularEnvs::of(cfg)?;
                 Self::Tabular {
                     demonstrator: env.demonstrator(&cfg.expert.name)?,
+                    panel: env.panel(cfg)?,
                     oracle: setup::oracle(cfg, || env.demonstrator(&cfg.expert.name))?,
                     env,
                 }
@@ -299,13 +302,15 @@ pub(crate) fn run_pieces(
         Pieces::Tabular {
             env: TabularEnvs::CliffWalk(env),
             mut demonstrator,
+            panel,
             oracle,
-        } => run_tabular(&watch, &env, demonstrator.as_mut(), oracle)?,
+        } => run_tabular(&watch, &env, (demonstrator.as_mut(), panel), oracle)?,
         Pieces::Tabular {
             env: TabularEnvs::DeepSea(env),
             mut demonstrator,
+            panel,
             oracle,
-        } => run_deepsea(&watch, *env, demonstrator.as_mut(), oracle)?,
+        } => run_deepsea(&watch, *env, (demonstrator.as_mut(), panel), oracle)?,
         Pieces::Remote { prior } => run_remote(&watch, prior.as_ref())?,
         Pieces::Neural {
             mut demonstrator,
@@ -421,14 +426,14 @@ impl Watch<'_> {
 fn train_tabular<E: alfd_common::env::TabularEnv>(
     watch: &Watch<'_>,
     env: E,
-    demonstrator: &mut dyn Demonstrator<usize>,
+    experts: TabularExperts<'_>,
     oracle: Option<Oracle<usize>>,
 ) -> anyhow::Result<Option<alfd_common::runner::TabularRun>> {
     let checkpoints = watch.resumable.checkpoints(RunState::tabular, "tabular")?;
     let run = run_tabular_checkpointed(
         watch.cfg,
         env,
-        demonstrator,
+        experts,
         oracle,
         checkpoints,
         |s| watch.save(RunState::Tabular(Box::new(s.clone()))),
@@ -440,20 +445,29 @@ fn train_tabular<E: alfd_common::env::TabularEnv>(
     }
     let table = serde_json::json!({ "actions": run.greedy_policy });
     write(watch.out, "policy.json", table.to_string().as_bytes())?;
+    if let Some(panel) = &run.panel {
+        write(watch.out, "experts.csv", panel.csv().as_bytes())?;
+    }
     Ok(Some(run))
 }
+
+/// A tabular run's expert and its `[[experts]]`.
+type TabularExperts<'d> = (
+    &'d mut dyn Demonstrator<usize>,
+    alfd_common::runner::TabularPanel,
+);
 
 /// Runs a DeepSea run; `None` when it stopped before its end. Its greedy value is the return
 /// of one greedy episode (DeepSea is deterministic).
 fn run_deepsea(
     watch: &Watch<'_>,
     env: alfd_common::env::DeepSeaCells,
-    demonstrator: &mut dyn Demonstrator<usize>,
+    experts: TabularExperts<'_>,
     oracle: Option<Oracle<usize>>,
 ) -> anyhow::Result<Option<Produced>> {
     let mut eval_env = env.clone();
     let optimal = env.0.optimal_return();
-    let Some(run) = train_tabular(watch, env, demonstrator, oracle)? else {
+    let Some(run) = train_tabular(watch, env, experts, oracle)? else {
         return Ok(None);
     };
     let policy = &run.greedy_policy;
@@ -465,7 +479,7 @@ fn run_deepsea(
         demos: run.demos,
         greedy: Some(greedy[0]),
         optimal: Some(optimal),
-        costs: None,
+        costs: run.panel.map(|p| p.answers),
     }))
 }
 
@@ -473,11 +487,11 @@ fn run_deepsea(
 fn run_tabular(
     watch: &Watch<'_>,
     env: &CliffWalk,
-    demonstrator: &mut dyn Demonstrator<usize>,
+    experts: TabularExperts<'_>,
     oracle: Option<Oracle<usize>>,
 ) -> anyhow::Result<Option<Produced>> {
     let gamma = watch.cfg.agent.gamma;
-    let Some(run) = train_tabular(watch, env.clone(), demonstrator, oracle)? else {
+    let Some(run) = train_tabular(watch, env.clone(), experts, oracle)? else {
         return Ok(None);
     };
     let vi = value_iteration(env, gamma, 1e-10)?;
@@ -490,7 +504,7 @@ fn run_tabular(
         demos: run.demos,
         greedy: Some(greedy[s0]),
         optimal: Some(vi.values[s0]),
-        costs: None,
+        costs: run.panel.map(|p| p.answers),
     }))
 }
 

@@ -174,6 +174,30 @@ impl TabularEnvs {
         })
     }
 
+    /// The demonstrators of `cfg`'s `[[experts]]` for this environment, in order (one that
+    /// `becomes` another answers as it after its `after`-th answer).
+    pub fn panel(
+        &self,
+        cfg: &ExperimentConfig,
+    ) -> anyhow::Result<alfd_common::runner::TabularPanel> {
+        let built = |name: &str| {
+            self.demonstrator(name)
+                .map_err(|e| usage(format!("[[experts]]: {e:#}")))
+        };
+        cfg.experts
+            .iter()
+            .map(|e| {
+                let first = built(&e.name)?;
+                Ok(match (&e.becomes, e.after) {
+                    (Some(then), Some(after)) => {
+                        Box::new(alfd_common::agent::Becomes::new(first, built(then)?, after))
+                    }
+                    _ => first as Box<dyn alfd_common::agent::Demonstrator<usize>>,
+                })
+            })
+            .collect()
+    }
+
     /// The demonstrator `name` for this environment (CliffWalk's for its map, DeepSea's for its
     /// instance).
     pub fn demonstrator(
@@ -213,6 +237,10 @@ pub fn check_run_demonstrator(cfg: &ExperimentConfig) -> anyhow::Result<()> {
 }
 
 fn check_demonstrator_where(cfg: &ExperimentConfig, people: People) -> anyhow::Result<()> {
+    if !cfg.experts.is_empty() && cfg.agent.kind.is_tabular() {
+        TabularEnvs::of(cfg)?.panel(cfg)?;
+        return Ok(());
+    }
     if !cfg.experts.is_empty() {
         return check_panel(cfg, people);
     }

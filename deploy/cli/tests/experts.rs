@@ -79,6 +79,91 @@ fn alfd_local_asks_several_experts_and_records_who_answered_at_what_cost() {
     }
 }
 
+const DEEPSEA_QTABLES: &str = "seed = 5\nepisodes = 300\n[env]\nname = \"deepsea\"\nsize = 12\n\
+    [agent]\nkind = \"bootstrapped-q\"\n[query]\nallowance = \"spread\"\ngate = \"chance\"\n\
+    horizon = 2400\n[budget]\ntotal = 40\n[expert]\nroute = \"round-robin\"\ndouble_ask = 0.5\n\
+    [[experts]]\nname = \"deepsea-good\"\ncost = 10\nbecomes = \"deepsea-poor\"\nafter = 5\n\
+    [[experts]]\nname = \"deepsea-optimal\"\ncost = 2\n";
+
+#[test]
+fn q_tables_ask_several_experts_in_alfd_local_and_record_who_answered_at_what_cost() {
+    let _time = timed!();
+    let dir = tmp("experts-qtables");
+    let config = dir.join("deepsea.toml");
+    std::fs::write(&config, DEEPSEA_QTABLES).unwrap();
+    let (a, b) = (
+        run_quietly(&dir.join("a"), &config, &["local"]),
+        run_quietly(&dir.join("b"), &config, &["local"]),
+    );
+    let lines: Vec<Value> = std::fs::read_to_string(a.join("demos.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(a.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["demos_used"], lines.len(), "{summary}");
+    assert!(
+        lines.len() > 30,
+        "most of the budget of 40 is spent: {}",
+        lines.len()
+    );
+    let (mut spent, mut doubles) = (0.0, 0);
+    for l in &lines {
+        let cost = match l["expert"].as_str().unwrap() {
+            "deepsea-good" => 10.0,
+            "deepsea-optimal" => 2.0,
+            other => panic!("an expert outside the panel: {other}"),
+        };
+        assert_eq!(l["cost"].as_f64().unwrap(), cost, "{l}");
+        spent += cost;
+        doubles += usize::from(l["double_asked"] == true);
+    }
+    assert!(doubles >= 2, "{doubles} answers of double asks");
+    // On a double ask both answer the same state: the optimal expert the move right, the good
+    // one, once it answers as the poor one, sometimes not. Two experts share their agreements,
+    // so both qualities fall below 1, each within its interval.
+    let csv = std::fs::read_to_string(a.join("experts.csv")).unwrap();
+    assert_eq!(csv.lines().count(), lines.len() + 1, "one row per answer");
+    for row in csv.lines().skip(1) {
+        let v: Vec<f64> = row.split(',').skip(3).map(|x| x.parse().unwrap()).collect();
+        assert!(v[1] <= v[0] && v[0] <= v[2], "{row}");
+    }
+    for name in ["deepsea-good", "deepsea-optimal"] {
+        let row = csv.lines().rfind(|r| r.contains(name)).unwrap();
+        let quality: f64 = row.split(',').nth(3).unwrap().parse().unwrap();
+        assert!(quality < 1.0, "{row}");
+    }
+    assert!(
+        spent > 2.0 * lines.len() as f64,
+        "the good expert answered too: {spent}"
+    );
+    for f in ["demos.jsonl", "experts.csv", "episodes.csv", "policy.json"] {
+        assert_eq!(
+            std::fs::read(a.join(f)).unwrap(),
+            std::fs::read(b.join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    // A Q-table agent's experts are built-in ones: a Python policy is refused, nothing written.
+    let python = DEEPSEA_QTABLES.replace("\"deepsea-optimal\"", "\"python:m:f\"");
+    std::fs::write(&config, python).unwrap();
+    let o = alfd()
+        .args(["local", "--config"])
+        .arg(&config)
+        .arg("--out")
+        .arg(dir.join("python"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(
+        text(&o).contains("`python:m:f`: a Q-table agent's experts"),
+        "{}",
+        text(&o)
+    );
+    assert!(!dir.join("python").exists(), "nothing written");
+}
+
 #[test]
 fn several_experts_are_refused_where_they_cannot_run() {
     let _time = timed!();

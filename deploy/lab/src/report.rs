@@ -246,10 +246,15 @@ pub(crate) fn expert_reference(cfg: &ExperimentConfig) -> ExpertReference {
     let entry = registry::list().into_iter().find(|e| e.name == name);
     let mut not_comparable = Vec::new();
     let mut notes = Vec::new();
-    let (limit, default_limit) = (
-        cfg.env.max_episode_steps(),
-        cfg.env.name.default_max_episode_steps(),
-    );
+    let default_limit = match cfg.env.name {
+        // Every DeepSea episode is N steps long, and its experts' figures hold for any N.
+        EnvName::Deepsea => cfg.env.deepsea_size(),
+        other => other.default_max_episode_steps(),
+    };
+    let limit = cfg.env.max_episode_steps();
+    if !cfg.experts.is_empty() {
+        not_comparable.push("the run's `[[experts]]` answer it, not this expert".to_owned());
+    }
     if limit != default_limit {
         not_comparable.push(format!(
             "measured with episodes of at most {default_limit} steps; this run's stop at {limit}"
@@ -337,7 +342,11 @@ impl RunReport<'_> {
                 ),
             );
         }
-        line("expert", expert_text(&expert_reference(cfg)));
+        if cfg.experts.is_empty() {
+            line("expert", expert_text(&expert_reference(cfg)));
+        } else {
+            line("experts", experts_text(cfg));
+        }
         line("demonstrations", self.demos_text());
         if let Some(text) = self.shaping_text() {
             line("shaping", text);
@@ -506,6 +515,23 @@ fn expert_text(e: &ExpertReference) -> String {
         }
     }
     text
+}
+
+/// Several experts: each one's name and cost, and the route that chose among them.
+fn experts_text(cfg: &ExperimentConfig) -> String {
+    let each: Vec<String> = cfg
+        .experts
+        .iter()
+        .map(|e| format!("{} (cost {})", e.name, e.cost))
+        .collect();
+    let route = serde_json::to_value(cfg.expert.route)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_owned))
+        .unwrap_or_else(|| format!("{:?}", cfg.expert.route));
+    format!(
+        "{}; route {route}; each one's estimated quality in experts.csv",
+        each.join(", ")
+    )
 }
 
 /// `1234567` as `1,234,567`.

@@ -207,13 +207,18 @@ impl ExperimentConfig {
             }
             return Ok(());
         }
-        if self.agent.kind.is_tabular() {
-            return Err(invalid(
-                "experts",
-                "several experts need a neural agent (`dqn`, `bdqn`)",
-            ));
-        }
         for (i, x) in self.experts.iter().enumerate() {
+            let elsewhere = ["python:", "sb3:"].iter().any(|p| x.name.starts_with(p));
+            if self.agent.kind.is_tabular() && (elsewhere || x.name == "human") {
+                return Err(invalid(
+                    "experts",
+                    format!(
+                        "`{}`: a Q-table agent's experts are built-in ones (`alfd expert \
+                         list`); Python policies and people answer neural agents",
+                        x.name
+                    ),
+                ));
+            }
             if x.name.trim().is_empty() {
                 return Err(invalid("experts", format!("entry {} has no name", i + 1)));
             }
@@ -396,6 +401,28 @@ mod tests {
             .contains("[0, 1]"));
         let multi = ExperimentConfig::for_multi_process(&format!("{BASE}{THREE}")).unwrap();
         assert_eq!(multi.experts.len(), 3);
+    }
+
+    #[test]
+    fn q_tables_take_built_in_experts_only() {
+        let qtables = |name: &str| {
+            let text = format!(
+                "seed = 1\nepisodes = 3\n[env]\nname = \"deepsea\"\n[agent]\n\
+                 kind = \"bootstrapped-q\"\n[[experts]]\nname = \"deepsea-good\"\n\
+                 [[experts]]\nname = \"{name}\"\n"
+            );
+            ExperimentConfig::from_toml(&text).map_err(|e| e.to_string())
+        };
+        assert_eq!(qtables("deepsea-poor").unwrap().experts.len(), 2);
+        for other in ["human", "python:module:policy", "sb3:dqn:model.zip"] {
+            let err = qtables(other).unwrap_err();
+            assert!(
+                err.contains(&format!(
+                    "`{other}`: a Q-table agent's experts are built-in"
+                )),
+                "{err}"
+            );
+        }
     }
 
     #[test]

@@ -127,11 +127,14 @@ fn draw<DB: DrawingBackend>(
             .chain(own.iter().rev().map(|p| (p.step, p.low)))
             .collect();
         chart.draw_series(std::iter::once(Polygon::new(band, colour.mix(0.15))))?;
-        chart
-            .draw_series(LineSeries::new(
-                own.iter().map(|p| (p.step, p.quality)),
-                colour.stroke_width(2),
-            ))?
+        let line: Vec<(f64, f64)> = own.iter().map(|p| (p.step, p.quality)).collect();
+        // One answer is a point: a line of one point is no line.
+        let series = if line.len() > 1 {
+            chart.draw_series(LineSeries::new(line, colour.stroke_width(2)))?
+        } else {
+            chart.draw_series(line.into_iter().map(|p| Circle::new(p, 3, colour.filled())))?
+        };
+        series
             .label(name.to_owned())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour));
     }
@@ -162,6 +165,19 @@ mod tests {
             svg.contains("\ngood\n") && svg.contains("\npoor\n"),
             "a legend entry each"
         );
+        // `poor` answered once: a point, not a polyline of one point (which renderers skip).
+        assert_eq!(svg.matches("<circle").count(), 1, "{svg}");
+        let lines: Vec<&str> = svg.split("<polyline").skip(1).collect();
+        for l in lines {
+            let points = l
+                .split("points=\"")
+                .nth(1)
+                .unwrap()
+                .split('"')
+                .next()
+                .unwrap();
+            assert!(points.split_whitespace().count() >= 2, "{l}");
+        }
         assert!(parse("step,who\n")
             .unwrap_err()
             .to_string()
