@@ -3,12 +3,13 @@ TASK=DOUBLE_ASK]...).
 
 Three experts of one task at once, a good, a fair and a poor one at costs 10, 2 and 1 per answer
 (`alfd expert eval` ranks them good > fair > poor). Each run: the task's recommended preset (for
-DeepSea(20), the neural DeepSea preset as PRESET_SETS changes it) with the experts in
+DeepSea(20), the neural or the Q-table DeepSea preset as PRESET_SETS changes it) with the experts in
 `[[experts]]`, B = 150 answers spread over the run's steps (`query.allowance = "spread"`), asked
-at state-blind moments (`query.gate = "chance"`: the study is about whom to ask, not where),
+at state-blind moments (`query.gate = "chance"`: the study is about whom to ask, not where; DeepSea's
+Q-tables where their greedy action differs from the optimal expert's, GATES),
 shaping from the first demonstration (`shaping.min_demos = 1`), greedy evaluation of 20 episodes
 (DeepSea: 1, it is deterministic) after every 10 training episodes. Each task has its own tuned
-`expert.double_ask` (`python3 make.py 0.1 deepsea=0.3` writes the study's files as run).
+`expert.double_ask` (`python3 make.py 0.1 deepsea=0.3 deepsea-q=0.1` writes the study's files as run).
 
 Methods: one per route (`best-known` = always the good expert, `cheapest` = always the poor one,
 `round-robin`, `interval`, `upper-per-cost`, `escalate` = the poor one, and the next up the cost
@@ -40,6 +41,7 @@ TASKS = {
     "acrobot": ("recommended/acrobot.toml", "acrobot", 100000, -100, 20),
     # DeepSea(20) is deterministic: one evaluation episode is exact; the treasure is the threshold.
     "deepsea": ("deepsea-bdqn.toml", "deepsea", 12000, 0.5, 1),
+    "deepsea-q": ("deepsea-bootstrapped.toml", "deepsea", 20000, 0.5, 1),
 }
 # What a task's preset is changed in. DeepSea: the neural DeepSea study's network (separate
 # torsos, no margin) at N = 20, where the network alone does not find the treasure, for 30 N
@@ -49,7 +51,15 @@ PRESET_SETS = {
     "deepsea": ["env.size=20", "episodes=600", "agent.shared_torso=false",
                 "agent.margin_loss_weight=0", "expert.model=krr", "shaping.kind=paper",
                 "shaping.lambda=0"],
+    # The Q-tables of the DeepSea gates study at N = 20 (its tuned prior scale), for its
+    # 50 N episodes. At N = 20 they reach the treasure with no answers in none of that study's
+    # runs, and with answers at state-blind moments in none either; with answers where the greedy
+    # action differs from the optimal expert's (gate `oracle`) in all.
+    "deepsea-q": ["env.size=20", "episodes=1000", "agent.prior_scale=0.3"],
 }
+# Where a task asks (default `chance`: state-blind). DeepSea's Q-tables ask at the oracle's
+# ceiling of where, so that whom to ask is what the methods change.
+GATES = {"deepsea-q": "oracle"}
 COSTS = {"good": 10, "fair": 2, "poor": 1}
 BUDGET = 150
 TURN_AFTER = 25
@@ -89,7 +99,8 @@ def config(task):
 def common(task):
     _, prefix, steps, _, evaluation = TASKS[task]
     return PRESET_SETS.get(task, []) + [
-        "query.rule=never", f"query.horizon={steps}", "query.allowance=spread", "query.gate=chance",
+        "query.rule=never", f"query.horizon={steps}", "query.allowance=spread",
+        f"query.gate={GATES.get(task, 'chance')}",
         f"budget.total={BUDGET}", "shaping.min_demos=1", "evaluation.every=10",
         f"evaluation.episodes={evaluation}", f"expert.best_known={prefix}-good",
     ]
