@@ -477,10 +477,15 @@ impl RunReport<'_> {
 
 /// The agent's kind as a config names it (`bdqn`, `qlearning`, ...).
 fn agent_name(cfg: &ExperimentConfig) -> String {
-    serde_json::to_value(cfg.agent.kind)
+    config_name(&cfg.agent.kind)
+}
+
+/// A config value's name as the config writes it (`bdqn`, `round-robin`, ...).
+fn config_name<T: serde::Serialize + std::fmt::Debug>(value: &T) -> String {
+    serde_json::to_value(value)
         .ok()
         .and_then(|v| v.as_str().map(str::to_owned))
-        .unwrap_or_else(|| format!("{:?}", cfg.agent.kind))
+        .unwrap_or_else(|| format!("{value:?}"))
 }
 
 /// The expert's measured quality, with what it is and whether it compares with the run's returns
@@ -524,13 +529,10 @@ fn experts_text(cfg: &ExperimentConfig) -> String {
         .iter()
         .map(|e| format!("{} (cost {})", e.name, e.cost))
         .collect();
-    let route = serde_json::to_value(cfg.expert.route)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_owned))
-        .unwrap_or_else(|| format!("{:?}", cfg.expert.route));
     format!(
-        "{}; route {route}; each one's estimated quality in experts.csv",
-        each.join(", ")
+        "{}; route {}; each one's estimated quality in experts.csv",
+        each.join(", "),
+        config_name(&cfg.expert.route)
     )
 }
 
@@ -771,6 +773,26 @@ mod tests {
         // No measured figure at all.
         let perfect = cfg("[expert]\nname = \"cartpole-perfect\"\n");
         assert!(expert_text(&expert_reference(&perfect)).contains("no measured return"));
+        // DeepSea: every episode is N steps, as its experts' figures assume.
+        let sea = ExperimentConfig::from_toml(
+            "seed = 0\nepisodes = 1\n[env]\nname = \"deepsea\"\nsize = 12\n[agent]\n\
+             kind = \"bootstrapped-q\"\n",
+        )
+        .unwrap();
+        assert_eq!(expert_reference(&sea).comparable_mean(), Some(0.99));
+        // Several experts: they are named with their costs, and the unasked expert drawn nowhere.
+        let mut several = sea.clone();
+        several.experts = serde_json::from_str(
+            r#"[{"name": "deepsea-good", "cost": 10}, {"name": "deepsea-poor", "cost": 1.5}]"#,
+        )
+        .unwrap();
+        several.expert.route = alfd_common::panel::Route::RoundRobin;
+        assert_eq!(
+            experts_text(&several),
+            "deepsea-good (cost 10), deepsea-poor (cost 1.5); route round-robin; each one's \
+             estimated quality in experts.csv"
+        );
+        assert_eq!(expert_reference(&several).comparable_mean(), None);
     }
 
     #[test]
