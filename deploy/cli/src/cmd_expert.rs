@@ -35,9 +35,9 @@ pub enum ExpertCommand {
         /// Seed of the first reset (and, for DeepSea, of its action mapping).
         #[arg(long, default_value_t = 12345)]
         seed: u64,
-        /// DeepSea's N, for its experts.
-        #[arg(long, default_value_t = 10)]
-        size: usize,
+        /// DeepSea's N, for its experts (default 10).
+        #[arg(long)]
+        size: Option<usize>,
     },
     /// Add an expert to a live run's experts (`[[experts]]`, or its one expert): a new expert
     /// process routes among them all and takes over once up, as `alfd swap-expert` does.
@@ -145,7 +145,7 @@ pub fn evaluate_named(
     name: &str,
     episodes: usize,
     seed: u64,
-    size: usize,
+    size: Option<usize>,
 ) -> anyhow::Result<ReturnStats> {
     let entry = registry::list().into_iter().find(|e| e.name == name);
     let env = match entry {
@@ -153,6 +153,11 @@ pub fn evaluate_named(
         // Not listed: the registry's error names the CartPole experts.
         None => EnvName::Cartpole,
     };
+    if size.is_some() && env != EnvName::Deepsea {
+        return Err(usage(format!(
+            "--size: DeepSea's experts take a size; `{name}` demonstrates {env}"
+        )));
+    }
     let returns = match env {
         EnvName::Cliffwalk => {
             let env = crate::setup::cliffwalk(&cliffwalk_config())?;
@@ -160,7 +165,7 @@ pub fn evaluate_named(
             evaluate_cliffwalk(d.as_mut(), &env, episodes, seed)
         }
         EnvName::Deepsea => {
-            let env = crate::setup::deepsea(&deepsea_config(size, seed)?)?;
+            let env = crate::setup::deepsea(&deepsea_config(size.unwrap_or(10), seed)?)?;
             let mut d = registry::deepsea(name, &env)?;
             evaluate(&mut env.clone(), episodes, seed, |s| d.act(s))
                 .map_err(|e| anyhow::anyhow!("evaluating {name}: {e}"))?

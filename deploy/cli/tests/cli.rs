@@ -450,6 +450,10 @@ fn deepseas_experts_are_evaluated_on_deepsea_of_the_size_asked_and_rank_by_their
         &["expert", "eval", "deepsea-good", "--size", "0"],
         "--size 0",
     );
+    assert_usage_error(
+        &["expert", "eval", "mountaincar-good", "--size", "20"],
+        "`mountaincar-good` demonstrates mountaincar",
+    );
 }
 
 /// `alfd local` of `config` (40 episodes) into `out`, with `extra` arguments.
