@@ -19,8 +19,10 @@ pub struct ShapingConfig {
     pub stop_multiple: f64,
     /// `paper`: eq. 4, `r + λ[1 − (p(a|s) − π(a|s))²]`, for a while. `potential`: the
     /// demonstration model as a potential over state-action pairs, `F = γΦ(s',a') − Φ(s,a)` with
-    /// `Φ(s,a) = λ p(a|s)` (look-ahead advice, Wiewiora et al. 2003), which does not change the
-    /// optimal policy and stays on for the whole run.
+    /// `Φ(s,a) = λ p(a|s)` (look-ahead advice, Wiewiora et al. 2003), for the whole run; the
+    /// agents act on their Q-values without adding Φ back, so their greedy policy is biased
+    /// against the actions the model favours (EXPERIMENTS.md, "Potential shaping and the greedy
+    /// policy").
     #[serde(default)]
     pub kind: ShapingKind,
 }
