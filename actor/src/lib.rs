@@ -17,7 +17,7 @@ use alfd_common::env::VectorEnv;
 use alfd_common::environment_loop::{
     self, Actor as _, EpisodeEnd, GenericActor, LoopError, Schedule,
 };
-use alfd_common::evaluate::evaluate_greedy;
+use alfd_common::evaluate::evaluate_greedy_advised;
 use alfd_harness::{BadInput, ProcessArgs, Session};
 use alfd_wire::{Doorbell, Process, Progress, Role, MAX_ACTORS};
 use tracing::info;
@@ -114,8 +114,9 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
         |e| {
             // Actor 0 evaluates, with the weights it acts on (as the single-process run does).
             if me.id == 0 && cfg.evaluation.due(e.record.episode) {
-                e.record.eval_return = evaluate_greedy(
+                e.record.eval_return = evaluate_greedy_advised(
                     e.actor.core.network(),
+                    alfd_common::runner::advice(cfg, &*e.expert, e.record.total_steps),
                     eval_env.as_mut(),
                     cfg.evaluation.episodes,
                     eval_seed,

@@ -1,9 +1,12 @@
 //! Greedy evaluation and the Q-values a network takes on its own episodes: the `eval_return` of
 //! an episode record, `alfd q-range`'s divergence check, and the returns of a demonstrator.
 
+use crate::agent::neural::add_advice;
 use crate::agent::{Demonstrator, NetworkDemonstrator};
+use crate::demo_model::DemoModel;
 use crate::env::{CartPole, CliffWalk, Env, EnvError, VectorEnv};
 use crate::nn::Mlp;
+use crate::query::mean_greedy;
 
 /// Mean return of `episodes` episodes of `env` played greedily by `net` (on the mean of its
 /// heads' Q-values), the first reset seeded with `seed`: the `eval_return` of a record.
@@ -14,6 +17,29 @@ pub fn evaluate_greedy(
     seed: u64,
 ) -> Result<f64, EnvError> {
     Ok(q_range(net, env, episodes, seed)?.mean_return)
+}
+
+/// [`evaluate_greedy`] on the heads' `Q(s,a) + λ p(a|s)` when `advice` gives the demonstration
+/// model and λ of look-ahead advice (`shaping.kind = "advice"`), as the actor acts.
+pub fn evaluate_greedy_advised(
+    net: &Mlp,
+    advice: Option<(&DemoModel, f64)>,
+    env: &mut VectorEnv,
+    episodes: u32,
+    seed: u64,
+) -> Result<f64, EnvError> {
+    let Some((model, lambda)) = advice else {
+        return evaluate_greedy(net, env, episodes, seed);
+    };
+    let (mut q32, mut q) = (vec![0.0; net.outputs()], vec![0.0; net.outputs()]);
+    let actions = net.actions();
+    let returns = evaluate(env, episodes as usize, seed, |obs| {
+        net.forward_one(obs, &mut q32);
+        q.iter_mut().zip(&q32).for_each(|(v, &x)| *v = f64::from(x));
+        add_advice(&mut q, actions, obs, model, lambda);
+        mean_greedy(&q, net.heads())
+    })?;
+    Ok(returns.iter().sum::<f64>() / returns.len().max(1) as f64)
 }
 
 /// The Q-values a network takes on its own greedy episodes ([`q_range`]).

@@ -14,11 +14,12 @@ use crate::agent::{
 };
 use crate::checkpoint::StateMismatch;
 use crate::config::ExperimentConfig;
+use crate::demo_model::DemoModel;
 use crate::env::{vector_env, EnvState, TabularEnv, VectorEnv};
 use crate::environment_loop::in_process::{LearnerHandle, LocalExpert};
 use crate::environment_loop::panel_expert::{PanelAsk, PanelLog};
-use crate::environment_loop::{self, GenericActor, Progress, Schedule};
-use crate::evaluate::evaluate_greedy;
+use crate::environment_loop::{self, ExpertClient, GenericActor, Progress, Schedule};
+use crate::evaluate::evaluate_greedy_advised;
 use crate::nn::Mlp;
 use crate::record::EpisodeRecord;
 
@@ -273,6 +274,20 @@ pub fn run_tabular_checkpointed<E: TabularEnv>(
     })
 }
 
+/// The demonstration model and λ a greedy evaluation adds to the action values under look-ahead
+/// advice (`shaping.kind = "advice"`), as the actor does at `step`; `None` otherwise.
+pub fn advice<'e, E: ExpertClient<Vec<f32>> + ?Sized>(
+    cfg: &ExperimentConfig,
+    expert: &'e E,
+    step: u64,
+) -> Option<(&'e DemoModel, f64)> {
+    if cfg.shaping.kind == crate::shaping::ShapingKind::Advice {
+        expert.shaping(step)
+    } else {
+        None
+    }
+}
+
 /// The demonstrators of a tabular run's `[[experts]]`, in order.
 pub type TabularPanel = Vec<Box<dyn Demonstrator<usize>>>;
 
@@ -473,8 +488,9 @@ pub fn run_neural_on(
         progress,
         |e| {
             if cfg.evaluation.due(e.record.episode) {
-                e.record.eval_return = evaluate_greedy(
+                e.record.eval_return = evaluate_greedy_advised(
                     e.actor.core.network(),
+                    advice(cfg, &*e.expert, e.record.total_steps),
                     eval_env.as_mut(),
                     cfg.evaluation.episodes,
                     eval_seed,

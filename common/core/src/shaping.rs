@@ -13,6 +13,16 @@ pub enum ShapingKind {
     Paper,
     /// Potential-based shaping with the demonstration model, for the whole run.
     Potential,
+    /// `potential`'s shaping, with the agent acting on `Q(s,a) + Φ(s,a)` (look-ahead advice as
+    /// Wiewiora et al. 2003 define it), in training and in greedy evaluation.
+    Advice,
+}
+
+impl ShapingKind {
+    /// Whether the reward gets the potential-based bonus (`potential`, `advice`).
+    pub fn is_potential(self) -> bool {
+        matches!(self, ShapingKind::Potential | ShapingKind::Advice)
+    }
 }
 
 /// Eq. 4: `r̂ = r + λ [1 − (p(a|s, demo model) − π(a|s))²]`.
@@ -46,7 +56,7 @@ impl ShapingSchedule {
     pub fn active(&self, step: u64, demos: usize, last_demo_step: u64) -> bool {
         demos > 0
             && demos >= self.min_demos
-            && (self.kind == ShapingKind::Potential
+            && (self.kind.is_potential()
                 || (step as f64) < self.stop_multiple * (last_demo_step as f64))
     }
 

@@ -137,9 +137,25 @@ impl NeuralActor {
     /// query rule's decision, and the agent's own action (greedy on the episode's head, or
     /// ε-greedy / softmax as configured).
     pub fn decide(&mut self, obs: &[f32], step: u64, budget: BudgetView) -> Decision {
+        self.decide_advised(obs, step, budget, None)
+    }
+
+    /// [`NeuralActor::decide`] on every head's `Q(s,a) + λ p(a|s)` when `advice` gives the
+    /// demonstration model and λ (look-ahead advice): the divergence, the query rule and the
+    /// action all see the advised values.
+    pub fn decide_advised(
+        &mut self,
+        obs: &[f32],
+        step: u64,
+        budget: BudgetView,
+        advice: Option<(&DemoModel, f64)>,
+    ) -> Decision {
         self.net.forward_one(obs, &mut self.q32);
         for (q, &v) in self.q.iter_mut().zip(&self.q32) {
             *q = f64::from(v);
+        }
+        if let Some((model, lambda)) = advice {
+            add_advice(&mut self.q, self.actions, obs, model, lambda);
         }
         let js = if self.heads > 1 {
             js_divergence(&self.q, self.heads, self.temperature)
@@ -246,6 +262,18 @@ impl NeuralActor {
             mask,
             demo,
             horizon: 1,
+        }
+    }
+}
+
+/// Adds `λ p(a|s)` to every head's value of action `a` in `q` (heads × `actions`, head-major):
+/// look-ahead advice's potential, which the values learned under it lack.
+pub fn add_advice(q: &mut [f64], actions: usize, obs: &[f32], model: &DemoModel, lambda: f64) {
+    let s: Vec<f64> = obs.iter().map(|&x| f64::from(x)).collect();
+    let p = model.probs(&s);
+    for head in q.chunks_mut(actions) {
+        for (v, pa) in head.iter_mut().zip(&p) {
+            *v += lambda * pa;
         }
     }
 }

@@ -19,10 +19,11 @@ pub struct ShapingConfig {
     pub stop_multiple: f64,
     /// `paper`: eq. 4, `r + λ[1 − (p(a|s) − π(a|s))²]`, for a while. `potential`: the
     /// demonstration model as a potential over state-action pairs, `F = γΦ(s',a') − Φ(s,a)` with
-    /// `Φ(s,a) = λ p(a|s)` (look-ahead advice, Wiewiora et al. 2003), for the whole run; the
-    /// agents act on their Q-values without adding Φ back, so their greedy policy is biased
-    /// against the actions the model favours (EXPERIMENTS.md, "Potential shaping and the greedy
-    /// policy").
+    /// `Φ(s,a) = λ p(a|s)`, for the whole run, the agent acting on its Q-values alone, which biases
+    /// its greedy policy against the actions the model favours. `advice`: the same shaping with
+    /// the agent acting on `Q(s,a) + Φ(s,a)` in training and greedy evaluation, look-ahead advice
+    /// as Wiewiora et al. (2003) define it, which leaves the optimal policy unchanged (EXPERIMENTS.md,
+    /// "Potential shaping and the greedy policy").
     #[serde(default)]
     pub kind: ShapingKind,
 }

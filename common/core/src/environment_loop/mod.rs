@@ -115,7 +115,16 @@ pub trait Actor<O> {
     /// Algorithm 1 lines 3-16 but the asking: the divergence of the heads at `obs` (the run's
     /// global step `step`), whether the query rule fires (only while budget is left), and the
     /// agent's own action.
-    fn select(&mut self, obs: &O, step: u64, budget: BudgetView) -> Decision;
+    ///
+    /// `advice` is the demonstration model and λ that shape this step's reward, which an agent
+    /// with look-ahead advice (`shaping.kind = "advice"`) adds to its action values.
+    fn select(
+        &mut self,
+        obs: &O,
+        step: u64,
+        budget: BudgetView,
+        advice: Option<(&DemoModel, f64)>,
+    ) -> Decision;
     /// Algorithm 1 lines 17-20: learn from (or hand on) the step taken with `action` from `obs`,
     /// with the reward shaped when `shaping` is given. Returns whether the reward was shaped.
     fn observe(
@@ -246,8 +255,15 @@ impl<A: Adder, V: VariableSource> Actor<Vec<f32>> for GenericActor<A, V> {
         self.core.begin_episode();
     }
 
-    fn select(&mut self, obs: &Vec<f32>, step: u64, budget: BudgetView) -> Decision {
-        self.core.decide(obs, step, budget)
+    fn select(
+        &mut self,
+        obs: &Vec<f32>,
+        step: u64,
+        budget: BudgetView,
+        advice: Option<(&DemoModel, f64)>,
+    ) -> Decision {
+        let advice = advice.filter(|_| self.core.shaping_kind() == ShapingKind::Advice);
+        self.core.decide_advised(obs, step, budget, advice)
     }
 
     fn observe(
@@ -258,7 +274,7 @@ impl<A: Adder, V: VariableSource> Actor<Vec<f32>> for GenericActor<A, V> {
         demo: bool,
         shaping: Option<(&DemoModel, f64)>,
     ) -> Result<bool> {
-        let potential = self.core.shaping_kind() == ShapingKind::Potential;
+        let potential = self.core.shaping_kind().is_potential();
         // Eq. 4 shapes the transition itself; potential shaping adds its bonus afterwards.
         let t = self.core.transition(
             obs,
@@ -291,7 +307,13 @@ impl Actor<usize> for TabularAgent {
         TabularAgent::begin_episode(self);
     }
 
-    fn select(&mut self, obs: &usize, step: u64, budget: BudgetView) -> Decision {
+    fn select(
+        &mut self,
+        obs: &usize,
+        step: u64,
+        budget: BudgetView,
+        _advice: Option<(&DemoModel, f64)>,
+    ) -> Decision {
         self.decide(*obs, step, budget)
     }
 
@@ -470,7 +492,12 @@ where
         expert.update()?;
         let global_step = actor.global_step(*steps);
         // Lines 3-16: the divergence, the query rule, the action.
-        let decision = actor.select(&obs, global_step, expert.budget());
+        let decision = actor.select(
+            &obs,
+            global_step,
+            expert.budget(),
+            expert.shaping(global_step),
+        );
         js_sum += decision.js;
         let (action, demo) = match decision.query {
             true => match expert.ask(&obs, global_step)? {
@@ -560,6 +587,37 @@ mod tests {
             terminated,
             truncated: false,
         }
+    }
+
+    #[test]
+    fn an_actor_with_look_ahead_advice_acts_on_q_plus_the_potential_and_no_other_does() {
+        let states = [vec![0.0; 4], vec![1.0; 4]];
+        let model = DemoModel::fit(DemoModelKind::Krr, &states, &[0, 1], 2).unwrap();
+        // So large a λ that the potential decides: the model's action at each state.
+        let advice = Some((&model, 1e6));
+        let greedy = "exploration = \"epsilon-greedy\"\nepsilon_start = 0.0\nepsilon_end = 0.0\n";
+        let budget = BudgetView::FRESH;
+        let mut out = Recorder::default();
+        let mut plain = GenericActor::new(actor_with("potential", greedy), &mut out, Fixed);
+        let mut sink = Recorder::default();
+        let mut advised = GenericActor::new(actor_with("advice", greedy), &mut sink, Fixed);
+        let (s0, s1) = (vec![0.0f32; 4], vec![1.0f32; 4]);
+        let own: Vec<usize> = [&s0, &s1]
+            .map(|s| plain.select(s, 0, budget, None).action)
+            .to_vec();
+        assert_ne!(
+            own,
+            [0, 1],
+            "the network alone disagrees with the model somewhere"
+        );
+        for (s, want) in [(&s0, 0), (&s1, 1)] {
+            assert_eq!(advised.select(s, 0, budget, advice).action, want);
+        }
+        // `potential` shapes the reward alone: its actions are the network's.
+        let shaped: Vec<usize> = [&s0, &s1]
+            .map(|s| plain.select(s, 0, budget, advice).action)
+            .to_vec();
+        assert_eq!(shaped, own);
     }
 
     #[test]
