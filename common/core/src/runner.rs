@@ -490,7 +490,7 @@ pub fn run_neural_on(
             if cfg.evaluation.due(e.record.episode) {
                 e.record.eval_return = evaluate_greedy_advised(
                     e.actor.core.network(),
-                    advice(cfg, &*e.expert, e.record.total_steps),
+                    advice(cfg, e.expert, e.record.total_steps),
                     eval_env.as_mut(),
                     cfg.evaluation.episodes,
                     eval_seed,
