@@ -116,7 +116,7 @@ pub fn run(args: &Args, schema: u32) -> alfd_harness::Result<()> {
             if me.id == 0 && cfg.evaluation.due(e.record.episode) {
                 e.record.eval_return = evaluate_greedy_advised(
                     e.actor.core.network(),
-                    alfd_common::runner::advice(cfg, &*e.expert, e.record.total_steps),
+                    alfd_common::runner::advice(cfg, e.expert, e.record.total_steps),
                     eval_env.as_mut(),
                     cfg.evaluation.episodes,
                     eval_seed,
