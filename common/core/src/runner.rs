@@ -281,11 +281,7 @@ pub fn advice<'e, E: ExpertClient<Vec<f32>> + ?Sized>(
     expert: &'e E,
     step: u64,
 ) -> Option<(&'e DemoModel, f64)> {
-    if cfg.shaping.kind == crate::shaping::ShapingKind::Advice {
-        expert.shaping(step)
-    } else {
-        None
-    }
+    cfg.shaping.kind.advice(expert.shaping(step))
 }
 
 /// The demonstrators of a tabular run's `[[experts]]`, in order.

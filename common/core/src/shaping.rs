@@ -23,6 +23,12 @@ impl ShapingKind {
     pub fn is_potential(self) -> bool {
         matches!(self, ShapingKind::Potential | ShapingKind::Advice)
     }
+
+    /// What an agent adds to its action values (the model and λ of `shaping`, the shaping of
+    /// the step): under `advice` only.
+    pub fn advice<M>(self, shaping: Option<(M, f64)>) -> Option<(M, f64)> {
+        shaping.filter(|_| self == ShapingKind::Advice)
+    }
 }
 
 /// Eq. 4: `r̂ = r + λ [1 − (p(a|s, demo model) − π(a|s))²]`.

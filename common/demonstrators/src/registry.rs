@@ -438,8 +438,17 @@ pub fn member(
     cfg: &alfd_common::config::ExperimentConfig,
     i: usize,
 ) -> Result<Box<dyn Demonstrator<[f32]>>, BadInput> {
-    let built =
-        |name: &str| for_config(cfg, name).map_err(|e| BadInput(format!("[[experts]]: {}", e.0)));
+    member_of(cfg, i, |name| for_config(cfg, name))
+}
+
+/// [`member`] for any kind of state: `build` gives a built-in expert by name (a Q-table run's
+/// for its environment's state ids, say).
+pub fn member_of<S: ?Sized + 'static>(
+    cfg: &alfd_common::config::ExperimentConfig,
+    i: usize,
+    build: impl Fn(&str) -> Result<Box<dyn Demonstrator<S> + Send>, BadInput>,
+) -> Result<Box<dyn Demonstrator<S>>, BadInput> {
+    let built = |name: &str| build(name).map_err(|e| BadInput(format!("[[experts]]: {}", e.0)));
     let Some(e) = cfg.experts.get(i) else {
         return Err(BadInput(format!(
             "[[experts]] has {} experts: there is none at place {i}",

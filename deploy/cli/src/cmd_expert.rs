@@ -165,9 +165,9 @@ pub fn evaluate_named(
             evaluate_cliffwalk(d.as_mut(), &env, episodes, seed)
         }
         EnvName::Deepsea => {
-            let env = crate::setup::deepsea(&deepsea_config(size.unwrap_or(10), seed)?)?;
+            let mut env = crate::setup::deepsea(&deepsea_config(size, seed)?)?;
             let mut d = registry::deepsea(name, &env)?;
-            evaluate(&mut env.clone(), episodes, seed, |s| d.act(s))
+            evaluate(&mut env, episodes, seed, |s| d.act(s))
                 .map_err(|e| anyhow::anyhow!("evaluating {name}: {e}"))?
         }
         _ => {
@@ -181,12 +181,17 @@ pub fn evaluate_named(
     Ok(ReturnStats::of(&returns))
 }
 
-fn deepsea_config(size: usize, seed: u64) -> anyhow::Result<ExperimentConfig> {
+/// A DeepSea config of `size` (the config's default without one), its mapping drawn from `seed`.
+fn deepsea_config(size: Option<usize>, seed: u64) -> anyhow::Result<ExperimentConfig> {
+    let size_line = size.map_or(String::new(), |n| format!("size = {n}\n"));
     let text = format!(
-        "seed = {seed}\nepisodes = 1\n[env]\nname = \"deepsea\"\nsize = {size}\n\
+        "seed = {seed}\nepisodes = 1\n[env]\nname = \"deepsea\"\n{size_line}\
          [agent]\nkind = \"qlearning\"\n"
     );
-    ExperimentConfig::from_toml(&text).map_err(|e| usage(format!("--size {size}: {e}")))
+    ExperimentConfig::from_toml(&text).map_err(|e| match size {
+        Some(n) => usage(format!("--size {n}: {e}")),
+        None => usage(e.to_string()),
+    })
 }
 
 fn cliffwalk_config() -> ExperimentConfig {

@@ -65,8 +65,9 @@ pub fn run(args: LocalArgs) -> anyhow::Result<()> {
     let cfg = setup::load_config(&args.config, &args.set)?;
     // Every input is checked before the directory is claimed.
     let pieces = Pieces::of(&cfg)?;
-    if !cfg.experts.is_empty() {
-        // Each of several experts known here (and no person, who needs `alfd run`'s page).
+    if !cfg.experts.is_empty() && !matches!(pieces, Pieces::Tabular { .. }) {
+        // Each of several experts known here (and no person, who needs `alfd run`'s page); a
+        // Q-table run's experts are built with its pieces.
         setup::check_demonstrator(&cfg)?;
     }
     if !cfg.experts.is_empty() && args.checkpoint_every.is_some() {

@@ -174,28 +174,18 @@ impl TabularEnvs {
         })
     }
 
-    /// The demonstrators of `cfg`'s `[[experts]]` for this environment, in order (one that
-    /// `becomes` another answers as it after its `after`-th answer).
+    /// The demonstrators of `cfg`'s `[[experts]]` for this environment, in order.
     pub fn panel(
         &self,
         cfg: &ExperimentConfig,
     ) -> anyhow::Result<alfd_common::runner::TabularPanel> {
-        let built = |name: &str| {
-            self.demonstrator(name)
-                .map_err(|e| usage(format!("[[experts]]: {e:#}")))
-        };
-        cfg.experts
-            .iter()
-            .map(|e| {
-                let first = built(&e.name)?;
-                Ok(match (&e.becomes, e.after) {
-                    (Some(then), Some(after)) => {
-                        Box::new(alfd_common::agent::Becomes::new(first, built(then)?, after))
-                    }
-                    _ => first as Box<dyn alfd_common::agent::Demonstrator<usize>>,
-                })
-            })
-            .collect()
+        let mut members = Vec::with_capacity(cfg.experts.len());
+        for i in 0..cfg.experts.len() {
+            members.push(alfd_demonstrators::registry::member_of(cfg, i, |name| {
+                self.built(name)
+            })?);
+        }
+        Ok(members)
     }
 
     /// The demonstrator `name` for this environment (CliffWalk's for its map, DeepSea's for its
@@ -204,10 +194,18 @@ impl TabularEnvs {
         &self,
         name: &str,
     ) -> anyhow::Result<Box<dyn alfd_common::agent::Demonstrator<usize> + Send>> {
-        Ok(match self {
-            Self::DeepSea(env) => alfd_demonstrators::registry::deepsea(name, env)?,
-            Self::CliffWalk(env) => alfd_demonstrators::registry::cliffwalk(name, env)?,
-        })
+        Ok(self.built(name)?)
+    }
+
+    fn built(
+        &self,
+        name: &str,
+    ) -> Result<Box<dyn alfd_common::agent::Demonstrator<usize> + Send>, alfd_harness::BadInput>
+    {
+        match self {
+            Self::DeepSea(env) => alfd_demonstrators::registry::deepsea(name, env),
+            Self::CliffWalk(env) => alfd_demonstrators::registry::cliffwalk(name, env),
+        }
     }
 }
 

@@ -44,7 +44,7 @@ TASKS = {
     "deepsea-q": ("deepsea-bootstrapped.toml", "deepsea", 20000, 0.5, 1),
 }
 # What a task's preset is changed in. DeepSea: the neural DeepSea study's network (separate
-# torsos, no margin) at N = 20, where the network alone does not find the treasure, for 30 N
+# torsos, no margin) at N = 20, where the network alone seldom finds the treasure, for 30 N
 # episodes; the demonstration model fitted (for the routes' and the quality estimates' use) but
 # shaping nothing (lambda = 0), as the neural DeepSea study shapes nothing.
 PRESET_SETS = {

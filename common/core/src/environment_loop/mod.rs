@@ -28,7 +28,7 @@ use crate::n_step::NStep;
 use crate::query::BudgetView;
 use crate::record::EpisodeRecord;
 use crate::replay::Transition;
-use crate::shaping::{potential_bonus, ShapingKind};
+use crate::shaping::potential_bonus;
 
 /// Why a run stopped before its last episode (the launcher said so, a signal arrived, ...).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -262,7 +262,7 @@ impl<A: Adder, V: VariableSource> Actor<Vec<f32>> for GenericActor<A, V> {
         budget: BudgetView,
         advice: Option<(&DemoModel, f64)>,
     ) -> Decision {
-        let advice = advice.filter(|_| self.core.shaping_kind() == ShapingKind::Advice);
+        let advice = self.core.shaping_kind().advice(advice);
         self.core.decide_advised(obs, step, budget, advice)
     }
 
